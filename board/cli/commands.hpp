@@ -1,0 +1,11 @@
+// Each subcommand of `trailnav` registers itself on the application.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace trailnav::cli {
+
+void add_demo_command(CLI::App& app);
+void add_jitter_command(CLI::App& app);
+
+}  // namespace trailnav::cli

@@ -1,0 +1,20 @@
+// Writes 8-bit grey or RGB images as PNG (zlib from Debian), for maps a
+// person can look at. Not for real-time threads.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "trailnav/runtime/status.hpp"
+
+namespace trailnav::cli {
+
+enum class PngColor : std::uint8_t { grey = 0, rgb = 2 };
+
+// `pixels` holds `height` rows of `width` pixels, top row first (1 byte per
+// pixel for grey, 3 for RGB).
+Status write_png(const std::string& path, std::uint32_t width, std::uint32_t height, PngColor color,
+                 std::span<const std::uint8_t> pixels);
+
+}  // namespace trailnav::cli

@@ -1,0 +1,193 @@
+// The fixed-rate scheduler. One task table states, for every task, its name,
+// kind (periodic at a rate, or event-driven), time budget, priority and CPU;
+// the scheduler runs each task on its own thread and measures it against that
+// table: runs, overruns (execution over budget), slips (start more than one
+// period after the deadline), skipped periods, and execution-time and
+// wake-up-latency distributions, all readable at any time without locks.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "trailnav/runtime/clock.hpp"
+#include "trailnav/runtime/histogram.hpp"
+#include "trailnav/runtime/status.hpp"
+
+namespace trailnav {
+
+enum class TaskKind : std::uint8_t { periodic, event };
+
+struct TaskSpec {
+  std::string name;
+  TaskKind kind = TaskKind::periodic;
+  double rate_hz = 0.0;  // periodic tasks: runs per second
+  Nanos budget = 0;      // execution time allowed per run
+  int priority = 0;      // 0: normal scheduling; 1..99: SCHED_FIFO priority
+  int cpu = -1;          // CPU to pin the task's thread to; -1: any
+
+  Nanos period() const noexcept {
+    return kind == TaskKind::periodic && rate_hz > 0.0 ? static_cast<Nanos>(1e9 / rate_hz) : 0;
+  }
+};
+
+// Checks one entry of the task table; the message names the task and the field.
+Status validate_task_spec(const TaskSpec& spec, int cpu_count);
+
+struct TaskTick {
+  std::uint64_t cycle = 0;  // 0 for the first run
+  Nanos scheduled = 0;      // deadline (periodic) or signal time (event)
+  Nanos started = 0;        // when the run began
+};
+
+class Task {
+ public:
+  virtual ~Task() = default;
+  virtual void run(const TaskTick& tick) = 0;
+};
+
+// Wakes an event-driven task. Producers call signal(); several signals before
+// the task runs coalesce into one run (the task drains its queues).
+class TaskEvent {
+ public:
+  // Wait-free for the producer.
+  void signal(Nanos when) noexcept {
+    last_signal_.store(when, std::memory_order_relaxed);
+    count_.fetch_add(1, std::memory_order_release);
+    count_.notify_one();
+  }
+  Nanos last_signal() const noexcept { return last_signal_.load(std::memory_order_relaxed); }
+
+  // Task side: blocks until a signal newer than `seen`; false once interrupted.
+  bool wait(std::uint32_t& seen) noexcept;
+  void interrupt() noexcept;
+  void resume() noexcept { interrupted_.store(false, std::memory_order_release); }
+
+ private:
+  std::atomic<std::uint32_t> count_{0};
+  std::atomic<Nanos> last_signal_{0};
+  std::atomic<bool> interrupted_{false};
+};
+
+struct TaskStats {
+  std::uint64_t runs = 0;
+  std::uint64_t overruns = 0;
+  std::uint64_t slips = 0;
+  std::uint64_t skipped_periods = 0;
+  DurationSummary execution;
+  DurationSummary latency;  // start minus deadline (periodic) or minus signal (event)
+};
+
+// The bookkeeping for one task, separate from any thread so that it can be
+// tested on its own. Single writer (the task's thread), lock-free readers.
+class TaskAccounting {
+ public:
+  TaskAccounting(TaskKind kind, Nanos period, Nanos budget) noexcept
+      : kind_(kind), period_(period), budget_(budget) {}
+
+  void record_run(Nanos scheduled, Nanos started, Nanos finished) noexcept {
+    const Nanos latency = started - scheduled;
+    const Nanos execution = finished - started;
+    runs_.fetch_add(1, std::memory_order_relaxed);
+    if (execution > budget_) overruns_.fetch_add(1, std::memory_order_relaxed);
+    if (kind_ == TaskKind::periodic && latency > period_) slips_.fetch_add(1, std::memory_order_relaxed);
+    execution_.record(execution);
+    latency_.record(latency);
+  }
+  void record_skipped(std::uint64_t periods) noexcept { skipped_.fetch_add(periods, std::memory_order_relaxed); }
+
+  TaskStats stats() const noexcept {
+    TaskStats s;
+    s.runs = runs_.load(std::memory_order_relaxed);
+    s.overruns = overruns_.load(std::memory_order_relaxed);
+    s.slips = slips_.load(std::memory_order_relaxed);
+    s.skipped_periods = skipped_.load(std::memory_order_relaxed);
+    s.execution = execution_.summary();
+    s.latency = latency_.summary();
+    return s;
+  }
+
+ private:
+  TaskKind kind_;
+  Nanos period_;
+  Nanos budget_;
+  std::atomic<std::uint64_t> runs_{0};
+  std::atomic<std::uint64_t> overruns_{0};
+  std::atomic<std::uint64_t> slips_{0};
+  std::atomic<std::uint64_t> skipped_{0};
+  DurationHistogram execution_;
+  DurationHistogram latency_;
+};
+
+// After a periodic run that ended at `finished`, the next deadline to sleep
+// to: `scheduled + period`, moved on by whole periods while that deadline
+// lies a full period or more in the past (the dropped periods are returned in
+// `skipped`), so a late task catches up without a burst of runs.
+Nanos next_periodic_deadline(Nanos scheduled, Nanos period, Nanos finished, std::uint64_t& skipped) noexcept;
+
+enum class RealtimePolicy : std::uint8_t {
+  off,          // normal scheduling, no memory locking
+  best_effort,  // SCHED_FIFO and mlockall when permitted, one warning when not
+  required,     // start() fails when either is not permitted
+};
+
+struct SchedulerOptions {
+  RealtimePolicy realtime = RealtimePolicy::best_effort;
+  bool lock_memory = true;
+};
+
+class Scheduler {
+ public:
+  Scheduler(Clock& clock, SchedulerOptions options);
+  ~Scheduler();
+  Scheduler(const Scheduler&) = delete;
+  Scheduler& operator=(const Scheduler&) = delete;
+
+  // Before start(). Event tasks need `event`; periodic tasks must not have one.
+  // Returns the task's index, or an error naming the task.
+  Status add(const TaskSpec& spec, Task& task, TaskEvent* event = nullptr);
+
+  // Spawns one thread per task, marks each as a real-time thread for the
+  // allocation guard, and returns once every thread is running.
+  Status start();
+  // Stops every task after its current run and joins the threads.
+  void stop();
+  bool running() const noexcept { return running_.load(std::memory_order_acquire); }
+
+  std::size_t task_count() const noexcept { return entries_.size(); }
+  const TaskSpec& spec(std::size_t index) const noexcept { return entries_[index]->spec; }
+  TaskStats stats(std::size_t index) const noexcept { return entries_[index]->accounting.stats(); }
+  // Whether SCHED_FIFO was granted to the tasks that asked for it.
+  bool realtime_active() const noexcept { return realtime_active_; }
+  bool memory_locked() const noexcept { return memory_locked_; }
+
+ private:
+  struct Entry {
+    Entry(const TaskSpec& s, Task& t, TaskEvent* e)
+        : spec(s), task(t), event(e), accounting(s.kind, s.period(), s.budget) {}
+    TaskSpec spec;
+    Task& task;
+    TaskEvent* event;
+    TaskAccounting accounting;
+    std::thread thread;
+  };
+
+  void thread_main(Entry& entry) noexcept;
+  void run_periodic(Entry& entry) noexcept;
+  void run_event(Entry& entry) noexcept;
+  void apply_thread_settings(Entry& entry) noexcept;
+
+  Clock& clock_;
+  SchedulerOptions options_;
+  std::vector<std::unique_ptr<Entry>> entries_;
+  std::atomic<bool> running_{false};
+  std::atomic<int> threads_ready_{0};
+  std::atomic<int> realtime_failures_{0};
+  bool realtime_active_ = false;
+  bool memory_locked_ = false;
+};
+
+}  // namespace trailnav

@@ -1,0 +1,209 @@
+#include "trailnav/runtime/scheduler.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+
+#include <cerrno>
+#include <cstring>
+
+#include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/log.hpp"
+
+namespace trailnav {
+
+Status validate_task_spec(const TaskSpec& spec, int cpu_count) {
+  const std::string who = "task '" + spec.name + "': ";
+  if (spec.name.empty()) return Status::error("task without a name: every task needs a unique name");
+  if (spec.name.size() > 15) return Status::error(who + "name is longer than 15 characters (thread names are limited to 15)");
+  if (spec.kind == TaskKind::periodic && !(spec.rate_hz > 0.0 && spec.rate_hz <= 10'000.0)) {
+    return Status::error(who + "rate_hz must be in (0, 10000] for a periodic task");
+  }
+  if (spec.kind == TaskKind::event && spec.rate_hz != 0.0) {
+    return Status::error(who + "an event-driven task has no rate_hz; it runs when its data arrives");
+  }
+  if (spec.budget <= 0) return Status::error(who + "budget must be positive");
+  if (spec.kind == TaskKind::periodic && spec.budget > spec.period()) {
+    return Status::error(who + "budget exceeds the period (1/rate_hz); the task could never keep its rate");
+  }
+  if (spec.priority < 0 || spec.priority > 99) return Status::error(who + "priority must be in [0, 99] (0: normal scheduling)");
+  if (spec.cpu < -1 || spec.cpu >= cpu_count) {
+    return Status::error(who + "cpu must be -1 (any) or in [0, " + std::to_string(cpu_count - 1) + "]");
+  }
+  return Status::ok();
+}
+
+Nanos next_periodic_deadline(Nanos scheduled, Nanos period, Nanos finished, std::uint64_t& skipped) noexcept {
+  Nanos next = scheduled + period;
+  skipped = 0;
+  if (finished - next >= period) {
+    skipped = static_cast<std::uint64_t>((finished - next) / period);
+    next += static_cast<Nanos>(skipped) * period;
+  }
+  return next;
+}
+
+bool TaskEvent::wait(std::uint32_t& seen) noexcept {
+  for (;;) {
+    if (interrupted_.load(std::memory_order_acquire)) return false;
+    const std::uint32_t current = count_.load(std::memory_order_acquire);
+    if (current != seen) {
+      seen = current;
+      return true;
+    }
+    count_.wait(current, std::memory_order_acquire);
+  }
+}
+
+void TaskEvent::interrupt() noexcept {
+  interrupted_.store(true, std::memory_order_release);
+  count_.fetch_add(1, std::memory_order_release);
+  count_.notify_all();
+}
+
+Scheduler::Scheduler(Clock& clock, SchedulerOptions options) : clock_(clock), options_(options) {}
+
+Scheduler::~Scheduler() { stop(); }
+
+Status Scheduler::add(const TaskSpec& spec, Task& task, TaskEvent* event) {
+  if (running()) return Status::error("task '" + spec.name + "': tasks must be added before start()");
+  const int cpus = static_cast<int>(std::thread::hardware_concurrency());
+  if (Status s = validate_task_spec(spec, cpus > 0 ? cpus : 1); !s) return s;
+  for (const auto& e : entries_) {
+    if (e->spec.name == spec.name) return Status::error("task '" + spec.name + "': name used twice in the task table");
+  }
+  if (spec.kind == TaskKind::event && event == nullptr) {
+    return Status::error("task '" + spec.name + "': an event-driven task needs the event that wakes it");
+  }
+  if (spec.kind == TaskKind::periodic && event != nullptr) {
+    return Status::error("task '" + spec.name + "': a periodic task is woken by its rate, not by an event");
+  }
+  entries_.push_back(std::make_unique<Entry>(spec, task, event));
+  return Status::ok();
+}
+
+Status Scheduler::start() {
+  if (running()) return Status::error("scheduler already running");
+  memory_locked_ = false;
+  if (options_.realtime != RealtimePolicy::off && options_.lock_memory) {
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
+      memory_locked_ = true;
+    } else {
+      const int err = errno;
+      if (options_.realtime == RealtimePolicy::required) {
+        return Status::error(std::string("mlockall failed: ") + std::strerror(err) +
+                             " (grant CAP_IPC_LOCK or raise RLIMIT_MEMLOCK, or set realtime: best_effort)");
+      }
+      TN_LOG_WARN("memory not locked (mlockall: %s); page faults may delay real-time tasks. "
+                  "Grant CAP_IPC_LOCK or raise RLIMIT_MEMLOCK.", std::strerror(err));
+    }
+  }
+
+  clock_.resume_sleepers();
+  for (auto& e : entries_) {
+    if (e->event != nullptr) e->event->resume();
+  }
+  threads_ready_.store(0, std::memory_order_release);
+  realtime_failures_.store(0, std::memory_order_release);
+  running_.store(true, std::memory_order_release);
+  for (auto& e : entries_) {
+    Entry& entry = *e;
+    entry.thread = std::thread([this, &entry] { thread_main(entry); });
+  }
+  while (threads_ready_.load(std::memory_order_acquire) < static_cast<int>(entries_.size())) {
+    std::this_thread::yield();
+  }
+
+  bool any_asked = false;
+  for (const auto& e : entries_) any_asked = any_asked || e->spec.priority > 0;
+  const int failures = realtime_failures_.load(std::memory_order_acquire);
+  realtime_active_ = any_asked && options_.realtime != RealtimePolicy::off && failures == 0;
+  if (failures > 0) {
+    if (options_.realtime == RealtimePolicy::required) {
+      stop();
+      return Status::error("SCHED_FIFO not permitted for " + std::to_string(failures) +
+                           " task(s) (grant CAP_SYS_NICE or raise RLIMIT_RTPRIO, or set realtime: best_effort)");
+    }
+    TN_LOG_WARN("SCHED_FIFO not permitted for %d task(s); they run with normal priority and may be "
+                "delayed by other processes. Grant CAP_SYS_NICE or raise RLIMIT_RTPRIO.", failures);
+  }
+  return Status::ok();
+}
+
+void Scheduler::stop() {
+  if (!running_.exchange(false, std::memory_order_acq_rel)) return;
+  clock_.interrupt_sleepers();
+  for (auto& e : entries_) {
+    if (e->event != nullptr) e->event->interrupt();
+  }
+  for (auto& e : entries_) {
+    if (e->thread.joinable()) e->thread.join();
+  }
+  if (memory_locked_) munlockall();  // memory_locked() keeps reporting what the run had
+}
+
+void Scheduler::apply_thread_settings(Entry& entry) noexcept {
+  pthread_setname_np(pthread_self(), entry.spec.name.c_str());
+  if (entry.spec.cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(static_cast<unsigned>(entry.spec.cpu), &set);
+    if (pthread_setaffinity_np(pthread_self(), sizeof set, &set) != 0) {
+      TN_LOG_WARN("task '%s': could not pin to CPU %d", entry.spec.name.c_str(), entry.spec.cpu);
+    }
+  }
+  if (options_.realtime != RealtimePolicy::off && entry.spec.priority > 0) {
+    sched_param param{};
+    param.sched_priority = entry.spec.priority;
+    if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) != 0) {
+      realtime_failures_.fetch_add(1, std::memory_order_acq_rel);
+    }
+  }
+}
+
+void Scheduler::thread_main(Entry& entry) noexcept {
+  apply_thread_settings(entry);
+  alloc_guard::mark_realtime_thread(entry.spec.name.c_str());
+  threads_ready_.fetch_add(1, std::memory_order_acq_rel);
+  if (entry.spec.kind == TaskKind::periodic) {
+    run_periodic(entry);
+  } else {
+    run_event(entry);
+  }
+  alloc_guard::unmark_current_thread();
+}
+
+void Scheduler::run_periodic(Entry& entry) noexcept {
+  const Nanos period = entry.spec.period();
+  Nanos deadline = clock_.now() + period;
+  std::uint64_t cycle = 0;
+  while (running_.load(std::memory_order_acquire)) {
+    if (!clock_.sleep_until(deadline)) break;
+    if (!running_.load(std::memory_order_acquire)) break;
+    const Nanos started = clock_.now();
+    entry.task.run(TaskTick{cycle, deadline, started});
+    const Nanos finished = clock_.now();
+    entry.accounting.record_run(deadline, started, finished);
+    std::uint64_t skipped = 0;
+    deadline = next_periodic_deadline(deadline, period, finished, skipped);
+    if (skipped > 0) entry.accounting.record_skipped(skipped);
+    ++cycle;
+  }
+}
+
+void Scheduler::run_event(Entry& entry) noexcept {
+  std::uint32_t seen = 0;
+  std::uint64_t cycle = 0;
+  while (running_.load(std::memory_order_acquire)) {
+    if (!entry.event->wait(seen)) break;
+    if (!running_.load(std::memory_order_acquire)) break;
+    const Nanos signalled = entry.event->last_signal();
+    const Nanos started = clock_.now();
+    entry.task.run(TaskTick{cycle, signalled, started});
+    const Nanos finished = clock_.now();
+    entry.accounting.record_run(signalled, started, finished);
+    ++cycle;
+  }
+}
+
+}  // namespace trailnav

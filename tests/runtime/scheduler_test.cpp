@@ -1,0 +1,226 @@
+#include "trailnav/runtime/scheduler.hpp"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <thread>
+
+namespace trailnav {
+namespace {
+
+constexpr Nanos kMs = kNanosPerMilli;
+
+// --- the accounting on its own ---
+
+TEST(TaskAccounting, OverrunIsNotASlip) {
+  TaskAccounting acc(TaskKind::periodic, 10 * kMs, 2 * kMs);
+  acc.record_run(0, 1 * kMs, 4 * kMs);  // on time, 3 ms of work against 2 ms
+  const TaskStats s = acc.stats();
+  EXPECT_EQ(s.runs, 1u);
+  EXPECT_EQ(s.overruns, 1u);
+  EXPECT_EQ(s.slips, 0u);
+}
+
+TEST(TaskAccounting, SlipIsNotAnOverrun) {
+  TaskAccounting acc(TaskKind::periodic, 10 * kMs, 2 * kMs);
+  acc.record_run(0, 15 * kMs, 16 * kMs);  // 15 ms late, 1 ms of work
+  const TaskStats s = acc.stats();
+  EXPECT_EQ(s.overruns, 0u);
+  EXPECT_EQ(s.slips, 1u);
+}
+
+TEST(TaskAccounting, LateButWithinOnePeriodIsNeither) {
+  TaskAccounting acc(TaskKind::periodic, 10 * kMs, 2 * kMs);
+  acc.record_run(0, 10 * kMs, 12 * kMs);  // exactly one period late, exactly on budget
+  const TaskStats s = acc.stats();
+  EXPECT_EQ(s.overruns, 0u);
+  EXPECT_EQ(s.slips, 0u);
+  EXPECT_EQ(s.latency.max, 10 * kMs);
+  EXPECT_EQ(s.execution.max, 2 * kMs);
+}
+
+TEST(TaskAccounting, EventTasksNeverSlip) {
+  TaskAccounting acc(TaskKind::event, 0, 2 * kMs);
+  acc.record_run(0, 500 * kMs, 501 * kMs);
+  EXPECT_EQ(acc.stats().slips, 0u);
+  EXPECT_EQ(acc.stats().latency.max, 500 * kMs);
+}
+
+TEST(NextPeriodicDeadline, KeepsTheGridWhenOnTime) {
+  std::uint64_t skipped = 99;
+  EXPECT_EQ(next_periodic_deadline(0, 10 * kMs, 5 * kMs, skipped), 10 * kMs);
+  EXPECT_EQ(skipped, 0u);
+  // The next deadline has passed, but by less than a period: run at once.
+  EXPECT_EQ(next_periodic_deadline(0, 10 * kMs, 19 * kMs, skipped), 10 * kMs);
+  EXPECT_EQ(skipped, 0u);
+}
+
+TEST(NextPeriodicDeadline, DropsWholePeriodsThatAreLongGone) {
+  std::uint64_t skipped = 0;
+  EXPECT_EQ(next_periodic_deadline(0, 10 * kMs, 25 * kMs, skipped), 20 * kMs);
+  EXPECT_EQ(skipped, 1u);
+  EXPECT_EQ(next_periodic_deadline(100 * kMs, 10 * kMs, 147 * kMs, skipped), 140 * kMs);
+  EXPECT_EQ(skipped, 3u);
+}
+
+// --- task table validation ---
+
+TEST(TaskSpec, ValidationNamesTheTaskAndTheField) {
+  TaskSpec spec{"obstacles", TaskKind::periodic, 10.0, 200 * kMs, 50, -1};
+  Status s = validate_task_spec(spec, 2);
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.message().find("obstacles"), std::string::npos);
+  EXPECT_NE(s.message().find("budget exceeds the period"), std::string::npos);
+
+  spec.budget = 5 * kMs;
+  spec.priority = 120;
+  s = validate_task_spec(spec, 2);
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.message().find("priority"), std::string::npos);
+
+  spec.priority = 10;
+  spec.cpu = 2;
+  EXPECT_FALSE(validate_task_spec(spec, 2));
+  spec.cpu = 1;
+  EXPECT_TRUE(validate_task_spec(spec, 2));
+}
+
+class CountingTask final : public Task {
+ public:
+  void run(const TaskTick&) override { runs.fetch_add(1); }
+  std::atomic<int> runs{0};
+};
+
+TEST(Scheduler, RejectsBadTableEntries) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  CountingTask task;
+  TaskEvent event;
+  EXPECT_TRUE(scheduler.add({"a", TaskKind::periodic, 100.0, kMs, 0, -1}, task));
+  EXPECT_FALSE(scheduler.add({"a", TaskKind::periodic, 100.0, kMs, 0, -1}, task));  // duplicate
+  EXPECT_FALSE(scheduler.add({"b", TaskKind::event, 0.0, kMs, 0, -1}, task));       // no event
+  EXPECT_FALSE(scheduler.add({"c", TaskKind::periodic, 100.0, kMs, 0, -1}, task, &event));
+  EXPECT_TRUE(scheduler.add({"d", TaskKind::event, 0.0, kMs, 0, -1}, task, &event));
+  EXPECT_EQ(scheduler.task_count(), 2u);
+}
+
+// --- the scheduler driven by a simulated clock: exact accounting ---
+
+// Each run "works" for a scripted time by advancing the simulated clock.
+class ScriptedTask final : public Task {
+ public:
+  explicit ScriptedTask(SimulatedClock& clock) : clock_(clock) {}
+  void run(const TaskTick& tick) override {
+    const Nanos work = tick.cycle < work_.size() ? work_[tick.cycle] : 1 * kMs;
+    clock_.advance_by(work);
+  }
+  std::array<Nanos, 16> work_{1 * kMs, 3 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs,
+                              1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs, 1 * kMs};
+
+ private:
+  SimulatedClock& clock_;
+};
+
+// Waits until the task has run `runs` times and is asleep again.
+void wait_for(const Scheduler& scheduler, const SimulatedClock& clock, std::uint64_t runs) {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (scheduler.stats(0).runs < runs || clock.sleepers() == 0) {
+    ASSERT_LT(std::chrono::steady_clock::now(), give_up) << "task did not reach " << runs << " runs";
+    std::this_thread::yield();
+  }
+}
+
+TEST(Scheduler, CountsOverrunsSlipsAndSkipsExactlyOnSimulatedTime) {
+  SimulatedClock clock(0);
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  ScriptedTask task(clock);
+  ASSERT_TRUE(scheduler.add({"scripted", TaskKind::periodic, 100.0, 2 * kMs, 0, -1}, task));
+  ASSERT_TRUE(scheduler.start());
+  wait_for(scheduler, clock, 0);
+
+  for (int k = 1; k <= 5; ++k) {  // cycles 0..4 on time; cycle 1 works 3 ms: one overrun
+    clock.advance_to(k * 10 * kMs);
+    wait_for(scheduler, clock, static_cast<std::uint64_t>(k));
+  }
+  // Cycle 5 (deadline 60 ms) starts at 75 ms: a slip. It ends at 76 ms; the
+  // 70 ms deadline has passed by less than a period, so cycle 6 runs at once.
+  clock.advance_to(75 * kMs);
+  wait_for(scheduler, clock, 7);
+  clock.advance_to(80 * kMs);
+  wait_for(scheduler, clock, 8);
+  // Cycle 8 (deadline 90 ms) starts at 125 ms: a slip; it ends at 126 ms, so
+  // the 100 and 110 ms deadlines are dropped and cycle 9 runs at once for 120 ms.
+  clock.advance_to(125 * kMs);
+  wait_for(scheduler, clock, 10);
+  scheduler.stop();
+
+  const TaskStats s = scheduler.stats(0);
+  EXPECT_EQ(s.runs, 10u);
+  EXPECT_EQ(s.overruns, 1u);
+  EXPECT_EQ(s.slips, 2u);
+  EXPECT_EQ(s.skipped_periods, 2u);
+  EXPECT_EQ(s.execution.max, 3 * kMs);
+  EXPECT_EQ(s.execution.min, 1 * kMs);
+  EXPECT_EQ(s.latency.min, 0);
+  EXPECT_EQ(s.latency.max, 35 * kMs);
+}
+
+// --- the scheduler on the real clock ---
+
+TEST(Scheduler, RunsPeriodicTasksAtTheirRateAndEventTasksOnSignal) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  CountingTask periodic;
+  CountingTask on_event;
+  TaskEvent event;
+  ASSERT_TRUE(scheduler.add({"periodic", TaskKind::periodic, 200.0, 2 * kMs, 0, -1}, periodic));
+  ASSERT_TRUE(scheduler.add({"on-event", TaskKind::event, 0.0, 2 * kMs, 0, -1}, on_event, &event));
+  ASSERT_TRUE(scheduler.start());
+  for (int i = 0; i < 20; ++i) {
+    event.signal(clock.now());
+    std::this_thread::sleep_for(std::chrono::milliseconds(15));
+  }
+  scheduler.stop();
+  // 300 ms at 200 Hz is 60 runs; allow for a loaded CI machine.
+  EXPECT_GE(periodic.runs.load(), 30);
+  EXPECT_LE(periodic.runs.load(), 62);
+  // Signals 15 ms apart each wake the task once (coalescing allowed under load).
+  EXPECT_GE(on_event.runs.load(), 10);
+  EXPECT_LE(on_event.runs.load(), 20);
+  EXPECT_EQ(scheduler.stats(1).runs, static_cast<std::uint64_t>(on_event.runs.load()));
+}
+
+TEST(Scheduler, StopsPromptlyEvenForSlowTasks) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  CountingTask slow;
+  CountingTask waiting;
+  TaskEvent never;
+  ASSERT_TRUE(scheduler.add({"slow", TaskKind::periodic, 0.2, kMs, 0, -1}, slow));
+  ASSERT_TRUE(scheduler.add({"waiting", TaskKind::event, 0.0, kMs, 0, -1}, waiting, &never));
+  ASSERT_TRUE(scheduler.start());
+  const auto t0 = std::chrono::steady_clock::now();
+  scheduler.stop();
+  const auto elapsed = std::chrono::steady_clock::now() - t0;
+  EXPECT_LT(elapsed, std::chrono::milliseconds(500));
+  EXPECT_EQ(slow.runs.load(), 0);
+  EXPECT_EQ(waiting.runs.load(), 0);
+}
+
+TEST(Scheduler, CanBeRestarted) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  CountingTask task;
+  ASSERT_TRUE(scheduler.add({"restart", TaskKind::periodic, 500.0, kMs, 0, -1}, task));
+  for (int round = 0; round < 2; ++round) {
+    ASSERT_TRUE(scheduler.start());
+    std::this_thread::sleep_for(std::chrono::milliseconds(30));
+    scheduler.stop();
+  }
+  EXPECT_GE(task.runs.load(), 10);
+}
+
+}  // namespace
+}  // namespace trailnav
