@@ -1,0 +1,118 @@
+// Decodes Velodyne data packets into points. A pure parser: no I/O, no
+// allocation after construction, and no transcendental function per point —
+// the trigonometry of every azimuth and laser is tabulated at construction.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "trailnav/drivers/velodyne/calibration.hpp"
+#include "trailnav/drivers/velodyne/model.hpp"
+#include "trailnav/drivers/velodyne/packet.hpp"
+
+namespace trailnav::velodyne {
+
+// How a point relates to the returns of its firing.
+enum class ReturnKind : std::uint8_t {
+  strongest = 0,       // single-return packet, strongest mode
+  last = 1,            // single-return packet, last mode
+  dual_last = 2,       // dual-return packet: the last return
+  dual_strongest = 3,  // dual-return packet: the strongest (or second strongest) return
+  dual_both = 4,       // dual-return packet whose two returns are the same: one point
+};
+
+// Which returns of a dual-return packet to keep.
+enum class ReturnSelection : std::uint8_t { all, strongest, last };
+
+// One return. Frame: the sensor's, x forward (azimuth 0), y left, z up, as
+// in ROS velodyne_pointcloud.
+struct Point {
+  float x = 0.0f;          // m
+  float y = 0.0f;          // m
+  float z = 0.0f;          // m
+  float distance = 0.0f;   // m, after the laser's distance correction
+  float azimuth = 0.0f;    // rad in [0, 2pi), clockwise seen from above, the laser's own pointing direction
+  float intensity = 0.0f;  // 0..255 (HDL-64E: after the focal intensity correction)
+  float time = 0.0f;       // s, firing time after the packet's first firing
+  std::uint16_t ring = 0;  // laser index sorted by elevation, 0 = lowest
+  std::uint8_t laser = 0;  // laser id as in the packet and calibration
+  ReturnKind kind = ReturnKind::strongest;
+};
+
+enum class PacketError : std::uint8_t {
+  none,
+  wrong_size,          // not 1206 bytes
+  bad_block_flag,      // a block flag other than 0xFFEE (or 0xFFDD on an HDL-64E)
+  bad_azimuth,         // an azimuth of 36000 or more
+  unknown_return_mode, // factory byte 1204 is not 0x37, 0x38 or 0x39
+  model_mismatch,      // product id says another model than the configured one
+};
+
+const char* packet_error_name(PacketError error) noexcept;
+
+struct PacketInfo {
+  PacketError error = PacketError::none;
+  std::uint32_t timestamp_us = 0;  // microseconds past the hour, of the first firing
+  ReturnMode mode = ReturnMode::strongest;
+  std::uint16_t first_azimuth = 0;  // hundredths of a degree, first block
+  std::uint16_t last_azimuth = 0;   // hundredths of a degree, last block
+  int points = 0;                   // points written
+  int zero_returns = 0;             // firings without a return (distance 0)
+};
+
+class PacketDecoder {
+ public:
+  // Checks the calibration against the model. `hdl64e_mode` is the return
+  // mode an HDL-64E was set to (its packets do not say); dual is not
+  // supported for the HDL-64E.
+  struct Created;
+  static Created create(Model model, const Calibration& calibration, ReturnSelection selection = ReturnSelection::all,
+                        ReturnMode hdl64e_mode = ReturnMode::strongest);
+
+  const ModelInfo& model() const noexcept { return *info_; }
+  const Calibration& calibration() const noexcept { return calibration_; }
+  double distance_resolution() const noexcept { return resolution_; }
+  // Ring of each laser id.
+  std::span<const std::uint16_t> rings() const noexcept { return {rings_.data(), rings_.size()}; }
+
+  // Decodes one packet into `out`, which must hold kMaxPointsPerPacket points.
+  PacketInfo decode(std::span<const std::uint8_t> payload, std::span<Point> out) const noexcept;
+
+ private:
+  PacketDecoder() = default;
+
+  struct LaserTable {
+    float cos_vert, sin_vert;
+    float cos_rot, sin_rot;
+    float rot;  // rad
+    float dist_correction, dist_correction_x, dist_correction_y;
+    float vert_offset, horiz_offset;
+    bool two_pt;
+    bool intensity_correction;
+    float focal_offset, focal_slope;
+    float min_intensity, max_intensity;
+  };
+
+  const ModelInfo* info_ = nullptr;
+  Calibration calibration_;
+  ReturnSelection selection_ = ReturnSelection::all;
+  ReturnMode hdl64e_mode_ = ReturnMode::strongest;
+  double resolution_ = 0.002;
+  std::vector<LaserTable> lasers_;
+  std::vector<std::uint16_t> rings_;
+  std::vector<float> sin_table_;  // sin of hundredths of a degree, 0..36000
+  std::vector<float> cos_table_;
+  // Time of the firing of return slot k after its firing group's start (us).
+  std::array<float, kReturnsPerBlock> firing_time_us_{};
+};
+
+struct PacketDecoder::Created {
+  std::optional<PacketDecoder> decoder;
+  std::string error;
+};
+
+}  // namespace trailnav::velodyne

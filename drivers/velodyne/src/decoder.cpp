@@ -1,0 +1,294 @@
+#include "trailnav/drivers/velodyne/decoder.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+
+namespace trailnav::velodyne {
+namespace {
+
+constexpr int kAzimuthSteps = 36000;  // hundredths of a degree per turn
+constexpr float kRadPerStep = static_cast<float>(std::numbers::pi / 18000.0);
+constexpr float kTwoPi = static_cast<float>(2.0 * std::numbers::pi);
+// Largest believable azimuth advance between two firing groups: 5 degrees.
+constexpr int kMaxGroupGap = 500;
+
+}  // namespace
+
+const char* packet_error_name(PacketError error) noexcept {
+  switch (error) {
+    case PacketError::none: return "none";
+    case PacketError::wrong_size: return "wrong_size";
+    case PacketError::bad_block_flag: return "bad_block_flag";
+    case PacketError::bad_azimuth: return "bad_azimuth";
+    case PacketError::unknown_return_mode: return "unknown_return_mode";
+    case PacketError::model_mismatch: return "model_mismatch";
+  }
+  return "?";
+}
+
+std::optional<Model> detect_model(std::span<const std::uint8_t> payload) noexcept {
+  if (payload.size() != kDataPacketSize) return std::nullopt;
+  for (int b = 0; b < kBlocksPerPacket; ++b) {
+    if (read_u16(payload.data() + static_cast<std::size_t>(b) * kBlockSize) == kLowerBlockFlag) return Model::hdl64e;
+  }
+  return model_from_product_id(payload[kProductIdOffset]);
+}
+
+PositionError decode_position_packet(std::span<const std::uint8_t> payload, PositionPacket& out) noexcept {
+  if (payload.size() != kPositionPacketSize) return PositionError::wrong_size;
+  out.timestamp_us = read_u32(payload.data() + 198);
+  if (out.timestamp_us >= kMicrosPerHour) return PositionError::bad_timestamp;
+  const std::uint8_t pps = payload[202];
+  if (pps > 3) return PositionError::bad_pps;
+  out.pps = static_cast<PpsStatus>(pps);
+  const auto* text = reinterpret_cast<const char*>(payload.data() + 206);
+  std::size_t length = 0;
+  const std::size_t limit = kPositionPacketSize - 206;
+  while (length < limit && text[length] != '\0' && text[length] != '\r' && text[length] != '\n') ++length;
+  out.nmea = std::string_view(text, length);
+  return PositionError::none;
+}
+
+PacketDecoder::Created PacketDecoder::create(Model model, const Calibration& calibration, ReturnSelection selection,
+                                             ReturnMode hdl64e_mode) {
+  Created result;
+  if (Status s = check_calibration(calibration, model); !s) {
+    result.error = s.message();
+    return result;
+  }
+  if (model == Model::hdl64e && hdl64e_mode == ReturnMode::dual) {
+    result.error = "dual-return mode is not supported for the HDL-64E yet; set it to strongest or last";
+    return result;
+  }
+  PacketDecoder d;
+  d.info_ = &model_info(model);
+  d.calibration_ = calibration;
+  d.selection_ = selection;
+  d.hdl64e_mode_ = hdl64e_mode;
+  d.resolution_ = calibration.distance_resolution.value_or(d.info_->distance_resolution);
+
+  d.sin_table_.resize(kAzimuthSteps + 1);
+  d.cos_table_.resize(kAzimuthSteps + 1);
+  for (int i = 0; i <= kAzimuthSteps; ++i) {
+    const double a = static_cast<double>(i) * std::numbers::pi / 18000.0;
+    d.sin_table_[static_cast<std::size_t>(i)] = static_cast<float>(std::sin(a));
+    d.cos_table_[static_cast<std::size_t>(i)] = static_cast<float>(std::cos(a));
+  }
+
+  for (const LaserCorrection& c : calibration.lasers) {
+    LaserTable t{};
+    t.cos_vert = static_cast<float>(std::cos(c.vert_correction));
+    t.sin_vert = static_cast<float>(std::sin(c.vert_correction));
+    t.cos_rot = static_cast<float>(std::cos(c.rot_correction));
+    t.sin_rot = static_cast<float>(std::sin(c.rot_correction));
+    t.rot = static_cast<float>(c.rot_correction);
+    t.dist_correction = static_cast<float>(c.dist_correction);
+    t.dist_correction_x = static_cast<float>(c.dist_correction_x);
+    t.dist_correction_y = static_cast<float>(c.dist_correction_y);
+    t.vert_offset = static_cast<float>(c.vert_offset_correction);
+    t.horiz_offset = static_cast<float>(c.horiz_offset_correction);
+    t.two_pt = c.two_pt_correction;
+    // Intensity correction of the HDL-64E manual, with the focal distance in
+    // centimetres over the 131 m (13100 cm) maximum range.
+    const double focal_cm = c.focal_distance * 100.0;
+    t.focal_offset = static_cast<float>(256.0 * (1.0 - focal_cm / 13100.0) * (1.0 - focal_cm / 13100.0));
+    t.focal_slope = static_cast<float>(c.focal_slope);
+    t.intensity_correction = c.focal_slope != 0.0 || c.min_intensity != 0 || c.max_intensity != 255;
+    t.min_intensity = static_cast<float>(c.min_intensity);
+    t.max_intensity = static_cast<float>(c.max_intensity);
+    d.lasers_.push_back(t);
+  }
+
+  // Rings: lasers sorted by elevation, lowest first (ties by id).
+  std::vector<int> order(calibration.lasers.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return calibration.lasers[static_cast<std::size_t>(a)].vert_correction <
+           calibration.lasers[static_cast<std::size_t>(b)].vert_correction;
+  });
+  d.rings_.resize(order.size());
+  for (std::size_t r = 0; r < order.size(); ++r) d.rings_[static_cast<std::size_t>(order[r])] = static_cast<std::uint16_t>(r);
+
+  const ModelInfo& m = *d.info_;
+  for (int k = 0; k < kReturnsPerBlock; ++k) {
+    const int lasers_per_sequence = kReturnsPerBlock / m.sequences_per_block;
+    const int sequence = k / lasers_per_sequence;
+    const int in_sequence = k % lasers_per_sequence;
+    d.firing_time_us_[static_cast<std::size_t>(k)] =
+        static_cast<float>(sequence * m.sequence_period_us + (in_sequence / m.lasers_per_step) * m.step_us);
+  }
+  result.decoder = std::move(d);
+  return result;
+}
+
+PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::span<Point> out) const noexcept {
+  PacketInfo info;
+  if (payload.size() != kDataPacketSize) {
+    info.error = PacketError::wrong_size;
+    return info;
+  }
+  const std::uint8_t* p = payload.data();
+  const bool is64 = info_->model == Model::hdl64e;
+
+  // Factory bytes (not sent by the HDL-64E, whose mode is configured).
+  if (is64) {
+    info.mode = hdl64e_mode_;
+  } else {
+    const auto mode = return_mode_from_byte(p[kReturnModeOffset]);
+    if (!mode) {
+      info.error = PacketError::unknown_return_mode;
+      return info;
+    }
+    info.mode = *mode;
+    const auto product = model_from_product_id(p[kProductIdOffset]);
+    const bool compatible = !product || *product == info_->model ||
+                            (info_->model == Model::vlp16_hires && *product == Model::vlp16) ||
+                            (info_->model == Model::vlp16 && *product == Model::vlp16_hires);
+    if (!compatible) {
+      info.error = PacketError::model_mismatch;
+      return info;
+    }
+  }
+
+  // Validate every block before writing any point.
+  std::array<std::uint16_t, kBlocksPerPacket> azimuth{};
+  for (int b = 0; b < kBlocksPerPacket; ++b) {
+    const std::uint8_t* block = p + static_cast<std::size_t>(b) * kBlockSize;
+    const std::uint16_t flag = read_u16(block);
+    if (flag != kUpperBlockFlag && !(is64 && flag == kLowerBlockFlag)) {
+      info.error = PacketError::bad_block_flag;
+      return info;
+    }
+    azimuth[static_cast<std::size_t>(b)] = read_u16(block + 2);
+    if (azimuth[static_cast<std::size_t>(b)] >= kAzimuthSteps) {
+      info.error = PacketError::bad_azimuth;
+      return info;
+    }
+  }
+  info.timestamp_us = read_u32(p + kTimestampOffset);
+  info.first_azimuth = azimuth.front();
+  info.last_azimuth = azimuth.back();
+
+  const bool dual = info.mode == ReturnMode::dual;
+  const int group_size = (dual ? 2 : 1) * (is64 ? 2 : 1);
+  const int groups = kBlocksPerPacket / group_size;
+
+  // Azimuth advance from each firing group to the next; the last group
+  // reuses the one before it.
+  std::array<int, kBlocksPerPacket> gap{};
+  for (int g = 0; g < groups; ++g) {
+    int diff = 0;
+    if (g + 1 < groups) {
+      diff = azimuth[static_cast<std::size_t>((g + 1) * group_size)] - azimuth[static_cast<std::size_t>(g * group_size)];
+      if (diff < 0) diff += kAzimuthSteps;
+      if (diff > kMaxGroupGap) diff = -1;  // implausible: decided below
+    } else {
+      diff = g > 0 ? gap[static_cast<std::size_t>(g - 1)] : 0;
+    }
+    gap[static_cast<std::size_t>(g)] = diff;
+  }
+  for (int g = 0; g < groups; ++g) {
+    if (gap[static_cast<std::size_t>(g)] < 0) gap[static_cast<std::size_t>(g)] = g > 0 ? std::max(gap[static_cast<std::size_t>(g - 1)], 0) : 0;
+  }
+
+  const ReturnKind single_kind = info.mode == ReturnMode::last ? ReturnKind::last : ReturnKind::strongest;
+  const float resolution = static_cast<float>(resolution_);
+  const float group_period = static_cast<float>(info_->group_period_us);
+  const int lasers_per_sequence = kReturnsPerBlock / info_->sequences_per_block;
+  int n = 0;
+
+  for (int b = 0; b < kBlocksPerPacket; ++b) {
+    const std::uint8_t* block = p + static_cast<std::size_t>(b) * kBlockSize;
+    const int group = b / group_size;
+    const bool lower = is64 && read_u16(block) == kLowerBlockFlag;
+    // In a dual-return packet, even blocks of a pair carry the last return,
+    // odd blocks the strongest.
+    const bool second_of_pair = dual && (b % 2 == 1);
+    ReturnKind kind = single_kind;
+    if (dual) {
+      kind = second_of_pair ? ReturnKind::dual_strongest : ReturnKind::dual_last;
+      if (selection_ == ReturnSelection::strongest && !second_of_pair) continue;
+      if (selection_ == ReturnSelection::last && second_of_pair) continue;
+    }
+    const float group_start_us = static_cast<float>(group) * group_period;
+    const auto block_azimuth = static_cast<float>(azimuth[static_cast<std::size_t>(b)]);
+    const auto group_gap = static_cast<float>(gap[static_cast<std::size_t>(group)]);
+
+    for (int k = 0; k < kReturnsPerBlock; ++k) {
+      const std::uint8_t* ret = block + 4 + static_cast<std::size_t>(k) * 3;
+      const std::uint16_t raw = read_u16(ret);
+      if (raw == 0) {
+        ++info.zero_returns;
+        continue;
+      }
+      ReturnKind point_kind = kind;
+      if (dual && selection_ == ReturnSelection::all) {
+        // The sensor repeats a lone return in both blocks: keep it once.
+        const std::uint8_t* other = p + static_cast<std::size_t>(second_of_pair ? b - 1 : b + 1) * kBlockSize + 4 +
+                                    static_cast<std::size_t>(k) * 3;
+        if (read_u16(other) == raw && other[2] == ret[2]) {
+          if (second_of_pair) continue;
+          point_kind = ReturnKind::dual_both;
+        }
+      }
+      const int laser = (lower ? 32 : 0) + (k % lasers_per_sequence);
+      const LaserTable& t = lasers_[static_cast<std::size_t>(laser)];
+      const float t_in_group = firing_time_us_[static_cast<std::size_t>(k)];
+
+      // Azimuth of this firing, interpolated over the group's advance, then
+      // the laser's own rotation: table lookup plus a first-order step.
+      float a = block_azimuth + group_gap * (t_in_group / group_period);
+      if (a >= static_cast<float>(kAzimuthSteps)) a -= static_cast<float>(kAzimuthSteps);
+      const int ai = static_cast<int>(a);
+      const float delta = (a - static_cast<float>(ai)) * kRadPerStep;
+      const float s0 = sin_table_[static_cast<std::size_t>(ai)];
+      const float c0 = cos_table_[static_cast<std::size_t>(ai)];
+      const float sin_az = s0 + delta * c0;
+      const float cos_az = c0 - delta * s0;
+      const float sa = sin_az * t.cos_rot - cos_az * t.sin_rot;  // sin(azimuth - rot)
+      const float ca = cos_az * t.cos_rot + sin_az * t.sin_rot;  // cos(azimuth - rot)
+
+      const float distance = static_cast<float>(raw) * resolution + t.dist_correction;
+      float distance_x = distance;
+      float distance_y = distance;
+      if (t.two_pt) {
+        // Two-point distance correction of the HDL-64E, interpolated between
+        // its calibration distances of 2.4 m (x), 1.93 m (y) and 25.04 m.
+        const float xy0 = distance * t.cos_vert - t.vert_offset * t.sin_vert;
+        const float xx = std::abs(xy0 * sa - t.horiz_offset * ca);
+        const float yy = std::abs(xy0 * ca + t.horiz_offset * sa);
+        distance_x += (t.dist_correction - t.dist_correction_x) * (xx - 2.4f) / (25.04f - 2.4f) + t.dist_correction_x - t.dist_correction;
+        distance_y += (t.dist_correction - t.dist_correction_y) * (yy - 1.93f) / (25.04f - 1.93f) + t.dist_correction_y - t.dist_correction;
+      }
+      const float xy_x = distance_x * t.cos_vert - t.vert_offset * t.sin_vert;
+      const float xy_y = distance_y * t.cos_vert - t.vert_offset * t.sin_vert;
+
+      Point& pt = out[static_cast<std::size_t>(n++)];
+      pt.x = xy_y * ca + t.horiz_offset * sa;
+      pt.y = -(xy_x * sa - t.horiz_offset * ca);
+      pt.z = distance_y * t.sin_vert + t.vert_offset * t.cos_vert;
+      pt.distance = distance;
+      float pointing = a * kRadPerStep - t.rot;
+      if (pointing < 0.0f) pointing += kTwoPi;
+      if (pointing >= kTwoPi) pointing -= kTwoPi;
+      pt.azimuth = pointing;
+      float intensity = ret[2];
+      if (t.intensity_correction) {
+        const float fall = 1.0f - static_cast<float>(raw) / 65535.0f;
+        intensity += t.focal_slope * std::abs(t.focal_offset - 256.0f * fall * fall);
+        intensity = std::clamp(intensity, t.min_intensity, t.max_intensity);
+      }
+      pt.intensity = intensity;
+      pt.time = (group_start_us + t_in_group) * 1e-6f;
+      pt.ring = rings_[static_cast<std::size_t>(laser)];
+      pt.laser = static_cast<std::uint8_t>(laser);
+      pt.kind = point_kind;
+    }
+  }
+  info.points = n;
+  return info;
+}
+
+}  // namespace trailnav::velodyne
