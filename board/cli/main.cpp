@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("trailnav ") + TRAILNAV_VERSION);
   trailnav::cli::add_demo_command(app);
   trailnav::cli::add_jitter_command(app);
+  trailnav::cli::add_decode_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -51,22 +51,20 @@ PositionError decode_position_packet(std::span<const std::uint8_t> payload, Posi
   return PositionError::none;
 }
 
-PacketDecoder::Created PacketDecoder::create(Model model, const Calibration& calibration, ReturnSelection selection,
-                                             ReturnMode hdl64e_mode) {
+PacketDecoder::Created PacketDecoder::create(Model model, const Calibration& calibration, const DecoderOptions& options) {
   Created result;
   if (Status s = check_calibration(calibration, model); !s) {
     result.error = s.message();
     return result;
   }
-  if (model == Model::hdl64e && hdl64e_mode == ReturnMode::dual) {
+  if (model == Model::hdl64e && options.hdl64e_mode == ReturnMode::dual) {
     result.error = "dual-return mode is not supported for the HDL-64E yet; set it to strongest or last";
     return result;
   }
   PacketDecoder d;
   d.info_ = &model_info(model);
   d.calibration_ = calibration;
-  d.selection_ = selection;
-  d.hdl64e_mode_ = hdl64e_mode;
+  d.options_ = options;
   d.resolution_ = calibration.distance_resolution.value_or(d.info_->distance_resolution);
 
   d.sin_table_.resize(kAzimuthSteps + 1);
@@ -134,7 +132,7 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
 
   // Factory bytes (not sent by the HDL-64E, whose mode is configured).
   if (is64) {
-    info.mode = hdl64e_mode_;
+    info.mode = options_.hdl64e_mode;
   } else {
     const auto mode = return_mode_from_byte(p[kReturnModeOffset]);
     if (!mode) {
@@ -184,6 +182,8 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
       diff = azimuth[static_cast<std::size_t>((g + 1) * group_size)] - azimuth[static_cast<std::size_t>(g * group_size)];
       if (diff < 0) diff += kAzimuthSteps;
       if (diff > kMaxGroupGap) diff = -1;  // implausible: decided below
+    } else if (options_.last_group == LastGroupAzimuth::hold) {
+      diff = 0;
     } else {
       diff = g > 0 ? gap[static_cast<std::size_t>(g - 1)] : 0;
     }
@@ -209,8 +209,8 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
     ReturnKind kind = single_kind;
     if (dual) {
       kind = second_of_pair ? ReturnKind::dual_strongest : ReturnKind::dual_last;
-      if (selection_ == ReturnSelection::strongest && !second_of_pair) continue;
-      if (selection_ == ReturnSelection::last && second_of_pair) continue;
+      if (options_.selection == ReturnSelection::strongest && !second_of_pair) continue;
+      if (options_.selection == ReturnSelection::last && second_of_pair) continue;
     }
     const float group_start_us = static_cast<float>(group) * group_period;
     const auto block_azimuth = static_cast<float>(azimuth[static_cast<std::size_t>(b)]);
@@ -224,7 +224,7 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
         continue;
       }
       ReturnKind point_kind = kind;
-      if (dual && selection_ == ReturnSelection::all) {
+      if (dual && options_.selection == ReturnSelection::all) {
         // The sensor repeats a lone return in both blocks: keep it once.
         const std::uint8_t* other = p + static_cast<std::size_t>(second_of_pair ? b - 1 : b + 1) * kBlockSize + 4 +
                                     static_cast<std::size_t>(k) * 3;

@@ -28,6 +28,20 @@ enum class ReturnKind : std::uint8_t {
 // Which returns of a dual-return packet to keep.
 enum class ReturnSelection : std::uint8_t { all, strongest, last };
 
+// How the azimuth of the firings in a packet's last firing group is found.
+// The sensor only reports each group's start azimuth; the advance during a
+// group is the gap to the next group, unknown for the last one.
+enum class LastGroupAzimuth : std::uint8_t {
+  extrapolate,  // assume the previous group's advance (default; as ROS velodyne_pointcloud)
+  hold,         // keep the group's start azimuth for all its firings (as tier4/nebula)
+};
+
+struct DecoderOptions {
+  ReturnSelection selection = ReturnSelection::all;
+  ReturnMode hdl64e_mode = ReturnMode::strongest;  // HDL-64E packets do not state it; dual unsupported
+  LastGroupAzimuth last_group = LastGroupAzimuth::extrapolate;
+};
+
 // One return. Frame: the sensor's, x forward (azimuth 0), y left, z up, as
 // in ROS velodyne_pointcloud.
 struct Point {
@@ -66,12 +80,9 @@ struct PacketInfo {
 
 class PacketDecoder {
  public:
-  // Checks the calibration against the model. `hdl64e_mode` is the return
-  // mode an HDL-64E was set to (its packets do not say); dual is not
-  // supported for the HDL-64E.
+  // Checks the calibration against the model and tabulates everything.
   struct Created;
-  static Created create(Model model, const Calibration& calibration, ReturnSelection selection = ReturnSelection::all,
-                        ReturnMode hdl64e_mode = ReturnMode::strongest);
+  static Created create(Model model, const Calibration& calibration, const DecoderOptions& options = {});
 
   const ModelInfo& model() const noexcept { return *info_; }
   const Calibration& calibration() const noexcept { return calibration_; }
@@ -99,8 +110,7 @@ class PacketDecoder {
 
   const ModelInfo* info_ = nullptr;
   Calibration calibration_;
-  ReturnSelection selection_ = ReturnSelection::all;
-  ReturnMode hdl64e_mode_ = ReturnMode::strongest;
+  DecoderOptions options_;
   double resolution_ = 0.002;
   std::vector<LaserTable> lasers_;
   std::vector<std::uint16_t> rings_;
