@@ -1,5 +1,4 @@
 // `trailnav decode`: dump the points of a Velodyne capture as CSV or PLY.
-#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <numbers>

@@ -36,6 +36,20 @@ std::atomic<std::uint64_t> g_written{0};
 std::atomic<Sink> g_sink{Sink::stderr_only};
 std::thread g_thread;
 
+// The calling thread's name, read from the kernel once per thread (a
+// system call) and kept; a thread renamed after its first log line keeps
+// the old name in its records.
+__attribute__((tls_model("initial-exec"))) thread_local char t_name[16] = {};
+__attribute__((tls_model("initial-exec"))) thread_local bool t_name_known = false;
+
+void copy_thread_name(char (&out)[16]) noexcept {
+  if (!t_name_known) {
+    pthread_getname_np(pthread_self(), t_name, sizeof t_name);
+    t_name_known = true;
+  }
+  std::memcpy(out, t_name, sizeof t_name);
+}
+
 std::int64_t wall_time_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_REALTIME, &ts);
@@ -98,7 +112,7 @@ void write(Level level, const char* format, ...) noexcept {
   Record record;
   record.wall_time_ns = wall_time_ns();
   record.level = level;
-  pthread_getname_np(pthread_self(), record.thread, sizeof record.thread);
+  copy_thread_name(record.thread);
   va_list args;
   va_start(args, format);
   std::vsnprintf(record.text, sizeof record.text, format, args);

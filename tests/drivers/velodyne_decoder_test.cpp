@@ -107,9 +107,11 @@ void expect_point_rings_ordered(const Decoded& d, int rings) {
   }
 }
 
-// Every complete revolution holds the firings one turn takes at the measured
-// azimuth advance per firing group.
-void expect_complete_revolutions_have_expected_firings(const Decoded& d, const ModelInfo& model, bool dual) {
+// Every complete revolution of a single-return capture holds the firings one
+// turn takes at the capture's own azimuth advance per packet (384 firings per
+// packet). Firings without a return are counted per packet, so a revolution
+// may be off by part of a packet: well inside the 1 % allowed.
+void expect_complete_revolutions_have_expected_firings(const Decoded& d) {
   ASSERT_GE(d.firings_per_revolution.size(), 3u) << "need at least one complete revolution";
   // Mean azimuth advance per packet, from consecutive packets.
   double advance = 0.0;
@@ -124,10 +126,8 @@ void expect_complete_revolutions_have_expected_firings(const Decoded& d, const M
   }
   ASSERT_GT(n, 0);
   advance /= n;
-  const int blocks_per_firing = dual ? 2 : 1;
-  const double firings_per_packet = 12.0 / blocks_per_firing * 32.0 * (model.model == Model::hdl64e ? 0.5 : 1.0) *
-                                    (dual ? 2.0 : 1.0);
-  const double expected = 36000.0 / advance * firings_per_packet;
+  constexpr double kFiringsPerPacket = kBlocksPerPacket * kReturnsPerBlock;
+  const double expected = 36000.0 / advance * kFiringsPerPacket;
   for (std::size_t r = 1; r + 1 < d.firings_per_revolution.size(); ++r) {
     EXPECT_NEAR(d.firings_per_revolution[r], expected, expected * 0.01) << "revolution " << r;
   }
@@ -140,7 +140,7 @@ TEST(VelodyneDecoder, MrptHdl32eDecodesCleanly) {
   EXPECT_EQ(d.malformed, 0u);
   expect_rings_ordered_by_elevation(decoder);
   expect_point_rings_ordered(d, 32);
-  expect_complete_revolutions_have_expected_firings(d, decoder.model(), false);
+  expect_complete_revolutions_have_expected_firings(d);
   const float max_range = std::max_element(d.points.begin(), d.points.end(), [](const auto& a, const auto& b) {
                             return a.point.distance < b.point.distance;
                           })->point.distance;
@@ -154,7 +154,7 @@ TEST(VelodyneDecoder, MrptVlp16DecodesAndItsPositionPacketsCarryGprmc) {
   EXPECT_EQ(d.packets, 293u);
   EXPECT_EQ(d.malformed, 0u);
   expect_rings_ordered_by_elevation(decoder);
-  expect_complete_revolutions_have_expected_firings(d, decoder.model(), false);
+  expect_complete_revolutions_have_expected_firings(d);
   ASSERT_EQ(d.positions.size(), 57u);
   EXPECT_EQ(d.nmea.front(), "$GPRMC,081802.00,A,3649.7478558,N,00224.4542928,W,0.034,212.5,210116,0.0,E,A*2E");
   EXPECT_EQ(d.positions.front().pps, PpsStatus::locked);
@@ -168,7 +168,7 @@ TEST(VelodyneDecoder, EinrideRawRecordingDecodesCleanly) {
   EXPECT_EQ(d.packets, 1000u);
   EXPECT_EQ(d.malformed, 0u);
   EXPECT_GE(d.firings_per_revolution.size(), 13u);  // ~13 revolutions
-  expect_complete_revolutions_have_expected_firings(d, decoder.model(), false);
+  expect_complete_revolutions_have_expected_firings(d);
 }
 
 TEST(VelodyneDecoder, RustLidarUtilsCaptureDecodesCleanly) {

@@ -3,6 +3,7 @@
 #include <expat.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -21,6 +22,15 @@ std::optional<std::string> read_file(const std::string& path) {
   std::stringstream s;
   s << in.rdbuf();
   return s.str();
+}
+
+// A loaded table, indexed by laser id whatever order the file listed them in.
+CalibrationResult success(Calibration cal) {
+  std::sort(cal.lasers.begin(), cal.lasers.end(),
+            [](const LaserCorrection& a, const LaserCorrection& b) { return a.laser_id < b.laser_id; });
+  CalibrationResult r;
+  r.calibration = std::move(cal);
+  return r;
 }
 
 CalibrationResult failure(const std::string& path, int line, const std::string& what) {
@@ -180,11 +190,7 @@ CalibrationResult load_calibration_yaml(const std::string& path) {
       return failure(path, root["distance_resolution"].Mark().line + 1, "'distance_resolution' is not a number");
     }
   }
-  std::sort(cal.lasers.begin(), cal.lasers.end(),
-            [](const LaserCorrection& a, const LaserCorrection& b) { return a.laser_id < b.laser_id; });
-  CalibrationResult r;
-  r.calibration = std::move(cal);
-  return r;
+  return success(std::move(cal));
 }
 
 CalibrationResult load_calibration_xml(const std::string& path) {
@@ -230,11 +236,7 @@ CalibrationResult load_calibration_xml(const std::string& path) {
     if (i < state.max_intensity.size()) c.max_intensity = state.max_intensity[i];
     cal.lasers.push_back(c);
   }
-  std::sort(cal.lasers.begin(), cal.lasers.end(),
-            [](const LaserCorrection& a, const LaserCorrection& b) { return a.laser_id < b.laser_id; });
-  CalibrationResult r;
-  r.calibration = std::move(cal);
-  return r;
+  return success(std::move(cal));
 }
 
 CalibrationResult load_calibration(const std::string& path) {

@@ -173,24 +173,22 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
   const int group_size = (dual ? 2 : 1) * (is64 ? 2 : 1);
   const int groups = kBlocksPerPacket / group_size;
 
-  // Azimuth advance from each firing group to the next; the last group
-  // reuses the one before it.
+  // Azimuth advance from each firing group to the next. The last group's is
+  // unknown: the previous group's (extrapolate) or none (hold). An
+  // implausible advance (corrupt azimuth) is replaced by the previous one.
   std::array<int, kBlocksPerPacket> gap{};
+  int previous_gap = 0;
   for (int g = 0; g < groups; ++g) {
-    int diff = 0;
+    int diff = previous_gap;
     if (g + 1 < groups) {
       diff = azimuth[static_cast<std::size_t>((g + 1) * group_size)] - azimuth[static_cast<std::size_t>(g * group_size)];
       if (diff < 0) diff += kAzimuthSteps;
-      if (diff > kMaxGroupGap) diff = -1;  // implausible: decided below
+      if (diff > kMaxGroupGap) diff = previous_gap;
     } else if (options_.last_group == LastGroupAzimuth::hold) {
       diff = 0;
-    } else {
-      diff = g > 0 ? gap[static_cast<std::size_t>(g - 1)] : 0;
     }
     gap[static_cast<std::size_t>(g)] = diff;
-  }
-  for (int g = 0; g < groups; ++g) {
-    if (gap[static_cast<std::size_t>(g)] < 0) gap[static_cast<std::size_t>(g)] = g > 0 ? std::max(gap[static_cast<std::size_t>(g - 1)], 0) : 0;
+    previous_gap = diff;
   }
 
   const ReturnKind single_kind = info.mode == ReturnMode::last ? ReturnKind::last : ReturnKind::strongest;

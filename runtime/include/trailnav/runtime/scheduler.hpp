@@ -147,7 +147,7 @@ class Scheduler {
   Scheduler& operator=(const Scheduler&) = delete;
 
   // Before start(). Event tasks need `event`; periodic tasks must not have one.
-  // Returns the task's index, or an error naming the task.
+  // Tasks are indexed in the order added (for stats()); an error names the task.
   Status add(const TaskSpec& spec, Task& task, TaskEvent* event = nullptr);
 
   // Spawns one thread per task, marks each as a real-time thread for the
