@@ -191,6 +191,19 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
     previous_gap = diff;
   }
 
+  const int sequences_per_block = info_->sequences_per_block;
+  const float sequence_period = static_cast<float>(info_->sequence_period_us);
+  info.sequences = groups * sequences_per_block;
+  for (int s = 0; s < info.sequences; ++s) {
+    const int g = s / sequences_per_block;
+    const float offset_us = static_cast<float>(s % sequences_per_block) * sequence_period;
+    float a = static_cast<float>(azimuth[static_cast<std::size_t>(g * group_size)]) +
+              static_cast<float>(gap[static_cast<std::size_t>(g)]) * offset_us / static_cast<float>(info_->group_period_us);
+    if (a >= static_cast<float>(kAzimuthSteps)) a -= static_cast<float>(kAzimuthSteps);
+    info.sequence_azimuth[static_cast<std::size_t>(s)] = a;
+    info.sequence_time_us[static_cast<std::size_t>(s)] = static_cast<float>(g) * static_cast<float>(info_->group_period_us) + offset_us;
+  }
+
   const ReturnKind single_kind = info.mode == ReturnMode::last ? ReturnKind::last : ReturnKind::strongest;
   const float resolution = static_cast<float>(resolution_);
   const float group_period = static_cast<float>(info_->group_period_us);
@@ -283,6 +296,7 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
       pt.ring = rings_[static_cast<std::size_t>(laser)];
       pt.laser = static_cast<std::uint8_t>(laser);
       pt.kind = point_kind;
+      pt.sequence = static_cast<std::uint8_t>(group * sequences_per_block + k / lasers_per_sequence);
     }
   }
   info.points = n;

@@ -55,6 +55,7 @@ struct Point {
   std::uint16_t ring = 0;  // laser index sorted by elevation, 0 = lowest
   std::uint8_t laser = 0;  // laser id as in the packet and calibration
   ReturnKind kind = ReturnKind::strongest;
+  std::uint8_t sequence = 0;  // firing sequence within the packet (see PacketInfo)
 };
 
 enum class PacketError : std::uint8_t {
@@ -68,6 +69,9 @@ enum class PacketError : std::uint8_t {
 
 const char* packet_error_name(PacketError error) noexcept;
 
+// Firing sequences a packet can hold: 12 blocks of two VLP-16 sequences.
+inline constexpr int kMaxSequencesPerPacket = 24;
+
 struct PacketInfo {
   PacketError error = PacketError::none;
   std::uint32_t timestamp_us = 0;  // microseconds past the hour, of the first firing
@@ -76,6 +80,11 @@ struct PacketInfo {
   std::uint16_t last_azimuth = 0;   // hundredths of a degree, last block
   int points = 0;                   // points written
   int zero_returns = 0;             // firings without a return (distance 0)
+  // Firing sequences (all lasers firing once) in time order. Both blocks of a
+  // dual-return pair, and both HDL-64E laser blocks, share their sequences.
+  int sequences = 0;
+  std::array<float, kMaxSequencesPerPacket> sequence_azimuth{};  // hundredths of a degree at the sequence's start, [0, 36000)
+  std::array<float, kMaxSequencesPerPacket> sequence_time_us{};  // after the packet's first firing
 };
 
 class PacketDecoder {

@@ -1,0 +1,301 @@
+#include "trailnav/drivers/velodyne/range_image.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace trailnav::velodyne {
+namespace {
+
+constexpr float kTurn = 36000.0f;  // hundredths of a degree
+constexpr std::int64_t kHourUs = 3'600'000'000;
+
+// Microseconds from `previous` to `current` on the sensor's hour clock, in
+// (-30 min, +30 min].
+std::int64_t hour_clock_delta(std::uint32_t current, std::uint32_t previous) noexcept {
+  std::int64_t d = static_cast<std::int64_t>(current) - static_cast<std::int64_t>(previous);
+  if (d <= -kHourUs / 2) d += kHourUs;
+  if (d > kHourUs / 2) d -= kHourUs;
+  return d;
+}
+
+float wrap_turn(float hundredths) noexcept {
+  if (hundredths < 0.0f) hundredths += kTurn;
+  if (hundredths >= kTurn) hundredths -= kTurn;
+  return hundredths;
+}
+
+}  // namespace
+
+RangeImage::RangeImage(RangeImageShape shape)
+    : shape_(shape),
+      cells_(static_cast<std::size_t>(shape.layers) * static_cast<std::size_t>(shape.rings) *
+             static_cast<std::size_t>(shape.max_columns)),
+      column_state_(static_cast<std::size_t>(shape.max_columns), ColumnState::missing) {}
+
+double RangeImage::column_azimuth(int column) const noexcept {
+  const double width = 2.0 * std::numbers::pi / static_cast<double>(columns_);
+  double a = cut_azimuth + (static_cast<double>(column) + 0.5) * width;
+  if (a >= 2.0 * std::numbers::pi) a -= 2.0 * std::numbers::pi;
+  return a;
+}
+
+void RangeImage::reset(int columns) noexcept {
+  columns_ = std::clamp(columns, 1, shape_.max_columns);
+  for (int layer = 0; layer < shape_.layers; ++layer) {
+    for (int ring = 0; ring < shape_.rings; ++ring) {
+      RangeCell* row_cells = cells_.data() + index(layer, ring, 0);
+      std::fill(row_cells, row_cells + columns_, RangeCell{});
+    }
+  }
+  std::fill(column_state_.begin(), column_state_.begin() + columns_, ColumnState::missing);
+  sequence = 0;
+  start_ns = end_ns = 0;
+  rpm = 0.0;
+  points = missing_columns = 0;
+  packets = lost_packets = collisions = 0;
+}
+
+void RangeImage::mark_received(int first_column, int end_column) noexcept {
+  first_column = std::max(first_column, 0);
+  end_column = std::min(end_column, columns_);
+  for (int c = first_column; c < end_column; ++c) column_state_[static_cast<std::size_t>(c)] = ColumnState::received;
+}
+
+void RangeImage::finish() noexcept {
+  missing_columns = static_cast<int>(
+      std::count(column_state_.begin(), column_state_.begin() + columns_, ColumnState::missing));
+  int n = 0;
+  for (int layer = 0; layer < shape_.layers; ++layer) {
+    for (int ring = 0; ring < shape_.rings; ++ring) {
+      for (const RangeCell& cell : row(layer, ring)) n += cell.valid() ? 1 : 0;
+    }
+  }
+  points = n;
+}
+
+RevolutionAssembler::Created RevolutionAssembler::create(const PacketDecoder& decoder, const AssemblerOptions& options) {
+  Created result;
+  if (!(options.min_rpm >= 60.0 && options.min_rpm <= 1200.0)) {
+    result.error = "min_rpm " + std::to_string(options.min_rpm) + " is outside 60..1200";
+    return result;
+  }
+  if (!(options.rpm >= options.min_rpm && options.rpm <= 1500.0)) {
+    result.error = "rpm " + std::to_string(options.rpm) + " must lie between min_rpm (" +
+                   std::to_string(options.min_rpm) + ") and 1500";
+    return result;
+  }
+  if (!(options.cut_azimuth_rad >= 0.0 && options.cut_azimuth_rad < 2.0 * std::numbers::pi)) {
+    result.error = "the cut azimuth must lie in [0, 360) degrees";
+    return result;
+  }
+  const ModelInfo& m = decoder.model();
+  const double firings_per_second = m.sequences_per_block * 1e6 / m.group_period_us;
+  RangeImageShape shape;
+  shape.rings = m.lasers;
+  shape.max_columns = static_cast<int>(std::lround(firings_per_second * 60.0 / options.min_rpm));
+  shape.layers = options.dual_returns ? 2 : 1;
+  result.assembler.emplace(RevolutionAssembler(decoder, options, shape));
+  return result;
+}
+
+RevolutionAssembler::RevolutionAssembler(const PacketDecoder& decoder, const AssemblerOptions& options,
+                                         RangeImageShape shape)
+    : decoder_(&decoder),
+      options_(options),
+      shape_(shape),
+      points_(kMaxPointsPerPacket) {
+  const ModelInfo& m = decoder.model();
+  firings_per_second_ = m.sequences_per_block * 1e6 / m.group_period_us;
+  current_rpm_ = options.rpm;
+  columns_ = columns_for_rpm(options.rpm);
+  cut_hundredths_ = static_cast<float>(options.cut_azimuth_rad * 18000.0 / std::numbers::pi);
+}
+
+int RevolutionAssembler::columns_for_rpm(double rpm) const noexcept {
+  const auto c = static_cast<int>(std::lround(firings_per_second_ * 60.0 / rpm));
+  return std::clamp(c, 1, shape_.max_columns);
+}
+
+PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payload, std::int64_t packet_time_ns,
+                                            RevolutionSink& sink) noexcept {
+  const PacketInfo info = decoder_->decode(payload, points_);
+  if (info.error != PacketError::none) {
+    ++counters_.malformed;
+    return info.error;
+  }
+  const int n = info.sequences;
+  const ModelInfo& m = decoder_->model();
+
+  // Order and loss, from the packet clock and from the azimuth.
+  std::int64_t lost = 0;
+  if (have_previous_) {
+    const std::int64_t dt = hour_clock_delta(info.timestamp_us, previous_timestamp_us_);
+    if (dt <= 0) {
+      ++counters_.out_of_order;
+      return PacketError::none;
+    }
+    const double packet_us = static_cast<double>(n) / m.sequences_per_block * m.group_period_us;
+    if (static_cast<double>(dt) > 1.5 * packet_us) {
+      lost = std::llround(static_cast<double>(dt) / packet_us) - 1;
+    }
+  }
+  for (int s = 0; s < n; ++s) {
+    relative_[static_cast<std::size_t>(s)] = wrap_turn(info.sequence_azimuth[static_cast<std::size_t>(s)] - cut_hundredths_);
+  }
+  if (have_previous_ && n > 1) {
+    const float advance = wrap_turn(relative_[static_cast<std::size_t>(n - 1)] - relative_[0]) / static_cast<float>(n - 1);
+    const float gap = wrap_turn(relative_[0] - previous_relative_);
+    if (advance > 0.0f && gap > (static_cast<float>(n) * 0.5f + 1.0f) * advance && gap < kTurn / 2) {
+      lost = std::max<std::int64_t>(lost, std::lround((gap / advance - 1.0f) / static_cast<float>(n)));
+    }
+  }
+  ++counters_.packets;
+  counters_.lost_packets += static_cast<std::uint64_t>(lost);
+  if (have_previous_) {
+    // Rotation rate: azimuth advance over packet time since the last revolution began.
+    rate_azimuth_ += static_cast<double>(wrap_turn(relative_[0] - previous_first_relative_));
+    rate_time_us_ += static_cast<double>(hour_clock_delta(info.timestamp_us, previous_timestamp_us_));
+  }
+  previous_first_relative_ = relative_[0];
+
+  // The first sequence past the cut, if this packet crosses it.
+  int first_new = n;
+  float previous = previous_relative_;
+  for (int s = 0; s < n; ++s) {
+    const float r = relative_[static_cast<std::size_t>(s)];
+    if (previous >= 0.0f && r + kTurn / 2 < previous) {
+      first_new = s;
+      break;
+    }
+    previous = r;
+  }
+
+  const auto sequence_ns = [&](int s) {
+    return packet_time_ns + std::llround(static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(s)]) * 1e3);
+  };
+  if (image_ == nullptr) start_revolution(sink, sequence_ns(0), true);
+  if (lost > 0) image_->lost_packets += static_cast<std::uint32_t>(std::min<std::int64_t>(lost, 0xFFFFFFFF));
+
+  const bool continuous = have_previous_ && lost == 0;
+  if (first_new > 0) {
+    ++image_->packets;
+    assign_columns(0, first_new, continuous);
+    place_points(info, 0, first_new, packet_time_ns);
+  }
+  if (first_new < n) {
+    finish_revolution(sink, sequence_ns(first_new), first_new > 0 || continuous);
+    start_revolution(sink, sequence_ns(first_new), false);
+    ++image_->packets;
+    assign_columns(first_new, n, first_new > 0 || continuous);
+    place_points(info, first_new, n, packet_time_ns);
+  }
+
+  have_previous_ = true;
+  previous_timestamp_us_ = info.timestamp_us;
+  previous_relative_ = relative_[static_cast<std::size_t>(n - 1)];
+  return PacketError::none;
+}
+
+void RevolutionAssembler::assign_columns(int begin, int end, bool continuous) noexcept {
+  RangeImage& image = *image_;
+  const int columns = image.columns();
+  const float scale = static_cast<float>(columns) / kTurn;
+  for (int s = begin; s < end; ++s) {
+    const float position = relative_[static_cast<std::size_t>(s)] * scale;
+    int c = std::min(static_cast<int>(position), columns - 1);
+    // Coverage: everything since the previous firing when nothing was lost
+    // in between, else only this firing's own column.
+    const bool joined = s > begin || continuous;
+    if (joined && previous_column_ >= 0) {
+      image.mark_received(previous_column_ + 1, c + 1);
+    } else if (joined && previous_column_ < 0) {
+      image.mark_received(0, c + 1);  // first firing after the cut
+    }
+    image.mark_received(c, c + 1);
+    // Two firings in one bin (the bins are one firing wide, but azimuth
+    // jitters): the later one moves one bin on when that one is free.
+    if (c <= previous_column_) {
+      if (previous_column_ == c && c + 1 < columns) {
+        c += 1;
+        image.mark_received(c, c + 1);
+      } else {
+        column_[static_cast<std::size_t>(s)] = -1;
+        ++image.collisions;
+        ++counters_.collisions;
+        continue;
+      }
+    }
+    column_[static_cast<std::size_t>(s)] = c;
+    previous_column_ = c;
+  }
+}
+
+void RevolutionAssembler::place_points(const PacketInfo& info, int begin, int end, std::int64_t packet_time_ns) noexcept {
+  RangeImage& image = *image_;
+  const bool two_layers = image.layers() == 2;
+  const double since_start_s = static_cast<double>(packet_time_ns - image.start_ns) * 1e-9;
+  for (int i = 0; i < info.points; ++i) {
+    const Point& p = points_[static_cast<std::size_t>(i)];
+    if (p.sequence < begin || p.sequence >= end) continue;
+    const int c = column_[p.sequence];
+    if (c < 0) continue;
+    RangeCell cell;
+    cell.x = p.x;
+    cell.y = p.y;
+    cell.z = p.z;
+    cell.distance = p.distance;
+    cell.azimuth = p.azimuth;
+    cell.time = static_cast<float>(since_start_s + static_cast<double>(p.time));
+    cell.intensity = p.intensity;
+    cell.kind = p.kind;
+    const int layer = two_layers && p.kind == ReturnKind::dual_last ? 1 : 0;
+    image.at(layer, p.ring, c) = cell;
+    if (two_layers && p.kind == ReturnKind::dual_both) image.at(1, p.ring, c) = cell;
+  }
+  const std::int64_t last_ns =
+      packet_time_ns + std::llround(static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(end - 1)]) * 1e3);
+  last_firing_ns_ = std::max(last_firing_ns_, last_ns);
+}
+
+void RevolutionAssembler::start_revolution(RevolutionSink& sink, std::int64_t first_ns, bool partial) noexcept {
+  // Columns for the rate measured over the last revolution (or the part of
+  // one seen at start-up), when it differs from the current one by over 2 %.
+  if (options_.follow_rpm && rate_time_us_ > 20'000.0 && rate_azimuth_ > 0.0) {
+    const double measured = rate_azimuth_ / static_cast<double>(kTurn) / rate_time_us_ * 60e6;
+    if (std::abs(measured - current_rpm_) > 0.02 * current_rpm_) {
+      const int columns = columns_for_rpm(measured);
+      if (columns != columns_) ++counters_.rpm_changes;
+      current_rpm_ = measured;
+      columns_ = columns;
+    }
+  }
+  rate_azimuth_ = 0.0;
+  rate_time_us_ = 0.0;
+  if (image_ == nullptr) image_ = &sink.next_image();
+  image_->reset(columns_);
+  image_->start_ns = first_ns;
+  image_->cut_azimuth = options_.cut_azimuth_rad;
+  partial_ = partial;
+  previous_column_ = -1;
+  last_firing_ns_ = first_ns;
+}
+
+void RevolutionAssembler::finish_revolution(RevolutionSink& sink, std::int64_t next_start_ns, bool continuous) noexcept {
+  RangeImage& image = *image_;
+  // The firings up to the cut were seen when nothing was lost before it.
+  if (continuous && previous_column_ >= 0) image.mark_received(previous_column_ + 1, image.columns());
+  image.end_ns = last_firing_ns_;
+  image.finish();
+  if (partial_) {
+    ++counters_.partial_revolutions;
+    return;  // the same image is reused for the first full revolution
+  }
+  const std::int64_t duration = next_start_ns - image.start_ns;
+  image.rpm = duration > 0 ? 60e9 / static_cast<double>(duration) : 0.0;
+  image.sequence = ++counters_.revolutions;
+  sink.complete(image);  // the image is the sink's from here on
+  image_ = nullptr;
+}
+
+}  // namespace trailnav::velodyne
