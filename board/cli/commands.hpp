@@ -8,5 +8,6 @@ namespace trailnav::cli {
 void add_demo_command(CLI::App& app);
 void add_jitter_command(CLI::App& app);
 void add_decode_command(CLI::App& app);
+void add_replay_command(CLI::App& app);
 
 }  // namespace trailnav::cli

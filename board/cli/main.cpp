@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_demo_command(app);
   trailnav::cli::add_jitter_command(app);
   trailnav::cli::add_decode_command(app);
+  trailnav::cli::add_replay_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

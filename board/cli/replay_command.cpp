@@ -1,0 +1,172 @@
+// `trailnav replay`: re-send a bench recording (or a bare capture) with its
+// original timing, to loopback.
+#include <csignal>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "replayer.hpp"
+#include "terminal.hpp"
+
+namespace trailnav::cli {
+namespace {
+
+struct ReplayCliOptions {
+  std::string input;
+  double rate = 1.0;
+  bool max_rate = false;
+  int loops = 1;
+  bool forever = false;
+  std::string lidar_to;
+  std::string position_to;
+  std::vector<std::string> to;
+  std::string can_interface;
+  std::string can_tunnel = "127.0.0.1:29536";
+  std::vector<std::string> serial_links;
+  double skip = 0.0;
+  double duration = 0.0;
+  bool quiet = false;
+};
+
+std::atomic<bool> g_stop{false};
+
+void on_signal(int) { g_stop.store(true); }
+
+bool split_assignment(const std::string& text, std::string& name, std::string& value) {
+  const std::size_t eq = text.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == text.size()) return false;
+  name = text.substr(0, eq);
+  value = text.substr(eq + 1);
+  return true;
+}
+
+double us(Nanos ns) { return static_cast<double>(ns) / 1000.0; }
+
+int run_replay(const ReplayCliOptions& o) {
+  replay::ReplayOptions options;
+  options.rate = o.rate;
+  options.max_rate = o.max_rate;
+  options.loops = o.forever ? 0 : o.loops;
+  options.skip_s = o.skip;
+  options.duration_s = o.duration;
+  options.can_interface = o.can_interface;
+  options.stop = &g_stop;
+  std::string error;
+  auto target = [&](const std::string& stream, const std::string& text) {
+    auto endpoint = udp::parse_endpoint(text, error);
+    if (!endpoint) {
+      std::fprintf(stderr, "trailnav replay: %s\n", error.c_str());
+      return false;
+    }
+    options.udp_targets[stream] = *endpoint;
+    return true;
+  };
+  if (!o.lidar_to.empty() && !target("lidar", o.lidar_to)) return 2;
+  if (!o.position_to.empty() && !target("lidar-position", o.position_to)) return 2;
+  for (const std::string& t : o.to) {
+    std::string name, value;
+    if (!split_assignment(t, name, value)) {
+      std::fprintf(stderr, "trailnav replay: --to wants STREAM=ADDRESS:PORT, not '%s'\n", t.c_str());
+      return 2;
+    }
+    if (!target(name, value)) return 2;
+  }
+  for (const std::string& l : o.serial_links) {
+    std::string name, value;
+    if (!split_assignment(l, name, value)) {
+      std::fprintf(stderr, "trailnav replay: --serial-link wants STREAM=PATH, not '%s'\n", l.c_str());
+      return 2;
+    }
+    options.serial_links[name] = value;
+  }
+  auto tunnel = udp::parse_endpoint(o.can_tunnel, error);
+  if (!tunnel) {
+    std::fprintf(stderr, "trailnav replay: --can-tunnel: %s\n", error.c_str());
+    return 2;
+  }
+  options.can_tunnel = *tunnel;
+
+  ProgressBar progress("replay", 100.0, "%");
+  if (!o.quiet) options.progress = [&](double part) { progress.update(part * 100.0); };
+
+  auto created = replay::Replayer::create(o.input, options);
+  if (!created.replayer) {
+    std::fprintf(stderr, "trailnav replay: %s\n", created.error.c_str());
+    return 2;
+  }
+  char speed[32];
+  std::snprintf(speed, sizeof speed, "%gx speed", o.rate);
+  std::fprintf(stderr, "trailnav replay: %s at %s%s\n", o.input.c_str(), o.max_rate ? "maximum rate" : speed,
+               o.forever ? ", looping until stopped" : "");
+  for (const auto& s : created.replayer->streams()) {
+    std::fprintf(stderr, "  %-16s %-6s -> %s\n", s.name.c_str(), recording::stream_kind_name(s.kind), s.target.c_str());
+  }
+  std::fflush(stderr);
+
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  const replay::ReplayReport report = created.replayer->run();
+  if (!o.quiet) progress.finish();
+
+  std::uint64_t failures = 0;
+  std::fprintf(stderr, "trailnav replay: %.3f s of recording in %.3f s (%d loop%s)%s\n", report.recording_s, report.wall_s,
+               report.loops, report.loops == 1 ? "" : "s", g_stop.load() ? ", stopped" : "");
+  std::fprintf(stderr, "  %-16s %10s %12s %9s\n", "stream", "sent", "bytes", "failed");
+  for (const auto& s : report.streams) {
+    std::fprintf(stderr, "  %-16s %10llu %12llu %9llu\n", s.name.c_str(), static_cast<unsigned long long>(s.sent),
+                 static_cast<unsigned long long>(s.bytes), static_cast<unsigned long long>(s.failures));
+    failures += s.failures;
+  }
+  if (report.send_error.count > 0) {
+    std::fprintf(stderr, "  send-time error: p50 %.1f us, p99 %.1f us, max %.1f us; %llu sends over 1 ms late\n",
+                 us(report.send_error.p50), us(report.send_error.p99), us(report.send_error.max),
+                 static_cast<unsigned long long>(report.late_over_1ms));
+  }
+  if (report.bad_lines > 0) {
+    std::fprintf(stderr, "  %llu unparsable log lines skipped\n", static_cast<unsigned long long>(report.bad_lines));
+  }
+  if (failures > 0) {
+    std::fprintf(stderr,
+                 "  failed sends: datagrams the kernel refused (send buffer full), or bytes for a\n"
+                 "  pseudo-terminal whose buffer was full because nobody read it\n");
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_replay_command(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "replay",
+      "Re-send a bench recording with its original timing: UDP streams to loopback ports, serial\n"
+      "streams into pseudo-terminals (their paths are printed), CAN frames onto a SocketCAN\n"
+      "interface (--can-interface) or into the UDP tunnel on loopback. The input is a recording\n"
+      "directory (docs/recording.md) or a bare pcap, pcapng or raw Velodyne file, whose UDP streams\n"
+      "are named by port: 2368 lidar, 8308 lidar-position, others udp-<port>.\n"
+      "Destinations must be loopback addresses (127.0.0.0/8).");
+  static ReplayCliOptions o;
+  cmd->add_option("input", o.input, "Recording directory, or pcap/pcapng/raw file")->required();
+  auto* rate = cmd->add_option("--rate", o.rate, "Speed-up over the recorded timing")->capture_default_str()->check(
+      CLI::PositiveNumber);
+  cmd->add_flag("--max-rate", o.max_rate, "Send as fast as possible (no timing)")->excludes(rate);
+  auto* loops = cmd->add_option("--loops", o.loops, "Play the recording this many times")->capture_default_str()->check(
+      CLI::PositiveNumber);
+  cmd->add_flag("--loop", o.forever, "Play it again and again until Ctrl-C")->excludes(loops);
+  cmd->add_option("--lidar-to", o.lidar_to, "Destination of the 'lidar' stream (default 127.0.0.1:<recorded port>)");
+  cmd->add_option("--position-to", o.position_to, "Destination of the 'lidar-position' stream");
+  cmd->add_option("--to", o.to, "STREAM=ADDRESS:PORT for any UDP stream (repeatable)");
+  cmd->add_option("--can-interface", o.can_interface, "Send CAN frames onto this SocketCAN interface (e.g. vcan0)");
+  cmd->add_option("--can-tunnel", o.can_tunnel, "Where the CAN tunnel sends when there is no --can-interface")
+      ->capture_default_str();
+  cmd->add_option("--serial-link", o.serial_links, "STREAM=PATH: a symlink to the stream's pseudo-terminal (repeatable)");
+  cmd->add_option("--skip", o.skip, "Start this many seconds into the recording")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--duration", o.duration, "Replay only this many seconds (0: all)")->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--quiet", o.quiet, "No progress bar");
+  cmd->callback([] {
+    const int code = run_replay(o);
+    if (code != 0) throw CLI::RuntimeError(code);
+  });
+}
+
+}  // namespace trailnav::cli

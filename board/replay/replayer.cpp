@@ -1,0 +1,379 @@
+#include "replayer.hpp"
+
+#include <fcntl.h>
+#include <linux/can.h>
+#include <linux/can/raw.h>
+#include <net/if.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+namespace trailnav::replay {
+namespace {
+
+using recording::CanFrame;
+using recording::StreamKind;
+
+std::int64_t monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// Sleeps to an absolute CLOCK_MONOTONIC time; the last 100 us are spun for
+// accuracy (the kernel's wake-up alone is late by 50 us or more).
+void wait_until(std::int64_t target) noexcept {
+  constexpr std::int64_t kSpin = 100'000;
+  if (target - monotonic_ns() > kSpin) {
+    const std::int64_t wake = target - kSpin;
+    timespec ts{static_cast<time_t>(wake / 1'000'000'000), static_cast<long>(wake % 1'000'000'000)};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+    }
+  }
+  while (monotonic_ns() < target) {
+  }
+}
+
+void put_u32(std::uint8_t* p, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+std::uint32_t get_u32(const std::uint8_t* p) {
+  std::uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> encode_can_tunnel(const CanFrame& frame) {
+  std::vector<std::uint8_t> d(kCanTunnelHeader + frame.length, 0);
+  d[0] = 'T';
+  d[1] = 'N';
+  d[2] = 'C';
+  d[3] = 'N';
+  d[4] = 1;
+  d[5] = static_cast<std::uint8_t>((frame.fd ? 1 : 0) | (frame.fd ? (frame.fd_flags & 0x3) << 1 : 0));
+  const auto t = static_cast<std::uint64_t>(frame.time_ns);
+  put_u32(d.data() + 8, static_cast<std::uint32_t>(t));
+  put_u32(d.data() + 12, static_cast<std::uint32_t>(t >> 32));
+  put_u32(d.data() + 16, frame.id);
+  d[20] = frame.length;
+  std::memcpy(d.data() + kCanTunnelHeader, frame.data.data(), frame.length);
+  return d;
+}
+
+bool decode_can_tunnel(std::span<const std::uint8_t> d, CanFrame& frame) {
+  if (d.size() < kCanTunnelHeader || d[0] != 'T' || d[1] != 'N' || d[2] != 'C' || d[3] != 'N' || d[4] != 1) return false;
+  const std::size_t length = d[20];
+  const bool fd = (d[5] & 1) != 0;
+  if (length > (fd ? 64u : 8u) || d.size() != kCanTunnelHeader + length) return false;
+  frame = CanFrame{};
+  frame.fd = fd;
+  frame.fd_flags = static_cast<std::uint8_t>(fd ? (d[5] >> 1) & 0x3 : 0);
+  frame.time_ns = static_cast<std::int64_t>(static_cast<std::uint64_t>(get_u32(d.data() + 8)) |
+                                            (static_cast<std::uint64_t>(get_u32(d.data() + 12)) << 32));
+  frame.id = get_u32(d.data() + 16);
+  frame.length = static_cast<std::uint8_t>(length);
+  std::memcpy(frame.data.data(), d.data() + kCanTunnelHeader, length);
+  return true;
+}
+
+struct Replayer::Output {
+  virtual ~Output() = default;
+  // False when the frame or bytes could not be delivered.
+  virtual bool send(const recording::Event& event) = 0;
+};
+
+namespace {
+
+struct UdpOutput final : Replayer::Output {
+  std::unique_ptr<udp::UdpSender> sender;
+  bool send(const recording::Event& e) override { return sender->send(e.payload); }
+};
+
+struct CanTunnelOutput final : Replayer::Output {
+  std::shared_ptr<udp::UdpSender> sender;
+  std::vector<std::uint8_t> buffer;
+  bool send(const recording::Event& e) override {
+    buffer = encode_can_tunnel(*e.can);
+    return sender->send(buffer);
+  }
+};
+
+struct SocketCanOutput final : Replayer::Output {
+  int fd = -1;
+  ~SocketCanOutput() override {
+    if (fd >= 0) close(fd);
+  }
+  bool send(const recording::Event& e) override {
+    const CanFrame& f = *e.can;
+    if (f.fd) {
+      canfd_frame frame{};
+      frame.can_id = f.id;
+      frame.len = f.length;
+      frame.flags = f.fd_flags;
+      std::memcpy(frame.data, f.data.data(), f.length);
+      return write(fd, &frame, sizeof frame) == static_cast<ssize_t>(sizeof frame);
+    }
+    can_frame frame{};
+    frame.can_id = f.id;
+    frame.len = f.length;
+    std::memcpy(frame.data, f.data.data(), f.length);
+    return write(fd, &frame, sizeof frame) == static_cast<ssize_t>(sizeof frame);
+  }
+};
+
+struct PtyOutput final : Replayer::Output {
+  int master = -1;
+  int slave = -1;  // held open so the terminal lives while nobody has opened it
+  std::string path;
+  std::string link;
+  ~PtyOutput() override {
+    if (!link.empty()) unlink(link.c_str());
+    if (slave >= 0) close(slave);
+    if (master >= 0) close(master);
+  }
+  bool send(const recording::Event& e) override {
+    const ssize_t n = write(master, e.payload.data(), e.payload.size());
+    return n == static_cast<ssize_t>(e.payload.size());
+  }
+};
+
+std::string open_pty(PtyOutput& pty, int baud) {
+  pty.master = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+  if (pty.master < 0 || grantpt(pty.master) != 0 || unlockpt(pty.master) != 0) {
+    return std::string("cannot create a pseudo-terminal: ") + std::strerror(errno);
+  }
+  char name[128] = {};
+  if (ptsname_r(pty.master, name, sizeof name) != 0) return std::string("ptsname: ") + std::strerror(errno);
+  pty.path = name;
+  pty.slave = ::open(name, O_RDWR | O_NOCTTY | O_CLOEXEC);
+  if (pty.slave < 0) return "cannot open " + pty.path + ": " + std::strerror(errno);
+  // Raw bytes, no echo, no line editing: what a serial device gives.
+  termios t{};
+  tcgetattr(pty.slave, &t);
+  cfmakeraw(&t);
+  speed_t speed = B115200;
+  switch (baud) {
+    case 9600: speed = B9600; break;
+    case 19200: speed = B19200; break;
+    case 38400: speed = B38400; break;
+    case 57600: speed = B57600; break;
+    case 230400: speed = B230400; break;
+    case 460800: speed = B460800; break;
+    case 921600: speed = B921600; break;
+    default: break;
+  }
+  cfsetspeed(&t, speed);
+  tcsetattr(pty.slave, TCSANOW, &t);
+  return "";
+}
+
+}  // namespace
+
+Replayer::~Replayer() = default;
+
+std::string Replayer::pty_path(const std::string& stream) const {
+  for (const StreamReport& s : report_.streams) {
+    if (s.name == stream && s.kind == StreamKind::serial) return s.target;
+  }
+  return "";
+}
+
+Replayer::Created Replayer::create(const std::string& path, const ReplayOptions& options) {
+  Created result;
+  if (!(options.rate > 0.0) && !options.max_rate) {
+    result.error = "the rate must be positive";
+    return result;
+  }
+  auto opened = recording::RecordingReader::open(path);
+  if (!opened.reader) {
+    result.error = opened.error;
+    return result;
+  }
+  std::unique_ptr<Replayer> r(new Replayer());
+  r->path_ = path;
+  r->options_ = options;
+  r->reader_ = std::move(opened.reader);
+
+  for (const auto& [name, endpoint] : options.udp_targets) {
+    bool known = false;
+    for (const auto& s : r->reader_->streams()) known |= s.name == name && s.kind == StreamKind::udp;
+    if (!known) {
+      result.error = "no UDP stream '" + name + "' in " + path;
+      return result;
+    }
+    (void)endpoint;
+  }
+  for (const auto& [name, link] : options.serial_links) {
+    bool known = false;
+    for (const auto& s : r->reader_->streams()) known |= s.name == name && s.kind == StreamKind::serial;
+    if (!known) {
+      result.error = "no serial stream '" + name + "' in " + path;
+      return result;
+    }
+    (void)link;
+  }
+
+  std::shared_ptr<udp::UdpSender> tunnel;
+  int can_socket_index = -1;
+  for (const recording::StreamInfo& s : r->reader_->streams()) {
+    StreamReport report;
+    report.name = s.name;
+    report.kind = s.kind;
+    if (s.kind == StreamKind::udp) {
+      udp::Endpoint target{0x7F000001u, s.port};
+      if (auto it = options.udp_targets.find(s.name); it != options.udp_targets.end()) target = it->second;
+      auto sender = udp::UdpSender::open(target);
+      if (!sender.sender) {
+        result.error = "stream '" + s.name + "': " + sender.error;
+        return result;
+      }
+      auto out = std::make_unique<UdpOutput>();
+      out->sender = std::move(sender.sender);
+      report.target = "udp " + udp::format_endpoint(target);
+      r->outputs_.push_back(std::move(out));
+    } else if (s.kind == StreamKind::can) {
+      if (!options.can_interface.empty()) {
+        auto out = std::make_unique<SocketCanOutput>();
+        out->fd = socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+        if (out->fd < 0) {
+          result.error = "SocketCAN is not available here (" + std::string(std::strerror(errno)) +
+                         "): leave out --can-interface to use the UDP tunnel";
+          return result;
+        }
+        ifreq ifr{};
+        std::strncpy(ifr.ifr_name, options.can_interface.c_str(), IFNAMSIZ - 1);
+        if (ioctl(out->fd, SIOCGIFINDEX, &ifr) != 0) {
+          result.error = "no CAN interface '" + options.can_interface + "': " + std::strerror(errno);
+          return result;
+        }
+        const int on = 1;
+        setsockopt(out->fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof on);
+        sockaddr_can address{};
+        address.can_family = AF_CAN;
+        address.can_ifindex = ifr.ifr_ifindex;
+        if (bind(out->fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+          result.error = "cannot bind to " + options.can_interface + ": " + std::strerror(errno);
+          return result;
+        }
+        report.target = "socketcan " + options.can_interface;
+        r->outputs_.push_back(std::move(out));
+        ++can_socket_index;
+      } else {
+        if (!tunnel) {
+          auto sender = udp::UdpSender::open(options.can_tunnel);
+          if (!sender.sender) {
+            result.error = "CAN tunnel: " + sender.error;
+            return result;
+          }
+          tunnel = std::move(sender.sender);
+        }
+        auto out = std::make_unique<CanTunnelOutput>();
+        out->sender = tunnel;
+        report.target = "can-tunnel udp " + udp::format_endpoint(options.can_tunnel);
+        r->outputs_.push_back(std::move(out));
+      }
+    } else {
+      auto out = std::make_unique<PtyOutput>();
+      if (std::string error = open_pty(*out, s.baud); !error.empty()) {
+        result.error = "stream '" + s.name + "': " + error;
+        return result;
+      }
+      if (auto it = options.serial_links.find(s.name); it != options.serial_links.end()) {
+        std::error_code ec;
+        if (std::filesystem::exists(std::filesystem::symlink_status(it->second)) &&
+            !std::filesystem::is_symlink(std::filesystem::symlink_status(it->second))) {
+          result.error = "stream '" + s.name + "': " + it->second + " exists and is not a symlink; not replacing it";
+          return result;
+        }
+        std::filesystem::remove(it->second, ec);
+        std::filesystem::create_symlink(out->path, it->second, ec);
+        if (ec) {
+          result.error = "stream '" + s.name + "': cannot link " + it->second + ": " + ec.message();
+          return result;
+        }
+        out->link = it->second;
+      }
+      report.target = out->path;
+      r->outputs_.push_back(std::move(out));
+    }
+    r->report_.streams.push_back(report);
+  }
+  (void)can_socket_index;
+  result.replayer = std::move(r);
+  return result;
+}
+
+ReplayReport Replayer::run() {
+  DurationHistogram errors;
+  const std::int64_t skip_ns = static_cast<std::int64_t>(options_.skip_s * 1e9);
+  const std::int64_t limit_ns = options_.duration_s > 0.0 ? static_cast<std::int64_t>(options_.duration_s * 1e9) : -1;
+  const std::int64_t wall_start = monotonic_ns();
+  std::int64_t schedule_base = wall_start;  // wall time of the current loop's first event
+  std::int64_t covered_ns = 0;
+  int loop = 0;
+  auto stopped = [&] { return options_.stop != nullptr && options_.stop->load(std::memory_order_relaxed); };
+
+  while (!stopped() && (options_.loops == 0 || loop < options_.loops)) {
+    if (loop > 0) {
+      auto opened = recording::RecordingReader::open(path_);
+      if (!opened.reader) break;
+      reader_ = std::move(opened.reader);
+    }
+    std::int64_t first = -1;
+    std::int64_t last_offset = 0;
+    std::uint64_t events = 0;
+    while (!stopped()) {
+      auto event = reader_->next();
+      if (!event) break;
+      if (first < 0) first = event->time_ns;
+      const std::int64_t offset = event->time_ns - first;
+      if (offset < skip_ns) continue;
+      if (limit_ns >= 0 && offset - skip_ns > limit_ns) break;
+      last_offset = offset - skip_ns;
+      const std::int64_t target =
+          schedule_base + static_cast<std::int64_t>(static_cast<double>(last_offset) / options_.rate);
+      if (!options_.max_rate) wait_until(target);
+      Output& out = *outputs_[static_cast<std::size_t>(event->stream)];
+      StreamReport& report = report_.streams[static_cast<std::size_t>(event->stream)];
+      if (out.send(*event)) {
+        ++report.sent;
+        report.bytes += event->kind == StreamKind::can ? event->can->length : event->payload.size();
+      } else {
+        ++report.failures;
+      }
+      if (!options_.max_rate) {
+        const std::int64_t error = monotonic_ns() - target;
+        errors.record(error);
+        if (error > 1'000'000) ++report_.late_over_1ms;
+      }
+      if (options_.progress && (++events % 512) == 0 && reader_->size() > 0) {
+        const double part = static_cast<double>(reader_->position()) / static_cast<double>(reader_->size());
+        options_.progress(options_.loops > 0 ? (loop + part) / options_.loops : part);
+      }
+    }
+    report_.bad_lines += reader_->counters().bad_lines;
+    report_.unassigned_udp += reader_->counters().unassigned_udp;
+    covered_ns += last_offset;
+    ++loop;
+    // The next loop starts one typical gap after this one's last event.
+    schedule_base = options_.max_rate ? monotonic_ns()
+                                      : schedule_base + static_cast<std::int64_t>(static_cast<double>(last_offset) / options_.rate) +
+                                            1'000'000;
+  }
+  if (options_.progress) options_.progress(1.0);
+  report_.loops = loop;
+  report_.recording_s = static_cast<double>(covered_ns) * 1e-9;
+  report_.wall_s = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
+  report_.send_error = errors.summary();
+  return report_;
+}
+
+}  // namespace trailnav::replay

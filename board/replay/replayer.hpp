@@ -1,0 +1,100 @@
+// The bench replayer: re-sends a recording with its original timing — UDP
+// streams to loopback ports, serial streams into pseudo-terminals, CAN frames
+// onto a SocketCAN interface or, where there is none, into a UDP tunnel on
+// loopback (format in docs/recording.md). Measures how far each send is from
+// its schedule.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "trailnav/drivers/recording/recording.hpp"
+#include "trailnav/drivers/udp/udp_sender.hpp"
+#include "trailnav/runtime/histogram.hpp"
+
+namespace trailnav::replay {
+
+inline constexpr std::uint16_t kDefaultCanTunnelPort = 29536;
+
+// The CAN tunnel datagram: 24-byte header, then the data bytes.
+//   0  "TNCN"            magic
+//   4  u8 version (1)    u8 flags: bit 0 CAN FD, bit 1 FD bit-rate switch, bit 2 FD error state
+//   6  u16 reserved (0)
+//   8  i64 LE            the frame's recorded time, ns since the epoch
+//  16  u32 LE            id, SocketCAN encoding (EFF 0x80000000, RTR 0x40000000, ERR 0x20000000)
+//  20  u8 length         data bytes that follow (0..64)
+//  21  3 bytes reserved (0)
+inline constexpr std::size_t kCanTunnelHeader = 24;
+std::vector<std::uint8_t> encode_can_tunnel(const recording::CanFrame& frame);
+bool decode_can_tunnel(std::span<const std::uint8_t> datagram, recording::CanFrame& frame);
+
+struct ReplayOptions {
+  double rate = 1.0;       // speed-up over the recorded timing
+  bool max_rate = false;   // no waiting at all
+  int loops = 1;           // 0: until stopped
+  std::map<std::string, udp::Endpoint> udp_targets;  // per stream name; default 127.0.0.1:<recorded port>
+  std::string can_interface;                          // SocketCAN interface; empty: the UDP tunnel
+  udp::Endpoint can_tunnel{0x7F000001u, kDefaultCanTunnelPort};
+  std::map<std::string, std::string> serial_links;    // per stream name: a symlink to its pseudo-terminal
+  double skip_s = 0.0;      // start this far into the recording
+  double duration_s = 0.0;  // replay only this much (0: all)
+  const std::atomic<bool>* stop = nullptr;
+  std::function<void(double fraction)> progress;  // called now and then with the part done
+};
+
+struct StreamReport {
+  std::string name;
+  recording::StreamKind kind;
+  std::string target;  // where it goes: address, pseudo-terminal, interface
+  std::uint64_t sent = 0;
+  std::uint64_t bytes = 0;
+  std::uint64_t failures = 0;  // refused by the kernel or a full pseudo-terminal
+};
+
+struct ReplayReport {
+  std::vector<StreamReport> streams;
+  DurationSummary send_error;    // actual minus scheduled send time
+  std::uint64_t late_over_1ms = 0;
+  double recording_s = 0.0;      // recorded time covered (all loops)
+  double wall_s = 0.0;
+  int loops = 0;
+  std::uint64_t bad_lines = 0;
+  std::uint64_t unassigned_udp = 0;
+};
+
+class Replayer {
+ public:
+  struct Created;
+  // Opens the recording, every socket and every pseudo-terminal.
+  static Created create(const std::string& path, const ReplayOptions& options);
+  ~Replayer();
+
+  // Where each stream goes (pseudo-terminal paths are known from here on).
+  const std::vector<StreamReport>& streams() const noexcept { return report_.streams; }
+  std::string pty_path(const std::string& stream) const;
+
+  // Replays; returns when done or stopped.
+  ReplayReport run();
+
+  struct Output;  // one destination (defined in the implementation)
+
+ private:
+  Replayer() = default;
+  std::string path_;
+  ReplayOptions options_;
+  std::unique_ptr<recording::RecordingReader> reader_;
+  std::vector<std::unique_ptr<Output>> outputs_;  // per stream
+  ReplayReport report_;
+};
+
+struct Replayer::Created {
+  std::unique_ptr<Replayer> replayer;
+  std::string error;
+};
+
+}  // namespace trailnav::replay

@@ -1,0 +1,105 @@
+// The Velodyne driver task: receives data and position packets over UDP,
+// times them, assembles revolutions and publishes each one through a
+// Mailbox. Runs periodically on the scheduler (1 kHz is typical) and drains
+// its sockets each run; everything is allocated by create().
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+
+#include "trailnav/drivers/udp/udp_receiver.hpp"
+#include "trailnav/drivers/velodyne/range_image.hpp"
+#include "trailnav/drivers/velodyne/sensor_clock.hpp"
+#include "trailnav/runtime/mailbox.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+
+namespace trailnav::velodyne {
+
+struct DriverOptions {
+  std::string name = "lidar";
+  udp::ReceiverOptions data;                     // bind port 2368 by default
+  std::optional<udp::ReceiverOptions> position;  // 8308; none: no position packets
+  AssemblerOptions assembler;
+  SensorClockOptions clock;
+  int max_batches_per_run = 32;  // bounds one run's work; the rest waits for the next run
+
+  DriverOptions() {
+    data.bind.port = 2368;
+  }
+};
+
+// The newest position packet.
+struct PositionSnapshot {
+  std::int64_t receive_ns = 0;
+  std::uint32_t timestamp_us = 0;
+  PpsStatus pps = PpsStatus::absent;
+  TimeSource time_source = TimeSource::none;
+  std::uint16_t nmea_length = 0;
+  std::array<char, kPositionPacketSize> nmea{};
+  std::string_view sentence() const noexcept { return {nmea.data(), nmea_length}; }
+};
+
+// Everything the driver counts, readable from any thread.
+struct DriverCounters {
+  udp::ReceiverCounters data;
+  udp::ReceiverCounters position;
+  AssemblerCounters assembler;
+  std::uint64_t wrong_size = 0;           // datagrams neither 1206 nor 512 bytes long
+  std::uint64_t position_packets = 0;
+  std::uint64_t position_malformed = 0;
+  std::uint64_t time_steps = 0;
+  std::uint64_t time_clamped = 0;
+  TimeSource time_source = TimeSource::none;
+  std::int64_t last_packet_ns = 0;        // receive time of the newest data packet
+};
+
+class VelodyneDriver final : public Task {
+ public:
+  struct Created;
+  // Takes the decoder; opens the sockets and allocates every image.
+  static Created create(PacketDecoder decoder, const DriverOptions& options);
+  VelodyneDriver(const VelodyneDriver&) = delete;
+  VelodyneDriver& operator=(const VelodyneDriver&) = delete;
+
+  void run(const TaskTick& tick) override;
+
+  Mailbox<RangeImage>& revolutions() noexcept { return revolutions_; }
+  Mailbox<PositionSnapshot>& positions() noexcept { return positions_; }
+  DriverCounters counters() const noexcept;
+  const DriverOptions& options() const noexcept { return options_; }
+  udp::Endpoint data_endpoint() const noexcept { return data_->local(); }
+  std::optional<udp::Endpoint> position_endpoint() const noexcept;
+  const PacketDecoder& decoder() const noexcept { return decoder_; }
+
+ private:
+  VelodyneDriver(PacketDecoder decoder, const DriverOptions& options, RangeImageShape shape);
+  void handle_position(std::span<const std::uint8_t> payload, std::int64_t receive_ns) noexcept;
+  void publish_counters() noexcept;
+
+  DriverOptions options_;
+  PacketDecoder decoder_;
+  std::optional<RevolutionAssembler> assembler_;
+  Mailbox<RangeImage> revolutions_;
+  MailboxRevolutionSink sink_;
+  Mailbox<PositionSnapshot> positions_;
+  SensorClock clock_;
+  std::unique_ptr<udp::UdpReceiver> data_;
+  std::unique_ptr<udp::UdpReceiver> position_;
+  DriverCounters local_;  // the task thread's own
+
+  // Published copy. The task only try_locks, so a reader never blocks it
+  // (a skipped update is made on the next run).
+  mutable std::mutex shared_mutex_;
+  DriverCounters shared_;
+};
+
+struct VelodyneDriver::Created {
+  std::unique_ptr<VelodyneDriver> driver;
+  std::string error;
+};
+
+}  // namespace trailnav::velodyne

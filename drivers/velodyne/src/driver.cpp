@@ -1,0 +1,114 @@
+#include "trailnav/drivers/velodyne/driver.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+namespace trailnav::velodyne {
+
+VelodyneDriver::Created VelodyneDriver::create(PacketDecoder decoder, const DriverOptions& options) {
+  Created result;
+  auto assembler = RevolutionAssembler::create(decoder, options.assembler);
+  if (!assembler.assembler) {
+    result.error = options.name + ": " + assembler.error;
+    return result;
+  }
+  const RangeImageShape shape = assembler.assembler->shape();
+  std::unique_ptr<VelodyneDriver> d(new VelodyneDriver(std::move(decoder), options, shape));
+  // The assembler refers to the decoder: build it again on the driver's own copy.
+  d->assembler_.emplace(std::move(*RevolutionAssembler::create(d->decoder_, options.assembler).assembler));
+
+  auto data = udp::UdpReceiver::open(options.data);
+  if (!data.receiver) {
+    result.error = options.name + ": data packets: " + data.error;
+    return result;
+  }
+  d->data_ = std::move(data.receiver);
+  if (options.position) {
+    auto position = udp::UdpReceiver::open(*options.position);
+    if (!position.receiver) {
+      result.error = options.name + ": position packets: " + position.error;
+      return result;
+    }
+    d->position_ = std::move(position.receiver);
+  }
+  result.driver = std::move(d);
+  return result;
+}
+
+VelodyneDriver::VelodyneDriver(PacketDecoder decoder, const DriverOptions& options, RangeImageShape shape)
+    : options_(options),
+      decoder_(std::move(decoder)),
+      revolutions_(shape),
+      sink_(revolutions_),
+      clock_(options.clock) {}
+
+std::optional<udp::Endpoint> VelodyneDriver::position_endpoint() const noexcept {
+  if (!position_) return std::nullopt;
+  return position_->local();
+}
+
+void VelodyneDriver::handle_position(std::span<const std::uint8_t> payload, std::int64_t receive_ns) noexcept {
+  PositionPacket packet;
+  if (decode_position_packet(payload, packet) != PositionError::none) {
+    ++local_.position_malformed;
+    return;
+  }
+  ++local_.position_packets;
+  clock_.on_position_packet(packet);
+  PositionSnapshot& s = positions_.write_slot();
+  s.receive_ns = receive_ns;
+  s.timestamp_us = packet.timestamp_us;
+  s.pps = packet.pps;
+  s.time_source = clock_.source();
+  s.nmea_length = static_cast<std::uint16_t>(std::min(packet.nmea.size(), s.nmea.size()));
+  std::memcpy(s.nmea.data(), packet.nmea.data(), s.nmea_length);
+  positions_.publish();
+}
+
+void VelodyneDriver::run(const TaskTick&) {
+  if (position_) {
+    for (int b = 0; b < options_.max_batches_per_run; ++b) {
+      const auto batch = position_->receive();
+      for (const udp::Datagram& d : batch) handle_position(d.payload, d.receive_ns);
+      if (batch.size() < static_cast<std::size_t>(position_->options().batch)) break;
+    }
+  }
+  for (int b = 0; b < options_.max_batches_per_run; ++b) {
+    const auto batch = data_->receive();
+    for (const udp::Datagram& d : batch) {
+      if (d.payload.size() == kPositionPacketSize) {
+        handle_position(d.payload, d.receive_ns);
+        continue;
+      }
+      if (d.payload.size() != kDataPacketSize) {
+        ++local_.wrong_size;
+        continue;
+      }
+      const std::int64_t t = clock_.resolve(read_u32(d.payload.data() + kTimestampOffset), d.receive_ns);
+      assembler_->add_packet(d.payload, t, sink_);
+      local_.last_packet_ns = d.receive_ns;
+    }
+    if (batch.size() < static_cast<std::size_t>(data_->options().batch)) break;
+  }
+  publish_counters();
+}
+
+void VelodyneDriver::publish_counters() noexcept {
+  local_.data = data_->counters();
+  if (position_) local_.position = position_->counters();
+  local_.assembler = assembler_->counters();
+  local_.time_source = clock_.source();
+  local_.time_steps = clock_.steps();
+  local_.time_clamped = clock_.clamped();
+  if (shared_mutex_.try_lock()) {
+    shared_ = local_;
+    shared_mutex_.unlock();
+  }
+}
+
+DriverCounters VelodyneDriver::counters() const noexcept {
+  std::lock_guard lock(shared_mutex_);
+  return shared_;
+}
+
+}  // namespace trailnav::velodyne
