@@ -1,0 +1,315 @@
+// End to end on loopback: recordings replayed by `trailnav replay` (the real
+// binary) and by the replayer library into the real receivers.
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+#include <vector>
+
+#include "replayer.hpp"
+#include "test_data.hpp"
+#include "trailnav/drivers/recording/recording.hpp"
+#include "trailnav/drivers/udp/udp_receiver.hpp"
+#include "trailnav/drivers/velodyne/driver.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+
+extern char** environ;
+
+namespace trailnav {
+namespace {
+
+using namespace trailnav::velodyne;
+namespace fs = std::filesystem;
+
+// Keeps a copy of every finished revolution.
+class CollectingSink final : public RevolutionSink {
+ public:
+  explicit CollectingSink(RangeImageShape shape) : work_(shape) {}
+  RangeImage& next_image() noexcept override { return work_; }
+  void complete(RangeImage& image) noexcept override { images.push_back(image); }
+  std::vector<RangeImage> images;
+
+ private:
+  RangeImage work_;
+};
+
+PacketDecoder make_decoder(Model model, const std::string& calibration) {
+  Calibration cal = *builtin_calibration(model);
+  if (!calibration.empty()) cal = *load_calibration(test::shared_data("velodyne/calibration/" + calibration)).calibration;
+  return std::move(*PacketDecoder::create(model, cal).decoder);
+}
+
+// The file decoded directly, exactly as the driver does it live.
+std::vector<RangeImage> decode_offline(const std::string& capture, Model model, const std::string& calibration) {
+  const PacketDecoder decoder = make_decoder(model, calibration);
+  auto assembler = std::move(*RevolutionAssembler::create(decoder, {}).assembler);
+  CollectingSink sink(assembler.shape());
+  SensorClock clock;
+  auto reader = recording::RecordingReader::open(capture);
+  EXPECT_TRUE(reader.reader) << reader.error;
+  while (auto e = reader.reader->next()) {
+    if (e->payload.size() == kPositionPacketSize) {
+      PositionPacket p;
+      if (decode_position_packet(e->payload, p) == PositionError::none) clock.on_position_packet(p);
+    } else if (e->payload.size() == kDataPacketSize) {
+      assembler.add_packet(e->payload, clock.resolve(read_u32(e->payload.data() + kTimestampOffset), e->time_ns), sink);
+    }
+  }
+  return std::move(sink.images);
+}
+
+int run_binary(const std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) return -1;
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// Replays `capture` with `trailnav replay` into a driver running on the
+// scheduler; returns what the driver published.
+std::vector<RangeImage> replay_live(const std::string& capture, Model model, const std::string& calibration,
+                                    bool has_position_stream, DriverCounters& counters) {
+  DriverOptions options;
+  options.data.bind = {0x7F000001u, 0};
+  udp::ReceiverOptions position;
+  position.bind = {0x7F000001u, 0};
+  options.position = position;
+  auto created = VelodyneDriver::create(make_decoder(model, calibration), options);
+  EXPECT_TRUE(created.driver) << created.error;
+  VelodyneDriver& driver = *created.driver;
+
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  TaskSpec spec{"lidar", TaskKind::periodic, 1000.0, 1'000'000, 0, -1};
+  EXPECT_TRUE(scheduler.add(spec, driver));
+  std::vector<RangeImage> images;
+  std::atomic<bool> done{false};
+  std::thread reader([&] {
+    for (;;) {
+      const bool finished = done.load();
+      if (const RangeImage* image = driver.revolutions().try_read()) images.push_back(*image);
+      if (finished) break;
+      std::this_thread::sleep_for(std::chrono::microseconds(500));
+    }
+  });
+  EXPECT_TRUE(scheduler.start());
+  std::vector<std::string> args = {TRAILNAV_BINARY, "replay", capture, "--quiet", "--lidar-to",
+                                   udp::format_endpoint(driver.data_endpoint())};
+  if (has_position_stream) {
+    args.push_back("--position-to");
+    args.push_back(udp::format_endpoint(*driver.position_endpoint()));
+  }
+  const int rc = run_binary(args);
+  EXPECT_EQ(rc, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the last packets' run
+  scheduler.stop();
+  done.store(true);
+  reader.join();
+  counters = driver.counters();
+  return images;
+}
+
+void expect_same_revolutions(const std::vector<RangeImage>& live, const std::vector<RangeImage>& file, bool exact_time) {
+  ASSERT_EQ(live.size(), file.size());
+  ASSERT_FALSE(file.empty());
+  for (std::size_t i = 0; i < file.size(); ++i) {
+    const RangeImage& a = live[i];
+    const RangeImage& b = file[i];
+    SCOPED_TRACE("revolution " + std::to_string(b.sequence));
+    EXPECT_EQ(a.sequence, b.sequence);
+    ASSERT_EQ(a.columns(), b.columns());
+    EXPECT_EQ(a.points, b.points);
+    EXPECT_EQ(a.packets, b.packets);
+    EXPECT_EQ(a.missing_columns, b.missing_columns);
+    EXPECT_EQ(a.lost_packets, 0u);
+    if (exact_time) {
+      EXPECT_EQ(a.start_ns, b.start_ns);
+      EXPECT_EQ(a.end_ns, b.end_ns);
+    }
+    int differing = 0;
+    for (int ring = 0; ring < b.rings(); ++ring) {
+      for (int c = 0; c < b.columns(); ++c) {
+        const RangeCell& x = a.at(0, ring, c);
+        const RangeCell& y = b.at(0, ring, c);
+        const bool same = x.distance == y.distance && x.x == y.x && x.y == y.y && x.z == y.z &&
+                          x.intensity == y.intensity && x.azimuth == y.azimuth && x.kind == y.kind &&
+                          (exact_time ? x.time == y.time : std::abs(x.time - y.time) < 2e-3f);
+        differing += same ? 0 : 1;
+      }
+      for (int c = 0; c < b.columns(); ++c) {
+        EXPECT_EQ(a.column_state(c), b.column_state(c));
+      }
+    }
+    EXPECT_EQ(differing, 0);
+  }
+}
+
+TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileGpsTimed) {
+  const std::string capture = test::shared_data("velodyne/mrpt_sample_velodyne_vlp16_gps.pcap");
+  DriverCounters counters;
+  const auto live = replay_live(capture, Model::vlp16, "", true, counters);
+  const auto file = decode_offline(capture, Model::vlp16, "");
+  EXPECT_EQ(counters.data.datagrams, 293u);
+  EXPECT_EQ(counters.position_packets, 57u);
+  EXPECT_EQ(counters.data.kernel_drops, 0u);
+  EXPECT_EQ(counters.assembler.malformed, 0u);
+  EXPECT_EQ(counters.time_source, TimeSource::gps);
+  // GPS time depends on the packets alone: the revolutions match bit for bit, times included.
+  expect_same_revolutions(live, file, true);
+}
+
+TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileHostTimed) {
+  const std::string capture = test::shared_data("velodyne/mrpt_sample_velodyne_hdl32.pcap");
+  DriverCounters counters;
+  const auto live = replay_live(capture, Model::hdl32e, "ros_velodyne_32db.yaml", false, counters);
+  const auto file = decode_offline(capture, Model::hdl32e, "ros_velodyne_32db.yaml");
+  EXPECT_EQ(counters.data.datagrams, 500u);
+  EXPECT_EQ(counters.assembler.lost_packets, 0u);
+  EXPECT_EQ(counters.time_source, TimeSource::host);
+  // Host time: absolute times differ (live is now, the file is 2013), the rest is identical.
+  expect_same_revolutions(live, file, false);
+}
+
+TEST(Replay, SerialAndCanStreamsArriveIntact) {
+  // A recording of real bytes: an NMEA log as a serial stream (a sentence
+  // every 10 ms) and the boat's CAN frames (one every 2 ms).
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-replay-" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  std::vector<std::uint8_t> serial_bytes;
+  std::vector<recording::CanFrame> frames;
+  {
+    auto w = std::move(recording::RecordingWriter::create(dir.string(), "serial and CAN").writer);
+    const int gps = w->add_serial_stream("gps", 4800);
+    const int can = w->add_can_stream("nmea2000", "can0");
+    std::ifstream nmea(test::shared_data("nmea/bu353s4.log"));
+    std::string line;
+    std::int64_t t = 1'000'000'000'000;
+    int lines = 0;
+    while (std::getline(nmea, line) && lines < 60) {
+      if (line.empty() || line[0] != '$') continue;
+      line += "\r\n";
+      const std::vector<std::uint8_t> bytes(line.begin(), line.end());
+      ASSERT_TRUE(w->write_serial(gps, t, bytes));
+      serial_bytes.insert(serial_bytes.end(), bytes.begin(), bytes.end());
+      t += 10'000'000;
+      ++lines;
+    }
+    std::ifstream log(test::shared_data("can/gpsd_nmea2000_garmin_boat_candump.log"));
+    while (std::getline(log, line) && frames.size() < 300) {
+      if (line.empty() || line[0] == '#') continue;
+      recording::CanFrame f;
+      std::string interface, error;
+      ASSERT_TRUE(recording::parse_candump_line(line, f, interface, error)) << error;
+      f.time_ns = 1'000'000'000'000 + static_cast<std::int64_t>(frames.size()) * 2'000'000;
+      ASSERT_TRUE(w->write_can(can, f));
+      frames.push_back(f);
+    }
+    ASSERT_TRUE(w->close());
+  }
+  ASSERT_EQ(frames.size(), 300u);
+
+  udp::ReceiverOptions tunnel_options;
+  tunnel_options.bind = {0x7F000001u, 0};
+  auto tunnel = std::move(udp::UdpReceiver::open(tunnel_options).receiver);
+  ASSERT_TRUE(tunnel);
+  replay::ReplayOptions options;
+  options.can_tunnel = tunnel->local();
+  auto created = replay::Replayer::create(dir.string(), options);
+  ASSERT_TRUE(created.replayer) << created.error;
+  const std::string pty = created.replayer->pty_path("gps");
+  ASSERT_FALSE(pty.empty());
+
+  std::vector<std::uint8_t> read_back;
+  std::vector<recording::CanFrame> received;
+  std::atomic<bool> done{false};
+  std::thread consumer([&] {
+    const int fd = ::open(pty.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
+    ASSERT_GE(fd, 0);
+    std::uint8_t buffer[4096];
+    for (;;) {
+      const bool finished = done.load();
+      ssize_t n;
+      while ((n = ::read(fd, buffer, sizeof buffer)) > 0) read_back.insert(read_back.end(), buffer, buffer + n);
+      for (const udp::Datagram& d : tunnel->receive(1)) {
+        recording::CanFrame f;
+        ASSERT_TRUE(replay::decode_can_tunnel(d.payload, f));
+        received.push_back(f);
+      }
+      if (finished) break;
+    }
+    ::close(fd);
+  });
+  const replay::ReplayReport report = created.replayer->run();
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  done.store(true);
+  consumer.join();
+
+  EXPECT_EQ(read_back, serial_bytes);
+  ASSERT_EQ(received.size(), frames.size());
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(received[i].id, frames[i].id);
+    EXPECT_EQ(received[i].time_ns, frames[i].time_ns);
+    EXPECT_EQ(received[i].length, frames[i].length);
+    EXPECT_EQ(0, std::memcmp(received[i].data.data(), frames[i].data.data(), frames[i].length));
+  }
+  ASSERT_EQ(report.streams.size(), 2u);
+  EXPECT_EQ(report.streams[0].failures, 0u);
+  EXPECT_EQ(report.streams[1].sent, frames.size());
+  EXPECT_NEAR(report.wall_s, report.recording_s, 0.05) << "real-time pacing";
+  fs::remove_all(dir);
+}
+
+TEST(Replay, BadDestinationsAndInputsAreRefused) {
+  const std::string capture = test::shared_data("velodyne/mrpt_sample_velodyne_vlp16_gps.pcap");
+  replay::ReplayOptions options;
+  options.udp_targets["lidar"] = {0xC0A80001u, 2368};  // 192.168.0.1: not loopback
+  auto created = replay::Replayer::create(capture, options);
+  EXPECT_FALSE(created.replayer);
+  EXPECT_NE(created.error.find("loopback"), std::string::npos) << created.error;
+  options.udp_targets.clear();
+  options.udp_targets["radar"] = {0x7F000001u, 1};
+  EXPECT_NE(replay::Replayer::create(capture, options).error.find("no UDP stream 'radar'"), std::string::npos);
+  EXPECT_FALSE(replay::Replayer::create("/nonexistent/recording", {}).replayer);
+  EXPECT_EQ(run_binary({TRAILNAV_BINARY, "replay", capture, "--lidar-to", "10.1.2.3:2368"}), 2);
+}
+
+TEST(Replay, CanTunnelDatagramsRoundTrip) {
+  recording::CanFrame f;
+  f.time_ns = 1'410'714'882'622'188'000;
+  f.id = 0x09F80102u | recording::kCanEffFlag;
+  f.length = 8;
+  for (int i = 0; i < 8; ++i) f.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(i * 17);
+  const auto bytes = replay::encode_can_tunnel(f);
+  ASSERT_EQ(bytes.size(), replay::kCanTunnelHeader + 8);
+  recording::CanFrame back;
+  ASSERT_TRUE(replay::decode_can_tunnel(bytes, back));
+  EXPECT_EQ(back.id, f.id);
+  EXPECT_EQ(back.time_ns, f.time_ns);
+  EXPECT_EQ(back.data, f.data);
+  auto broken = bytes;
+  broken[20] = 9;  // length does not match
+  EXPECT_FALSE(replay::decode_can_tunnel(broken, back));
+  broken = bytes;
+  broken[0] = 'X';
+  EXPECT_FALSE(replay::decode_can_tunnel(broken, back));
+}
+
+}  // namespace
+}  // namespace trailnav

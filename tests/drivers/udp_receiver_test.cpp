@@ -1,0 +1,183 @@
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <ctime>
+#include <thread>
+#include <vector>
+
+#include "trailnav/drivers/udp/udp_receiver.hpp"
+#include "trailnav/drivers/udp/udp_sender.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+namespace trailnav::udp {
+namespace {
+
+constexpr std::uint32_t kLoopback = 0x7F000001u;
+
+std::unique_ptr<UdpReceiver> listen(ReceiverOptions options = {}) {
+  options.bind = {kLoopback, 0};  // the kernel picks a free port
+  auto opened = UdpReceiver::open(options);
+  EXPECT_TRUE(opened.receiver) << opened.error;
+  return std::move(opened.receiver);
+}
+
+std::unique_ptr<UdpSender> sender_to(const UdpReceiver& r) {
+  auto opened = UdpSender::open(r.local());
+  EXPECT_TRUE(opened.sender) << opened.error;
+  return std::move(opened.sender);
+}
+
+std::int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+TEST(UdpReceiver, ReceivesBatchesWithKernelTimestamps) {
+  auto r = listen();
+  ASSERT_TRUE(r);
+  EXPECT_NE(r->local().port, 0);
+  EXPECT_GE(r->granted_buffer_bytes(), 100'000);
+  auto s = sender_to(*r);
+  const std::int64_t before = now_ns();
+  std::vector<std::uint8_t> payload(1206);
+  for (int i = 0; i < 100; ++i) {
+    payload[0] = static_cast<std::uint8_t>(i);
+    ASSERT_TRUE(s->send(payload));
+  }
+  // Read 20 ms later: the times are the kernel's, from arrival, not from the read.
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const std::int64_t read_start = now_ns();
+  int received = 0;
+  int calls = 0;
+  while (received < 100 && calls < 100) {
+    for (const Datagram& d : r->receive(100)) {
+      EXPECT_EQ(d.payload.size(), 1206u);
+      EXPECT_EQ(d.payload[0], received);  // in order on loopback
+      EXPECT_GE(d.receive_ns, before);
+      EXPECT_LT(d.receive_ns, read_start - 10'000'000);
+      EXPECT_EQ(d.source.ip, kLoopback);
+      ++received;
+    }
+    ++calls;
+  }
+  EXPECT_EQ(received, 100);
+  EXPECT_LE(r->counters().calls, 3u) << "64 datagrams per call";
+  EXPECT_EQ(r->counters().datagrams, 100u);
+  EXPECT_EQ(r->counters().bytes, 120600u);
+  EXPECT_TRUE(r->receive(0).empty());
+}
+
+TEST(UdpReceiver, OnlyTheConfiguredSenderIsAccepted) {
+  // The sender's port is fixed by the first datagram; learn it, then filter.
+  auto probe = listen();
+  auto s = sender_to(*probe);
+  std::vector<std::uint8_t> payload(10, 1);
+  ASSERT_TRUE(s->send(payload));
+  const auto first = probe->receive(1000);
+  ASSERT_EQ(first.size(), 1u);
+  const std::uint16_t sender_port = first[0].source.port;
+
+  ReceiverOptions options;
+  options.source_ip = kLoopback;
+  options.source_port = static_cast<std::uint16_t>(sender_port + 1);  // someone else
+  auto r = listen(options);
+  auto s2 = sender_to(*r);
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(s2->send(payload));
+  r->receive(200);
+  r->receive(0);
+  EXPECT_EQ(r->counters().foreign, 5u);
+  EXPECT_EQ(r->counters().datagrams, 0u);
+}
+
+TEST(UdpReceiver, OversizedDatagramsAreCountedNotDelivered) {
+  ReceiverOptions options;
+  options.max_datagram_bytes = 1206;
+  auto r = listen(options);
+  auto s = sender_to(*r);
+  ASSERT_TRUE(s->send(std::vector<std::uint8_t>(1500, 7)));
+  ASSERT_TRUE(s->send(std::vector<std::uint8_t>(1206, 7)));
+  std::size_t delivered = 0;
+  for (int i = 0; i < 10 && r->counters().truncated + r->counters().datagrams < 2; ++i) delivered += r->receive(100).size();
+  EXPECT_EQ(r->counters().truncated, 1u);
+  EXPECT_EQ(delivered, 1u);
+}
+
+TEST(UdpReceiver, KernelDropsAreCountedWhenTheBufferOverflows) {
+  ReceiverOptions options;
+  options.receive_buffer_bytes = 4096;  // the kernel's minimum holds only a few datagrams
+  auto r = listen(options);
+  auto s = sender_to(*r);
+  const std::vector<std::uint8_t> payload(1206, 3);
+  for (int i = 0; i < 500; ++i) s->send(payload);
+  std::uint64_t got = 0;
+  for (int i = 0; i < 20; ++i) got += r->receive(10).size();
+  // The kernel attaches its drop count to the next datagram it queues.
+  s->send(payload);
+  for (int i = 0; i < 20; ++i) got += r->receive(10).size();
+  EXPECT_GT(r->counters().kernel_drops, 0u);
+  EXPECT_EQ(got + r->counters().kernel_drops, 501u) << "every datagram is either received or counted as dropped";
+}
+
+TEST(UdpReceiver, SeveralSensorsOnTheirOwnPorts) {
+  auto a = listen();
+  auto b = listen();
+  ASSERT_NE(a->local().port, b->local().port);
+  auto sa = sender_to(*a);
+  auto sb = sender_to(*b);
+  sa->send(std::vector<std::uint8_t>(100, 0xA));
+  sb->send(std::vector<std::uint8_t>(200, 0xB));
+  sb->send(std::vector<std::uint8_t>(200, 0xB));
+  const auto ra = a->receive(500);
+  ASSERT_EQ(ra.size(), 1u);
+  EXPECT_EQ(ra[0].payload[0], 0xA);
+  std::size_t nb = b->receive(500).size();
+  if (nb < 2) nb += b->receive(500).size();
+  EXPECT_EQ(nb, 2u);
+}
+
+TEST(UdpReceiver, ReceivingDoesNotTouchTheHeap) {
+  auto r = listen();
+  auto s = sender_to(*r);
+  const std::vector<std::uint8_t> payload(1206, 1);
+  r->receive(0);
+  const std::uint64_t before = alloc_guard::total_allocations();
+  std::size_t got = 0;
+  for (int i = 0; i < 50; ++i) {
+    s->send(payload);
+    got += r->receive(100).size();
+  }
+  const std::uint64_t after = alloc_guard::total_allocations();
+  EXPECT_EQ(got, 50u);
+  if (alloc_guard::hook_installed()) {
+    EXPECT_EQ(after, before);
+  }
+}
+
+TEST(UdpReceiver, BadOptionsAndEndpoints) {
+  std::string error;
+  EXPECT_FALSE(parse_endpoint("127.0.0.1", error));
+  EXPECT_FALSE(parse_endpoint("localhost:2368", error));
+  EXPECT_FALSE(parse_endpoint("127.0.0.1:70000", error));
+  const auto e = parse_endpoint(":2368", error);
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->ip, 0u);
+  EXPECT_EQ(format_endpoint({kLoopback, 2368}), "127.0.0.1:2368");
+  ReceiverOptions options;
+  options.batch = 0;
+  EXPECT_NE(UdpReceiver::open(options).error.find("batch"), std::string::npos);
+  // Tools never send anywhere but loopback.
+  auto refused = UdpSender::open({0x0A000001u, 2368});
+  EXPECT_FALSE(refused.sender);
+  EXPECT_NE(refused.error.find("loopback"), std::string::npos);
+  // A port already taken is a clear error.
+  auto a = listen();
+  ReceiverOptions same;
+  same.bind = a->local();
+  auto taken = UdpReceiver::open(same);
+  EXPECT_FALSE(taken.receiver);
+  EXPECT_NE(taken.error.find("cannot listen on 127.0.0.1:"), std::string::npos) << taken.error;
+}
+
+}  // namespace
+}  // namespace trailnav::udp
