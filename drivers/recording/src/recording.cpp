@@ -44,6 +44,10 @@ bool parse_stamp(std::string_view& line, std::int64_t& time_ns, std::string& err
     error = "malformed timestamp seconds";
     return false;
   }
+  if (seconds < 0 || seconds > 9'000'000'000) {  // nanoseconds must fit in 64 bits
+    error = "timestamp seconds out of range";
+    return false;
+  }
   const std::string_view fraction = line.substr(dot + 1, close - dot - 1);
   if (fraction.empty() || fraction.size() > 9) {
     error = "timestamp fraction must have 1 to 9 digits";
@@ -211,8 +215,12 @@ bool parse_candump_line(std::string_view line, CanFrame& frame, std::string& int
     id = id * 16 + static_cast<std::uint32_t>(v);
   }
   if (id_text.size() == 8) {
-    // Error frames carry CAN_ERR_FLAG; data frames here are extended.
-    if ((id & kCanErrFlag) == 0) id = (id & 0x1FFFFFFFu) | kCanEffFlag;
+    // 29-bit extended ids; error frames carry CAN_ERR_FLAG (0x20000000) as candump prints it.
+    if (id > 0x3FFFFFFFu) {
+      error = "extended CAN id " + std::string(id_text) + " has more than 29 bits";
+      return false;
+    }
+    if ((id & kCanErrFlag) == 0) id |= kCanEffFlag;
   } else if (id > 0x7FF) {
     error = "standard CAN id " + std::string(id_text) + " is over 0x7FF";
     return false;
@@ -233,9 +241,14 @@ bool parse_candump_line(std::string_view line, CanFrame& frame, std::string& int
       error = "CAN FD data of " + std::to_string(length) + " bytes is not a valid FD length";
       return false;
     }
-  } else if (!data.empty() && (data.front() == 'R' || data.front() == 'r')) {
+  } else if (!data.empty() && data.front() == 'R') {
+    // Remote request: "R", or "R<length>" with the requested length 0..8.
+    if (data.size() > 2 || (data.size() == 2 && (data[1] < '0' || data[1] > '8'))) {
+      error = "a remote frame is written R or R0..R8, not '" + std::string(data) + "'";
+      return false;
+    }
     frame.id |= kCanRtrFlag;
-    length = data.size() > 1 && data[1] >= '0' && data[1] <= '8' ? static_cast<std::size_t>(data[1] - '0') : 0;
+    length = data.size() == 2 ? static_cast<std::size_t>(data[1] - '0') : 0;
   } else {
     if (!parse_hex_bytes(data, frame.data.data(), 8, length, error)) return false;
   }
@@ -261,6 +274,7 @@ std::string format_candump_line(const CanFrame& frame, std::string_view interfac
     out += kHex[frame.fd_flags & 0xF];
   } else if ((frame.id & kCanRtrFlag) != 0) {
     out += 'R';
+    if (frame.length > 0) out += static_cast<char>('0' + std::min<int>(frame.length, 8));
     return out;
   }
   for (std::size_t i = 0; i < frame.length; ++i) {
