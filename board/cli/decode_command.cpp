@@ -1,5 +1,6 @@
 // `trailnav decode`: dump the points of a Velodyne capture as CSV or PLY.
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -8,6 +9,7 @@
 #include "commands.hpp"
 #include "terminal.hpp"
 #include "trailnav/drivers/capture/capture_reader.hpp"
+#include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/decoder.hpp"
 #include "trailnav/drivers/velodyne/revolution_cut.hpp"
 
@@ -50,8 +52,31 @@ std::optional<Model> sniff_model(const std::string& path, int port, std::string&
   return std::nullopt;
 }
 
-int run_decode(const DecodeOptions& o) {
+// A recording directory's lidar stream: its capture file and port.
+bool resolve_recording(DecodeOptions& o, std::string& error) {
+  if (!std::filesystem::is_directory(o.input)) return true;
+  const auto manifest = recording::load_manifest((std::filesystem::path(o.input) / recording::kManifestName).string());
+  if (!manifest.manifest) {
+    error = manifest.error;
+    return false;
+  }
+  for (const recording::StreamInfo& s : manifest.manifest->streams) {
+    if (s.kind == recording::StreamKind::udp && (s.name == "lidar" || s.port == o.port)) {
+      o.input = (std::filesystem::path(o.input) / s.file).string();
+      o.port = s.port;
+      return true;
+    }
+  }
+  error = o.input + ": the recording has no UDP stream named 'lidar' or on port " + std::to_string(o.port);
+  return false;
+}
+
+int run_decode(DecodeOptions o) {
   std::string error;
+  if (!resolve_recording(o, error)) {
+    std::fprintf(stderr, "trailnav decode: %s\n", error.c_str());
+    return 2;
+  }
   std::optional<Model> model;
   if (o.model == "auto") {
     model = sniff_model(o.input, o.port, error);
@@ -178,14 +203,15 @@ int run_decode(const DecodeOptions& o) {
 void add_decode_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "decode",
-      "Decode a Velodyne capture (pcap, pcapng, or raw back-to-back 1206-byte payloads) into points.\n"
+      "Decode a Velodyne capture (pcap, pcapng, raw back-to-back 1206-byte payloads, or a bench\n"
+      "recording directory, whose 'lidar' stream is read) into points.\n"
       "CSV columns: revolution,ring,azimuth_deg,distance_m,x,y,z,intensity,time_s,return\n"
       "  ring: laser index sorted by elevation (0 = lowest); x forward, y left, z up (m);\n"
       "  time_s: since the revolution's first point; return: 0 strongest, 1 last, 2 dual-last,\n"
       "  3 dual-strongest, 4 dual with both returns identical (one point).\n"
       "Exit code 1 when any packet on the port was malformed.");
   static DecodeOptions o;
-  cmd->add_option("input", o.input, "Capture file")->required()->check(CLI::ExistingFile);
+  cmd->add_option("input", o.input, "Capture file or recording directory")->required()->check(CLI::ExistingPath);
   cmd->add_option("--calibration", o.calibration,
                   "Calibration: ROS velodyne_pointcloud YAML or Velodyne db.xml (default: the model's built-in table)")
       ->check(CLI::ExistingFile);

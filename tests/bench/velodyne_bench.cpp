@@ -6,6 +6,7 @@
 
 #include "trailnav/drivers/capture/capture_reader.hpp"
 #include "trailnav/drivers/velodyne/decoder.hpp"
+#include "trailnav/drivers/velodyne/range_image.hpp"
 
 namespace trailnav::velodyne {
 namespace {
@@ -77,6 +78,93 @@ void BM_DecodeHdl64eFullPacket(benchmark::State& state) {
   run(state, Model::hdl64e, *loaded.calibration, {packet});
 }
 BENCHMARK(BM_DecodeHdl64eFullPacket);
+
+// Decode plus revolution assembly into the range image, the driver's whole
+// per-packet work. Items are points.
+class NullSink final : public RevolutionSink {
+ public:
+  explicit NullSink(RangeImageShape shape) : image_(shape) {}
+  RangeImage& next_image() noexcept override { return image_; }
+  void complete(RangeImage& image) noexcept override { benchmark::DoNotOptimize(image.points); }
+
+ private:
+  RangeImage image_;
+};
+
+void assemble(benchmark::State& state, Model model, const Calibration& calibration,
+              std::vector<std::vector<std::uint8_t>> packets, double packet_us) {
+  auto created = PacketDecoder::create(model, calibration);
+  if (!created.decoder || packets.empty()) {
+    state.SkipWithError("decoder or data missing (run from the repository root)");
+    return;
+  }
+  auto assembler = std::move(*RevolutionAssembler::create(*created.decoder, {}).assembler);
+  NullSink sink(assembler.shape());
+  std::vector<Point> out(kMaxPointsPerPacket);
+  std::int64_t points = 0;
+  for (const auto& p : packets) points += created.decoder->decode(p, out).points;
+  std::size_t i = 0;
+  std::int64_t t = 0;
+  std::int64_t done = 0;
+  for (auto _ : state) {
+    // The packet clock runs on across loops over the packets.
+    const auto stamp = static_cast<std::uint32_t>((t / 1000) % kMicrosPerHour);
+    for (std::size_t b = 0; b < 4; ++b) packets[i][kTimestampOffset + b] = static_cast<std::uint8_t>(stamp >> (8 * b));
+    assembler.add_packet(packets[i], t, sink);
+    t += static_cast<std::int64_t>(packet_us * 1000.0);
+    if (++i == packets.size()) {
+      i = 0;
+      done += points;
+    }
+  }
+  state.SetItemsProcessed(done + points * static_cast<std::int64_t>(i) / static_cast<std::int64_t>(packets.size()));
+  state.counters["revolutions"] = static_cast<double>(assembler.counters().revolutions);
+  state.counters["lost"] = static_cast<double>(assembler.counters().lost_packets);
+  state.counters["out_of_order"] = static_cast<double>(assembler.counters().out_of_order);
+}
+
+void BM_AssembleVlp16RealCapture(benchmark::State& state) {
+  static const auto packets = load_packets("../shared/data/velodyne/einride_vlp16_recording_raw1206.bin");
+  assemble(state, Model::vlp16, *builtin_calibration(Model::vlp16), packets, 1327.0);
+}
+BENCHMARK(BM_AssembleVlp16RealCapture);
+
+// HDL-64E at about 600 rpm: 6 upper/lower pairs a packet, 347 packets a turn
+// (so the packets loop seamlessly), every firing returning; a real calibration.
+void BM_AssembleHdl64eFullRevolutions(benchmark::State& state) {
+  CalibrationResult loaded = load_calibration("../shared/data/velodyne/calibration/ros_velodyne_64e_s2.1-sztaki.yaml");
+  if (!loaded.calibration) {
+    state.SkipWithError(loaded.error.c_str());
+    return;
+  }
+  std::vector<std::vector<std::uint8_t>> packets;
+  double azimuth = 0.0;
+  std::uint32_t stamp = 0;
+  for (int n = 0; n < 347 * 3; ++n) {  // three turns
+    std::vector<std::uint8_t> packet(kDataPacketSize, 0);
+    for (int b = 0; b < 12; ++b) {
+      const std::size_t base = static_cast<std::size_t>(b) * 100;
+      packet[base] = 0xFF;
+      packet[base + 1] = b % 2 ? 0xDD : 0xEE;
+      const int a = static_cast<int>(azimuth + (b / 2) * (36000.0 / 347.0 / 6.0)) % 36000;
+      packet[base + 2] = static_cast<std::uint8_t>(a & 0xFF);
+      packet[base + 3] = static_cast<std::uint8_t>(a >> 8);
+      for (int k = 0; k < 32; ++k) {
+        const int raw = 1000 + 131 * k + 700 * b;
+        packet[base + 4 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw & 0xFF);
+        packet[base + 5 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw >> 8);
+        packet[base + 6 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(k * 5);
+      }
+    }
+    for (int i = 0; i < 4; ++i) packet[1200 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(stamp >> (8 * i));
+    azimuth += 36000.0 / 347.0;
+    if (azimuth >= 36000.0) azimuth -= 36000.0;
+    stamp += 288;
+    packets.push_back(std::move(packet));
+  }
+  assemble(state, Model::hdl64e, *loaded.calibration, packets, 288.0);
+}
+BENCHMARK(BM_AssembleHdl64eFullRevolutions);
 
 }  // namespace
 }  // namespace trailnav::velodyne
