@@ -19,6 +19,7 @@
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_receiver.hpp"
 #include "trailnav/drivers/velodyne/driver.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 
 extern char** environ;
@@ -110,6 +111,10 @@ std::vector<RangeImage> replay_live(const std::string& capture, Model model, con
     }
   });
   EXPECT_TRUE(scheduler.start());
+  // From here on the driver's thread must not touch the heap.
+  EXPECT_TRUE(alloc_guard::hook_installed());
+  alloc_guard::reset_counters();
+  alloc_guard::arm();
   std::vector<std::string> args = {TRAILNAV_BINARY, "replay", capture, "--quiet", "--lidar-to",
                                    udp::format_endpoint(driver.data_endpoint())};
   if (has_position_stream) {
@@ -119,6 +124,8 @@ std::vector<RangeImage> replay_live(const std::string& capture, Model model, con
   const int rc = run_binary(args);
   EXPECT_EQ(rc, 0);
   std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the last packets' run
+  alloc_guard::disarm();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u) << "the driver thread allocated after arm";
   scheduler.stop();
   done.store(true);
   reader.join();
