@@ -21,6 +21,28 @@ std::vector<std::vector<std::uint8_t>> load_packets(const std::string& path) {
   return packets;
 }
 
+// One HDL-64E packet: 6 upper/lower block pairs starting at `azimuth`
+// (hundredths of a degree), `pair_step` apart, every firing returning.
+std::vector<std::uint8_t> hdl64e_packet(double azimuth, double pair_step, std::uint32_t stamp) {
+  std::vector<std::uint8_t> packet(kDataPacketSize, 0);
+  for (int b = 0; b < 12; ++b) {
+    const std::size_t base = static_cast<std::size_t>(b) * 100;
+    packet[base] = 0xFF;
+    packet[base + 1] = b % 2 ? 0xDD : 0xEE;
+    const int a = static_cast<int>(azimuth + (b / 2) * pair_step) % 36000;
+    packet[base + 2] = static_cast<std::uint8_t>(a & 0xFF);
+    packet[base + 3] = static_cast<std::uint8_t>(a >> 8);
+    for (int k = 0; k < 32; ++k) {
+      const int raw = 1000 + 131 * k + 700 * b;
+      packet[base + 4 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw & 0xFF);
+      packet[base + 5 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw >> 8);
+      packet[base + 6 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(k * 5);
+    }
+  }
+  for (std::size_t i = 0; i < 4; ++i) packet[kTimestampOffset + i] = static_cast<std::uint8_t>(stamp >> (8 * i));
+  return packet;
+}
+
 void run(benchmark::State& state, Model model, const Calibration& calibration, const std::vector<std::vector<std::uint8_t>>& packets) {
   auto created = PacketDecoder::create(model, calibration);
   if (!created.decoder || packets.empty()) {
@@ -60,21 +82,7 @@ void BM_DecodeHdl64eFullPacket(benchmark::State& state) {
     state.SkipWithError(loaded.error.c_str());
     return;
   }
-  std::vector<std::uint8_t> packet(kDataPacketSize, 0);
-  for (int b = 0; b < 12; ++b) {
-    const std::size_t base = static_cast<std::size_t>(b) * 100;
-    packet[base] = 0xFF;
-    packet[base + 1] = b % 2 ? 0xDD : 0xEE;
-    const int azimuth = 1000 + (b / 2) * 17;
-    packet[base + 2] = static_cast<std::uint8_t>(azimuth & 0xFF);
-    packet[base + 3] = static_cast<std::uint8_t>(azimuth >> 8);
-    for (int k = 0; k < 32; ++k) {
-      const int raw = 1000 + 131 * k + 700 * b;
-      packet[base + 4 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw & 0xFF);
-      packet[base + 5 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw >> 8);
-      packet[base + 6 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(k * 5);
-    }
-  }
+  const std::vector<std::uint8_t> packet = hdl64e_packet(1000.0, 17.0, 0);
   run(state, Model::hdl64e, *loaded.calibration, {packet});
 }
 BENCHMARK(BM_DecodeHdl64eFullPacket);
@@ -141,26 +149,10 @@ void BM_AssembleHdl64eFullRevolutions(benchmark::State& state) {
   double azimuth = 0.0;
   std::uint32_t stamp = 0;
   for (int n = 0; n < 347 * 3; ++n) {  // three turns
-    std::vector<std::uint8_t> packet(kDataPacketSize, 0);
-    for (int b = 0; b < 12; ++b) {
-      const std::size_t base = static_cast<std::size_t>(b) * 100;
-      packet[base] = 0xFF;
-      packet[base + 1] = b % 2 ? 0xDD : 0xEE;
-      const int a = static_cast<int>(azimuth + (b / 2) * (36000.0 / 347.0 / 6.0)) % 36000;
-      packet[base + 2] = static_cast<std::uint8_t>(a & 0xFF);
-      packet[base + 3] = static_cast<std::uint8_t>(a >> 8);
-      for (int k = 0; k < 32; ++k) {
-        const int raw = 1000 + 131 * k + 700 * b;
-        packet[base + 4 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw & 0xFF);
-        packet[base + 5 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(raw >> 8);
-        packet[base + 6 + static_cast<std::size_t>(k) * 3] = static_cast<std::uint8_t>(k * 5);
-      }
-    }
-    for (int i = 0; i < 4; ++i) packet[1200 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(stamp >> (8 * i));
+    packets.push_back(hdl64e_packet(azimuth, 36000.0 / 347.0 / 6.0, stamp));
     azimuth += 36000.0 / 347.0;
     if (azimuth >= 36000.0) azimuth -= 36000.0;
     stamp += 288;
-    packets.push_back(std::move(packet));
   }
   assemble(state, Model::hdl64e, *loaded.calibration, packets, 288.0);
 }

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "replayer.hpp"
+#include "collecting_sink.hpp"
 #include "test_data.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_receiver.hpp"
@@ -30,17 +31,7 @@ namespace {
 using namespace trailnav::velodyne;
 namespace fs = std::filesystem;
 
-// Keeps a copy of every finished revolution.
-class CollectingSink final : public RevolutionSink {
- public:
-  explicit CollectingSink(RangeImageShape shape) : work_(shape) {}
-  RangeImage& next_image() noexcept override { return work_; }
-  void complete(RangeImage& image) noexcept override { images.push_back(image); }
-  std::vector<RangeImage> images;
-
- private:
-  RangeImage work_;
-};
+using test::CollectingSink;
 
 PacketDecoder make_decoder(Model model, const std::string& calibration) {
   Calibration cal = *builtin_calibration(model);

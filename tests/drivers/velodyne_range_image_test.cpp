@@ -6,6 +6,7 @@
 #include <thread>
 #include <vector>
 
+#include "collecting_sink.hpp"
 #include "test_data.hpp"
 #include "trailnav/drivers/capture/capture_reader.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
@@ -19,17 +20,7 @@ namespace {
 
 using test::shared_data;
 
-// Keeps a copy of every finished revolution.
-class CollectingSink final : public RevolutionSink {
- public:
-  explicit CollectingSink(RangeImageShape shape) : work_(shape) {}
-  RangeImage& next_image() noexcept override { return work_; }
-  void complete(RangeImage& image) noexcept override { images.push_back(image); }
-  std::vector<RangeImage> images;
-
- private:
-  RangeImage work_;
-};
+using test::CollectingSink;
 
 struct Packet {
   std::vector<std::uint8_t> bytes;

@@ -8,23 +8,14 @@
 #include <string_view>
 #include <vector>
 
+#include "check.hpp"
+
 #include "replayer.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 #include "trailnav/runtime/config.hpp"
 
 using namespace trailnav;
-
-namespace {
-// An invariant that must hold: report where, then crash for libFuzzer.
-#define check(condition) \
-  do { \
-    if (!(condition)) { \
-      std::fprintf(stderr, "%s:%d: invariant failed: %s\n", __FILE__, __LINE__, #condition); \
-      std::abort(); \
-    } \
-  } while (false)
-}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);

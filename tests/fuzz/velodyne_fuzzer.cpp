@@ -9,6 +9,8 @@
 #include <memory>
 #include <vector>
 
+#include "check.hpp"
+
 #include "trailnav/drivers/velodyne/range_image.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 
@@ -16,14 +18,6 @@ using namespace trailnav::velodyne;
 
 namespace {
 
-// An invariant that must hold: report where, then crash for libFuzzer.
-#define check(condition) \
-  do { \
-    if (!(condition)) { \
-      std::fprintf(stderr, "%s:%d: invariant failed: %s\n", __FILE__, __LINE__, #condition); \
-      std::abort(); \
-    } \
-  } while (false)
 
 class CheckingSink final : public RevolutionSink {
  public:

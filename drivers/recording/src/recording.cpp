@@ -360,25 +360,52 @@ struct RecordingReader::UdpSource final : Source {
   std::uint64_t size() const noexcept override { return capture->size(); }
 };
 
-struct RecordingReader::CanSource final : Source {
+// A text log read line by line (candump and serial logs).
+struct RecordingReader::LineSource : Source {
   std::ifstream in;
   std::string file;
-  std::map<std::string, int> stream_of_interface;
-  int default_stream = -1;
-  CanFrame frame;
   std::string line;
   int line_number = 0;
   std::uint64_t bytes_read = 0;
   std::uint64_t total = 0;
 
-  bool advance(RecordingReader& reader) override {
-    std::string interface, error;
+  bool open_file(const std::string& path, std::string& error) {
+    in.open(path);
+    if (!in) {
+      error = "cannot read " + path;
+      return false;
+    }
+    file = path;
+    std::error_code ec;
+    total = fs::file_size(path, ec);
+    return true;
+  }
+  // The next line that is neither empty nor a comment.
+  bool next_line() {
     while (std::getline(in, line)) {
       ++line_number;
       bytes_read += line.size() + 1;
-      if (line.empty() || line.front() == '#') continue;
+      if (!line.empty() && line.front() != '#') return true;
+    }
+    return false;
+  }
+  void problem(RecordingReader& reader, const std::string& what) const {
+    reader.note_problem(file + ":" + std::to_string(line_number) + ": " + what);
+  }
+  std::uint64_t position() const noexcept override { return bytes_read; }
+  std::uint64_t size() const noexcept override { return total; }
+};
+
+struct RecordingReader::CanSource final : LineSource {
+  std::map<std::string, int> stream_of_interface;
+  int default_stream = -1;
+  CanFrame frame;
+
+  bool advance(RecordingReader& reader) override {
+    std::string interface, error;
+    while (next_line()) {
       if (!parse_candump_line(line, frame, interface, error)) {
-        reader.note_problem(file + ":" + std::to_string(line_number) + ": " + error);
+        problem(reader, error);
         continue;
       }
       auto it = stream_of_interface.find(interface);
@@ -391,29 +418,18 @@ struct RecordingReader::CanSource final : Source {
     }
     return false;
   }
-  std::uint64_t position() const noexcept override { return bytes_read; }
-  std::uint64_t size() const noexcept override { return total; }
 };
 
-struct RecordingReader::SerialSource final : Source {
-  std::ifstream in;
-  std::string file;
+struct RecordingReader::SerialSource final : LineSource {
   int stream = 0;
-  std::string line;
   std::vector<std::uint8_t> bytes;
-  int line_number = 0;
-  std::uint64_t bytes_read = 0;
-  std::uint64_t total = 0;
 
   bool advance(RecordingReader& reader) override {
     std::string error;
-    while (std::getline(in, line)) {
-      ++line_number;
-      bytes_read += line.size() + 1;
-      if (line.empty() || line.front() == '#') continue;
+    while (next_line()) {
       std::int64_t t = 0;
       if (!parse_serial_line(line, t, bytes, error)) {
-        reader.note_problem(file + ":" + std::to_string(line_number) + ": " + error);
+        problem(reader, error);
         continue;
       }
       event = Event{};
@@ -425,8 +441,6 @@ struct RecordingReader::SerialSource final : Source {
     }
     return false;
   }
-  std::uint64_t position() const noexcept override { return bytes_read; }
-  std::uint64_t size() const noexcept override { return total; }
 };
 
 void RecordingReader::note_problem(const std::string& problem) {
@@ -479,7 +493,6 @@ RecordingReader::Opened RecordingReader::open(const std::string& path) {
 
   // One UDP source per capture file.
   std::map<std::string, UdpSource*> udp_by_file;
-  CanSource* can_source = nullptr;
   std::map<std::string, CanSource*> can_by_file;
   for (std::size_t i = 0; i < r->streams_.size(); ++i) {
     const StreamInfo& s = r->streams_[i];
@@ -507,33 +520,19 @@ RecordingReader::Opened RecordingReader::open(const std::string& path) {
       CanSource*& c = can_by_file[file];
       if (c == nullptr) {
         auto source = std::make_unique<CanSource>();
-        source->in.open(file);
-        if (!source->in) {
-          result.error = "cannot read " + file;
-          return result;
-        }
-        source->file = file;
-        source->total = fs::file_size(file, ec);
+        if (!source->open_file(file, result.error)) return result;
         source->default_stream = static_cast<int>(i);
         c = source.get();
         r->sources_.push_back(std::move(source));
       }
       c->stream_of_interface[s.interface] = static_cast<int>(i);
-      can_source = c;
     } else {
       auto source = std::make_unique<SerialSource>();
-      source->in.open(file);
-      if (!source->in) {
-        result.error = "cannot read " + file;
-        return result;
-      }
-      source->file = file;
-      source->total = fs::file_size(file, ec);
+      if (!source->open_file(file, result.error)) return result;
       source->stream = static_cast<int>(i);
       r->sources_.push_back(std::move(source));
     }
   }
-  (void)can_source;
   for (auto& source : r->sources_) source->has = source->advance(*r);
   result.reader = std::move(r);
   return result;
@@ -602,6 +601,16 @@ RecordingWriter::~RecordingWriter() {
   if (!closed_) (void)close();
 }
 
+int RecordingWriter::add_stream(StreamInfo info) {
+  if (info.kind == StreamKind::serial) {
+    serial_.push_back(std::fopen((fs::path(directory_) / info.file).c_str(), "w"));
+  } else {
+    serial_.push_back(nullptr);
+  }
+  manifest_.streams.push_back(std::move(info));
+  return static_cast<int>(manifest_.streams.size() - 1);
+}
+
 int RecordingWriter::add_udp_stream(const std::string& name, std::uint16_t port, const std::string& description) {
   StreamInfo s;
   s.name = name;
@@ -609,9 +618,7 @@ int RecordingWriter::add_udp_stream(const std::string& name, std::uint16_t port,
   s.file = "udp.pcap";
   s.port = port;
   s.description = description;
-  manifest_.streams.push_back(s);
-  serial_.push_back(nullptr);
-  return static_cast<int>(manifest_.streams.size() - 1);
+  return add_stream(std::move(s));
 }
 
 int RecordingWriter::add_can_stream(const std::string& name, const std::string& interface, const std::string& description) {
@@ -621,9 +628,7 @@ int RecordingWriter::add_can_stream(const std::string& name, const std::string& 
   s.file = "can.log";
   s.interface = interface;
   s.description = description;
-  manifest_.streams.push_back(s);
-  serial_.push_back(nullptr);
-  return static_cast<int>(manifest_.streams.size() - 1);
+  return add_stream(std::move(s));
 }
 
 int RecordingWriter::add_serial_stream(const std::string& name, int baud, const std::string& description) {
@@ -633,9 +638,7 @@ int RecordingWriter::add_serial_stream(const std::string& name, int baud, const 
   s.file = "serial/" + name + ".log";
   s.baud = baud;
   s.description = description;
-  manifest_.streams.push_back(s);
-  serial_.push_back(std::fopen((fs::path(directory_) / s.file).c_str(), "w"));
-  return static_cast<int>(manifest_.streams.size() - 1);
+  return add_stream(std::move(s));
 }
 
 Status RecordingWriter::write_udp(int stream, std::int64_t time_ns, std::span<const std::uint8_t> payload,

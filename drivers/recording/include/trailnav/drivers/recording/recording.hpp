@@ -116,6 +116,7 @@ class RecordingReader {
   RecordingReader() = default;
   struct Source;
   struct UdpSource;
+  struct LineSource;
   struct CanSource;
   struct SerialSource;
 
@@ -157,6 +158,7 @@ class RecordingWriter {
 
  private:
   RecordingWriter() = default;
+  int add_stream(StreamInfo info);
   struct Pcap;
   std::string directory_;
   Manifest manifest_;
