@@ -130,19 +130,16 @@ int run_decode(DecodeOptions o) {
 
   std::vector<Point> points(kMaxPointsPerPacket);
   std::vector<OutputPoint> ply_points;
-  RevolutionCut cut(*calibration, o.cut_deg * std::numbers::pi / 180.0);
+  RevolutionCut cut(o.cut_deg * std::numbers::pi / 180.0);
   int revolution = 0;
   double revolution_start = -1.0;
   std::uint64_t packets = 0;
   std::uint64_t malformed = 0;
   std::uint64_t written = 0;
-  bool done = false;
   if (o.format == "csv") std::fprintf(out, "revolution,ring,azimuth_deg,distance_m,x,y,z,intensity,time_s,return\n");
   ProgressBar progress("decode", static_cast<double>(opened.reader->size()) / 1e6, "MB");
 
-  while (!done) {
-    auto d = opened.reader->next();
-    if (!d) break;
+  while (auto d = opened.reader->next()) {
     if (d->destination_port != o.port) continue;
     ++packets;
     const PacketInfo info = decoder.decode(d->payload, points);
@@ -152,19 +149,9 @@ int run_decode(DecodeOptions o) {
     }
     if (packets % 256 == 0) progress.update(static_cast<double>(opened.reader->position()) / 1e6);
     const double packet_time = info.timestamp_us * 1e-6;
-    for (int i = 0; i < info.points; ++i) {
-      const Point& p = points[static_cast<std::size_t>(i)];
-      if (cut.starts_revolution(p)) {
-        ++revolution;
-        revolution_start = -1.0;
-        if (o.revolutions > 0 && revolution >= o.revolutions) {
-          done = true;
-          break;
-        }
-      }
-      const double t = packet_time + static_cast<double>(p.time);
-      if (revolution_start < 0.0) revolution_start = t;
-      double since = t - revolution_start;
+    if (revolution_start < 0.0) revolution_start = packet_time;
+    auto emit = [&](const Point& p) {
+      double since = packet_time + static_cast<double>(p.time) - revolution_start;
       if (since < -1800.0) since += 3600.0;  // the packet clock wrapped at the top of the hour
       if (o.format == "csv") {
         std::fprintf(out, "%d,%u,%.3f,%.3f,%.4f,%.4f,%.4f,%.0f,%.6f,%d\n", revolution, p.ring,
@@ -175,6 +162,19 @@ int run_decode(DecodeOptions o) {
         ply_points.push_back({revolution, p, since});
       }
       ++written;
+    };
+    // The firings before the cut, then (when the packet crosses it) the rest
+    // in the next revolution: the same cut as the driver's range images.
+    const int first_new = cut.first_new_sequence(info);
+    for (int i = 0; i < info.points; ++i) {
+      if (points[static_cast<std::size_t>(i)].sequence < first_new) emit(points[static_cast<std::size_t>(i)]);
+    }
+    if (first_new == info.sequences) continue;
+    ++revolution;
+    revolution_start = packet_time + static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(first_new)]) * 1e-6;
+    if (o.revolutions > 0 && revolution >= o.revolutions) break;
+    for (int i = 0; i < info.points; ++i) {
+      if (points[static_cast<std::size_t>(i)].sequence >= first_new) emit(points[static_cast<std::size_t>(i)]);
     }
   }
   progress.finish();
@@ -207,7 +207,7 @@ void add_decode_command(CLI::App& app) {
       "recording directory, whose 'lidar' stream is read) into points.\n"
       "CSV columns: revolution,ring,azimuth_deg,distance_m,x,y,z,intensity,time_s,return\n"
       "  ring: laser index sorted by elevation (0 = lowest); x forward, y left, z up (m);\n"
-      "  time_s: since the revolution's first point; return: 0 strongest, 1 last, 2 dual-last,\n"
+      "  time_s: since the revolution's first firing; return: 0 strongest, 1 last, 2 dual-last,\n"
       "  3 dual-strongest, 4 dual with both returns identical (one point).\n"
       "Exit code 1 when any packet on the port was malformed.");
   static DecodeOptions o;

@@ -49,7 +49,7 @@ Decoded decode_file(const std::string& path, const PacketDecoder& decoder) {
   EXPECT_TRUE(opened.reader) << opened.error;
   if (!opened.reader) return out;
   std::vector<Point> buffer(kMaxPointsPerPacket);
-  RevolutionCut cut(decoder.calibration(), 0.0);
+  RevolutionCut cut(0.0);
   int revolution = 0;
   out.firings_per_revolution.push_back(0);
   while (auto d = opened.reader->next()) {
@@ -70,14 +70,19 @@ Decoded decode_file(const std::string& path, const PacketDecoder& decoder) {
     out.data_timestamps.push_back(info.timestamp_us);
     out.first_azimuths.push_back(info.first_azimuth);
     out.firings_per_revolution.back() += info.zero_returns;
-    for (int i = 0; i < info.points; ++i) {
-      const Point& p = buffer[static_cast<std::size_t>(i)];
-      if (cut.starts_revolution(p)) {
+    const int first_new = cut.first_new_sequence(info);
+    for (int pass = 0; pass < 2; ++pass) {
+      if (pass == 1) {
+        if (first_new == info.sequences) break;
         ++revolution;
         out.firings_per_revolution.push_back(0);
       }
-      ++out.firings_per_revolution.back();
-      out.points.push_back({revolution, p});
+      for (int i = 0; i < info.points; ++i) {
+        const Point& p = buffer[static_cast<std::size_t>(i)];
+        if ((p.sequence < first_new) != (pass == 0)) continue;
+        ++out.firings_per_revolution.back();
+        out.points.push_back({revolution, p});
+      }
     }
   }
   return out;

@@ -74,16 +74,19 @@ std::vector<RangeImage> assemble(const PacketDecoder& decoder, const std::vector
   return std::move(sink.images);
 }
 
-// Points per revolution from the point-wise cut, for comparison.
+// Points per revolution, straight from the decoder and the cut, for comparison.
 std::vector<int> points_per_revolution(const PacketDecoder& decoder, const std::vector<Packet>& packets) {
   std::vector<Point> buffer(kMaxPointsPerPacket);
-  RevolutionCut cut(decoder.calibration(), 0.0);
+  RevolutionCut cut(0.0);
   std::vector<int> counts{0};
   for (const Packet& p : packets) {
     const PacketInfo info = decoder.decode(p.bytes, buffer);
+    const int first_new = cut.first_new_sequence(info);
+    const bool crosses = first_new < info.sequences;
+    if (crosses) counts.push_back(0);
     for (int i = 0; i < info.points; ++i) {
-      if (cut.starts_revolution(buffer[static_cast<std::size_t>(i)])) counts.push_back(0);
-      ++counts.back();
+      const bool before_cut = buffer[static_cast<std::size_t>(i)].sequence < first_new;
+      ++counts[counts.size() - (crosses && before_cut ? 2 : 1)];
     }
   }
   return counts;
@@ -108,7 +111,7 @@ void expect_clean_revolutions(const PacketDecoder& decoder, const std::vector<Pa
     const double firings = decoder.model().sequences_per_block * 1e6 / decoder.model().group_period_us * 60.0 / image.rpm;
     EXPECT_NEAR(image.columns(), firings, firings * 0.06);
     // Same points as the point-wise cut, less the few firings that found their column taken.
-    // The point-wise cut may put part of one firing on the other side.
+    // Every point is in its image, less the firings whose column was taken.
     EXPECT_NEAR(image.points, reference[i + 1], static_cast<int>(image.collisions + 1) * decoder.model().lasers);
     EXPECT_LT(image.collisions, static_cast<std::uint32_t>(image.columns() / 100 + 2));
     // Time runs with the columns, within one revolution.

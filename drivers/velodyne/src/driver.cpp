@@ -7,14 +7,13 @@ namespace trailnav::velodyne {
 
 VelodyneDriver::Created VelodyneDriver::create(PacketDecoder decoder, const DriverOptions& options) {
   Created result;
-  auto assembler = RevolutionAssembler::create(decoder, options.assembler);
-  if (!assembler.assembler) {
-    result.error = options.name + ": " + assembler.error;
+  if (std::string error = RevolutionAssembler::check_options(options.assembler); !error.empty()) {
+    result.error = options.name + ": " + error;
     return result;
   }
-  const RangeImageShape shape = assembler.assembler->shape();
+  const RangeImageShape shape = RevolutionAssembler::shape_for(decoder.model(), options.assembler);
   std::unique_ptr<VelodyneDriver> d(new VelodyneDriver(std::move(decoder), options, shape));
-  // The assembler refers to the decoder: build it again on the driver's own copy.
+  // The assembler refers to the decoder: built on the driver's own.
   d->assembler_.emplace(std::move(*RevolutionAssembler::create(d->decoder_, options.assembler).assembler));
 
   auto data = udp::UdpReceiver::open(options.data);

@@ -8,17 +8,6 @@ namespace trailnav::velodyne {
 namespace {
 
 constexpr float kTurn = 36000.0f;  // hundredths of a degree
-constexpr std::int64_t kHourUs = 3'600'000'000;
-
-// Microseconds from `previous` to `current` on the sensor's hour clock, in
-// (-30 min, +30 min].
-std::int64_t hour_clock_delta(std::uint32_t current, std::uint32_t previous) noexcept {
-  std::int64_t d = static_cast<std::int64_t>(current) - static_cast<std::int64_t>(previous);
-  if (d <= -kHourUs / 2) d += kHourUs;
-  if (d > kHourUs / 2) d -= kHourUs;
-  return d;
-}
-
 float wrap_turn(float hundredths) noexcept {
   if (hundredths < 0.0f) hundredths += kTurn;
   if (hundredths >= kTurn) hundredths -= kTurn;
@@ -74,42 +63,50 @@ void RangeImage::finish() noexcept {
   points = n;
 }
 
-RevolutionAssembler::Created RevolutionAssembler::create(const PacketDecoder& decoder, const AssemblerOptions& options) {
-  Created result;
+namespace {
+
+double firings_per_second(const ModelInfo& m) noexcept { return m.sequences_per_block * 1e6 / m.group_period_us; }
+
+}  // namespace
+
+std::string RevolutionAssembler::check_options(const AssemblerOptions& options) {
   if (!(options.min_rpm >= 60.0 && options.min_rpm <= 1200.0)) {
-    result.error = "min_rpm " + std::to_string(options.min_rpm) + " is outside 60..1200";
-    return result;
+    return "min_rpm " + std::to_string(options.min_rpm) + " is outside 60..1200";
   }
   if (!(options.rpm >= options.min_rpm && options.rpm <= 1500.0)) {
-    result.error = "rpm " + std::to_string(options.rpm) + " must lie between min_rpm (" +
-                   std::to_string(options.min_rpm) + ") and 1500";
-    return result;
+    return "rpm " + std::to_string(options.rpm) + " must lie between min_rpm (" + std::to_string(options.min_rpm) +
+           ") and 1500";
   }
   if (!(options.cut_azimuth_rad >= 0.0 && options.cut_azimuth_rad < 2.0 * std::numbers::pi)) {
-    result.error = "the cut azimuth must lie in [0, 360) degrees";
-    return result;
+    return "the cut azimuth must lie in [0, 360) degrees";
   }
-  const ModelInfo& m = decoder.model();
-  const double firings_per_second = m.sequences_per_block * 1e6 / m.group_period_us;
+  return "";
+}
+
+RangeImageShape RevolutionAssembler::shape_for(const ModelInfo& model, const AssemblerOptions& options) noexcept {
   RangeImageShape shape;
-  shape.rings = m.lasers;
-  shape.max_columns = static_cast<int>(std::lround(firings_per_second * 60.0 / options.min_rpm));
+  shape.rings = model.lasers;
+  shape.max_columns = static_cast<int>(std::lround(firings_per_second(model) * 60.0 / options.min_rpm));
   shape.layers = options.dual_returns ? 2 : 1;
-  result.assembler.emplace(RevolutionAssembler(decoder, options, shape));
+  return shape;
+}
+
+RevolutionAssembler::Created RevolutionAssembler::create(const PacketDecoder& decoder, const AssemblerOptions& options) {
+  Created result;
+  result.error = check_options(options);
+  if (result.error.empty()) result.assembler.emplace(RevolutionAssembler(decoder, options));
   return result;
 }
 
-RevolutionAssembler::RevolutionAssembler(const PacketDecoder& decoder, const AssemblerOptions& options,
-                                         RangeImageShape shape)
+RevolutionAssembler::RevolutionAssembler(const PacketDecoder& decoder, const AssemblerOptions& options)
     : decoder_(&decoder),
       options_(options),
-      shape_(shape),
+      shape_(shape_for(decoder.model(), options)),
+      firings_per_second_(firings_per_second(decoder.model())),
+      current_rpm_(options.rpm),
+      cut_(options.cut_azimuth_rad),
       points_(kMaxPointsPerPacket) {
-  const ModelInfo& m = decoder.model();
-  firings_per_second_ = m.sequences_per_block * 1e6 / m.group_period_us;
-  current_rpm_ = options.rpm;
   columns_ = columns_for_rpm(options.rpm);
-  cut_hundredths_ = static_cast<float>(options.cut_azimuth_rad * 18000.0 / std::numbers::pi);
 }
 
 int RevolutionAssembler::columns_for_rpm(double rpm) const noexcept {
@@ -130,7 +127,7 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   // Order and loss, from the packet clock and from the azimuth.
   std::int64_t lost = 0;
   if (have_previous_) {
-    const std::int64_t dt = hour_clock_delta(info.timestamp_us, previous_timestamp_us_);
+    const std::int64_t dt = hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_);
     if (dt <= 0) {
       ++counters_.out_of_order;
       return PacketError::none;
@@ -140,12 +137,10 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
       lost = std::llround(static_cast<double>(dt) / packet_us) - 1;
     }
   }
-  for (int s = 0; s < n; ++s) {
-    relative_[static_cast<std::size_t>(s)] = wrap_turn(info.sequence_azimuth[static_cast<std::size_t>(s)] - cut_hundredths_);
-  }
+  const int first_new = cut_.first_new_sequence(info);  // n: the packet does not cross the cut
   if (have_previous_ && n > 1) {
-    const float advance = wrap_turn(relative_[static_cast<std::size_t>(n - 1)] - relative_[0]) / static_cast<float>(n - 1);
-    const float gap = wrap_turn(relative_[0] - previous_relative_);
+    const float advance = wrap_turn(cut_.relative(n - 1) - cut_.relative(0)) / static_cast<float>(n - 1);
+    const float gap = wrap_turn(cut_.relative(0) - cut_.previous_relative());
     if (advance > 0.0f && gap > (static_cast<float>(n) * 0.5f + 1.0f) * advance && gap < kTurn / 2) {
       lost = std::max<std::int64_t>(lost, std::lround((gap / advance - 1.0f) / static_cast<float>(n)));
     }
@@ -154,22 +149,10 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   counters_.lost_packets += static_cast<std::uint64_t>(lost);
   if (have_previous_) {
     // Rotation rate: azimuth advance over packet time since the last revolution began.
-    rate_azimuth_ += static_cast<double>(wrap_turn(relative_[0] - previous_first_relative_));
-    rate_time_us_ += static_cast<double>(hour_clock_delta(info.timestamp_us, previous_timestamp_us_));
+    rate_azimuth_ += static_cast<double>(wrap_turn(cut_.relative(0) - previous_first_relative_));
+    rate_time_us_ += static_cast<double>(hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_));
   }
-  previous_first_relative_ = relative_[0];
-
-  // The first sequence past the cut, if this packet crosses it.
-  int first_new = n;
-  float previous = previous_relative_;
-  for (int s = 0; s < n; ++s) {
-    const float r = relative_[static_cast<std::size_t>(s)];
-    if (previous >= 0.0f && r + kTurn / 2 < previous) {
-      first_new = s;
-      break;
-    }
-    previous = r;
-  }
+  previous_first_relative_ = cut_.relative(0);
 
   const auto sequence_ns = [&](int s) {
     return packet_time_ns + std::llround(static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(s)]) * 1e3);
@@ -193,7 +176,6 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
 
   have_previous_ = true;
   previous_timestamp_us_ = info.timestamp_us;
-  previous_relative_ = relative_[static_cast<std::size_t>(n - 1)];
   return PacketError::none;
 }
 
@@ -202,7 +184,7 @@ void RevolutionAssembler::assign_columns(int begin, int end, bool continuous) no
   const int columns = image.columns();
   const float scale = static_cast<float>(columns) / kTurn;
   for (int s = begin; s < end; ++s) {
-    const float position = relative_[static_cast<std::size_t>(s)] * scale;
+    const float position = cut_.relative(s) * scale;
     int c = std::min(static_cast<int>(position), columns - 1);
     // Coverage: everything since the previous firing when nothing was lost
     // in between, else only this firing's own column.

@@ -1,25 +1,30 @@
 #include "trailnav/drivers/velodyne/revolution_cut.hpp"
 
-#include <cmath>
 #include <numbers>
 
 namespace trailnav::velodyne {
+namespace {
 
-RevolutionCut::RevolutionCut(const Calibration& calibration, double cut_azimuth_rad)
-    : cut_(static_cast<float>(cut_azimuth_rad)) {
-  for (const LaserCorrection& c : calibration.lasers) rot_.push_back(static_cast<float>(c.rot_correction));
-}
+constexpr float kTurn = 36000.0f;  // hundredths of a degree
 
-bool RevolutionCut::starts_revolution(const Point& p) noexcept {
-  constexpr float kTwoPi = 2.0f * std::numbers::pi_v<float>;
-  float relative = p.azimuth + rot_[p.laser] - cut_;
-  while (relative < 0.0f) relative += kTwoPi;
-  while (relative >= kTwoPi) relative -= kTwoPi;
-  // A drop of more than half a turn is the wrap past the cut; small backward
-  // steps (dual-return pairs, laser offsets) are not.
-  const bool wrapped = previous_ >= 0.0f && relative + std::numbers::pi_v<float> < previous_;
-  previous_ = relative;
-  return wrapped;
+}  // namespace
+
+RevolutionCut::RevolutionCut(double cut_azimuth_rad) noexcept
+    : cut_(static_cast<float>(cut_azimuth_rad * 18000.0 / std::numbers::pi)) {}
+
+int RevolutionCut::first_new_sequence(const PacketInfo& info) noexcept {
+  previous_before_ = last_;
+  int first_new = info.sequences;
+  for (int s = 0; s < info.sequences; ++s) {
+    float r = info.sequence_azimuth[static_cast<std::size_t>(s)] - cut_;
+    if (r < 0.0f) r += kTurn;
+    if (r >= kTurn) r -= kTurn;
+    relative_[static_cast<std::size_t>(s)] = r;
+    // A drop of more than half a turn is the wrap past the cut.
+    if (first_new == info.sequences && last_ >= 0.0f && r + kTurn / 2 < last_) first_new = s;
+    last_ = r;
+  }
+  return first_new;
 }
 
 }  // namespace trailnav::velodyne

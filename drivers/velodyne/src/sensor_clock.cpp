@@ -107,9 +107,7 @@ std::int64_t SensorClock::unwrap(std::uint32_t counter) noexcept {
   // The reading of the counter nearest the newest one so far: a counter far
   // below it has passed the top of the hour, one far above is a late packet
   // from before it.
-  std::int64_t delta = static_cast<std::int64_t>(counter) - static_cast<std::int64_t>(last_counter_);
-  if (delta <= -kHourUs / 2) delta += kHourUs;
-  if (delta > kHourUs / 2) delta -= kHourUs;
+  const std::int64_t delta = hour_clock_delta_us(counter, last_counter_);
   const std::int64_t continuous = last_continuous_us_ + delta;
   if (delta > 0) {
     if (counter < last_counter_) ++rollovers_;

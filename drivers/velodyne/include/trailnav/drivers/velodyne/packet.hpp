@@ -42,6 +42,17 @@ inline std::uint32_t read_u32(const std::uint8_t* p) noexcept {
          (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
 }
 
+// Microseconds from `previous` to `current` on the sensors' hour clock (the
+// microseconds past the hour that every packet carries), taken as the
+// nearest reading: in (-30 min, +30 min].
+inline std::int64_t hour_clock_delta_us(std::uint32_t current, std::uint32_t previous) noexcept {
+  constexpr std::int64_t kHour = kMicrosPerHour;
+  std::int64_t d = static_cast<std::int64_t>(current) - static_cast<std::int64_t>(previous);
+  if (d <= -kHour / 2) d += kHour;
+  if (d > kHour / 2) d -= kHour;
+  return d;
+}
+
 // The model a data packet comes from: its product id, or the HDL-64E when
 // the packet has lower-block flags (the HDL-64E sends no product id).
 // nullopt when the packet tells neither.

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "trailnav/drivers/velodyne/decoder.hpp"
+#include "trailnav/drivers/velodyne/revolution_cut.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 
 namespace trailnav::velodyne {
@@ -140,6 +141,10 @@ class RevolutionAssembler {
  public:
   struct Created;
   static Created create(const PacketDecoder& decoder, const AssemblerOptions& options);
+  // What create() would refuse, as a message; empty when the options are fine.
+  static std::string check_options(const AssemblerOptions& options);
+  // The shape of the images an assembler with these options fills.
+  static RangeImageShape shape_for(const ModelInfo& model, const AssemblerOptions& options) noexcept;
 
   // The shape every image handed to this assembler must have.
   const RangeImageShape& shape() const noexcept { return shape_; }
@@ -154,7 +159,7 @@ class RevolutionAssembler {
   const AssemblerCounters& counters() const noexcept { return counters_; }
 
  private:
-  RevolutionAssembler(const PacketDecoder& decoder, const AssemblerOptions& options, RangeImageShape shape);
+  RevolutionAssembler(const PacketDecoder& decoder, const AssemblerOptions& options);
 
   void start_revolution(RevolutionSink& sink, std::int64_t first_ns, bool partial) noexcept;
   void finish_revolution(RevolutionSink& sink, std::int64_t next_start_ns, bool continuous) noexcept;
@@ -166,24 +171,21 @@ class RevolutionAssembler {
   AssemblerOptions options_;
   RangeImageShape shape_;
   double firings_per_second_ = 0.0;
-  int columns_ = 0;
   double current_rpm_ = 0.0;
+  int columns_ = 0;
   double rate_azimuth_ = 0.0;  // hundredths of a degree turned since the revolution began
   double rate_time_us_ = 0.0;  // over this much packet time
   float previous_first_relative_ = 0.0f;
-  float cut_hundredths_ = 0.0f;
+  RevolutionCut cut_;
   std::vector<Point> points_;
 
   RangeImage* image_ = nullptr;  // being filled; nullptr before the first packet
   bool partial_ = true;          // image_ started mid-turn (the first one)
   std::int64_t last_firing_ns_ = 0;
-  // Per sequence of the current packet.
-  std::array<float, kMaxSequencesPerPacket> relative_{};  // azimuth after the cut, hundredths
-  std::array<int, kMaxSequencesPerPacket> column_{};      // -1: dropped (column taken)
+  std::array<int, kMaxSequencesPerPacket> column_{};  // per sequence of the current packet; -1: dropped (column taken)
   // The previous packet.
   bool have_previous_ = false;
   std::uint32_t previous_timestamp_us_ = 0;
-  float previous_relative_ = -1.0f;  // of its last sequence
   int previous_column_ = -1;         // of its last sequence, in image_
   AssemblerCounters counters_;
 };
