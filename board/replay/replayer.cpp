@@ -10,6 +10,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -51,8 +52,11 @@ std::uint32_t get_u32(const std::uint8_t* p) {
 
 }  // namespace
 
-std::vector<std::uint8_t> encode_can_tunnel(const CanFrame& frame) {
-  std::vector<std::uint8_t> d(kCanTunnelHeader + frame.length, 0);
+CanTunnelDatagram encode_can_tunnel(const CanFrame& frame) noexcept {
+  CanTunnelDatagram out;
+  const std::size_t length = std::min<std::size_t>(frame.length, frame.fd ? 64 : 8);
+  out.size = kCanTunnelHeader + length;
+  std::uint8_t* d = out.bytes.data();
   d[0] = 'T';
   d[1] = 'N';
   d[2] = 'C';
@@ -60,12 +64,12 @@ std::vector<std::uint8_t> encode_can_tunnel(const CanFrame& frame) {
   d[4] = 1;
   d[5] = static_cast<std::uint8_t>((frame.fd ? 1 : 0) | (frame.fd ? (frame.fd_flags & 0x3) << 1 : 0));
   const auto t = static_cast<std::uint64_t>(frame.time_ns);
-  put_u32(d.data() + 8, static_cast<std::uint32_t>(t));
-  put_u32(d.data() + 12, static_cast<std::uint32_t>(t >> 32));
-  put_u32(d.data() + 16, frame.id);
-  d[20] = frame.length;
-  std::memcpy(d.data() + kCanTunnelHeader, frame.data.data(), frame.length);
-  return d;
+  put_u32(d + 8, static_cast<std::uint32_t>(t));
+  put_u32(d + 12, static_cast<std::uint32_t>(t >> 32));
+  put_u32(d + 16, frame.id);
+  d[20] = static_cast<std::uint8_t>(length);
+  std::memcpy(d + kCanTunnelHeader, frame.data.data(), length);
+  return out;
 }
 
 bool decode_can_tunnel(std::span<const std::uint8_t> d, CanFrame& frame) {
@@ -99,11 +103,7 @@ struct UdpOutput final : Replayer::Output {
 
 struct CanTunnelOutput final : Replayer::Output {
   std::shared_ptr<udp::UdpSender> sender;
-  std::vector<std::uint8_t> buffer;
-  bool send(const recording::Event& e) override {
-    buffer = encode_can_tunnel(*e.can);
-    return sender->send(buffer);
-  }
+  bool send(const recording::Event& e) override { return sender->send(encode_can_tunnel(*e.can).view()); }
 };
 
 struct SocketCanOutput final : Replayer::Output {
@@ -202,27 +202,22 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
   r->options_ = options;
   r->reader_ = std::move(opened.reader);
 
-  for (const auto& [name, endpoint] : options.udp_targets) {
-    bool known = false;
-    for (const auto& s : r->reader_->streams()) known |= s.name == name && s.kind == StreamKind::udp;
-    if (!known) {
-      result.error = "no UDP stream '" + name + "' in " + path;
-      return result;
+  // Every stream an option names must exist, with the kind the option is for.
+  auto missing = [&](const std::string& name, StreamKind kind) {
+    for (const auto& s : r->reader_->streams()) {
+      if (s.name == name && s.kind == kind) return false;
     }
-    (void)endpoint;
+    result.error = std::string("no ") + (kind == StreamKind::udp ? "UDP" : "serial") + " stream '" + name + "' in " + path;
+    return true;
+  };
+  for (const auto& target : options.udp_targets) {
+    if (missing(target.first, StreamKind::udp)) return result;
   }
-  for (const auto& [name, link] : options.serial_links) {
-    bool known = false;
-    for (const auto& s : r->reader_->streams()) known |= s.name == name && s.kind == StreamKind::serial;
-    if (!known) {
-      result.error = "no serial stream '" + name + "' in " + path;
-      return result;
-    }
-    (void)link;
+  for (const auto& link : options.serial_links) {
+    if (missing(link.first, StreamKind::serial)) return result;
   }
 
   std::shared_ptr<udp::UdpSender> tunnel;
-  int can_socket_index = -1;
   for (const recording::StreamInfo& s : r->reader_->streams()) {
     StreamReport report;
     report.name = s.name;
@@ -265,7 +260,6 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
         }
         report.target = "socketcan " + options.can_interface;
         r->outputs_.push_back(std::move(out));
-        ++can_socket_index;
       } else {
         if (!tunnel) {
           auto sender = udp::UdpSender::open(options.can_tunnel);
@@ -306,7 +300,6 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
     }
     r->report_.streams.push_back(report);
   }
-  (void)can_socket_index;
   result.replayer = std::move(r);
   return result;
 }

@@ -5,11 +5,13 @@
 // its schedule.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -30,7 +32,12 @@ inline constexpr std::uint16_t kDefaultCanTunnelPort = 29536;
 //  20  u8 length         data bytes that follow (0..64)
 //  21  3 bytes reserved (0)
 inline constexpr std::size_t kCanTunnelHeader = 24;
-std::vector<std::uint8_t> encode_can_tunnel(const recording::CanFrame& frame);
+struct CanTunnelDatagram {
+  std::array<std::uint8_t, kCanTunnelHeader + 64> bytes{};
+  std::size_t size = 0;
+  std::span<const std::uint8_t> view() const noexcept { return {bytes.data(), size}; }
+};
+CanTunnelDatagram encode_can_tunnel(const recording::CanFrame& frame) noexcept;
 bool decode_can_tunnel(std::span<const std::uint8_t> datagram, recording::CanFrame& frame);
 
 struct ReplayOptions {

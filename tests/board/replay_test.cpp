@@ -295,18 +295,18 @@ TEST(Replay, CanTunnelDatagramsRoundTrip) {
   f.length = 8;
   for (int i = 0; i < 8; ++i) f.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(i * 17);
   const auto bytes = replay::encode_can_tunnel(f);
-  ASSERT_EQ(bytes.size(), replay::kCanTunnelHeader + 8);
+  ASSERT_EQ(bytes.size, replay::kCanTunnelHeader + 8);
   recording::CanFrame back;
-  ASSERT_TRUE(replay::decode_can_tunnel(bytes, back));
+  ASSERT_TRUE(replay::decode_can_tunnel(bytes.view(), back));
   EXPECT_EQ(back.id, f.id);
   EXPECT_EQ(back.time_ns, f.time_ns);
   EXPECT_EQ(back.data, f.data);
   auto broken = bytes;
-  broken[20] = 9;  // length does not match
-  EXPECT_FALSE(replay::decode_can_tunnel(broken, back));
+  broken.bytes[20] = 9;  // length does not match
+  EXPECT_FALSE(replay::decode_can_tunnel(broken.view(), back));
   broken = bytes;
-  broken[0] = 'X';
-  EXPECT_FALSE(replay::decode_can_tunnel(broken, back));
+  broken.bytes[0] = 'X';
+  EXPECT_FALSE(replay::decode_can_tunnel(broken.view(), back));
 }
 
 }  // namespace

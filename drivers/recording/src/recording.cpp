@@ -12,6 +12,7 @@
 #include <map>
 
 #include "trailnav/drivers/capture/capture_reader.hpp"
+#include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/runtime/config.hpp"
 
 namespace trailnav::recording {
@@ -108,9 +109,12 @@ constexpr const char* kHex = "0123456789ABCDEF";
 
 const char* stream_kind_name(StreamKind kind) noexcept {
   switch (kind) {
-    case StreamKind::udp: return "udp";
-    case StreamKind::can: return "can";
-    case StreamKind::serial: return "serial";
+    case StreamKind::udp:
+      return "udp";
+    case StreamKind::can:
+      return "can";
+    case StreamKind::serial:
+      return "serial";
   }
   return "?";
 }
@@ -263,7 +267,8 @@ std::string format_candump_line(const CanFrame& frame, std::string_view interfac
   out += ' ';
   char id[16];
   if ((frame.id & (kCanEffFlag | kCanErrFlag)) != 0) {
-    std::snprintf(id, sizeof id, "%08X", (frame.id & kCanErrFlag) != 0 ? (frame.id & 0x3FFFFFFFu) : (frame.id & 0x1FFFFFFFu));
+    std::snprintf(id, sizeof id, "%08X",
+                  (frame.id & kCanErrFlag) != 0 ? (frame.id & 0x3FFFFFFFu) : (frame.id & 0x1FFFFFFFu));
   } else {
     std::snprintf(id, sizeof id, "%03X", frame.id & 0x7FFu);
   }
@@ -284,7 +289,8 @@ std::string format_candump_line(const CanFrame& frame, std::string_view interfac
   return out;
 }
 
-bool parse_serial_line(std::string_view line, std::int64_t& time_ns, std::vector<std::uint8_t>& bytes, std::string& error) {
+bool parse_serial_line(std::string_view line, std::int64_t& time_ns, std::vector<std::uint8_t>& bytes,
+                       std::string& error) {
   while (!line.empty() && (line.back() == '\r' || line.back() == '\n' || line.back() == ' ')) line.remove_suffix(1);
   if (!parse_stamp(line, time_ns, error)) return false;
   bytes.resize(line.size() / 2);
@@ -323,9 +329,10 @@ struct RecordingReader::UdpSource final : Source {
   std::unique_ptr<capture::CaptureReader> capture;
   std::map<std::uint16_t, int> stream_of_port;
   std::vector<std::uint8_t> buffer;
-  bool raw_times = false;  // raw Velodyne file: time from the packets' own clock
-  std::int64_t last_raw_us = -1;
-  std::int64_t raw_base_us = 0;
+  // Raw Velodyne files have no capture time: the packets' own clock, unwrapped.
+  bool have_raw = false;
+  std::uint32_t last_raw_stamp = 0;
+  std::int64_t raw_us = 0;
 
   bool advance(RecordingReader& reader) override {
     while (auto d = capture->next()) {
@@ -337,15 +344,15 @@ struct RecordingReader::UdpSource final : Source {
       buffer.assign(d->payload.begin(), d->payload.end());
       event = Event{};
       event.time_ns = d->time_ns;
-      if (d->time_ns == 0 && buffer.size() == 1206) {
-        // No capture time (raw file): unwrap the packet's microseconds past the hour.
-        const std::int64_t us = static_cast<std::int64_t>(buffer[1200]) | (static_cast<std::int64_t>(buffer[1201]) << 8) |
-                                (static_cast<std::int64_t>(buffer[1202]) << 16) |
-                                (static_cast<std::int64_t>(buffer[1203]) << 24);
-        if (last_raw_us >= 0 && us + 1'800'000'000 < last_raw_us) raw_base_us += 3'600'000'000;
-        last_raw_us = us;
-        event.time_ns = (raw_base_us + us) * 1000;
-        raw_times = true;
+      if (d->time_ns == 0 && buffer.size() == velodyne::kDataPacketSize) {
+        const std::uint32_t stamp = velodyne::read_u32(buffer.data() + velodyne::kTimestampOffset);
+        if (have_raw)
+          raw_us += velodyne::hour_clock_delta_us(stamp, last_raw_stamp);
+        else
+          raw_us = stamp;
+        have_raw = true;
+        last_raw_stamp = stamp;
+        event.time_ns = raw_us * 1000;
       }
       event.stream = it->second;
       event.kind = StreamKind::udp;
@@ -621,7 +628,8 @@ int RecordingWriter::add_udp_stream(const std::string& name, std::uint16_t port,
   return add_stream(std::move(s));
 }
 
-int RecordingWriter::add_can_stream(const std::string& name, const std::string& interface, const std::string& description) {
+int RecordingWriter::add_can_stream(const std::string& name, const std::string& interface,
+                                    const std::string& description) {
   StreamInfo s;
   s.name = name;
   s.kind = StreamKind::can;

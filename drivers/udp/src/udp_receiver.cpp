@@ -167,11 +167,11 @@ std::span<const Datagram> UdpReceiver::receive(int timeout_ms) noexcept {
     return {};
   }
   ++counters_.calls;
-  const std::int64_t now = realtime_ns();
+  std::int64_t now = 0;  // read only for datagrams without a kernel timestamp
   std::size_t kept = 0;
   for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
     const msghdr& h = b.messages[i].msg_hdr;
-    std::int64_t stamp = now;
+    std::int64_t stamp = 0;
     for (cmsghdr* c = CMSG_FIRSTHDR(&h); c != nullptr; c = CMSG_NXTHDR(const_cast<msghdr*>(&h), c)) {
       if (c->cmsg_level != SOL_SOCKET) continue;
       if (c->cmsg_type == SO_TIMESTAMPNS) {
@@ -184,6 +184,10 @@ std::span<const Datagram> UdpReceiver::receive(int timeout_ms) noexcept {
         counters_.kernel_drops += overflow - last_overflow_;  // the kernel's count is cumulative
         last_overflow_ = overflow;
       }
+    }
+    if (stamp == 0) {
+      if (now == 0) now = realtime_ns();
+      stamp = now;
     }
     if ((h.msg_flags & MSG_TRUNC) != 0) {
       ++counters_.truncated;
