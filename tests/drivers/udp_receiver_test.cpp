@@ -1,7 +1,12 @@
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <algorithm>
+#include <chrono>
 #include <ctime>
 #include <set>
 #include <thread>
@@ -72,26 +77,51 @@ TEST(UdpReceiver, ReceivesBatchesWithKernelTimestamps) {
   EXPECT_TRUE(r->receive(0).empty());
 }
 
-TEST(UdpReceiver, OnlyTheConfiguredSenderIsAccepted) {
-  // The sender's port is fixed by the first datagram; learn it, then filter.
-  auto probe = listen();
-  auto s = sender_to(*probe);
-  std::vector<std::uint8_t> payload(10, 1);
-  ASSERT_TRUE(s->send(payload));
-  const auto first = probe->receive(1000);
-  ASSERT_EQ(first.size(), 1u);
-  const std::uint16_t sender_port = first[0].source.port;
+// A plain socket bound to a port of its own, so the test knows the source port.
+struct BoundSocket {
+  int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  Endpoint local;
+  BoundSocket() {
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(kLoopback);
+    bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    socklen_t n = sizeof a;
+    getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+    local = {ntohl(a.sin_addr.s_addr), ntohs(a.sin_port)};
+  }
+  ~BoundSocket() { close(fd); }
+  void send_to(const Endpoint& to, const std::vector<std::uint8_t>& payload) const {
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(to.ip);
+    a.sin_port = htons(to.port);
+    sendto(fd, payload.data(), payload.size(), 0, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  }
+};
 
-  ReceiverOptions options;
-  options.source_ip = kLoopback;
-  options.source_port = static_cast<std::uint16_t>(sender_port + 1);  // someone else
-  auto r = listen(options);
-  auto s2 = sender_to(*r);
-  for (int i = 0; i < 5; ++i) ASSERT_TRUE(s2->send(payload));
-  r->receive(200);
-  r->receive(0);
-  EXPECT_EQ(r->counters().foreign, 5u);
-  EXPECT_EQ(r->counters().datagrams, 0u);
+TEST(UdpReceiver, OnlyTheConfiguredSenderIsAccepted) {
+  const BoundSocket sensor;
+  ASSERT_GE(sensor.fd, 0);
+  ReceiverOptions mine;
+  mine.source_ip = kLoopback;
+  mine.source_port = sensor.local.port;
+  ReceiverOptions someone_elses = mine;
+  someone_elses.source_port = static_cast<std::uint16_t>(sensor.local.port + 1);
+  auto accepting = listen(mine);
+  auto refusing = listen(someone_elses);
+  const std::vector<std::uint8_t> payload(10, 1);
+  for (int i = 0; i < 5; ++i) {
+    sensor.send_to(accepting->local(), payload);
+    sensor.send_to(refusing->local(), payload);
+  }
+  std::size_t accepted = 0;
+  for (int i = 0; i < 10 && accepted < 5; ++i) accepted += accepting->receive(200).size();
+  for (int i = 0; i < 10 && refusing->counters().foreign < 5; ++i) refusing->receive(200);
+  EXPECT_EQ(accepted, 5u);
+  EXPECT_EQ(accepting->counters().foreign, 0u);
+  EXPECT_EQ(refusing->counters().foreign, 5u);
+  EXPECT_EQ(refusing->counters().datagrams, 0u);
 }
 
 TEST(UdpReceiver, OversizedDatagramsAreCountedNotDelivered) {

@@ -45,7 +45,7 @@ class SensorClock {
  public:
   explicit SensorClock(SensorClockOptions options = {}) noexcept : options_(options) {}
 
-  // A position packet, with the host time it arrived. Switches to GPS time
+  // A position packet. Switches to GPS time
   // when its PPS is locked and its sentence gives a valid time.
   void on_position_packet(const PositionPacket& packet) noexcept;
 
