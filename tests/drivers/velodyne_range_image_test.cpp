@@ -172,6 +172,17 @@ TEST(RangeImage, DualReturnsFillTwoLayers) {
     EXPECT_GT(both, 0);
     EXPECT_GT(strongest + last, 0);
   }
+  // With one layer, the same packets give exactly layer 0: the strongest returns.
+  const auto single = assemble(d, data_packets(shared_data("velodyne/nebula-vlp16/vlp16_dual_rewrapped.pcap")));
+  ASSERT_EQ(single.size(), images.size());
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    int layer0 = 0;
+    for (int ring = 0; ring < images[i].rings(); ++ring) {
+      for (const RangeCell& c : images[i].row(0, ring)) layer0 += c.valid() ? 1 : 0;
+    }
+    EXPECT_EQ(single[i].points, layer0);
+    EXPECT_EQ(single[i].at(0, 5, 100).distance, images[i].at(0, 5, 100).distance);
+  }
 }
 
 TEST(RangeImage, LostPacketsLeaveMissingColumnsAndAreCounted) {

@@ -54,13 +54,6 @@ void RangeImage::mark_received(int first_column, int end_column) noexcept {
 void RangeImage::finish() noexcept {
   missing_columns = static_cast<int>(
       std::count(column_state_.begin(), column_state_.begin() + columns_, ColumnState::missing));
-  int n = 0;
-  for (int layer = 0; layer < shape_.layers; ++layer) {
-    for (int ring = 0; ring < shape_.rings; ++ring) {
-      for (const RangeCell& cell : row(layer, ring)) n += cell.valid() ? 1 : 0;
-    }
-  }
-  points = n;
 }
 
 namespace {
@@ -222,6 +215,7 @@ void RevolutionAssembler::place_points(const PacketInfo& info, int begin, int en
     if (p.sequence < begin || p.sequence >= end) continue;
     const int c = column_[p.sequence];
     if (c < 0) continue;
+    if (!two_layers && p.kind == ReturnKind::dual_last) continue;  // one layer: the strongest return
     RangeCell cell;
     cell.x = p.x;
     cell.y = p.y;
@@ -232,8 +226,13 @@ void RevolutionAssembler::place_points(const PacketInfo& info, int begin, int en
     cell.intensity = p.intensity;
     cell.kind = p.kind;
     const int layer = two_layers && p.kind == ReturnKind::dual_last ? 1 : 0;
+    const int valid = cell.valid() ? 1 : 0;  // each cell is written once per revolution
     image.at(layer, p.ring, c) = cell;
-    if (two_layers && p.kind == ReturnKind::dual_both) image.at(1, p.ring, c) = cell;
+    image.points += valid;
+    if (two_layers && p.kind == ReturnKind::dual_both) {
+      image.at(1, p.ring, c) = cell;
+      image.points += valid;
+    }
   }
   const std::int64_t last_ns =
       packet_time_ns + std::llround(static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(end - 1)]) * 1e3);

@@ -8,7 +8,7 @@
 // rotation correction), so the lasers of one firing share a column; each
 // cell keeps the point's own azimuth. Dual-return data fills two layers:
 // layer 0 the strongest return, layer 1 the last (identical returns are in
-// both).
+// both); an image of one layer keeps the strongest.
 //
 // Every column is either `received` (a packet covered its azimuth: a cell
 // without a return there means the laser saw nothing) or `missing` (no packet
@@ -83,7 +83,7 @@ class RangeImage {
   // Clears the first `columns` columns (no allocation). Used by the assembler.
   void reset(int columns) noexcept;
   void mark_received(int first_column, int end_column) noexcept;  // [first, end)
-  void finish() noexcept;  // counts missing columns and points
+  void finish() noexcept;  // counts the missing columns
 
  private:
   std::size_t index(int layer, int ring, int column) const noexcept {
