@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_jitter_command(app);
   trailnav::cli::add_decode_command(app);
   trailnav::cli::add_replay_command(app);
+  trailnav::cli::add_sim_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -243,6 +243,29 @@ std::vector<double> ConfigNode::number_list(std::string_view key, double min, do
   return out;
 }
 
+std::vector<std::vector<double>> ConfigNode::number_rows(std::string_view key, std::size_t columns, double min,
+                                                        double max) const {
+  const YAML::Node value = value_of(key);
+  const std::string shape = "a list of [" + std::to_string(columns) + " numbers] rows, e.g. [[0, 0], [10, 5]]";
+  if (!value.IsDefined() || value.IsNull()) fail("", "missing required key '" + key_path(key) + "' (" + shape + ")");
+  if (!value.IsSequence()) fail(key, "expected " + shape);
+  std::vector<std::vector<double>> out;
+  std::size_t index = 0;
+  for (const auto& row : value) {
+    const std::string row_key = std::string(key) + "[" + std::to_string(index++) + "]";
+    if (!row.IsSequence() || row.size() != columns) {
+      throw ConfigError(file_, line_of(row), key_path(row_key), "expected " + std::to_string(columns) + " numbers");
+    }
+    std::vector<double> numbers;
+    std::size_t column = 0;
+    for (const auto& item : row) {
+      numbers.push_back(parse_number(item, row_key + "[" + std::to_string(column++) + "]", line_of(item), min, max));
+    }
+    out.push_back(std::move(numbers));
+  }
+  return out;
+}
+
 void ConfigNode::reject_unknown_keys() const {
   for (const auto& item : node_) {
     const std::string& key = item.first.Scalar();

@@ -121,6 +121,60 @@ PacketDecoder::Created PacketDecoder::create(Model model, const Calibration& cal
   return result;
 }
 
+void PacketDecoder::place(const LaserTable& t, float a, std::uint16_t raw, std::uint8_t raw_intensity,
+                        Point& pt) const noexcept {
+  // The laser's own rotation: table lookup plus a first-order step.
+  const int ai = static_cast<int>(a);
+  const float delta = (a - static_cast<float>(ai)) * kRadPerStep;
+  const float s0 = sin_table_[static_cast<std::size_t>(ai)];
+  const float c0 = cos_table_[static_cast<std::size_t>(ai)];
+  const float sin_az = s0 + delta * c0;
+  const float cos_az = c0 - delta * s0;
+  const float sa = sin_az * t.cos_rot - cos_az * t.sin_rot;  // sin(azimuth - rot)
+  const float ca = cos_az * t.cos_rot + sin_az * t.sin_rot;  // cos(azimuth - rot)
+
+  const float distance = static_cast<float>(raw) * static_cast<float>(resolution_) + t.dist_correction;
+  float distance_x = distance;
+  float distance_y = distance;
+  if (t.two_pt) {
+    // Two-point distance correction of the HDL-64E, interpolated between
+    // its calibration distances of 2.4 m (x), 1.93 m (y) and 25.04 m.
+    const float xy0 = distance * t.cos_vert - t.vert_offset * t.sin_vert;
+    const float xx = std::abs(xy0 * sa - t.horiz_offset * ca);
+    const float yy = std::abs(xy0 * ca + t.horiz_offset * sa);
+    distance_x += (t.dist_correction - t.dist_correction_x) * (xx - 2.4f) / (25.04f - 2.4f) + t.dist_correction_x - t.dist_correction;
+    distance_y += (t.dist_correction - t.dist_correction_y) * (yy - 1.93f) / (25.04f - 1.93f) + t.dist_correction_y - t.dist_correction;
+  }
+  const float xy_x = distance_x * t.cos_vert - t.vert_offset * t.sin_vert;
+  const float xy_y = distance_y * t.cos_vert - t.vert_offset * t.sin_vert;
+
+  pt.x = xy_y * ca + t.horiz_offset * sa;
+  pt.y = -(xy_x * sa - t.horiz_offset * ca);
+  pt.z = distance_y * t.sin_vert + t.vert_offset * t.cos_vert;
+  pt.distance = distance;
+  float pointing = a * kRadPerStep - t.rot;
+  if (pointing < 0.0f) pointing += kTwoPi;
+  if (pointing >= kTwoPi) pointing -= kTwoPi;
+  pt.azimuth = pointing;
+  float intensity = raw_intensity;
+  if (t.intensity_correction) {
+    const float fall = 1.0f - static_cast<float>(raw) / 65535.0f;
+    intensity += t.focal_slope * std::abs(t.focal_offset - 256.0f * fall * fall);
+    intensity = std::clamp(intensity, t.min_intensity, t.max_intensity);
+  }
+  pt.intensity = intensity;
+}
+
+Point PacketDecoder::point_of(int laser, float azimuth, std::uint16_t raw, std::uint8_t intensity) const noexcept {
+  Point pt;
+  while (azimuth >= static_cast<float>(kAzimuthSteps)) azimuth -= static_cast<float>(kAzimuthSteps);
+  while (azimuth < 0.0f) azimuth += static_cast<float>(kAzimuthSteps);
+  place(lasers_[static_cast<std::size_t>(laser)], azimuth, raw, intensity, pt);
+  pt.laser = static_cast<std::uint8_t>(laser);
+  pt.ring = rings_[static_cast<std::size_t>(laser)];
+  return pt;
+}
+
 PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::span<Point> out) const noexcept {
   PacketInfo info;
   if (payload.size() != kDataPacketSize) {
@@ -205,7 +259,6 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
   }
 
   const ReturnKind single_kind = info.mode == ReturnMode::last ? ReturnKind::last : ReturnKind::strongest;
-  const float resolution = static_cast<float>(resolution_);
   const float group_period = static_cast<float>(info_->group_period_us);
   const int lasers_per_sequence = kReturnsPerBlock / info_->sequences_per_block;
   int n = 0;
@@ -248,50 +301,11 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
       const LaserTable& t = lasers_[static_cast<std::size_t>(laser)];
       const float t_in_group = firing_time_us_[static_cast<std::size_t>(k)];
 
-      // Azimuth of this firing, interpolated over the group's advance, then
-      // the laser's own rotation: table lookup plus a first-order step.
+      // Azimuth of this firing, interpolated over the group's advance.
       float a = block_azimuth + group_gap * (t_in_group / group_period);
       if (a >= static_cast<float>(kAzimuthSteps)) a -= static_cast<float>(kAzimuthSteps);
-      const int ai = static_cast<int>(a);
-      const float delta = (a - static_cast<float>(ai)) * kRadPerStep;
-      const float s0 = sin_table_[static_cast<std::size_t>(ai)];
-      const float c0 = cos_table_[static_cast<std::size_t>(ai)];
-      const float sin_az = s0 + delta * c0;
-      const float cos_az = c0 - delta * s0;
-      const float sa = sin_az * t.cos_rot - cos_az * t.sin_rot;  // sin(azimuth - rot)
-      const float ca = cos_az * t.cos_rot + sin_az * t.sin_rot;  // cos(azimuth - rot)
-
-      const float distance = static_cast<float>(raw) * resolution + t.dist_correction;
-      float distance_x = distance;
-      float distance_y = distance;
-      if (t.two_pt) {
-        // Two-point distance correction of the HDL-64E, interpolated between
-        // its calibration distances of 2.4 m (x), 1.93 m (y) and 25.04 m.
-        const float xy0 = distance * t.cos_vert - t.vert_offset * t.sin_vert;
-        const float xx = std::abs(xy0 * sa - t.horiz_offset * ca);
-        const float yy = std::abs(xy0 * ca + t.horiz_offset * sa);
-        distance_x += (t.dist_correction - t.dist_correction_x) * (xx - 2.4f) / (25.04f - 2.4f) + t.dist_correction_x - t.dist_correction;
-        distance_y += (t.dist_correction - t.dist_correction_y) * (yy - 1.93f) / (25.04f - 1.93f) + t.dist_correction_y - t.dist_correction;
-      }
-      const float xy_x = distance_x * t.cos_vert - t.vert_offset * t.sin_vert;
-      const float xy_y = distance_y * t.cos_vert - t.vert_offset * t.sin_vert;
-
       Point& pt = out[static_cast<std::size_t>(n++)];
-      pt.x = xy_y * ca + t.horiz_offset * sa;
-      pt.y = -(xy_x * sa - t.horiz_offset * ca);
-      pt.z = distance_y * t.sin_vert + t.vert_offset * t.cos_vert;
-      pt.distance = distance;
-      float pointing = a * kRadPerStep - t.rot;
-      if (pointing < 0.0f) pointing += kTwoPi;
-      if (pointing >= kTwoPi) pointing -= kTwoPi;
-      pt.azimuth = pointing;
-      float intensity = ret[2];
-      if (t.intensity_correction) {
-        const float fall = 1.0f - static_cast<float>(raw) / 65535.0f;
-        intensity += t.focal_slope * std::abs(t.focal_offset - 256.0f * fall * fall);
-        intensity = std::clamp(intensity, t.min_intensity, t.max_intensity);
-      }
-      pt.intensity = intensity;
+      place(t, a, raw, ret[2], pt);
       pt.time = (group_start_us + t_in_group) * 1e-6f;
       pt.ring = rings_[static_cast<std::size_t>(laser)];
       pt.laser = static_cast<std::uint8_t>(laser);

@@ -69,6 +69,9 @@ class ConfigNode {
   std::string choice(std::string_view key, std::initializer_list<std::string_view> choices,
                      const std::string& fallback) const;
   std::vector<double> number_list(std::string_view key, double min, double max) const;
+  // A list of rows of exactly `columns` numbers each, e.g. points [[x, y], ...].
+  std::vector<std::vector<double>> number_rows(std::string_view key, std::size_t columns, double min,
+                                               double max) const;
 
   // Fails on the first key of this mapping that was never asked about.
   void reject_unknown_keys() const;

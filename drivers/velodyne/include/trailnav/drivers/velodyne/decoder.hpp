@@ -102,6 +102,14 @@ class PacketDecoder {
   // Decodes one packet into `out`, which must hold kMaxPointsPerPacket points.
   PacketInfo decode(std::span<const std::uint8_t> payload, std::span<Point> out) const noexcept;
 
+  // The point that laser `laser` reports at firing azimuth `azimuth`
+  // (hundredths of a degree) for a raw distance and intensity: exactly what
+  // decode() computes. For tools that must predict the decoder (the
+  // simulator); time, sequence and kind are left at zero.
+  Point point_of(int laser, float azimuth, std::uint16_t raw, std::uint8_t intensity) const noexcept;
+  // Time of return slot k's firing after its firing group's start (us).
+  float firing_offset_us(int slot) const noexcept { return firing_time_us_[static_cast<std::size_t>(slot)]; }
+
  private:
   PacketDecoder() = default;
 
@@ -116,6 +124,9 @@ class PacketDecoder {
     float focal_offset, focal_slope;
     float min_intensity, max_intensity;
   };
+
+  // One return's position, distance, pointing and intensity.
+  void place(const LaserTable& t, float azimuth, std::uint16_t raw, std::uint8_t raw_intensity, Point& pt) const noexcept;
 
   const ModelInfo* info_ = nullptr;
   Calibration calibration_;
