@@ -92,6 +92,7 @@ Trajectory drive(const Scenario& s, const RoadNetwork& roads, const World& world
   // Suspension state.
   double z = world.ground(xy.x(), xy.y());
   double roll = 0.0, pitch = 0.0;
+  double z_rate = 0.0, roll_rate = 0.0, pitch_rate = 0.0;
   bool settled = false;
 
   Trajectory traj;
@@ -118,10 +119,16 @@ Trajectory drive(const Scenario& s, const RoadNetwork& roads, const World& world
       pitch = pitch_target;
       settled = true;
     }
-    const double alpha = dt / (0.06 + dt);  // suspension time constant 60 ms
-    z += (z_target - z) * alpha;
-    roll += (roll_target - roll) * alpha;
-    pitch += (pitch_target - pitch) * alpha;
+    // A critically damped suspension at 3 Hz: bumps reach the body smoothed,
+    // with bounded accelerations.
+    const double w = 2.0 * kPi * 3.0;
+    auto spring = [&](double target, double& x, double& rate) {
+      rate += (w * w * (target - x) - 2.0 * w * rate) * dt;
+      x += rate * dt;
+    };
+    spring(z_target, z, z_rate);
+    spring(roll_target, roll, roll_rate);
+    spring(pitch_target, pitch, pitch_rate);
 
     PoseSample ps;
     ps.t = t;

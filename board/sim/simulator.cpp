@@ -127,29 +127,35 @@ class LidarSim {
           float a = static_cast<float>(az[static_cast<std::size_t>(g)]) +
                     static_cast<float>(gap[static_cast<std::size_t>(g)]) * (t_in / static_cast<float>(info_.group_period_us));
           if (a >= 36000.0f) a -= 36000.0f;
-          const double ar = static_cast<double>(a) * kPi / 18000.0;
-          const double ca = std::cos(ar), sa = std::sin(ar);
-          // Clockwise rotation by the azimuth about the sensor's z axis.
-          const Vec3& d0 = dir0_[lz];
-          const Vec3& o0 = origin0_[lz];
-          const Vec3 ds(d0.x() * ca + d0.y() * sa, -d0.x() * sa + d0.y() * ca, d0.z());
-          const Vec3 os(o0.x() * ca + o0.y() * sa, -o0.x() * sa + o0.y() * ca, o0.z());
+          // The laser's ray at this azimuth in the sensor frame: origin os, unit direction ds, and
+          // `step` metres along it per distance count.
+          Vec3 ds, os;
+          double step = res;
+          if (two_pt_[lz]) {
+            // The HDL-64E's two-point correction makes the decoded point an affine function of the
+            // raw distance whose line depends on the azimuth: take it from the decoder.
+            const vel::Point p0 = d_.point_of(laser, a, 0, 0);
+            const vel::Point p1 = d_.point_of(laser, a, 10000, 0);
+            const Vec3 v = (Vec3(p1.x, p1.y, p1.z) - Vec3(p0.x, p0.y, p0.z)) / 10000.0;
+            step = v.norm();
+            ds = v / step;
+            os = Vec3(p0.x, p0.y, p0.z);
+          } else {
+            const double ar = static_cast<double>(a) * kPi / 18000.0;
+            const double ca = std::cos(ar), sa = std::sin(ar);
+            // Clockwise rotation by the azimuth about the sensor's z axis.
+            const Vec3& d0 = dir0_[lz];
+            const Vec3& o0 = origin0_[lz];
+            ds = Vec3(d0.x() * ca + d0.y() * sa, -d0.x() * sa + d0.y() * ca, d0.z());
+            os = Vec3(o0.x() * ca + o0.y() * sa, -o0.x() * sa + o0.y() * ca, o0.z()) + ds * dist_correction_[lz];
+          }
+          // From the zero-count point on: distances are counted from there.
           const std::uint64_t key = hash(seed_, index, static_cast<std::uint64_t>(b * 32 + k));
-          const Hit hit = world_.cast(sensor + R * os, R * ds, rmin, rmax, key);
+          const Hit hit = world_.cast(sensor + R * os, R * ds, std::max(0.0, rmin - dist_correction_[lz]), rmax, key);
           ++rays_;
           if (!hit.hit || unit(hash(key, 0xD0)) < s_.lidar.dropout) continue;
           const double range = hit.distance + s_.lidar.range_noise * gaussian(hash(key, 0xD1));
-          double raw = std::nearbyint((range - dist_correction_[lz]) / res);
-          if (two_pt_[lz]) {
-            // The decoder bends the ray slightly; aim its point at the hit.
-            const Vec3 target = os + ds * range;
-            for (int it = 0; it < 3; ++it) {
-              const auto r16 = static_cast<std::uint16_t>(std::clamp(raw, 1.0, 65535.0));
-              const vel::Point p = d_.point_of(laser, a, r16, 0);
-              const double err = (target - Vec3(p.x, p.y, p.z)).dot(ds);
-              raw = std::nearbyint(raw + err / res);
-            }
-          }
+          const double raw = std::nearbyint(range / step);
           if (raw < 1.0 || raw > 65535.0) continue;
           const auto r16 = static_cast<std::uint16_t>(raw);
           double intensity = hit.reflectivity * (0.55 + 0.45 * hit.cos_incidence) + 2.0 * gaussian(hash(key, 0xD2));
@@ -366,17 +372,18 @@ SimReport run_simulation(const SimOptions& o) {
     const auto fine0 = static_cast<std::uint32_t>(unit(hash(o.seed, 0x7F)) * 1e9);
     for (int k = 0; k < samples; ++k) {
       const double t = k / s.imu.rate;
+      // Derivatives by central differences, kept inside the trajectory.
+      const double tc = std::clamp(t, h, std::max(h, traj.duration() - h));
       const PoseSample p = traj.at(t);
-      const PoseSample pa = traj.at(std::max(0.0, t - h));
-      const PoseSample pb = traj.at(t + h);
+      const PoseSample pc = traj.at(tc);
+      const PoseSample pa = traj.at(tc - h);
+      const PoseSample pb = traj.at(tc + h);
       const Eigen::Matrix3d R = rotation(p.roll, p.pitch, p.yaw);
       const Eigen::Matrix3d Ra = rotation(pa.roll, pa.pitch, pa.yaw);
       const Eigen::Matrix3d Rb = rotation(pb.roll, pb.pitch, pb.yaw);
       const Eigen::AngleAxisd delta(Ra.transpose() * Rb);
-      const double span = pb.t - pa.t;
-      Vec3 omega = span > 0 ? Vec3(delta.axis() * delta.angle() / span) : Vec3::Zero();
-      Vec3 accel_w = span > 0 ? Vec3((pb.p - 2.0 * p.p + pa.p) / (0.25 * span * span)) : Vec3::Zero();
-      if (t < h) accel_w.setZero();
+      Vec3 omega = delta.axis() * delta.angle() / (2.0 * h);
+      const Vec3 accel_w = (pb.p - 2.0 * pc.p + pa.p) / (h * h);
       Vec3 f = R.transpose() * (accel_w + Vec3(0, 0, kGravity));
       omega += gyro_bias + Vec3(rng.normal(), rng.normal(), rng.normal()) * s.imu.gyro_noise;
       f += accel_bias + Vec3(rng.normal(), rng.normal(), rng.normal()) * s.imu.accel_noise;
