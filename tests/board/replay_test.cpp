@@ -173,6 +173,29 @@ TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileGpsTimed) {
   expect_same_revolutions(live, file, true);
 }
 
+TEST(Replay, ASimulatedRecordingReplaysInRealTimeIntoTheDriver) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-replay-sim-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  ASSERT_EQ(run_binary({TRAILNAV_BINARY, "sim", "--scenario", "urban", "--seed", "4", "--duration", "3", "--quiet",
+                        "--out", dir.string()}),
+            0);
+  DriverCounters counters;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto live = replay_live(dir.string(), Model::vlp16, "ros_velodyne_VLP16db.yaml", true, counters);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const auto file = decode_offline(dir.string(), Model::vlp16, "ros_velodyne_VLP16db.yaml");
+  // 3 s of packets at 754 per second, sent at their recorded times.
+  EXPECT_EQ(counters.data.datagrams, 2260u);
+  EXPECT_EQ(counters.data.kernel_drops, 0u);
+  EXPECT_EQ(counters.assembler.malformed, 0u);
+  EXPECT_EQ(counters.time_source, TimeSource::gps);
+  EXPECT_GE(wall, 2.9);
+  EXPECT_LT(wall, 4.5);
+  EXPECT_GE(live.size(), 28u);
+  expect_same_revolutions(live, file, true);
+  fs::remove_all(dir);
+}
+
 TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileHostTimed) {
   const std::string capture = test::shared_data("velodyne/mrpt_sample_velodyne_hdl32.pcap");
   DriverCounters counters;

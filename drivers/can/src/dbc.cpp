@@ -266,9 +266,11 @@ DbcResult parse_dbc(std::string_view text, const std::string& file_name) {
         if (!current) throw ParseError(line, "SG_ outside a message (no BO_ before it)");
         DbcSignal sig = parse_signal(c);
         if (!fits(sig, current->size * 8)) {
-          throw ParseError(line, "signal " + sig.name + " (start " + std::to_string(sig.start_bit) + ", " +
-                                     std::to_string(sig.length) + " bits) does not fit message " + current->name + " of " +
-                                     std::to_string(current->size) + " bytes");
+          // Real databases carry such slips; keep the rest of the file usable.
+          dbc.warnings.push_back(file_name + ":" + std::to_string(line) + ": signal " + sig.name + " (start " +
+                                 std::to_string(sig.start_bit) + ", " + std::to_string(sig.length) +
+                                 " bits) does not fit message " + current->name + " of " + std::to_string(current->size) +
+                                 " bytes; it is kept but never decoded");
         }
         if (current->signal(sig.name)) throw ParseError(line, "signal " + sig.name + " is defined twice in " + current->name);
         current->signals.push_back(std::move(sig));

@@ -39,7 +39,9 @@ bool integer(std::string_view s, int& out, int empty_value) noexcept {
     out = empty_value;
     return true;
   }
-  const auto r = std::from_chars(s.data(), s.data() + s.size(), out);
+  const char* b = s.data();
+  if (*b == '+' && s.size() > 1) ++b;
+  const auto r = std::from_chars(b, s.data() + s.size(), out);
   return r.ec == std::errc() && r.ptr == s.data() + s.size();
 }
 

@@ -49,6 +49,9 @@ struct DbcMessage {
 struct Dbc {
   std::string file;
   std::vector<DbcMessage> messages;
+  // Problems that do not stop the file being used (file:line: what), e.g. a
+  // signal that does not fit its message: decoding it reports short_frame.
+  std::vector<std::string> warnings;
 
   const DbcMessage* message(std::uint32_t id, bool extended = false) const noexcept;
   const DbcMessage* message(std::string_view name) const noexcept;
