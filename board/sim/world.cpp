@@ -406,7 +406,10 @@ void World::build_truth(const Scenario& s) {
     for (int i = 0; i < nx_; ++i) {
       const std::size_t idx = index(i, j);
       if (ditch_[idx] >= kDitchTruth) mark(idx, ObstacleTruth::negative);
-      if (med_[idx] >= 0.5f) mark(idx, ObstacleTruth::vegetation);
+      // Tall grass is traversable; bushes and undergrowth are not.
+      if (med_[idx] >= 0.5f && cls_[idx] == static_cast<std::uint8_t>(TerrainClass::vegetation)) {
+        mark(idx, ObstacleTruth::vegetation);
+      }
       if (i + 1 < nx_ && std::abs(h_[index(i + 1, j)] - h_[idx]) >= kStepTruth && ditch_[idx] == 0.0f &&
           ditch_[index(i + 1, j)] == 0.0f) {
         mark(idx, ObstacleTruth::obstacle);

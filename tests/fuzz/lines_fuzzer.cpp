@@ -1,6 +1,8 @@
-// Fuzzes the text and datagram formats of bench recordings: candump log
-// lines, serial log lines, NMEA RMC times, CAN tunnel datagrams and the
-// recording manifest. Round trips are checked where a format has one.
+// Fuzzes the text and datagram formats of bench recordings and sensors:
+// candump log lines, serial log lines, NMEA sentences and RMC times, CAN
+// tunnel datagrams, DBC databases and the recording manifest. Round trips
+// are checked where a format has one.
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -11,6 +13,8 @@
 #include "check.hpp"
 
 #include "replayer.hpp"
+#include "trailnav/drivers/can/dbc.hpp"
+#include "trailnav/drivers/gps/nmea.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 #include "trailnav/runtime/config.hpp"
@@ -44,10 +48,37 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     std::int64_t t = 0;
     if (recording::parse_serial_line(line, t, bytes, error)) check(!bytes.empty());
     (void)velodyne::rmc_utc_ns(line);
+    gps::NmeaSentence sentence;
+    if (gps::parse_nmea(line, sentence) == gps::NmeaError::none) {
+      if (sentence.type == gps::SentenceType::gga) {
+        check(!(std::abs(sentence.gga.lat) > 90.0) && !(std::abs(sentence.gga.lon) > 180.0));
+      }
+      if (sentence.type == gps::SentenceType::rmc && sentence.rmc.year != 0) {
+        check(sentence.rmc.year >= 1980 && sentence.rmc.year <= 2079 && sentence.rmc.month >= 1 && sentence.rmc.month <= 12);
+      }
+    }
     start = end + 1;
   }
   recording::CanFrame frame;
   (void)replay::decode_can_tunnel({data, size}, frame);
+  const auto dbc = can::parse_dbc(text, "fuzz.dbc");
+  if (dbc.dbc) {
+    for (const can::DbcMessage& m : dbc.dbc->messages) {
+      check(m.size >= 0 && m.size <= 64);
+      for (const can::DbcSignal& sig : m.signals) {
+        std::uint8_t buf[64] = {};
+        double v = 0;
+        const auto used = std::span<std::uint8_t>(buf, static_cast<std::size_t>(m.size));
+        if (can::decode_signal(sig, used, v) != can::SignalError::none || sig.length > 52) continue;
+        const double value = sig.factor + sig.offset;
+        if (can::encode_signal(sig, value, used) == can::SignalError::none) {
+          double back = 0;
+          check(can::decode_signal(sig, used, back) == can::SignalError::none);
+          check(std::abs(back - value) <= std::abs(sig.factor) * 1e-6 + std::abs(value) * 1e-12);
+        }
+      }
+    }
+  }
   try {
     const ConfigNode node = ConfigNode::parse(std::string(text), "fuzz.yaml");
     (void)node.has("streams");
