@@ -45,31 +45,23 @@ struct Dda {
 
   // (u, v): ray position in grid units at parameter t; (du, dv): grid units per unit t.
   void start(double u, double v, double du, double dv, double t, double cell, int ni, int nj) {
-    i = std::clamp(static_cast<int>(std::floor(u / cell)), 0, ni - 1);
-    j = std::clamp(static_cast<int>(std::floor(v / cell)), 0, nj - 1);
+    axis(u, du, t, cell, ni, i, si, next_i, di);
+    axis(v, dv, t, cell, nj, j, sj, next_j, dj);
+  }
+  // One axis: the cell index, its step, and where the ray leaves the cell.
+  static void axis(double u, double du, double t, double cell, int n, int& index, int& step, double& next, double& delta) {
+    index = std::clamp(static_cast<int>(std::floor(u / cell)), 0, n - 1);
     if (du > 0) {
-      si = 1;
-      di = cell / du;
-      next_i = t + ((i + 1) * cell - u) / du;
+      step = 1;
+      delta = cell / du;
+      next = t + ((index + 1) * cell - u) / du;
     } else if (du < 0) {
-      si = -1;
-      di = -cell / du;
-      next_i = t + (i * cell - u) / du;
+      step = -1;
+      delta = -cell / du;
+      next = t + (index * cell - u) / du;
     } else {
-      si = 0;
-      next_i = kInf;
-    }
-    if (dv > 0) {
-      sj = 1;
-      dj = cell / dv;
-      next_j = t + ((j + 1) * cell - v) / dv;
-    } else if (dv < 0) {
-      sj = -1;
-      dj = -cell / dv;
-      next_j = t + (j * cell - v) / dv;
-    } else {
-      sj = 0;
-      next_j = kInf;
+      step = 0;
+      next = kInf;
     }
   }
   double exit() const { return std::min(next_i, next_j); }
@@ -131,10 +123,7 @@ std::unique_ptr<World> World::build(const Scenario& s, const RoadNetwork& roads,
       lo = lo.cwiseMin(p);
       hi = hi.cwiseMax(p);
     }
-    const int i0 = std::max(0, static_cast<int>(std::floor((lo.x() - w->x0_) * w->inv_res_)));
-    const int i1 = std::min(w->nx_ - 1, static_cast<int>(std::ceil((hi.x() - w->x0_) * w->inv_res_)));
-    const int j0 = std::max(0, static_cast<int>(std::floor((lo.y() - w->y0_) * w->inv_res_)));
-    const int j1 = std::min(w->ny_ - 1, static_cast<int>(std::ceil((hi.y() - w->y0_) * w->inv_res_)));
+    const auto [i0, i1, j0, j1] = w->samples_within(lo.x(), lo.y(), hi.x(), hi.y());
     for (int j = j0; j <= j1; ++j) {
       for (int i = i0; i <= i1; ++i) {
         if (!inside_polygon(region.polygon, w->x0_ + i * w->res_, w->y0_ + j * w->res_)) continue;
@@ -154,10 +143,7 @@ std::unique_ptr<World> World::build(const Scenario& s, const RoadNetwork& roads,
     for (std::size_t k = 0; k + 1 < pts.size(); ++k) {
       const Vec2 lo = pts[k].cwiseMin(pts[k + 1]) - Vec2(half + 0.5, half + 0.5);
       const Vec2 hi = pts[k].cwiseMax(pts[k + 1]) + Vec2(half + 0.5, half + 0.5);
-      const int i0 = std::max(0, static_cast<int>(std::floor((lo.x() - w->x0_) * w->inv_res_)));
-      const int i1 = std::min(w->nx_ - 1, static_cast<int>(std::ceil((hi.x() - w->x0_) * w->inv_res_)));
-      const int j0 = std::max(0, static_cast<int>(std::floor((lo.y() - w->y0_) * w->inv_res_)));
-      const int j1 = std::min(w->ny_ - 1, static_cast<int>(std::ceil((hi.y() - w->y0_) * w->inv_res_)));
+      const auto [i0, i1, j0, j1] = w->samples_within(lo.x(), lo.y(), hi.x(), hi.y());
       for (int j = j0; j <= j1; ++j) {
         for (int i = i0; i <= i1; ++i) {
           const Vec2 p(w->x0_ + i * w->res_, w->y0_ + j * w->res_);
@@ -226,10 +212,8 @@ std::unique_ptr<World> World::build(const Scenario& s, const RoadNetwork& roads,
   // Bushes and ditches shape the field.
   for (const Obstacle& ob : s.obstacles) {
     if (ob.type == ObstacleType::bush) {
-      const int i0 = std::max(0, static_cast<int>(std::floor((ob.center.x() - ob.radius - w->x0_) * w->inv_res_)));
-      const int i1 = std::min(w->nx_ - 1, static_cast<int>(std::ceil((ob.center.x() + ob.radius - w->x0_) * w->inv_res_)));
-      const int j0 = std::max(0, static_cast<int>(std::floor((ob.center.y() - ob.radius - w->y0_) * w->inv_res_)));
-      const int j1 = std::min(w->ny_ - 1, static_cast<int>(std::ceil((ob.center.y() + ob.radius - w->y0_) * w->inv_res_)));
+      const auto [i0, i1, j0, j1] = w->samples_within(ob.center.x() - ob.radius, ob.center.y() - ob.radius,
+                                                       ob.center.x() + ob.radius, ob.center.y() + ob.radius);
       for (int j = j0; j <= j1; ++j) {
         for (int i = i0; i <= i1; ++i) {
           const Vec2 p(w->x0_ + i * w->res_, w->y0_ + j * w->res_);
@@ -249,10 +233,7 @@ std::unique_ptr<World> World::build(const Scenario& s, const RoadNetwork& roads,
       for (std::size_t k = 0; k + 1 < ob.points.size(); ++k) {
         const Vec2 lo = ob.points[k].cwiseMin(ob.points[k + 1]) - Vec2(half, half);
         const Vec2 hi = ob.points[k].cwiseMax(ob.points[k + 1]) + Vec2(half, half);
-        const int i0 = std::max(0, static_cast<int>(std::floor((lo.x() - w->x0_) * w->inv_res_)));
-        const int i1 = std::min(w->nx_ - 1, static_cast<int>(std::ceil((hi.x() - w->x0_) * w->inv_res_)));
-        const int j0 = std::max(0, static_cast<int>(std::floor((lo.y() - w->y0_) * w->inv_res_)));
-        const int j1 = std::min(w->ny_ - 1, static_cast<int>(std::ceil((hi.y() - w->y0_) * w->inv_res_)));
+        const auto [i0, i1, j0, j1] = w->samples_within(lo.x(), lo.y(), hi.x(), hi.y());
         for (int j = j0; j <= j1; ++j) {
           for (int i = i0; i <= i1; ++i) {
             const Vec2 p(w->x0_ + i * w->res_, w->y0_ + j * w->res_);
@@ -424,10 +405,7 @@ void World::build_truth(const Scenario& s) {
   }
   (void)s;
   for (const Primitive& p : primitives_) {
-    const int i0 = std::max(0, static_cast<int>(std::floor((p.lo.x() - x0_) * inv_res_)));
-    const int i1 = std::min(nx_ - 1, static_cast<int>(std::ceil((p.hi.x() - x0_) * inv_res_)));
-    const int j0 = std::max(0, static_cast<int>(std::floor((p.lo.y() - y0_) * inv_res_)));
-    const int j1 = std::min(ny_ - 1, static_cast<int>(std::ceil((p.hi.y() - y0_) * inv_res_)));
+    const auto [i0, i1, j0, j1] = samples_within(p.lo.x(), p.lo.y(), p.hi.x(), p.hi.y());
     for (int j = j0; j <= j1; ++j) {
       for (int i = i0; i <= i1; ++i) {
         const double x = x0_ + i * res_;
@@ -454,6 +432,13 @@ void World::build_truth(const Scenario& s) {
       }
     }
   }
+}
+
+World::SampleRange World::samples_within(double xlo, double ylo, double xhi, double yhi) const noexcept {
+  return {std::max(0, static_cast<int>(std::floor((xlo - x0_) * inv_res_))),
+          std::min(nx_ - 1, static_cast<int>(std::ceil((xhi - x0_) * inv_res_))),
+          std::max(0, static_cast<int>(std::floor((ylo - y0_) * inv_res_))),
+          std::min(ny_ - 1, static_cast<int>(std::ceil((yhi - y0_) * inv_res_)))};
 }
 
 double World::ground(double x, double y) const noexcept {

@@ -60,6 +60,11 @@ class World {
  private:
   World() = default;
   struct Primitive;
+  struct SampleRange {
+    int i0, i1, j0, j1;  // inclusive
+  };
+  // The samples inside a world box, clipped to the grid.
+  SampleRange samples_within(double xlo, double ylo, double xhi, double yhi) const noexcept;
   void build_primitives(const Scenario& s, std::uint64_t seed);
   void build_blocks();
   void build_truth(const Scenario& s);
