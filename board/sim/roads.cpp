@@ -292,13 +292,8 @@ RoadsResult build_roads(const Scenario& s, std::uint64_t seed) {
       const Junction* j = junction_between(net, ti, next);
       if (!j) return {std::nullopt, s.source + ": route: trails '" + s.route[i].trail + "' and '" + s.route[i + 1].trail +
                                         "' do not meet, so the route cannot turn from one to the other"};
-      const double at = arc_on(*j, ti);
-      if (i == 0) {
-        // Go towards the junction from the end given by `reverse`.
-        to = at;
-      } else {
-        to = at;
-      }
+      // Towards the junction (the first leg from the end `reverse` names).
+      to = arc_on(*j, ti);
     } else if (i > 0) {
       // Last leg: away from the junction, towards the end given by `reverse`
       // (default: the farther end).

@@ -5,14 +5,15 @@
 #include <cstring>
 #include <ctime>
 
+#include "trailnav/drivers/gps/nmea.hpp"
+
 namespace trailnav::sim {
 namespace {
 
+// "$...": appends the checksum and CR LF.
 std::string finish(const char* body) {
-  std::uint8_t x = 0;
-  for (const char* c = body + 1; *c; ++c) x = static_cast<std::uint8_t>(x ^ static_cast<std::uint8_t>(*c));
   char tail[8];
-  std::snprintf(tail, sizeof tail, "*%02X\r\n", x);
+  std::snprintf(tail, sizeof tail, "*%02X\r\n", gps::nmea_checksum(body + 1));
   return std::string(body) + tail;
 }
 
@@ -30,22 +31,17 @@ Utc split(std::int64_t utc_ns) {
           tm.tm_sec + static_cast<double>(utc_ns % 1'000'000'000) * 1e-9};
 }
 
-// "ddmm.mmmmm,N"
-std::string latitude(double lat) {
-  const double a = std::abs(lat);
+// "ddmm.mmmmm,N" (latitude, 2 degree digits) or "dddmm.mmmmm,E" (longitude, 3).
+std::string coordinate(double value, int degree_digits, char positive, char negative) {
+  const double a = std::abs(value);
   const int d = static_cast<int>(a);
   char buf[32];
-  std::snprintf(buf, sizeof buf, "%02d%08.5f,%c", d, (a - d) * 60.0, lat >= 0 ? 'N' : 'S');
+  std::snprintf(buf, sizeof buf, "%0*d%08.5f,%c", degree_digits, d, (a - d) * 60.0, value >= 0 ? positive : negative);
   return buf;
 }
 
-std::string longitude(double lon) {
-  const double a = std::abs(lon);
-  const int d = static_cast<int>(a);
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%03d%08.5f,%c", d, (a - d) * 60.0, lon >= 0 ? 'E' : 'W');
-  return buf;
-}
+std::string latitude(double lat) { return coordinate(lat, 2, 'N', 'S'); }
+std::string longitude(double lon) { return coordinate(lon, 3, 'E', 'W'); }
 
 std::string clock(const Utc& u) {
   char buf[48];

@@ -314,6 +314,15 @@ SimReport run_simulation(const SimOptions& o) {
   const can::DbcMessage* speeds = dbc.dbc->message("WHEEL_SPEEDS");
   const can::DbcMessage* ticks = dbc.dbc->message("WHEEL_TICKS");
   if (!speeds || !ticks) return fail("the built-in robot DBC lacks WHEEL_SPEEDS or WHEEL_TICKS");
+  const can::DbcSignal* speed_left = speeds->signal("SpeedLeft");
+  const can::DbcSignal* speed_right = speeds->signal("SpeedRight");
+  const can::DbcSignal* counter = speeds->signal("Counter");
+  const can::DbcSignal* status = speeds->signal("Status");
+  const can::DbcSignal* ticks_left = ticks->signal("TicksLeft");
+  const can::DbcSignal* ticks_right = ticks->signal("TicksRight");
+  if (!speed_left || !speed_right || !counter || !status || !ticks_left || !ticks_right) {
+    return fail("the built-in robot DBC lacks a wheel signal (SpeedLeft, SpeedRight, Counter, Status, TicksLeft, TicksRight)");
+  }
 
   auto built = build_roads(s, o.seed);
   if (!built.roads) return fail(built.error);
@@ -425,10 +434,10 @@ SimReport run_simulation(const SimOptions& o) {
       frame.id = speeds->id;
       frame.length = static_cast<std::uint8_t>(speeds->size);
       const std::span<std::uint8_t> data(frame.data.data(), frame.length);
-      bool ok = can::encode_signal(*speeds->signal("SpeedLeft"), vl, data) == can::SignalError::none &&
-                can::encode_signal(*speeds->signal("SpeedRight"), vr, data) == can::SignalError::none &&
-                can::encode_signal(*speeds->signal("Counter"), k % 256, data) == can::SignalError::none &&
-                can::encode_signal(*speeds->signal("Status"), 0, data) == can::SignalError::none;
+      bool ok = can::encode_signal(*speed_left, vl, data) == can::SignalError::none &&
+                can::encode_signal(*speed_right, vr, data) == can::SignalError::none &&
+                can::encode_signal(*counter, k % 256, data) == can::SignalError::none &&
+                can::encode_signal(*status, 0, data) == can::SignalError::none;
       check(w.write_can(can_stream, frame));
       recording::CanFrame tf;
       tf.time_ns = frame.time_ns + 150'000;
@@ -436,9 +445,9 @@ SimReport run_simulation(const SimOptions& o) {
       tf.length = static_cast<std::uint8_t>(ticks->size);
       const std::span<std::uint8_t> tdata(tf.data.data(), tf.length);
       ok = ok &&
-           can::encode_signal(*ticks->signal("TicksLeft"), std::round(dist_left * s.wheels.ticks_per_metre), tdata) ==
+           can::encode_signal(*ticks_left, std::round(dist_left * s.wheels.ticks_per_metre), tdata) ==
                can::SignalError::none &&
-           can::encode_signal(*ticks->signal("TicksRight"), std::round(dist_right * s.wheels.ticks_per_metre), tdata) ==
+           can::encode_signal(*ticks_right, std::round(dist_right * s.wheels.ticks_per_metre), tdata) ==
                can::SignalError::none;
       if (!ok) return fail("wheel odometry does not fit the robot DBC's signals at t = " + std::to_string(t) + " s");
       check(w.write_can(can_stream, tf));

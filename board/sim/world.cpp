@@ -252,13 +252,13 @@ std::unique_ptr<World> World::build(const Scenario& s, const RoadNetwork& roads,
     }
   }
 
-  w->build_primitives(s, seed);
+  w->build_primitives(s);
   w->build_blocks();
-  w->build_truth(s);
+  w->build_truth();
   return w;
 }
 
-void World::build_primitives(const Scenario& s, std::uint64_t /*seed*/) {
+void World::build_primitives(const Scenario& s) {
   for (const Obstacle& ob : s.obstacles) {
     Primitive p;
     p.remission = ob.remission;
@@ -376,7 +376,7 @@ void World::build_blocks() {
   }
 }
 
-void World::build_truth(const Scenario& s) {
+void World::build_truth() {
   truth_.assign(h_.size(), static_cast<std::uint8_t>(ObstacleTruth::free));
   auto mark = [&](std::size_t idx, ObstacleTruth code) {
     // Solid obstacles win over negative ones, which win over vegetation.
@@ -403,7 +403,6 @@ void World::build_truth(const Scenario& s) {
       }
     }
   }
-  (void)s;
   for (const Primitive& p : primitives_) {
     const auto [i0, i1, j0, j1] = samples_within(p.lo.x(), p.lo.y(), p.hi.x(), p.hi.y());
     for (int j = j0; j <= j1; ++j) {

@@ -65,9 +65,9 @@ class World {
   };
   // The samples inside a world box, clipped to the grid.
   SampleRange samples_within(double xlo, double ylo, double xhi, double yhi) const noexcept;
-  void build_primitives(const Scenario& s, std::uint64_t seed);
+  void build_primitives(const Scenario& s);
   void build_blocks();
-  void build_truth(const Scenario& s);
+  void build_truth();
   bool intersect(const Primitive& p, const Vec3& o, const Vec3& d, double t_lo, double t_hi, std::uint64_t ray_key,
                  Hit& hit) const noexcept;
   std::size_t index(int i, int j) const noexcept {
