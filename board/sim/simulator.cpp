@@ -32,6 +32,8 @@ constexpr double kGravity = 9.80665;
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
+}  // namespace
+
 std::string default_calibration_file(vel::Model model) {
   const char* name = nullptr;
   switch (model) {
@@ -47,6 +49,8 @@ std::string default_calibration_file(vel::Model model) {
   }
   return "";
 }
+
+namespace {
 
 // The lidar: packets of the chosen model, ray-cast against the world at each
 // firing's time and pose.

@@ -7,6 +7,8 @@
 #include <functional>
 #include <string>
 
+#include "trailnav/drivers/velodyne/model.hpp"
+
 namespace trailnav::sim {
 
 struct SimOptions {
@@ -41,6 +43,10 @@ struct SimReport {
 };
 
 SimReport run_simulation(const SimOptions& options);
+
+// The calibration file the simulator uses for a model when the scenario names
+// none (from ../shared/data/velodyne/calibration/); empty when not found.
+std::string default_calibration_file(velodyne::Model model);
 
 // The DBC describing the simulated robot's CAN messages (board/sim/trailnav-robot.dbc).
 const char* robot_dbc_text() noexcept;

@@ -97,7 +97,7 @@ class RollingGrid {
     const std::int64_t dx = std::int64_t{new_origin.x} - origin_.x;
     const std::int64_t dy = std::int64_t{new_origin.y} - origin_.y;
     if (std::llabs(dx) >= size_x_ || std::llabs(dy) >= size_y_) {
-      origin_ = new_origin;
+      set_origin(new_origin);
       fill(empty_);
       return cell_count();
     }
@@ -108,14 +108,24 @@ class RollingGrid {
       const auto count = static_cast<std::int32_t>(std::llabs(dx));
       for (std::int32_t wx = first; wx < first + count; ++wx) cleared += clear_storage_column(wrap(wx, size_x_));
     }
-    origin_.x = new_origin.x;
+    set_origin({new_origin.x, origin_.y});
     if (dy != 0) {
       const std::int32_t first = dy > 0 ? origin_.y + size_y_ : new_origin.y;
       const auto count = static_cast<std::int32_t>(std::llabs(dy));
       for (std::int32_t wy = first; wy < first + count; ++wy) cleared += clear_storage_row(wrap(wy, size_y_));
     }
-    origin_.y = new_origin.y;
+    set_origin(new_origin);
     return cleared;
+  }
+
+  // Becomes a copy of `other`, which must have the same size (no allocation).
+  void assign_from(const RollingGrid& other) noexcept {
+    assert(other.size_x_ == size_x_ && other.size_y_ == size_y_);
+    resolution_ = other.resolution_;
+    inverse_resolution_ = other.inverse_resolution_;
+    empty_ = other.empty_;
+    set_origin(other.origin_);
+    std::copy(other.cells_.get(), other.cells_.get() + cell_count(), cells_.get());
   }
 
   void fill(const Cell& value) noexcept {
@@ -155,9 +165,18 @@ class RollingGrid {
     const std::int32_t r = v % n;
     return r < 0 ? r + n : r;
   }
+  // Precondition: contains(i). No division: the cell's offset from the
+  // origin plus the origin's storage position, wrapped once.
   std::size_t storage_offset(CellIndex i) const noexcept {
-    return static_cast<std::size_t>(wrap(i.y, size_y_)) * static_cast<std::size_t>(size_x_) +
-           static_cast<std::size_t>(wrap(i.x, size_x_));
+    std::int32_t sx = i.x - origin_.x + origin_storage_.x;
+    if (sx >= size_x_) sx -= size_x_;
+    std::int32_t sy = i.y - origin_.y + origin_storage_.y;
+    if (sy >= size_y_) sy -= size_y_;
+    return static_cast<std::size_t>(sy) * static_cast<std::size_t>(size_x_) + static_cast<std::size_t>(sx);
+  }
+  void set_origin(CellIndex o) noexcept {
+    origin_ = o;
+    origin_storage_ = {wrap(o.x, size_x_), wrap(o.y, size_y_)};
   }
   std::size_t clear_storage_column(std::int32_t sx) noexcept {
     const auto w = static_cast<std::size_t>(size_x_);
@@ -176,6 +195,7 @@ class RollingGrid {
   double inverse_resolution_;
   Cell empty_;
   CellIndex origin_{};
+  CellIndex origin_storage_{};  // where the origin's cell lives in storage
   std::unique_ptr<Cell[]> cells_;
 };
 

@@ -1,0 +1,605 @@
+#include "obstacle_run.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "png.hpp"
+#include "sim_truth.hpp"
+#include "simulator.hpp"
+#include "trailnav/drivers/recording/recording.hpp"
+#include "trailnav/drivers/velodyne/calibration.hpp"
+#include "trailnav/drivers/velodyne/decoder.hpp"
+#include "trailnav/drivers/velodyne/packet.hpp"
+#include "trailnav/drivers/velodyne/range_image.hpp"
+#include "trailnav/drivers/velodyne/sensor_clock.hpp"
+#include "trailnav/perception/kitti.hpp"
+#include "world.hpp"
+
+namespace trailnav::eval {
+
+namespace fs = std::filesystem;
+namespace vel = trailnav::velodyne;
+using perception::FusionModel;
+using perception::ObstacleMap;
+
+ClassCells MapScore::all_free() const noexcept {
+  ClassCells c;
+  for (const ClassCells& k : classes) {
+    c.free += k.free;
+    c.fake += k.fake;
+  }
+  return c;
+}
+
+namespace {
+
+using SteadyClock = std::chrono::steady_clock;
+double ms_since(SteadyClock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(SteadyClock::now() - t0).count();
+}
+
+// The truth on the obstacle map's cells: what each cell holds, its terrain
+// class and whether it lies next to something that is not free ground.
+class TruthCells {
+ public:
+  TruthCells(const SimTruth& truth, double res, int tolerance) : res_(res) {
+    const TruthRaster& o = truth.obstacles;
+    const double rr = o.resolution;
+    ix0_ = static_cast<std::int32_t>(std::floor((o.x0 - 0.5 * rr) / res));
+    iy0_ = static_cast<std::int32_t>(std::floor((o.y0 - 0.5 * rr) / res));
+    nx_ = static_cast<std::int32_t>(std::floor((o.x0 + (o.width - 0.5) * rr) / res)) - ix0_ + 1;
+    ny_ = static_cast<std::int32_t>(std::floor((o.y0 + (o.height - 0.5) * rr) / res)) - iy0_ + 1;
+    const auto n = static_cast<std::size_t>(nx_) * static_cast<std::size_t>(ny_);
+    code_.assign(n, 0);
+    cls_.assign(n, 255);
+    near_.assign(n, 0);
+    std::vector<std::array<std::uint16_t, perception::kTerrainClasses>> counts(n);
+    static constexpr int kRank[] = {0, 3, 2, 1};
+    for (int j = 0; j < o.height; ++j) {
+      for (int i = 0; i < o.width; ++i) {
+        const double px = o.x0 + i * rr, py = o.y0 + j * rr;
+        const std::size_t k = index(static_cast<std::int32_t>(std::floor(px / res)), static_cast<std::int32_t>(std::floor(py / res)));
+        const std::size_t src = static_cast<std::size_t>(j) * static_cast<std::size_t>(o.width) + static_cast<std::size_t>(i);
+        const std::uint8_t c = std::min<std::uint8_t>(o.data[src], 3);
+        if (kRank[c] > kRank[code_[k]]) code_[k] = c;
+        const std::uint8_t t = truth.terrain.data[src];
+        if (t < perception::kTerrainClasses) ++counts[k][t];
+      }
+    }
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto& c = counts[k];
+      const auto best = std::max_element(c.begin(), c.end());
+      if (*best > 0) cls_[k] = static_cast<std::uint8_t>(best - c.begin());
+    }
+    for (std::int32_t y = 0; y < ny_; ++y) {
+      for (std::int32_t x = 0; x < nx_; ++x) {
+        if (code_[local(x, y)] == 0) continue;
+        for (std::int32_t dy = -tolerance; dy <= tolerance; ++dy) {
+          for (std::int32_t dx = -tolerance; dx <= tolerance; ++dx) {
+            if (x + dx >= 0 && x + dx < nx_ && y + dy >= 0 && y + dy < ny_) near_[local(x + dx, y + dy)] = 1;
+          }
+        }
+      }
+    }
+  }
+
+  bool contains(std::int32_t wx, std::int32_t wy) const noexcept {
+    return wx >= ix0_ && wy >= iy0_ && wx < ix0_ + nx_ && wy < iy0_ + ny_;
+  }
+  std::size_t index(std::int32_t wx, std::int32_t wy) const noexcept { return local(wx - ix0_, wy - iy0_); }
+  std::uint8_t code(std::size_t k) const noexcept { return code_[k]; }
+  std::uint8_t cls(std::size_t k) const noexcept { return cls_[k]; }
+  bool near(std::size_t k) const noexcept { return near_[k] != 0; }
+  double resolution() const noexcept { return res_; }
+
+ private:
+  std::size_t local(std::int32_t x, std::int32_t y) const noexcept {
+    return static_cast<std::size_t>(y) * static_cast<std::size_t>(nx_) + static_cast<std::size_t>(x);
+  }
+  double res_;
+  std::int32_t ix0_ = 0, iy0_ = 0, nx_ = 0, ny_ = 0;
+  std::vector<std::uint8_t> code_, cls_, near_;
+};
+
+struct NamedShape {
+  std::string name;
+  double x, y, radius;
+};
+
+std::vector<NamedShape> named_obstacles(const sim::Scenario& s) {
+  std::vector<NamedShape> out;
+  for (const sim::Obstacle& o : s.obstacles) {
+    double r = 0.0;
+    const char* kind = "";
+    switch (o.type) {
+      case sim::ObstacleType::box: r = 0.5 * std::hypot(o.size.x(), o.size.y()); kind = "box"; break;
+      case sim::ObstacleType::pole: r = o.radius; kind = "pole"; break;
+      case sim::ObstacleType::tree: r = o.radius; kind = "trunk"; break;
+      default: continue;
+    }
+    char name[96];
+    std::snprintf(name, sizeof name, "%s at (%.1f, %.1f)", kind, o.center.x(), o.center.y());
+    out.push_back({o.name.empty() ? std::string(name) : o.name, o.center.x(), o.center.y(), r});
+  }
+  return out;
+}
+
+class Scorer {
+ public:
+  Scorer(const SimTruth& truth, const ObstacleRunOptions& o, double res)
+      : truth_(truth), cells_(truth, res, o.tolerance_cells), radius_(o.score_radius), tolerance_(o.tolerance_cells),
+        shapes_(named_obstacles(truth.scenario)) {}
+
+  void init(MapScore& s) const {
+    for (const NamedShape& n : shapes_) s.named.push_back({n.name, 0, 0});
+  }
+
+  void score(const ObstacleMap& map, double rx, double ry, std::int64_t t_ns, MapScore& s) const {
+    const auto& g = map.grid();
+    const double res = g.resolution();
+    const CellIndex c = g.world_to_index(rx, ry);
+    const auto r = static_cast<std::int32_t>(std::ceil(radius_ / res));
+    auto occupied = [&](std::int32_t x, std::int32_t y) {
+      const CellIndex i{x, y};
+      return g.contains(i) && map.state(g.at(i)) == perception::CellState::occupied;
+    };
+    for (std::int32_t dy = -r; dy <= r; ++dy) {
+      for (std::int32_t dx = -r; dx <= r; ++dx) {
+        if (dx * dx + dy * dy > r * r) continue;
+        const std::int32_t x = c.x + dx, y = c.y + dy;
+        if (!cells_.contains(x, y) || !g.contains({x, y})) continue;
+        const perception::ObstacleCell& cell = g.at({x, y});
+        if (cell.seen == 0) continue;
+        const std::size_t k = cells_.index(x, y);
+        const std::uint8_t code = cells_.code(k);
+        if (code == 0) {
+          if (cells_.near(k) || cells_.cls(k) >= perception::kTerrainClasses) continue;
+          ClassCells& cc = s.classes[cells_.cls(k)];
+          ++cc.free;
+          if (map.state(cell) == perception::CellState::occupied) ++cc.fake;
+          continue;
+        }
+        FoundCells& f = code == 1 ? s.obstacles : code == 2 ? s.negative : s.vegetation;
+        ++f.cells;
+        bool found = false;
+        for (std::int32_t ty = -tolerance_; ty <= tolerance_ && !found; ++ty) {
+          for (std::int32_t tx = -tolerance_; tx <= tolerance_ && !found; ++tx) found = occupied(x + tx, y + ty);
+        }
+        if (found) ++f.found;
+      }
+    }
+    // Fake obstacles on the robot's next 4 m of true path, within 0.3 m of it.
+    const auto& traj = truth_.trajectory;
+    auto it = std::lower_bound(traj.begin(), traj.end(), t_ns, [](const TruthPose& p, std::int64_t t) { return p.utc_ns < t; });
+    bool blocked = false;
+    double travelled = 0.0, since_check = 1e9;
+    const auto rr = static_cast<std::int32_t>(std::ceil(0.3 / res));
+    for (auto p = it; p != traj.end() && travelled < 4.0 && !blocked; ++p) {
+      if (p != it) {
+        const double step = std::hypot(p->x - (p - 1)->x, p->y - (p - 1)->y);
+        travelled += step;
+        since_check += step;
+      }
+      if (since_check < 0.1) continue;
+      since_check = 0.0;
+      const CellIndex pc = g.world_to_index(p->x, p->y);
+      for (std::int32_t dy = -rr; dy <= rr && !blocked; ++dy) {
+        for (std::int32_t dx = -rr; dx <= rr && !blocked; ++dx) {
+          if (dx * dx + dy * dy > rr * rr) continue;
+          const std::int32_t x = pc.x + dx, y = pc.y + dy;
+          if (!cells_.contains(x, y)) continue;
+          const std::size_t k = cells_.index(x, y);
+          if (cells_.code(k) == 0 && !cells_.near(k) && occupied(x, y)) blocked = true;
+        }
+      }
+    }
+    ++s.snapshots;
+    if (blocked) ++s.blocked;
+    // Named obstacles within the radius: any occupied cell on them?
+    for (std::size_t n = 0; n < shapes_.size(); ++n) {
+      const NamedShape& sh = shapes_[n];
+      if (std::hypot(sh.x - rx, sh.y - ry) > radius_) continue;
+      ++s.named[n].snapshots;
+      const CellIndex oc = g.world_to_index(sh.x, sh.y);
+      const auto rr2 = static_cast<std::int32_t>(std::ceil((sh.radius + res) / res));
+      bool hit = false;
+      for (std::int32_t dy = -rr2; dy <= rr2 && !hit; ++dy) {
+        for (std::int32_t dx = -rr2; dx <= rr2 && !hit; ++dx) {
+          const std::int32_t x = oc.x + dx, y = oc.y + dy;
+          if (!cells_.contains(x, y)) continue;
+          if (cells_.code(cells_.index(x, y)) == 1 && occupied(x, y)) hit = true;
+        }
+      }
+      if (hit) ++s.named[n].detected;
+    }
+  }
+
+ private:
+  const SimTruth& truth_;
+  TruthCells cells_;
+  double radius_;
+  int tolerance_;
+  std::vector<NamedShape> shapes_;
+};
+
+// Mean per-cell KL(P || Q) in bits over the cells P has observed.
+double mean_kl(const ObstacleMap& p_map, const ObstacleMap& q_map) {
+  const auto& gp = p_map.grid();
+  const auto& gq = q_map.grid();
+  const CellIndex o = gp.origin();
+  double sum = 0.0;
+  std::uint64_t n = 0;
+  for (std::int32_t y = 0; y < gp.size_y(); ++y) {
+    for (std::int32_t x = 0; x < gp.size_x(); ++x) {
+      const perception::ObstacleCell& a = gp.at({o.x + x, o.y + y});
+      if (a.seen == 0 || !gq.contains({o.x + x, o.y + y})) continue;
+      const perception::ObstacleCell& b = gq.at({o.x + x, o.y + y});
+      const double p = static_cast<double>(perception::logistic(a.logit));
+      const double q = static_cast<double>(perception::logistic(b.logit));
+      sum += p * std::log2(p / q) + (1.0 - p) * std::log2((1.0 - p) / (1.0 - q));
+      ++n;
+    }
+  }
+  return n ? sum / static_cast<double>(n) : 0.0;
+}
+
+// Receives finished revolutions from the assembler and runs them at once.
+class ImmediateSink final : public vel::RevolutionSink {
+ public:
+  ImmediateSink(vel::RangeImageShape shape, std::function<void(const vel::RangeImage&)> on_image)
+      : a_(shape), b_(shape), on_image_(std::move(on_image)) {}
+  vel::RangeImage& next_image() noexcept override { return use_a_ ? a_ : b_; }
+  void complete(vel::RangeImage& image) noexcept override {
+    use_a_ = !use_a_;
+    on_image_(image);
+  }
+
+ private:
+  vel::RangeImage a_, b_;
+  bool use_a_ = true;
+  std::function<void(const vel::RangeImage&)> on_image_;
+};
+
+std::optional<vel::Model> sniff_model(const std::string& input, int stream, std::string& error) {
+  auto opened = recording::RecordingReader::open(input);
+  if (!opened.reader) {
+    error = opened.error;
+    return std::nullopt;
+  }
+  while (auto e = opened.reader->next()) {
+    if (e->stream != stream || e->payload.size() != vel::kDataPacketSize) continue;
+    if (auto m = vel::detect_model(e->payload)) return m;
+  }
+  error = input + ": no lidar data packet names its model";
+  return std::nullopt;
+}
+
+}  // namespace
+
+Status write_obstacle_png(const std::string& path, const ObstacleMap& map, double robot_x, double robot_y) {
+  const auto& g = map.grid();
+  const auto w = static_cast<std::uint32_t>(g.size_x());
+  const auto h = static_cast<std::uint32_t>(g.size_y());
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  const CellIndex o = g.origin();
+  for (std::uint32_t row = 0; row < h; ++row) {
+    const auto y = static_cast<std::int32_t>(h - 1 - row);  // north up
+    for (std::uint32_t col = 0; col < w; ++col) {
+      const perception::ObstacleCell& c = g.at({o.x + static_cast<std::int32_t>(col), o.y + y});
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + col) * 3];
+      if (c.seen == 0) {
+        px[0] = 60;
+        px[1] = 70;
+        px[2] = 90;
+        continue;
+      }
+      const float p = perception::logistic(c.logit);
+      const auto v = static_cast<std::uint8_t>(std::lround(255.0f * (1.0f - p)));
+      px[0] = px[1] = px[2] = v;
+      if (map.state(c) == perception::CellState::occupied) {
+        px[0] = static_cast<std::uint8_t>(v / 2);
+        px[1] = static_cast<std::uint8_t>(v / 2);
+      }
+    }
+  }
+  const CellIndex rc = g.world_to_index(robot_x, robot_y);
+  for (int dy = -3; dy <= 3; ++dy) {
+    for (int dx = -3; dx <= 3; ++dx) {
+      if (dx * dx + dy * dy > 9) continue;
+      const int col = rc.x + dx - o.x;
+      const int row = static_cast<int>(h) - 1 - (rc.y + dy - o.y);
+      if (col < 0 || row < 0 || col >= static_cast<int>(w) || row >= static_cast<int>(h)) continue;
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + static_cast<std::size_t>(col)) * 3];
+      px[0] = 230;
+      px[1] = 30;
+      px[2] = 30;
+    }
+  }
+  return cli::write_png(path, w, h, cli::PngColor::rgb, rgb);
+}
+
+ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
+  ObstacleRunReport report;
+  if (options.inputs.empty()) {
+    report.error = "no input: give a recording directory, a pcap file or KITTI .bin scans";
+    return report;
+  }
+  const bool kitti = std::all_of(options.inputs.begin(), options.inputs.end(),
+                                 [](const std::string& p) { return fs::path(p).extension() == ".bin"; });
+  if (!kitti && options.inputs.size() > 1) {
+    report.error = "give one recording or capture file (or only KITTI .bin scans)";
+    return report;
+  }
+  perception::ObstacleConfig config = options.config;
+
+  // Truth, when the input is a simulated recording.
+  std::optional<SimTruth> truth;
+  if (!kitti && fs::is_directory(fs::path(options.inputs[0]) / "truth")) {
+    auto loaded = load_sim_truth((fs::path(options.inputs[0]) / "truth").string());
+    if (!loaded.truth) {
+      report.error = loaded.error;
+      return report;
+    }
+    truth = std::move(loaded.truth);
+    const auto& m = truth->scenario.robot.lidar_mount;
+    if (config.mount.translation == std::array<double, 3>{0.0, 0.0, 0.0}) config.mount.translation = {m.x(), m.y(), m.z()};
+  }
+  if (options.terrain == TerrainMode::truth && !truth) {
+    report.error = "--terrain truth needs a simulated recording (a directory with truth/)";
+    return report;
+  }
+  if (!options.out_dir.empty()) {
+    std::error_code ec;
+    fs::create_directories(options.out_dir, ec);
+    if (ec) {
+      report.error = "cannot create " + options.out_dir + ": " + ec.message();
+      return report;
+    }
+  }
+
+  // The sensor: KITTI scans, or the recording's lidar.
+  vel::RangeImageShape shape = perception::kitti_shape();
+  std::optional<vel::PacketDecoder> decoder;
+  std::optional<vel::RevolutionAssembler> assembler;
+  int lidar_stream = -1, position_stream = -1;
+  if (kitti) {
+    report.input_kind = "kitti";
+    report.model_name = "HDL-64E (KITTI)";
+  } else {
+    report.input_kind = "recording";
+    auto opened = recording::RecordingReader::open(options.inputs[0]);
+    if (!opened.reader) {
+      report.error = opened.error;
+      return report;
+    }
+    const auto& streams = opened.reader->streams();
+    for (std::size_t i = 0; i < streams.size(); ++i) {
+      if (streams[i].kind != recording::StreamKind::udp) continue;
+      if (lidar_stream < 0 && (streams[i].name == "lidar" || streams[i].port == 2368)) lidar_stream = static_cast<int>(i);
+      if (position_stream < 0 && (streams[i].name == "lidar-position" || streams[i].port == 8308)) {
+        position_stream = static_cast<int>(i);
+      }
+    }
+    if (lidar_stream < 0) {
+      report.error = options.inputs[0] + ": no UDP stream named 'lidar' or on port 2368";
+      return report;
+    }
+    std::string error;
+    const auto model = sniff_model(options.inputs[0], lidar_stream, error);
+    if (!model) {
+      report.error = error;
+      return report;
+    }
+    report.model_name = std::string(vel::model_info(*model).name);
+    std::string calib = options.calibration;
+    if (calib.empty() && truth) calib = truth->scenario.lidar.calibration;
+    if (calib.empty()) calib = sim::default_calibration_file(*model);
+    std::optional<vel::Calibration> calibration;
+    if (!calib.empty()) {
+      auto c = vel::load_calibration(calib);
+      if (!c.calibration) {
+        report.error = c.error;
+        return report;
+      }
+      calibration = std::move(c.calibration);
+    } else {
+      calibration = vel::builtin_calibration(*model);
+      if (!calibration) {
+        report.error = "the " + report.model_name + " needs its calibration: give --calibration FILE";
+        return report;
+      }
+    }
+    vel::DecoderOptions dopt;
+    dopt.selection = vel::ReturnSelection::strongest;
+    auto created = vel::PacketDecoder::create(*model, *calibration, dopt);
+    if (!created.decoder) {
+      report.error = created.error;
+      return report;
+    }
+    decoder.emplace(std::move(*created.decoder));
+    vel::AssemblerOptions aopt;
+    if (truth) aopt.rpm = truth->scenario.lidar.rpm;
+    auto made = vel::RevolutionAssembler::create(*decoder, aopt);
+    if (!made.assembler) {
+      report.error = made.error;
+      return report;
+    }
+    assembler.emplace(std::move(*made.assembler));
+    shape = assembler->shape();
+  }
+
+  config.compare_models = config.compare_models || truth.has_value();
+  auto made = perception::ObstaclePipeline::create(config, shape);
+  if (!made.pipeline) {
+    report.error = made.error;
+    return report;
+  }
+  perception::ObstaclePipeline& pipeline = *made.pipeline;
+
+  std::optional<perception::PoseTrack> poses;
+  if (truth) {
+    poses.emplace(truth->trajectory.size() + 1);
+    fill_pose_track(*truth, *poses);
+  }
+  std::optional<perception::TerrainClassMap> terrain;
+  if (options.terrain == TerrainMode::truth) terrain.emplace();
+  std::optional<Scorer> scorer;
+  if (truth) {
+    scorer.emplace(*truth, options, config.map.resolution);
+    report.scored = true;
+    for (int m = 0; m < perception::kFusionModels; ++m) {
+      if (pipeline.map(static_cast<FusionModel>(m)) != nullptr) {
+        report.scores[static_cast<std::size_t>(m)].emplace();
+        scorer->init(*report.scores[static_cast<std::size_t>(m)]);
+      }
+    }
+  }
+  const bool compare = pipeline.map(FusionModel::pw) && pipeline.map(FusionModel::ps) && pipeline.map(FusionModel::pc);
+  if (compare) report.kl.emplace();
+
+  double align_ms = 0.0, features_ms = 0.0, map_ms = 0.0;
+  auto write_pngs = [&](const std::string& suffix) {
+    if (options.out_dir.empty()) return;
+    for (int m = 0; m < perception::kFusionModels; ++m) {
+      const ObstacleMap* map = pipeline.map(static_cast<FusionModel>(m));
+      if (map == nullptr) continue;
+      const std::string name = "obstacles-" + std::string(perception::fusion_model_name(static_cast<FusionModel>(m))) + suffix;
+      const std::string png = (fs::path(options.out_dir) / (name + ".png")).string();
+      if (write_obstacle_png(png, *map, pipeline.cloud().robot_x, pipeline.cloud().robot_y)) report.files.push_back(png);
+    }
+  };
+  auto on_image = [&](const vel::RangeImage& image) {
+    if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) return;
+    ++report.revolutions;
+    auto t0 = SteadyClock::now();
+    pipeline.align(image, poses ? &*poses : nullptr);
+    align_ms += ms_since(t0);
+    t0 = SteadyClock::now();
+    pipeline.features();
+    features_ms += ms_since(t0);
+    if (terrain) {
+      terrain->grid().move_to(pipeline.cloud().robot_x, pipeline.cloud().robot_y);
+      fill_truth_terrain(*truth, *terrain);
+    }
+    t0 = SteadyClock::now();
+    pipeline.update_maps(terrain ? &*terrain : nullptr);
+    map_ms += ms_since(t0);
+    const auto rev = report.revolutions;
+    if (scorer && options.score_every > 0 && rev % static_cast<std::uint64_t>(options.score_every) == 0) {
+      for (int m = 0; m < perception::kFusionModels; ++m) {
+        const ObstacleMap* map = pipeline.map(static_cast<FusionModel>(m));
+        if (map != nullptr) {
+          scorer->score(*map, pipeline.cloud().robot_x, pipeline.cloud().robot_y, pipeline.cloud().time_ns,
+                        *report.scores[static_cast<std::size_t>(m)]);
+        }
+      }
+    }
+    if (compare && options.score_every > 0 && rev % static_cast<std::uint64_t>(options.score_every) == 0) {
+      const double pw = mean_kl(*pipeline.map(FusionModel::pc), *pipeline.map(FusionModel::pw));
+      const double ps = mean_kl(*pipeline.map(FusionModel::pc), *pipeline.map(FusionModel::ps));
+      KlSummary& k = *report.kl;
+      k.mean_pw += pw;
+      k.mean_ps += ps;
+      k.max_pw = std::max(k.max_pw, pw);
+      k.max_ps = std::max(k.max_ps, ps);
+      ++k.snapshots;
+    }
+    if (options.png_every > 0 && rev % static_cast<std::uint64_t>(options.png_every) == 0) {
+      char suffix[32];
+      std::snprintf(suffix, sizeof suffix, "-%06llu", static_cast<unsigned long long>(rev));
+      write_pngs(suffix);
+    }
+  };
+
+  if (kitti) {
+    vel::RangeImage image(shape);
+    std::vector<float> buffer;
+    for (std::size_t i = 0; i < options.inputs.size(); ++i) {
+      if (Status st = perception::load_kitti_scan(options.inputs[i], buffer, image); !st) {
+        report.error = st.message();
+        return report;
+      }
+      on_image(image);
+      if (options.progress) options.progress(static_cast<double>(i + 1) / static_cast<double>(options.inputs.size()));
+    }
+  } else {
+    auto opened = recording::RecordingReader::open(options.inputs[0]);
+    recording::RecordingReader& reader = *opened.reader;
+    ImmediateSink sink(shape, on_image);
+    vel::SensorClock clock;
+    std::uint64_t events = 0;
+    while (auto e = reader.next()) {
+      if (e->stream == position_stream && e->payload.size() == vel::kPositionPacketSize) {
+        vel::PositionPacket pp;
+        if (vel::decode_position_packet(e->payload, pp) == vel::PositionError::none) clock.on_position_packet(pp);
+      } else if (e->stream == lidar_stream && e->payload.size() == vel::kDataPacketSize) {
+        std::uint32_t us = 0;
+        for (int b = 3; b >= 0; --b) us = (us << 8) | e->payload[vel::kTimestampOffset + static_cast<std::size_t>(b)];
+        const std::int64_t t = clock.resolve(us, e->time_ns);
+        if (assembler->add_packet(e->payload, t, sink) != vel::PacketError::none) ++report.malformed_packets;
+      } else if (e->stream == lidar_stream) {
+        ++report.malformed_packets;
+      }
+      if (options.progress && ++events % 512 == 0) {
+        options.progress(static_cast<double>(reader.position()) / static_cast<double>(std::max<std::uint64_t>(reader.size(), 1)));
+      }
+      if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) break;
+    }
+    if (options.progress) options.progress(1.0);
+  }
+
+  write_pngs("");
+  if (!options.out_dir.empty()) {
+    // Raw probabilities of the configured model: float32, row-major from the
+    // map's origin (row 0 = lowest y), NaN for unknown; described in a YAML file.
+    const ObstacleMap& map = pipeline.map();
+    const auto& g = map.grid();
+    std::vector<float> probs(g.cell_count());
+    const CellIndex o = g.origin();
+    for (std::int32_t y = 0; y < g.size_y(); ++y) {
+      for (std::int32_t x = 0; x < g.size_x(); ++x) {
+        probs[static_cast<std::size_t>(y) * static_cast<std::size_t>(g.size_x()) + static_cast<std::size_t>(x)] =
+            map.probability(g.at({o.x + x, o.y + y}));
+      }
+    }
+    const std::string raw = (fs::path(options.out_dir) / "obstacles.f32").string();
+    if (std::FILE* f = std::fopen(raw.c_str(), "wb")) {
+      std::fwrite(probs.data(), sizeof(float), probs.size(), f);
+      std::fclose(f);
+      report.files.push_back(raw);
+    }
+    const std::string meta = (fs::path(options.out_dir) / "obstacles.yaml").string();
+    if (std::FILE* f = std::fopen(meta.c_str(), "w")) {
+      std::fprintf(f,
+                   "# trailnav obstacles: the last obstacle map of model %s\n"
+                   "file: obstacles.f32   # float32 little-endian P(obstacle), NaN = never observed\n"
+                   "width: %d\nheight: %d\nresolution: %.4f\n"
+                   "origin: [%.4f, %.4f]   # odometry-frame x, y of the lower-left corner of cell (0, 0)\n"
+                   "rows: south_up   # row 0 is the lowest y\n"
+                   "revolutions: %llu\nrobot: [%.4f, %.4f, %.5f]   # x, y, yaw at the last revolution\n",
+                   std::string(perception::fusion_model_name(map.model())).c_str(), g.size_x(), g.size_y(),
+                   g.resolution(), o.x * g.resolution(), o.y * g.resolution(),
+                   static_cast<unsigned long long>(report.revolutions), pipeline.cloud().robot_x,
+                   pipeline.cloud().robot_y, pipeline.cloud().robot_yaw);
+      std::fclose(f);
+      report.files.push_back(meta);
+    }
+  }
+  if (report.kl && report.kl->snapshots > 0) {
+    report.kl->mean_pw /= static_cast<double>(report.kl->snapshots);
+    report.kl->mean_ps /= static_cast<double>(report.kl->snapshots);
+  }
+  report.counters = pipeline.counters();
+  if (report.revolutions > 0) {
+    const auto n = static_cast<double>(report.revolutions);
+    report.align_ms = align_ms / n;
+    report.features_ms = features_ms / n;
+    report.map_ms = map_ms / n;
+  }
+  return report;
+}
+
+}  // namespace trailnav::eval

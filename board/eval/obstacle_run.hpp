@@ -1,0 +1,96 @@
+// `trailnav obstacles` as a library: runs the obstacle pipeline over a
+// recording, a pcap or KITTI scans, deterministically, writes map pictures,
+// scores the maps against a simulated recording's truth and compares the
+// fusion models with the KL divergence of §7.4.4.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/obstacle_pipeline.hpp"
+
+namespace trailnav::eval {
+
+// Where the terrain class of each cell comes from.
+enum class TerrainMode : std::uint8_t {
+  config,  // as configured: a fixed class, or adaptive (with no terrain map yet: the unknown class)
+  truth,   // adaptive, from the simulated recording's true classes
+};
+
+struct ObstacleRunOptions {
+  std::vector<std::string> inputs;  // one recording directory or capture file, or KITTI .bin files
+  perception::ObstacleConfig config;
+  TerrainMode terrain = TerrainMode::config;
+  std::string calibration;   // empty: the recording's scenario or the model's default
+  std::string out_dir;       // empty: no files
+  int png_every = 0;         // revolutions between map pictures (0: only the last)
+  int score_every = 5;       // revolutions between scored snapshots
+  double score_radius = 20.0;  // m around the robot
+  int tolerance_cells = 1;     // an obstacle cell counts as found when an occupied cell is this close
+  int max_revolutions = 0;     // 0: all
+  std::function<void(double fraction)> progress;
+};
+
+// Scores of one map against the truth, summed over the scored snapshots.
+struct ClassCells {
+  std::uint64_t free = 0;  // observed free cells (not next to an obstacle)
+  std::uint64_t fake = 0;  // of them, occupied
+  double rate() const noexcept { return free ? static_cast<double>(fake) / static_cast<double>(free) : 0.0; }
+};
+struct FoundCells {
+  std::uint64_t cells = 0;  // observed truth cells
+  std::uint64_t found = 0;  // occupied within the tolerance
+  double recall() const noexcept { return cells ? static_cast<double>(found) / static_cast<double>(cells) : 1.0; }
+};
+struct NamedObstacle {
+  std::string name;
+  std::uint64_t snapshots = 0;  // scored while it was within the radius
+  std::uint64_t detected = 0;   // of them, with an occupied cell on it
+};
+struct MapScore {
+  FoundCells obstacles;   // solid obstacles >= 10 cm
+  FoundCells negative;    // ditches
+  FoundCells vegetation;  // bushes, undergrowth
+  std::array<ClassCells, perception::kTerrainClasses> classes;
+  std::uint64_t snapshots = 0;
+  std::uint64_t blocked = 0;  // snapshots with a fake obstacle on the robot's next 4 m of path
+  std::vector<NamedObstacle> named;
+  ClassCells all_free() const noexcept;
+};
+
+struct KlSummary {
+  std::uint64_t snapshots = 0;
+  double mean_pw = 0.0;  // mean over snapshots of the mean per-cell KL(PC || PW), bits
+  double mean_ps = 0.0;
+  double max_pw = 0.0;
+  double max_ps = 0.0;
+};
+
+struct ObstacleRunReport {
+  std::string error;  // non-empty: nothing ran
+  std::string input_kind;  // "recording", "kitti"
+  std::string model_name;  // lidar
+  bool scored = false;
+  std::uint64_t revolutions = 0;
+  perception::PipelineCounters counters;
+  std::array<std::optional<MapScore>, perception::kFusionModels> scores;
+  std::optional<KlSummary> kl;
+  double align_ms = 0.0;     // mean per revolution
+  double features_ms = 0.0;
+  double map_ms = 0.0;       // all maps kept
+  std::uint64_t malformed_packets = 0;
+  std::vector<std::string> files;  // written
+};
+
+ObstacleRunReport run_obstacles(const ObstacleRunOptions& options);
+
+// Writes a map as PNG: unknown dark blue-grey, free white to occupied black
+// by probability, the robot as a red dot; north up.
+Status write_obstacle_png(const std::string& path, const perception::ObstacleMap& map, double robot_x, double robot_y);
+
+}  // namespace trailnav::eval

@@ -1,0 +1,145 @@
+#include "sim_truth.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "png.hpp"
+#include "trailnav/runtime/config.hpp"
+#include "world.hpp"
+
+namespace trailnav::eval {
+
+namespace fs = std::filesystem;
+
+std::uint8_t TruthRaster::at(double x, double y, std::uint8_t outside) const noexcept {
+  const long i = std::lround((x - x0) / resolution);
+  const long j = std::lround((y - y0) / resolution);
+  if (i < 0 || j < 0 || i >= width || j >= height) return outside;
+  return data[static_cast<std::size_t>(j) * static_cast<std::size_t>(width) + static_cast<std::size_t>(i)];
+}
+
+namespace {
+
+Status load_raster(const std::string& path, int width, int height, TruthRaster& out) {
+  cli::GreyImage img;
+  if (Status st = cli::read_png_grey(path, img); !st) return st;
+  if (static_cast<int>(img.width) != width || static_cast<int>(img.height) != height) {
+    return Status::error(path + ": " + std::to_string(img.width) + " x " + std::to_string(img.height) +
+                         " pixels, rasters.yaml says " + std::to_string(width) + " x " + std::to_string(height));
+  }
+  out.width = width;
+  out.height = height;
+  out.data.resize(img.pixels.size());
+  // PNG rows are north-up; ours are south-up.
+  const auto w = static_cast<std::size_t>(width);
+  for (std::size_t j = 0; j < static_cast<std::size_t>(height); ++j) {
+    std::copy_n(img.pixels.begin() + static_cast<std::ptrdiff_t>((static_cast<std::size_t>(height) - 1 - j) * w), w,
+                out.data.begin() + static_cast<std::ptrdiff_t>(j * w));
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+SimTruthResult load_sim_truth(const std::string& dir) {
+  SimTruth t;
+  t.dir = dir;
+  auto scenario = sim::load_scenario((fs::path(dir) / "scenario.yaml").string());
+  if (!scenario.scenario) return {std::nullopt, scenario.error};
+  t.scenario = std::move(*scenario.scenario);
+  int width = 0, height = 0;
+  try {
+    const ConfigNode r = ConfigNode::load_file((fs::path(dir) / "rasters.yaml").string());
+    const double res = r.number("resolution", 1e-4, 100.0);
+    width = static_cast<int>(r.integer("width", 1, 1'000'000));
+    height = static_cast<int>(r.integer("height", 1, 1'000'000));
+    const auto sw = r.number_list("south_west", -1e7, 1e7);
+    if (sw.size() != 2) r.fail("south_west", "needs [x, y]");
+    for (TruthRaster* raster : {&t.terrain, &t.obstacles}) {
+      raster->resolution = res;
+      raster->x0 = sw[0];
+      raster->y0 = sw[1];
+    }
+  } catch (const ConfigError& e) {
+    return {std::nullopt, e.what()};
+  }
+  if (Status st = load_raster((fs::path(dir) / "terrain.png").string(), width, height, t.terrain); !st) {
+    return {std::nullopt, st.message()};
+  }
+  if (Status st = load_raster((fs::path(dir) / "obstacles.png").string(), width, height, t.obstacles); !st) {
+    return {std::nullopt, st.message()};
+  }
+  const std::string traj = (fs::path(dir) / "trajectory.csv").string();
+  std::ifstream in(traj);
+  if (!in) return {std::nullopt, traj + ": cannot open"};
+  std::string line;
+  std::getline(in, line);
+  int line_no = 1;
+  while (std::getline(in, line)) {
+    ++line_no;
+    // time_s,utc_ns,x,y,z,roll,pitch,yaw,speed,yaw_rate,v_left,v_right,route_arc,lat,lon
+    double time_s = 0, speed = 0, yaw_rate = 0, vl = 0, vr = 0;
+    long long utc = 0;
+    TruthPose p;
+    if (std::sscanf(line.c_str(), "%lf,%lld,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &time_s, &utc, &p.x, &p.y, &p.z,
+                    &p.roll, &p.pitch, &p.yaw, &speed, &yaw_rate, &vl, &vr, &p.arc) != 13) {
+      return {std::nullopt, traj + ":" + std::to_string(line_no) + ": not a trajectory row"};
+    }
+    p.utc_ns = utc;
+    t.trajectory.push_back(p);
+  }
+  if (t.trajectory.size() < 2) return {std::nullopt, traj + ": fewer than two poses"};
+  return {std::move(t), {}};
+}
+
+void fill_pose_track(const SimTruth& truth, perception::PoseTrack& track) {
+  for (const TruthPose& p : truth.trajectory) track.push({p.utc_ns, p.x, p.y, p.z, p.roll, p.pitch, p.yaw});
+}
+
+void fill_truth_terrain(const SimTruth& truth, perception::TerrainClassMap& map, double window, float epsilon) {
+  auto& grid = map.grid();
+  const CellIndex o = grid.origin();
+  const double res = grid.resolution();
+  const double rr = truth.terrain.resolution;
+  const int half = std::max(0, static_cast<int>(std::lround((window - res) / 2.0 / rr)));
+  const int inner = std::max(1, static_cast<int>(std::lround(res / rr)));
+  for (std::int32_t y = 0; y < grid.size_y(); ++y) {
+    for (std::int32_t x = 0; x < grid.size_x(); ++x) {
+      perception::TerrainCell& cell = grid.at({o.x + x, o.y + y});
+      if (cell.known) continue;
+      const double cx0 = (o.x + x) * res + 0.5 * rr;  // first truth pixel centre inside the cell
+      const double cy0 = (o.y + y) * res + 0.5 * rr;
+      std::array<float, perception::kTerrainClasses> count{};
+      float total = 0.0f;
+      bool solid = false, undergrowth = false;
+      for (int j = -half; j < inner + half; ++j) {
+        for (int i = -half; i < inner + half; ++i) {
+          const double px = cx0 + i * rr, py = cy0 + j * rr;
+          const std::uint8_t cls = truth.terrain.at(px, py);
+          if (cls >= perception::kTerrainClasses) continue;
+          count[cls] += 1.0f;
+          total += 1.0f;
+          const bool own = i >= 0 && j >= 0 && i < inner && j < inner;
+          const std::uint8_t ob = truth.obstacles.at(px, py, 0);
+          if (own && ob == static_cast<std::uint8_t>(sim::ObstacleTruth::obstacle)) solid = true;
+          if (own && ob == static_cast<std::uint8_t>(sim::ObstacleTruth::vegetation)) undergrowth = true;
+        }
+      }
+      // What the lidar sees in the cell decides: an object makes it `other`,
+      // a bush `vegetation`.
+      if (solid || undergrowth) {
+        count.fill(0.0f);
+        count[static_cast<std::size_t>(solid ? perception::TerrainClass::other : perception::TerrainClass::vegetation)] = 1.0f;
+        total = 1.0f;
+      }
+      if (total == 0.0f) continue;  // outside the simulated world: stays unknown
+      for (float& v : count) v = (1.0f - epsilon) * v / total + epsilon / perception::kTerrainClasses;
+      cell.set(count);
+    }
+  }
+}
+
+}  // namespace trailnav::eval

@@ -1,0 +1,63 @@
+// The ground truth a simulated recording carries in its truth/ directory
+// (docs/simulator.md): the scenario, the trajectory and the rasters, read
+// back for scoring. Also a terrain-class map filled from the true classes,
+// which stands in for the terrain thread until one is configured.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "scenario.hpp"
+#include "trailnav/perception/pose_track.hpp"
+#include "trailnav/perception/terrain_class_map.hpp"
+
+namespace trailnav::eval {
+
+struct TruthRaster {
+  int width = 0;
+  int height = 0;
+  double resolution = 0.05;
+  double x0 = 0.0;  // world x, y of pixel (0, 0)'s centre (south-west corner)
+  double y0 = 0.0;
+  std::vector<std::uint8_t> data;  // row 0 = south
+
+  // The pixel nearest a world point; `outside` beyond the raster.
+  std::uint8_t at(double x, double y, std::uint8_t outside = 255) const noexcept;
+};
+
+struct TruthPose {
+  std::int64_t utc_ns = 0;
+  double x = 0, y = 0, z = 0, roll = 0, pitch = 0, yaw = 0;
+  double arc = 0;  // m along the route
+};
+
+struct SimTruth {
+  std::string dir;
+  sim::Scenario scenario;
+  TruthRaster terrain;    // sim::TerrainClass codes
+  TruthRaster obstacles;  // sim::ObstacleTruth codes
+  std::vector<TruthPose> trajectory;
+};
+
+struct SimTruthResult {
+  std::optional<SimTruth> truth;
+  std::string error;
+};
+
+// `dir`: a recording's truth/ directory.
+SimTruthResult load_sim_truth(const std::string& dir);
+
+// The true trajectory as the obstacle pipeline's pose history (UTC times).
+void fill_pose_track(const SimTruth& truth, perception::PoseTrack& track);
+
+// Fills the cells of `map` that are not known yet (after it moved) with the
+// true class distribution: the classes of the truth pixels in a window of
+// `window` m around the cell, mixed with `epsilon` of a uniform one. A cell
+// holding part of a solid obstacle is `other`, one holding undergrowth
+// `vegetation`, as a terrain classifier sees them.
+void fill_truth_terrain(const SimTruth& truth, perception::TerrainClassMap& map, double window = 0.2,
+                        float epsilon = 0.05f);
+
+}  // namespace trailnav::eval

@@ -1,0 +1,120 @@
+// One lidar revolution as a gravity-aligned point image, its smoothing along
+// the rings, and the geometric features of thesis §7.1.2.
+//
+// The image keeps the range image's structure: row i is a ring (0 = lowest
+// elevation), column j an azimuth bin, stored as separate arrays (x, y, z,
+// ...) so the per-point loops stream through memory. Coordinates are in the
+// gravity-aligned odometry frame, in metres from the revolution's reference
+// point (the sensor's position at the end of the revolution), which keeps
+// them small enough for floats far from the odometry origin.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "trailnav/drivers/velodyne/range_image.hpp"
+#include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/pose_track.hpp"
+
+namespace trailnav::perception {
+
+enum class PointState : std::uint8_t {
+  none = 0,      // no return, a missing column, or outside the range limits
+  valid = 1,     // aligned, features not computed yet
+  measured = 2,  // at least one neighbour farther than x: stepHeight and incline from it
+  flat = 3,      // valid neighbours, all within x: stepHeight 0, incline 0
+  isolated = 4,  // no valid neighbour at all: no feature, not used
+};
+
+struct CloudShape {
+  int rings = 0;
+  int max_columns = 0;
+};
+
+class RevolutionCloud {
+ public:
+  explicit RevolutionCloud(CloudShape shape);
+
+  const CloudShape& shape() const noexcept { return shape_; }
+  int rings() const noexcept { return shape_.rings; }
+  int columns() const noexcept { return columns_; }
+  int stride() const noexcept { return shape_.max_columns; }
+  std::size_t index(int ring, int column) const noexcept {
+    return static_cast<std::size_t>(ring) * static_cast<std::size_t>(shape_.max_columns) + static_cast<std::size_t>(column);
+  }
+  // Clears the first `columns` columns of every ring.
+  void reset(int columns) noexcept;
+
+  // Per point (index()).
+  std::vector<float> x, y, z;        // aligned (after smoothing() these are the smoothed values)
+  std::vector<float> range;          // m, as measured (0: none)
+  std::vector<float> intensity;      // 0..255
+  std::vector<float> step_height;    // m (Eq. 7.5)
+  std::vector<float> sin_incline;    // sin of the incline (Eq. 7.6)
+  std::vector<PointState> state;
+
+  // The revolution.
+  double ref_x = 0.0;  // odometry-frame position of the reference point
+  double ref_y = 0.0;
+  double ref_z = 0.0;
+  double robot_x = 0.0;  // odometry-frame position of the robot at the end of the revolution
+  double robot_y = 0.0;
+  double robot_yaw = 0.0;
+  std::int64_t time_ns = 0;  // end of the revolution
+  std::uint64_t sequence = 0;
+  bool full_turn = false;  // the columns close the circle: the last column neighbours the first
+
+ private:
+  CloudShape shape_;
+  int columns_ = 0;
+};
+
+struct AlignCounters {
+  std::uint64_t points = 0;         // valid cells read from range images
+  std::uint64_t out_of_range = 0;   // outside [min_range, max_range]
+  std::uint64_t pose_interpolated = 0;  // columns with an interpolated pose
+  std::uint64_t pose_clamped = 0;       // columns outside the pose history (nearest pose used)
+  std::uint64_t no_pose = 0;            // revolutions aligned with the fixed orientation
+};
+
+// Range image -> gravity-aligned cloud, compensating the sensor's motion
+// column by column when a pose history is given.
+class CloudAligner {
+ public:
+  CloudAligner(const MountParams& mount, const FeatureParams& features) noexcept;
+
+  // `poses` may be null or empty: the fixed orientation is used, at the
+  // odometry origin. Reads layer 0 (the strongest return).
+  void align(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept;
+
+  const AlignCounters& counters() const noexcept { return counters_; }
+
+ private:
+  float mount_r_[9];  // sensor -> robot
+  float mount_t_[3];
+  double fixed_roll_ = 0.0;
+  double fixed_pitch_ = 0.0;
+  float min_range_ = 0.0f;
+  float max_range_ = 0.0f;
+  AlignCounters counters_;
+};
+
+struct FeatureCounters {
+  std::uint64_t measured = 0;
+  std::uint64_t flat = 0;
+  std::uint64_t isolated = 0;
+};
+
+// Averages close-by points along each ring with a sliding window of
+// 2 * half_window + 1 points, constant cost per point. A window never
+// reaches across a missing point or a range jump larger than
+// `smoothing_max_jump` (an object's edge), so edges stay sharp.
+// `scratch` holds 3 * (max_columns + 1) doubles, allocated by the caller.
+void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, std::vector<double>& scratch) noexcept;
+
+// stepHeight (Eq. 7.5) and sin(incline) (Eq. 7.6) for every valid point from
+// the first neighbour farther than x in each of the four directions (Eqs.
+// 7.1-7.4): at most 2 (K + L) comparisons per point.
+void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters) noexcept;
+
+}  // namespace trailnav::perception

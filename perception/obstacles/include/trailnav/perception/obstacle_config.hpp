@@ -1,0 +1,91 @@
+// Parameters of the obstacle detection, with the thesis' defaults (§7.1,
+// Table 7.1, §7.4), and their YAML form (docs/obstacles.md).
+#pragma once
+
+#include <array>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "trailnav/perception/terrain_class_map.hpp"
+#include "trailnav/runtime/config.hpp"
+
+namespace trailnav::perception {
+
+// How the terrain class enters the obstacle probability (§7.4.4).
+enum class FusionModel : std::uint8_t {
+  pw,  // Dirac thresholds (Eq. 7.11) of the most likely class (Eq. 7.17)
+  ps,  // smooth model (Eq. 7.12) of the most likely class (Eq. 7.17)
+  pc,  // smooth model summed over the class distribution (Eq. 7.16)
+};
+inline constexpr int kFusionModels = 3;
+std::string_view fusion_model_name(FusionModel m) noexcept;  // "PW", "PS", "PC"
+std::optional<FusionModel> parse_fusion_model(std::string_view name) noexcept;  // case-insensitive
+
+// P(o | g, t) for one terrain class.
+struct ClassParams {
+  float max_step_height = 0.05f;  // m (Dirac)
+  float max_incline_deg = 20.5f;  // degrees (Dirac)
+  float alpha = 25.0f;            // 1/m (smooth)
+  float beta = 1.2f;              // (smooth)
+};
+
+// Table 7.1; vegetation, which the table lacks, is treated like other.
+std::array<ClassParams, kTerrainClasses> default_class_params() noexcept;
+
+struct FeatureParams {
+  int ring_neighbours = 5;         // K: search along the ring, each way
+  int cross_neighbours = 2;        // L: search across rings, each way
+  float min_distance = 0.05f;      // x, m: a neighbour must be farther than this
+  int smoothing_half_window = 5;   // points averaged each way along the ring (0: no smoothing)
+  float smoothing_max_jump = 0.15f;  // m: a range jump this large between ring neighbours ends a window
+  float min_range = 1.0f;          // m: nearer returns are ignored (the robot itself)
+  float max_range = 40.0f;         // m: farther returns are ignored (the map reaches 30 m each way)
+};
+
+struct MapParams {
+  int size = 600;               // cells per side
+  double resolution = 0.1;      // m
+  float prior = 0.5f;           // P_c(o)
+  float measurement_min = 0.4f;  // P(o | g) is clamped to [min, max] before Eq. 7.10
+  float measurement_max = 0.97f;
+  float logit_min = -4.0f;      // the cell's log-odds are clamped to [min, max]
+  float logit_max = 4.0f;
+  float dirac_hold_s = 2.0f;    // PW: an observed obstacle keeps its cell occupied this long
+  float occupied = 0.5f;        // P above this is an obstacle (PNGs, scores, planners' 0-100)
+};
+
+// Sensor pose on the robot and the orientation to assume without a pose stream.
+struct MountParams {
+  std::array<double, 3> translation{0.0, 0.0, 0.0};  // m, sensor origin in the robot frame
+  std::array<double, 3> rotation_deg{0.0, 0.0, 0.0};  // roll, pitch, yaw of the sensor on the robot
+  double fixed_roll_deg = 0.0;   // robot orientation when no pose stream is configured
+  double fixed_pitch_deg = 0.0;
+};
+
+struct ObstacleConfig {
+  FeatureParams features;
+  std::array<ClassParams, kTerrainClasses> classes = default_class_params();
+  MapParams map;
+  MountParams mount;
+  FusionModel model = FusionModel::pc;
+  // Terrain source: adaptive (a terrain-class map) or one fixed class for all
+  // cells (the basic approach of §7.1.3).
+  std::optional<TerrainClass> fixed_class;
+  TerrainClass unknown_class = TerrainClass::other;  // for cells the terrain map does not know
+  bool compare_models = false;  // also keep PW, PS and PC maps side by side (KL, §7.4.4)
+};
+
+// Reads the `obstacles:` mapping; ConfigError (file, line, key) on bad values.
+ObstacleConfig parse_obstacle_config(const ConfigNode& node);
+
+struct ObstacleConfigResult {
+  std::optional<ObstacleConfig> config;
+  std::string error;
+};
+// A YAML file whose top level has an `obstacles:` mapping.
+ObstacleConfigResult load_obstacle_config(const std::string& path);
+// Checks the values against each other (window sizes, capacities).
+std::string check_obstacle_config(const ObstacleConfig& config);
+
+}  // namespace trailnav::perception

@@ -1,0 +1,88 @@
+// The robot-centred obstacle map (thesis §7.1.3, §7.3): a rolling grid
+// perpendicular to gravity, moved with the odometry, updated once per
+// revolution point by point with the recursive log-odds rule (Eq. 7.10).
+//
+// Every cell is unknown until a point with features lands in it; unknown is
+// never reported as free. PW maps (Dirac model) keep a cell occupied for
+// `dirac_hold` seconds after its last obstacle point, whatever else is seen
+// there in that time (the thesis' workaround for 0/1 probabilities), and
+// free once a later revolution sees it without one.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <span>
+
+#include "trailnav/perception/cloud.hpp"
+#include "trailnav/perception/obstacle_models.hpp"
+#include "trailnav/perception/terrain_class_map.hpp"
+#include "trailnav/runtime/rolling_grid.hpp"
+
+namespace trailnav::perception {
+
+struct ObstacleCell {
+  float logit = 0.0f;       // log-odds of an obstacle
+  std::uint32_t seen = 0;   // revolution (1-based) that last saw this cell; 0: never
+  std::uint32_t hit = 0;    // PW: revolution of the last obstacle point; 0: none
+};
+
+enum class CellState : std::uint8_t { unknown, free, occupied };
+
+// Where the terrain class of a point comes from.
+struct TerrainSource {
+  const TerrainClassMap* map = nullptr;  // adaptive: this map (may be null: all cells unknown)
+  bool fixed = false;                    // true: every cell is `fixed_class`
+  TerrainClass fixed_class = TerrainClass::street;
+  TerrainClass unknown_class = TerrainClass::other;  // cells `map` does not know
+};
+
+struct MapCounters {
+  std::uint64_t updates = 0;        // points integrated
+  std::uint64_t outside_map = 0;    // points beyond the map's edge
+  std::uint64_t unknown_terrain = 0;  // points on cells without a terrain class
+  std::uint64_t cells_cleared = 0;  // by moving the map
+};
+
+class ObstacleMap {
+ public:
+  ObstacleMap(const MapParams& params, FusionModel model);
+
+  FusionModel model() const noexcept { return model_; }
+  const MapParams& params() const noexcept { return params_; }
+  RollingGrid<ObstacleCell>& grid() noexcept { return grid_; }
+  const RollingGrid<ObstacleCell>& grid() const noexcept { return grid_; }
+
+  // Re-centres on the robot and integrates one revolution's points.
+  void integrate(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept;
+
+  // P(o) of a cell; NaN when unknown.
+  float probability(const ObstacleCell& c) const noexcept {
+    return c.seen == 0 ? std::numeric_limits<float>::quiet_NaN() : logistic(c.logit);
+  }
+  CellState state(const ObstacleCell& c) const noexcept {
+    if (c.seen == 0) return CellState::unknown;
+    return c.logit > occupied_logit_ ? CellState::occupied : CellState::free;
+  }
+  std::uint32_t revolutions() const noexcept { return revolution_; }
+  const MapCounters& counters() const noexcept { return counters_; }
+
+  // Row-major copy from the map's origin (row 0 = lowest y): 0..100 percent
+  // occupancy, -1 unknown (the ROS OccupancyGrid convention).
+  void export_occupancy(std::span<std::int8_t> out) const noexcept;
+
+ private:
+  template <FusionModel M>
+  void integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept;
+
+  MapParams params_;
+  FusionModel model_;
+  RollingGrid<ObstacleCell> grid_;
+  float occupied_logit_;
+  std::uint32_t revolution_ = 0;
+  std::uint32_t hold_revolutions_ = 0;
+  std::int64_t first_ns_ = 0;
+  std::int64_t last_ns_ = 0;
+  MapCounters counters_;
+};
+
+}  // namespace trailnav::perception

@@ -1,0 +1,67 @@
+// One lidar revolution in, the obstacle map(s) updated: alignment, smoothing,
+// features and the map update, with everything allocated by create().
+#pragma once
+
+#include <array>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailnav/perception/cloud.hpp"
+#include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/obstacle_map.hpp"
+#include "trailnav/perception/obstacle_models.hpp"
+
+namespace trailnav::perception {
+
+struct PipelineCounters {
+  std::uint64_t revolutions = 0;
+  AlignCounters align;
+  FeatureCounters features;
+  MapCounters map;  // of the primary map
+};
+
+class ObstaclePipeline {
+ public:
+  struct Created;
+  // `shape`: the range images this pipeline will be given.
+  static Created create(const ObstacleConfig& config, const velodyne::RangeImageShape& shape);
+
+  // Aligns, smooths, computes features and updates every map kept. `poses`
+  // and `terrain` may be null (fixed orientation; no terrain map).
+  void process(const velodyne::RangeImage& image, const PoseTrack* poses, const TerrainClassMap* terrain) noexcept;
+
+  // The stages on their own (process() runs them in order), for benchmarks.
+  void align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
+  void features() noexcept;
+  void update_maps(const TerrainClassMap* terrain) noexcept;
+
+  const ObstacleConfig& config() const noexcept { return config_; }
+  const RevolutionCloud& cloud() const noexcept { return cloud_; }
+  const ObstacleModels& models() const noexcept { return models_; }
+  // The map of the configured model.
+  const ObstacleMap& map() const noexcept { return *maps_[static_cast<std::size_t>(config_.model)]; }
+  // The map of another model; null unless compare_models is set (or it is the configured one).
+  const ObstacleMap* map(FusionModel m) const noexcept { return maps_[static_cast<std::size_t>(m)].get(); }
+  PipelineCounters counters() const noexcept;
+
+ private:
+  ObstaclePipeline(const ObstacleConfig& config, const velodyne::RangeImageShape& shape);
+
+  ObstacleConfig config_;
+  CloudAligner aligner_;
+  RevolutionCloud cloud_;
+  std::vector<double> scratch_;
+  ObstacleModels models_;
+  std::array<std::unique_ptr<ObstacleMap>, kFusionModels> maps_;
+  FeatureCounters feature_counters_;
+  std::uint64_t revolutions_ = 0;
+};
+
+struct ObstaclePipeline::Created {
+  std::unique_ptr<ObstaclePipeline> pipeline;
+  std::string error;
+};
+
+}  // namespace trailnav::perception

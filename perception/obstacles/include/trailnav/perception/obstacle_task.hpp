@@ -1,0 +1,77 @@
+// The obstacle thread: a thin scheduler task around ObstaclePipeline.
+//
+// Each run takes the newest revolution from the lidar driver's mailbox (if a
+// new one arrived), the newest terrain-class map from the terrain thread's
+// mailbox (if any), the pose samples queued by the pose thread, updates the
+// obstacle map and publishes a snapshot of it through its own mailbox. It
+// never allocates after construction and never waits.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "trailnav/perception/obstacle_pipeline.hpp"
+#include "trailnav/perception/pose_track.hpp"
+#include "trailnav/runtime/mailbox.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/spsc_queue.hpp"
+
+namespace trailnav::perception {
+
+// What planners and publishers get: the map as 0..100 / -1 (unknown).
+struct ObstacleSnapshot {
+  ObstacleSnapshot(std::int32_t cells_x, std::int32_t cells_y)
+      : size_x(cells_x), size_y(cells_y),
+        occupancy(static_cast<std::size_t>(cells_x) * static_cast<std::size_t>(cells_y), std::int8_t{-1}) {}
+
+  std::int32_t size_x;
+  std::int32_t size_y;
+  double resolution = 0.0;
+  double origin_x = 0.0;  // odometry frame, m: the lower-left corner of cell (0, 0)
+  double origin_y = 0.0;
+  double robot_x = 0.0;
+  double robot_y = 0.0;
+  double robot_yaw = 0.0;
+  std::int64_t time_ns = 0;           // end of the revolution
+  std::uint64_t revolution = 0;       // the range image's sequence number
+  std::uint64_t terrain_sequence = 0; // terrain map used (0: none)
+  std::vector<std::int8_t> occupancy; // row-major, row 0 = lowest y
+};
+
+inline constexpr std::size_t kPoseQueueCapacity = 1024;
+using PoseQueue = SpscQueue<Pose, kPoseQueueCapacity>;
+
+struct ObstacleTaskCounters {
+  std::uint64_t runs = 0;
+  std::uint64_t revolutions = 0;       // processed
+  std::uint64_t skipped = 0;           // revolutions replaced in the mailbox before this task saw them
+  std::uint64_t poses = 0;
+  std::uint64_t terrain_maps = 0;
+};
+
+class ObstacleTask final : public Task {
+ public:
+  // `poses` and `terrain` may be null.
+  ObstacleTask(ObstaclePipeline& pipeline, Mailbox<velodyne::RangeImage>& revolutions, PoseQueue* poses,
+               Mailbox<TerrainClassMap>* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history = 512);
+
+  void run(const TaskTick& tick) override;
+  const ObstacleTaskCounters& counters() const noexcept { return counters_; }
+
+ private:
+  ObstaclePipeline& pipeline_;
+  Mailbox<velodyne::RangeImage>& revolutions_;
+  PoseQueue* poses_;
+  Mailbox<TerrainClassMap>* terrain_;
+  Mailbox<ObstacleSnapshot>& out_;
+  PoseTrack track_;
+  const TerrainClassMap* terrain_map_ = nullptr;
+  std::uint64_t last_sequence_ = 0;
+  ObstacleTaskCounters counters_;
+};
+
+// Fills a snapshot from a map (no allocation when the sizes match).
+void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, ObstacleSnapshot& out) noexcept;
+
+}  // namespace trailnav::perception

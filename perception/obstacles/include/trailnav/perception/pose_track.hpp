@@ -1,0 +1,60 @@
+// A short history of the robot's pose in the local odometry frame, for
+// gravity alignment and motion compensation of a lidar revolution.
+//
+// The odometry frame is gravity-aligned: z points up, x and y are
+// horizontal, and the robot drifts in it only as its odometry does. The pose
+// thread pushes samples in time order; the obstacle thread asks for the pose
+// at any firing time and gets it interpolated (linear in position, along the
+// shorter arc in angles). The storage is a ring allocated at construction.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace trailnav::perception {
+
+struct Pose {
+  std::int64_t t_ns = 0;
+  double x = 0.0;  // m, odometry frame
+  double y = 0.0;
+  double z = 0.0;
+  double roll = 0.0;  // rad: R = Rz(yaw) * Ry(pitch) * Rx(roll), robot to odometry frame
+  double pitch = 0.0;
+  double yaw = 0.0;
+};
+
+enum class PoseLookup : std::uint8_t {
+  interpolated,  // between two samples
+  before_first,  // earlier than the oldest sample: the oldest one
+  after_last,    // later than the newest sample: the newest one
+  empty,         // no samples
+};
+
+class PoseTrack {
+ public:
+  explicit PoseTrack(std::size_t capacity);
+
+  // Appends a sample; false (and counted) when it is not later than the newest.
+  bool push(const Pose& pose) noexcept;
+  void clear() noexcept { count_ = 0; }
+
+  std::size_t size() const noexcept { return count_; }
+  std::size_t capacity() const noexcept { return samples_.size(); }
+  const Pose& newest() const noexcept { return get(count_ - 1); }  // precondition: size() > 0
+  const Pose& oldest() const noexcept { return get(0); }
+
+  PoseLookup at(std::int64_t t_ns, Pose& out) const noexcept;
+
+  std::uint64_t rejected() const noexcept { return rejected_; }
+
+ private:
+  const Pose& get(std::size_t i) const noexcept { return samples_[(head_ + i) % samples_.size()]; }
+
+  std::vector<Pose> samples_;
+  std::size_t head_ = 0;  // oldest
+  std::size_t count_ = 0;
+  std::uint64_t rejected_ = 0;
+};
+
+}  // namespace trailnav::perception

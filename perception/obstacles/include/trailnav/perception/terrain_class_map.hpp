@@ -1,0 +1,68 @@
+// The terrain classes and the terrain-class map as the obstacle fusion reads
+// it (thesis §7.2.3, §7.3).
+//
+// The map is a robot-centred rolling grid (default 300 x 300 cells of 0.2 m)
+// whose cells hold a distribution over the five classes. A cell nobody has
+// classified yet holds no distribution (`known` false); the fusion then uses
+// its configured class for unknown terrain. The terrain thread owns and
+// updates one map and hands copies to readers through a Mailbox; readers
+// never see a map being written.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string_view>
+
+#include "trailnav/runtime/rolling_grid.hpp"
+
+namespace trailnav::perception {
+
+inline constexpr int kTerrainClasses = 5;
+
+enum class TerrainClass : std::uint8_t { street = 0, dirt = 1, grass = 2, vegetation = 3, other = 4 };
+
+std::string_view terrain_class_name(TerrainClass c) noexcept;
+std::optional<TerrainClass> parse_terrain_class(std::string_view name) noexcept;
+
+struct TerrainCell {
+  std::array<float, kTerrainClasses> p{};  // P(t | f_1..f_n); sums to 1 when known
+  TerrainClass best = TerrainClass::other;  // argmax of p
+  bool known = false;
+
+  // Sets the distribution (normalised here) and its argmax.
+  void set(const std::array<float, kTerrainClasses>& distribution) noexcept;
+};
+
+struct TerrainMapShape {
+  std::int32_t size_x = 300;
+  std::int32_t size_y = 300;
+  double resolution = 0.2;
+};
+
+class TerrainClassMap {
+ public:
+  explicit TerrainClassMap(TerrainMapShape shape = {});
+
+  const TerrainMapShape& shape() const noexcept { return shape_; }
+  RollingGrid<TerrainCell>& grid() noexcept { return grid_; }
+  const RollingGrid<TerrainCell>& grid() const noexcept { return grid_; }
+
+  // The cell under a world point, or nullptr outside the map or not known.
+  const TerrainCell* known_cell(double x, double y) const noexcept {
+    const TerrainCell* c = grid_.find(x, y);
+    return c != nullptr && c->known ? c : nullptr;
+  }
+
+  // Copies another map of the same shape (no allocation).
+  void copy_from(const TerrainClassMap& other) noexcept;
+
+  std::uint64_t sequence = 0;   // snapshot number
+  std::int64_t time_ns = 0;     // when the snapshot was taken
+
+ private:
+  TerrainMapShape shape_;
+  RollingGrid<TerrainCell> grid_;
+};
+
+}  // namespace trailnav::perception

@@ -1,0 +1,150 @@
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "trailnav/perception/cloud.hpp"
+
+namespace trailnav::perception {
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// R = Rz(yaw) * Ry(pitch) * Rx(roll), row-major.
+void rotation(double roll, double pitch, double yaw, double r[9]) noexcept {
+  const double cr = std::cos(roll), sr = std::sin(roll);
+  const double cp = std::cos(pitch), sp = std::sin(pitch);
+  const double cy = std::cos(yaw), sy = std::sin(yaw);
+  r[0] = cy * cp;
+  r[1] = cy * sp * sr - sy * cr;
+  r[2] = cy * sp * cr + sy * sr;
+  r[3] = sy * cp;
+  r[4] = sy * sp * sr + cy * cr;
+  r[5] = sy * sp * cr - cy * sr;
+  r[6] = -sp;
+  r[7] = cp * sr;
+  r[8] = cp * cr;
+}
+
+void multiply(const double a[9], const double b[9], double out[9]) noexcept {
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      out[i * 3 + j] = a[i * 3] * b[j] + a[i * 3 + 1] * b[3 + j] + a[i * 3 + 2] * b[6 + j];
+    }
+  }
+}
+
+}  // namespace
+
+RevolutionCloud::RevolutionCloud(CloudShape shape) : shape_(shape) {
+  const auto n = static_cast<std::size_t>(shape.rings) * static_cast<std::size_t>(shape.max_columns);
+  x.assign(n, 0.0f);
+  y.assign(n, 0.0f);
+  z.assign(n, 0.0f);
+  range.assign(n, 0.0f);
+  intensity.assign(n, 0.0f);
+  step_height.assign(n, 0.0f);
+  sin_incline.assign(n, 0.0f);
+  state.assign(n, PointState::none);
+}
+
+void RevolutionCloud::reset(int columns) noexcept {
+  columns_ = std::clamp(columns, 0, shape_.max_columns);
+  for (int i = 0; i < shape_.rings; ++i) {
+    const std::size_t b = index(i, 0);
+    std::fill_n(state.begin() + static_cast<std::ptrdiff_t>(b), columns_, PointState::none);
+    std::fill_n(range.begin() + static_cast<std::ptrdiff_t>(b), columns_, 0.0f);
+  }
+}
+
+CloudAligner::CloudAligner(const MountParams& mount, const FeatureParams& features) noexcept
+    : fixed_roll_(mount.fixed_roll_deg * kDeg),
+      fixed_pitch_(mount.fixed_pitch_deg * kDeg),
+      min_range_(features.min_range),
+      max_range_(features.max_range) {
+  double r[9];
+  rotation(mount.rotation_deg[0] * kDeg, mount.rotation_deg[1] * kDeg, mount.rotation_deg[2] * kDeg, r);
+  for (int i = 0; i < 9; ++i) mount_r_[i] = static_cast<float>(r[i]);
+  for (int i = 0; i < 3; ++i) mount_t_[i] = static_cast<float>(mount.translation[static_cast<std::size_t>(i)]);
+}
+
+void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
+  const int columns = std::min(image.columns(), out.shape().max_columns);
+  const int rings = std::min(image.rings(), out.rings());
+  out.reset(columns);
+  out.sequence = image.sequence;
+  out.time_ns = image.end_ns;
+  out.full_turn = true;
+
+  double mount_r[9];
+  for (int i = 0; i < 9; ++i) mount_r[i] = static_cast<double>(mount_r_[i]);
+  const bool moving = poses != nullptr && poses->size() > 0;
+
+  // The reference: the sensor at the end of the revolution.
+  Pose end{};
+  if (moving) {
+    poses->at(image.end_ns, end);
+  } else {
+    end.roll = fixed_roll_;
+    end.pitch = fixed_pitch_;
+    ++counters_.no_pose;
+  }
+  double r_end[9];
+  rotation(end.roll, end.pitch, end.yaw, r_end);
+  const double mt[3] = {mount_t_[0], mount_t_[1], mount_t_[2]};
+  out.ref_x = end.x + r_end[0] * mt[0] + r_end[1] * mt[1] + r_end[2] * mt[2];
+  out.ref_y = end.y + r_end[3] * mt[0] + r_end[4] * mt[1] + r_end[5] * mt[2];
+  out.ref_z = end.z + r_end[6] * mt[0] + r_end[7] * mt[1] + r_end[8] * mt[2];
+  out.robot_x = end.x;
+  out.robot_y = end.y;
+  out.robot_yaw = end.yaw;
+
+  float rf[9];
+  float tf[3];
+  auto set_transform = [&](const Pose& p, const double r[9]) {
+    double rt[9];
+    multiply(r, mount_r, rt);
+    for (int i = 0; i < 9; ++i) rf[i] = static_cast<float>(rt[i]);
+    tf[0] = static_cast<float>(p.x + r[0] * mt[0] + r[1] * mt[1] + r[2] * mt[2] - out.ref_x);
+    tf[1] = static_cast<float>(p.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2] - out.ref_y);
+    tf[2] = static_cast<float>(p.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2] - out.ref_z);
+  };
+  set_transform(end, r_end);
+
+  const double span = static_cast<double>(image.end_ns - image.start_ns);
+  const float min_r = min_range_;
+  const float max_r = max_range_;
+  for (int c = 0; c < columns; ++c) {
+    if (image.column_state(c) != velodyne::ColumnState::received) continue;
+    if (moving) {
+      const auto t = image.start_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns);
+      Pose p{};
+      if (poses->at(t, p) == PoseLookup::interpolated) {
+        ++counters_.pose_interpolated;
+      } else {
+        ++counters_.pose_clamped;
+      }
+      double r[9];
+      rotation(p.roll, p.pitch, p.yaw, r);
+      set_transform(p, r);
+    }
+    for (int i = 0; i < rings; ++i) {
+      const velodyne::RangeCell& cell = image.at(0, i, c);
+      if (!cell.valid()) continue;
+      ++counters_.points;
+      if (cell.distance < min_r || cell.distance > max_r) {
+        ++counters_.out_of_range;
+        continue;
+      }
+      const std::size_t k = out.index(i, c);
+      out.x[k] = rf[0] * cell.x + rf[1] * cell.y + rf[2] * cell.z + tf[0];
+      out.y[k] = rf[3] * cell.x + rf[4] * cell.y + rf[5] * cell.z + tf[1];
+      out.z[k] = rf[6] * cell.x + rf[7] * cell.y + rf[8] * cell.z + tf[2];
+      out.range[k] = cell.distance;
+      out.intensity[k] = cell.intensity;
+      out.state[k] = PointState::valid;
+    }
+  }
+}
+
+}  // namespace trailnav::perception

@@ -1,0 +1,140 @@
+#include "trailnav/perception/obstacle_map.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace trailnav::perception {
+
+ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
+    : params_(params),
+      model_(model),
+      grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0, 0}),
+      occupied_logit_(logit(params.occupied)) {}
+
+void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept {
+  ++revolution_;
+  // The hold of PW maps, in revolutions at the rate measured so far.
+  if (revolution_ == 1) first_ns_ = cloud.time_ns;
+  last_ns_ = cloud.time_ns;
+  const double period_s = revolution_ > 1 ? static_cast<double>(last_ns_ - first_ns_) * 1e-9 / (revolution_ - 1) : 0.1;
+  hold_revolutions_ =
+      static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_hold_s) / std::max(period_s, 1e-3)));
+  counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
+  switch (model_) {
+    case FusionModel::pw: integrate_points<FusionModel::pw>(cloud, models, terrain); break;
+    case FusionModel::ps: integrate_points<FusionModel::ps>(cloud, models, terrain); break;
+    case FusionModel::pc: integrate_points<FusionModel::pc>(cloud, models, terrain); break;
+  }
+}
+
+template <FusionModel M>
+void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models,
+                                   const TerrainSource& terrain) noexcept {
+  const float lo = params_.logit_min;
+  const float hi = params_.logit_max;
+  const std::uint32_t now = revolution_;
+  const std::uint32_t hold = hold_revolutions_;
+  // Cell coordinates relative to the map's origin: a point's cell is
+  // (offset + x / resolution), so no per-point floor of a large number.
+  const double inv = 1.0 / grid_.resolution();
+  const CellIndex origin = grid_.origin();
+  const auto ox = static_cast<float>(cloud.ref_x * inv - origin.x);
+  const auto oy = static_cast<float>(cloud.ref_y * inv - origin.y);
+  const auto finv = static_cast<float>(inv);
+  const auto size = static_cast<float>(grid_.size_x());
+  const auto size_y = static_cast<float>(grid_.size_y());
+
+  const TerrainClassMap* tmap = terrain.fixed ? nullptr : terrain.map;
+  const int fixed_cls = static_cast<int>(terrain.fixed ? terrain.fixed_class : terrain.unknown_class);
+  TerrainCell unknown_cell;
+  unknown_cell.p[static_cast<std::size_t>(fixed_cls)] = 1.0f;
+  unknown_cell.best = static_cast<TerrainClass>(fixed_cls);
+  unknown_cell.known = true;
+  double t_inv = 1.0;
+  float tox = 0.0f, toy = 0.0f, tsize_x = 0.0f, tsize_y = 0.0f;
+  CellIndex torigin{};
+  if (tmap != nullptr) {
+    const auto& tg = tmap->grid();
+    t_inv = 1.0 / tg.resolution();
+    torigin = tg.origin();
+    tox = static_cast<float>(cloud.ref_x * t_inv - torigin.x);
+    toy = static_cast<float>(cloud.ref_y * t_inv - torigin.y);
+    tsize_x = static_cast<float>(tg.size_x());
+    tsize_y = static_cast<float>(tg.size_y());
+  }
+  const auto tfinv = static_cast<float>(t_inv);
+
+  std::uint64_t updates = 0, outside = 0, unknown = 0;
+  const int columns = cloud.columns();
+  for (int ring = 0; ring < cloud.rings(); ++ring) {
+    const std::size_t base = cloud.index(ring, 0);
+    for (int j = 0; j < columns; ++j) {
+      const std::size_t k = base + static_cast<std::size_t>(j);
+      const PointState st = cloud.state[k];
+      if (st != PointState::measured && st != PointState::flat) continue;
+      const float lx = ox + cloud.x[k] * finv;
+      const float ly = oy + cloud.y[k] * finv;
+      if (!(lx >= 0.0f && lx < size && ly >= 0.0f && ly < size_y)) {
+        ++outside;
+        continue;
+      }
+      ObstacleCell& cell = grid_.at({origin.x + static_cast<std::int32_t>(lx), origin.y + static_cast<std::int32_t>(ly)});
+      const TerrainCell* tc = &unknown_cell;
+      if (tmap != nullptr) {
+        const float tx = tox + cloud.x[k] * tfinv;
+        const float ty = toy + cloud.y[k] * tfinv;
+        const TerrainCell* c = nullptr;
+        if (tx >= 0.0f && tx < tsize_x && ty >= 0.0f && ty < tsize_y) {
+          c = &tmap->grid().at({torigin.x + static_cast<std::int32_t>(tx), torigin.y + static_cast<std::int32_t>(ty)});
+        }
+        if (c != nullptr && c->known) {
+          tc = c;
+        } else {
+          ++unknown;
+        }
+      }
+      const float h = cloud.step_height[k];
+      const float s = cloud.sin_incline[k];
+      cell.seen = now;
+      if constexpr (M == FusionModel::pw) {
+        if (models.dirac(static_cast<int>(tc->best), h, s)) {
+          cell.hit = now;
+          cell.logit = hi;
+        } else if (cell.hit == 0 || now - cell.hit > hold) {
+          cell.logit = lo;
+        }
+      } else if constexpr (M == FusionModel::ps) {
+        const float p = models.smooth(static_cast<int>(tc->best), h, s);
+        cell.logit = std::clamp(cell.logit + models.increment(p), lo, hi);
+      } else {
+        const int hi_index = ObstacleModels::step_index(h);
+        const int si_index = ObstacleModels::sin_index(s);
+        float p = 0.0f;
+        for (int t = 0; t < kTerrainClasses; ++t) {
+          const float w = tc->p[static_cast<std::size_t>(t)];
+          if (w > 0.0f) p += w * models.step_part(t, hi_index) * models.incline_part(t, si_index);
+        }
+        cell.logit = std::clamp(cell.logit + models.increment(p), lo, hi);
+      }
+      ++updates;
+    }
+  }
+  counters_.updates += updates;
+  counters_.outside_map += outside;
+  counters_.unknown_terrain += unknown;
+}
+
+void ObstacleMap::export_occupancy(std::span<std::int8_t> out) const noexcept {
+  const CellIndex o = grid_.origin();
+  const std::int32_t w = grid_.size_x();
+  for (std::int32_t y = 0; y < grid_.size_y(); ++y) {
+    for (std::int32_t x = 0; x < w; ++x) {
+      const ObstacleCell& c = grid_.at({o.x + x, o.y + y});
+      const auto i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+      if (i >= out.size()) return;
+      out[i] = c.seen == 0 ? std::int8_t{-1} : static_cast<std::int8_t>(std::lround(100.0f * logistic(c.logit)));
+    }
+  }
+}
+
+}  // namespace trailnav::perception

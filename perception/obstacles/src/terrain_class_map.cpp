@@ -1,0 +1,39 @@
+#include "trailnav/perception/terrain_class_map.hpp"
+
+namespace trailnav::perception {
+
+namespace {
+constexpr std::array<std::string_view, kTerrainClasses> kNames = {"street", "dirt", "grass", "vegetation", "other"};
+}
+
+std::string_view terrain_class_name(TerrainClass c) noexcept { return kNames[static_cast<std::size_t>(c)]; }
+
+std::optional<TerrainClass> parse_terrain_class(std::string_view name) noexcept {
+  for (std::size_t i = 0; i < kNames.size(); ++i) {
+    if (kNames[i] == name) return static_cast<TerrainClass>(i);
+  }
+  return std::nullopt;
+}
+
+void TerrainCell::set(const std::array<float, kTerrainClasses>& distribution) noexcept {
+  float sum = 0.0f;
+  for (float v : distribution) sum += v;
+  std::size_t best_index = 0;
+  for (std::size_t t = 0; t < p.size(); ++t) {
+    p[t] = sum > 0.0f ? distribution[t] / sum : 1.0f / static_cast<float>(kTerrainClasses);
+    if (p[t] > p[best_index]) best_index = t;
+  }
+  best = static_cast<TerrainClass>(best_index);
+  known = true;
+}
+
+TerrainClassMap::TerrainClassMap(TerrainMapShape shape)
+    : shape_(shape), grid_(shape.size_x, shape.size_y, shape.resolution) {}
+
+void TerrainClassMap::copy_from(const TerrainClassMap& other) noexcept {
+  grid_.assign_from(other.grid_);
+  sequence = other.sequence;
+  time_ns = other.time_ns;
+}
+
+}  // namespace trailnav::perception
