@@ -1,0 +1,312 @@
+// The obstacle map (Eq. 7.10 with clamping, unknown vs free, the PW hold,
+// PW/PS/PC with a terrain-class map), pose interpolation, gravity alignment
+// with motion compensation, configuration errors, and zero heap operations
+// per revolution after arm.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "test_data.hpp"
+#include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/obstacle_pipeline.hpp"
+#include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+namespace trailnav::perception {
+namespace {
+
+// One ring of flat ground at 2 m and a 0.5 m wall segment across rings.
+RevolutionCloud ground_and_wall() {
+  RevolutionCloud c(CloudShape{4, 720});
+  c.reset(720);
+  c.full_turn = true;
+  for (int i = 0; i < 4; ++i) {
+    const double r = 4.05 + 0.2 * i;
+    for (int j = 0; j < 720; ++j) {
+      const double a = 2.0 * std::numbers::pi * j / 720;
+      const std::size_t k = c.index(i, j);
+      const bool wall = j < 20;  // azimuth 0..10 degrees: a wall at r = 4.05 m rising with the rings
+      c.x[k] = static_cast<float>((wall ? 4.05 : r) * std::cos(a));
+      c.y[k] = static_cast<float>((wall ? 4.05 : r) * std::sin(a));
+      c.z[k] = wall ? 0.15f * static_cast<float>(i) : 0.0f;
+      c.range[k] = static_cast<float>(r);
+      c.state[k] = PointState::valid;
+    }
+  }
+  return c;
+}
+
+TEST(ObstacleMap, UnknownFreeAndOccupiedAreDistinct) {
+  RevolutionCloud c = ground_and_wall();
+  FeatureCounters fc;
+  FeatureParams fp;
+  fp.smoothing_half_window = 0;
+  compute_features(c, fp, fc);
+  MapParams mp;
+  ObstacleModels models(default_class_params(), mp);
+  TerrainSource street;
+  street.fixed = true;
+  street.fixed_class = TerrainClass::street;
+  for (FusionModel m : {FusionModel::pw, FusionModel::ps, FusionModel::pc}) {
+    ObstacleMap map(mp, m);
+    for (int rev = 0; rev < 5; ++rev) {
+      c.time_ns = rev * 100'000'000LL;
+      map.integrate(c, models, street);
+    }
+    const auto& g = map.grid();
+    // Never observed: unknown, NaN probability.
+    EXPECT_EQ(map.state(*g.find(10.0, 10.0)), CellState::unknown) << fusion_model_name(m);
+    EXPECT_TRUE(std::isnan(map.probability(*g.find(10.0, 10.0))));
+    // Ground of ring 2 (4.45 m) at azimuth 150 degrees: free.
+    const std::size_t ground = c.index(2, 300);
+    const ObstacleCell& free_cell = *g.find(static_cast<double>(c.x[ground]), static_cast<double>(c.y[ground]));
+    EXPECT_EQ(map.state(free_cell), CellState::free) << fusion_model_name(m);
+    // The wall, ring 2 at azimuth 5 degrees: occupied.
+    const std::size_t wall = c.index(2, 10);
+    const ObstacleCell& wall_cell = *g.find(static_cast<double>(c.x[wall]), static_cast<double>(c.y[wall]));
+    EXPECT_EQ(map.state(wall_cell), CellState::occupied) << fusion_model_name(m);
+    // Clamped log-odds.
+    EXPECT_LE(wall_cell.logit, mp.logit_max);
+    EXPECT_GE(free_cell.logit, mp.logit_min);
+  }
+}
+
+TEST(ObstacleMap, LogOddsFollowEquation710) {
+  // One point per revolution in one cell, p = P(o | g) from the smooth model.
+  RevolutionCloud c(CloudShape{2, 16});
+  c.reset(16);
+  const std::size_t k = c.index(0, 0);
+  c.x[k] = 1.05f;
+  c.y[k] = 1.05f;
+  c.step_height[k] = 0.06f;
+  c.sin_incline[k] = 0.5f;
+  c.state[k] = PointState::measured;
+  MapParams mp;
+  mp.logit_max = 20.0f;
+  ObstacleModels models(default_class_params(), mp);
+  TerrainSource street;
+  street.fixed = true;
+  ObstacleMap map(mp, FusionModel::ps);
+  const float p = std::clamp(models.smooth(0, 0.06f, 0.5f), mp.measurement_min, mp.measurement_max);
+  for (int n = 1; n <= 3; ++n) {
+    map.integrate(c, models, street);
+    EXPECT_NEAR(map.grid().find(1.05, 1.05)->logit, static_cast<float>(n) * std::log(p / (1.0f - p)), 2e-3f);
+  }
+}
+
+TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
+  RevolutionCloud c(CloudShape{2, 16});
+  c.reset(16);
+  const std::size_t k = c.index(0, 0);
+  c.x[k] = 2.05f;
+  c.y[k] = 0.05f;
+  c.state[k] = PointState::measured;
+  MapParams mp;
+  mp.dirac_hold_s = 0.5f;  // 5 revolutions at 10 Hz
+  ObstacleModels models(default_class_params(), mp);
+  TerrainSource street;
+  street.fixed = true;
+  ObstacleMap map(mp, FusionModel::pw);
+  auto rev = [&](int n, float step) {
+    c.time_ns = n * 100'000'000LL;
+    c.step_height[k] = step;
+    c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
+    map.integrate(c, models, street);
+    return map.state(*map.grid().find(2.05, 0.05));
+  };
+  EXPECT_EQ(rev(0, 0.0f), CellState::free);
+  EXPECT_EQ(rev(1, 0.2f), CellState::occupied);
+  for (int n = 2; n <= 6; ++n) EXPECT_EQ(rev(n, 0.0f), CellState::occupied) << n;  // held
+  EXPECT_EQ(rev(7, 0.0f), CellState::free);
+}
+
+TEST(ObstacleMap, TerrainClassesChangeTheVerdict) {
+  // A 0.3 m vertical step: an obstacle on street, not on grass (PW, PS);
+  // PC weighs the classes.
+  RevolutionCloud c(CloudShape{2, 16});
+  c.reset(16);
+  const std::size_t k = c.index(0, 0);
+  c.x[k] = 1.05f;
+  c.y[k] = 1.05f;
+  c.step_height[k] = 0.3f;
+  c.sin_incline[k] = 1.0f;
+  c.state[k] = PointState::measured;
+  MapParams mp;
+  ObstacleModels models(default_class_params(), mp);
+  TerrainClassMap terrain;
+  TerrainCell* cell = terrain.grid().find(1.05, 1.05);
+  ASSERT_NE(cell, nullptr);
+  TerrainSource adaptive;
+  adaptive.map = &terrain;
+  // One revolution, so no map saturates at the clamp.
+  auto verdict = [&](FusionModel m, std::array<float, kTerrainClasses> dist) {
+    cell->set(dist);
+    ObstacleMap map(mp, m);
+    map.integrate(c, models, adaptive);
+    return map.probability(*map.grid().find(1.05, 1.05));
+  };
+  EXPECT_GT(verdict(FusionModel::pw, {1, 0, 0, 0, 0}), 0.9f);
+  EXPECT_LT(verdict(FusionModel::pw, {0, 0, 1, 0, 0}), 0.1f);
+  const float street_ps = verdict(FusionModel::ps, {0.9f, 0, 0.1f, 0, 0});
+  const float grass_ps = verdict(FusionModel::ps, {0.1f, 0, 0.9f, 0, 0});
+  const float mixed_pc = verdict(FusionModel::pc, {0.5f, 0.5f, 0, 0, 0});
+  EXPECT_GT(street_ps, grass_ps);
+  // PC of an even street/dirt mix lies between the two pure classes' PS.
+  const float street_only = verdict(FusionModel::ps, {1, 0, 0, 0, 0});
+  const float dirt_only = verdict(FusionModel::ps, {0, 1, 0, 0, 0});
+  EXPECT_LT(mixed_pc, street_only);
+  EXPECT_GT(mixed_pc, dirt_only);
+  // An unknown terrain cell uses the configured class for unknown terrain.
+  cell->known = false;
+  ObstacleMap map(mp, FusionModel::pw);
+  adaptive.unknown_class = TerrainClass::grass;
+  map.integrate(c, models, adaptive);
+  EXPECT_EQ(map.state(*map.grid().find(1.05, 1.05)), CellState::free);
+  EXPECT_EQ(map.counters().unknown_terrain, 1u);
+}
+
+TEST(PoseTrack, InterpolatesAndWrapsYaw) {
+  PoseTrack t(4);
+  EXPECT_TRUE(t.push({0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.1}));
+  EXPECT_TRUE(t.push({100, 1.0, 2.0, 0.0, 0.1, 0.0, -3.1}));
+  EXPECT_FALSE(t.push({100, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(t.rejected(), 1u);
+  Pose p;
+  EXPECT_EQ(t.at(50, p), PoseLookup::interpolated);
+  EXPECT_NEAR(p.x, 0.5, 1e-12);
+  EXPECT_NEAR(p.y, 1.0, 1e-12);
+  EXPECT_NEAR(p.roll, 0.05, 1e-12);
+  EXPECT_NEAR(std::abs(p.yaw), std::numbers::pi, 1e-9);  // across +-pi, not through 0
+  EXPECT_EQ(t.at(-5, p), PoseLookup::before_first);
+  EXPECT_EQ(t.at(500, p), PoseLookup::after_last);
+  EXPECT_NEAR(p.x, 1.0, 1e-12);
+  for (int i = 2; i < 10; ++i) t.push({i * 100, 1.0 * i, 0, 0, 0, 0, 0});
+  EXPECT_EQ(t.size(), 4u);
+  EXPECT_EQ(t.oldest().t_ns, 600);
+}
+
+TEST(CloudAligner, LevelsThePitchAndCompensatesMotion) {
+  velodyne::RangeImage image({2, 100, 1});
+  image.reset(100);
+  image.mark_received(0, 100);
+  image.start_ns = 0;
+  image.end_ns = 100'000'000;
+  // The same world point (5, 0, 0) seen at the first and the last column
+  // while the robot drives 1 m along x in the revolution: from the sensor
+  // it is 5 m ahead, then 4 m ahead.
+  auto put = [&](int column, float x) {
+    velodyne::RangeCell& c = image.at(0, 0, column);
+    c.x = x;
+    c.distance = x;
+  };
+  put(0, 5.0f);
+  put(99, 4.0f);
+  image.finish();
+  MountParams mount;
+  FeatureParams fp;
+  fp.min_range = 0.5f;
+  CloudAligner aligner(mount, fp);
+  PoseTrack poses(8);
+  poses.push({-1'000'000, -0.01, 0, 0, 0, 0, 0});
+  poses.push({101'000'000, 1.01, 0, 0, 0, 0, 0});
+  RevolutionCloud cloud(CloudShape{2, 100});
+  aligner.align(image, &poses, cloud);
+  const std::size_t a = cloud.index(0, 0), b = cloud.index(0, 99);
+  ASSERT_EQ(cloud.state[a], PointState::valid);
+  EXPECT_NEAR(cloud.ref_x + static_cast<double>(cloud.x[a]), 5.005, 1e-3);
+  EXPECT_NEAR(cloud.ref_x + static_cast<double>(cloud.x[b]), 4.0 + 0.995, 1e-3);
+
+  // No pose stream: the fixed pitch levels the sensor. Nose down by 10
+  // degrees, a point 5 m along the sensor's x lies 5 sin(10 deg) below it.
+  mount.fixed_pitch_deg = 10.0;
+  CloudAligner fixed(mount, fp);
+  fixed.align(image, nullptr, cloud);
+  EXPECT_NEAR(static_cast<double>(cloud.z[a]), -5.0 * std::sin(10.0 * std::numbers::pi / 180.0), 1e-5);
+  EXPECT_EQ(fixed.counters().no_pose, 1u);
+}
+
+TEST(ObstacleConfig, DefaultsAreTheThesisAndErrorsNameTheLine) {
+  const ObstacleConfig d;
+  EXPECT_EQ(d.features.ring_neighbours, 5);
+  EXPECT_EQ(d.features.cross_neighbours, 2);
+  EXPECT_FLOAT_EQ(d.features.min_distance, 0.05f);
+  EXPECT_EQ(d.map.size, 600);
+  EXPECT_DOUBLE_EQ(d.map.resolution, 0.1);
+  EXPECT_FLOAT_EQ(d.classes[static_cast<int>(TerrainClass::grass)].max_step_height, 0.5f);
+  EXPECT_FLOAT_EQ(d.classes[static_cast<int>(TerrainClass::dirt)].alpha, 3.0f);
+
+  const ConfigNode ok = ConfigNode::parse(
+      "obstacles:\n  model: PW\n  terrain: grass\n  classes:\n    grass: {max_step_height: 0.4}\n", "robot.yaml");
+  const ObstacleConfig c = parse_obstacle_config(ok.map("obstacles"));
+  EXPECT_EQ(c.model, FusionModel::pw);
+  ASSERT_TRUE(c.fixed_class.has_value());
+  EXPECT_EQ(*c.fixed_class, TerrainClass::grass);
+  EXPECT_FLOAT_EQ(c.classes[static_cast<int>(TerrainClass::grass)].max_step_height, 0.4f);
+
+  const ConfigNode bad = ConfigNode::parse("obstacles:\n  map:\n    size: 600\n    resolutoin: 0.1\n", "robot.yaml");
+  try {
+    parse_obstacle_config(bad.map("obstacles"));
+    FAIL() << "a misspelt key was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.line(), 4);
+    EXPECT_NE(std::string(e.what()).find("resolutoin"), std::string::npos) << e.what();
+  }
+  const ConfigNode range = ConfigNode::parse("obstacles:\n  features: {max_range: 80}\n", "robot.yaml");
+  EXPECT_THROW(parse_obstacle_config(range.map("obstacles")), ConfigError);
+}
+
+TEST(ObstaclePipeline, NoHeapOperationsPerRevolutionAfterArm) {
+  ObstacleConfig config;
+  config.compare_models = true;
+  auto made = ObstaclePipeline::create(config, kitti_shape());
+  ASSERT_TRUE(made.pipeline) << made.error;
+  ObstaclePipeline& pipeline = *made.pipeline;
+  // Two real scans, a moving pose and a terrain map, loaded before arm.
+  std::vector<float> buffer;
+  std::array<velodyne::RangeImage, 2> images{velodyne::RangeImage(kitti_shape()), velodyne::RangeImage(kitti_shape())};
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, images[0]));
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, images[1]));
+  PoseTrack poses(256);
+  TerrainClassMap terrain;
+  for (std::int32_t y = 0; y < terrain.grid().size_y(); ++y) {
+    for (std::int32_t x = 0; x < terrain.grid().size_x(); ++x) {
+      terrain.grid().at({terrain.grid().origin().x + x, terrain.grid().origin().y + y}).set({0.6f, 0.2f, 0.1f, 0.05f, 0.05f});
+    }
+  }
+  Mailbox<velodyne::RangeImage> revolutions(kitti_shape());
+  Mailbox<ObstacleSnapshot> out(config.map.size, config.map.size);
+  PoseQueue pose_queue;
+  ObstacleTask task(pipeline, revolutions, &pose_queue, nullptr, out);
+
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("obstacles");
+  ASSERT_TRUE(alloc_guard::arm());
+  for (int n = 0; n < 20; ++n) {
+    velodyne::RangeImage& image = images[static_cast<std::size_t>(n % 2)];
+    image.start_ns = n * 100'000'000LL;
+    image.end_ns = image.start_ns + 100'000'000LL;
+    poses.push({image.end_ns, 0.3 * n, 0.05 * n, 0.0, 0.01, -0.02, 0.01 * n});
+    pipeline.process(image, &poses, &terrain);
+    // And through the task: pose queue, mailbox in, snapshot out.
+    pose_queue.try_push(Pose{image.end_ns, 0.3 * n, 0.0, 0.0, 0.0, 0.0, 0.0});
+    revolutions.write_slot() = image;
+    revolutions.write_slot().sequence = static_cast<std::uint64_t>(n + 1);
+    revolutions.publish();
+    task.run(TaskTick{});
+  }
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  EXPECT_EQ(task.counters().revolutions, 20u);
+  EXPECT_EQ(pipeline.counters().revolutions, 40u);  // 20 direct, 20 through the task
+  const ObstacleSnapshot* snap = out.try_read();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_EQ(snap->revolution, 20u);
+  std::size_t known = 0;
+  for (std::int8_t v : snap->occupancy) known += v >= 0;
+  EXPECT_GT(known, 10000u);
+}
+
+}  // namespace
+}  // namespace trailnav::perception
