@@ -199,6 +199,7 @@ TEST(CloudAligner, LevelsThePitchAndCompensatesMotion) {
     velodyne::RangeCell& c = image.at(0, 0, column);
     c.x = x;
     c.distance = x;
+    c.azimuth = static_cast<float>(image.column_azimuth(column));
   };
   put(0, 5.0f);
   put(99, 4.0f);

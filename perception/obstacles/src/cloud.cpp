@@ -112,6 +112,12 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   set_transform(end, r_end);
 
   const double span = static_cast<double>(image.end_ns - image.start_ns);
+  // Each point goes to the column of its own azimuth: lasers with a
+  // rotation correction (the HDL-64E's are several degrees) fire in one
+  // column but point into another, and the features need the rings'
+  // neighbours in a column to look the same way.
+  const double columns_per_rad = columns / (2.0 * std::numbers::pi);
+  const auto cut = static_cast<float>(image.cut_azimuth);
   const float min_r = min_range_;
   const float max_r = max_range_;
   for (int c = 0; c < columns; ++c) {
@@ -136,7 +142,14 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
         ++counters_.out_of_range;
         continue;
       }
-      const std::size_t k = out.index(i, c);
+      double rel = static_cast<double>(cell.azimuth - cut);
+      if (rel < 0.0) rel += 2.0 * std::numbers::pi;
+      const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
+      const std::size_t k = out.index(i, target);
+      if (out.state[k] != PointState::none) {
+        ++counters_.collisions;
+        continue;
+      }
       out.x[k] = rf[0] * cell.x + rf[1] * cell.y + rf[2] * cell.z + tf[0];
       out.y[k] = rf[3] * cell.x + rf[4] * cell.y + rf[5] * cell.z + tf[1];
       out.z[k] = rf[6] * cell.x + rf[7] * cell.y + rf[8] * cell.z + tf[2];

@@ -75,6 +75,7 @@ struct AlignCounters {
   std::uint64_t pose_interpolated = 0;  // columns with an interpolated pose
   std::uint64_t pose_clamped = 0;       // columns outside the pose history (nearest pose used)
   std::uint64_t no_pose = 0;            // revolutions aligned with the fixed orientation
+  std::uint64_t collisions = 0;         // points whose azimuth column a point of their ring already took: dropped
 };
 
 // Range image -> gravity-aligned cloud, compensating the sensor's motion
