@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "test_data.hpp"
 #include "trailnav/perception/kitti.hpp"
@@ -34,6 +35,19 @@ RevolutionCloud ground_and_wall() {
       c.state[k] = PointState::valid;
     }
   }
+  return c;
+}
+
+// One measured point at (x, y) with the given features, in a small cloud.
+RevolutionCloud one_point(float x, float y, float step, float sin_incline) {
+  RevolutionCloud c(CloudShape{2, 16});
+  c.reset(16);
+  const std::size_t k = c.index(0, 0);
+  c.x[k] = x;
+  c.y[k] = y;
+  c.step_height[k] = step;
+  c.sin_incline[k] = sin_incline;
+  c.state[k] = PointState::measured;
   return c;
 }
 
@@ -69,19 +83,29 @@ TEST(ObstacleMap, UnknownFreeAndOccupiedAreDistinct) {
     // Clamped log-odds.
     EXPECT_LE(wall_cell.logit, mp.logit_max);
     EXPECT_GE(free_cell.logit, mp.logit_min);
+    // The exported percentages: -1 unknown, else within 1 of 100 P(o).
+    std::vector<std::int8_t> occupancy(g.cell_count());
+    map.export_occupancy(occupancy);
+    std::size_t unknown = 0;
+    for (std::int32_t y = 0; y < g.size_y(); ++y) {
+      for (std::int32_t x = 0; x < g.size_x(); ++x) {
+        const ObstacleCell& cell = g.at({g.origin().x + x, g.origin().y + y});
+        const std::int8_t v = occupancy[static_cast<std::size_t>(y * g.size_x() + x)];
+        if (cell.seen == 0) {
+          ASSERT_EQ(v, -1);
+          ++unknown;
+        } else {
+          ASSERT_NEAR(v, 100.0f * map.probability(cell), 1.0f);
+        }
+      }
+    }
+    EXPECT_GT(unknown, g.cell_count() / 2);
   }
 }
 
 TEST(ObstacleMap, LogOddsFollowEquation710) {
   // One point per revolution in one cell, p = P(o | g) from the smooth model.
-  RevolutionCloud c(CloudShape{2, 16});
-  c.reset(16);
-  const std::size_t k = c.index(0, 0);
-  c.x[k] = 1.05f;
-  c.y[k] = 1.05f;
-  c.step_height[k] = 0.06f;
-  c.sin_incline[k] = 0.5f;
-  c.state[k] = PointState::measured;
+  RevolutionCloud c = one_point(1.05f, 1.05f, 0.06f, 0.5f);
   MapParams mp;
   mp.logit_max = 20.0f;
   ObstacleModels models(default_class_params(), mp);
@@ -96,12 +120,8 @@ TEST(ObstacleMap, LogOddsFollowEquation710) {
 }
 
 TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
-  RevolutionCloud c(CloudShape{2, 16});
-  c.reset(16);
+  RevolutionCloud c = one_point(2.05f, 0.05f, 0.0f, 0.0f);
   const std::size_t k = c.index(0, 0);
-  c.x[k] = 2.05f;
-  c.y[k] = 0.05f;
-  c.state[k] = PointState::measured;
   MapParams mp;
   mp.dirac_hold_s = 0.5f;  // 5 revolutions at 10 Hz
   ObstacleModels models(default_class_params(), mp);
@@ -124,14 +144,7 @@ TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
 TEST(ObstacleMap, TerrainClassesChangeTheVerdict) {
   // A 0.3 m vertical step: an obstacle on street, not on grass (PW, PS);
   // PC weighs the classes.
-  RevolutionCloud c(CloudShape{2, 16});
-  c.reset(16);
-  const std::size_t k = c.index(0, 0);
-  c.x[k] = 1.05f;
-  c.y[k] = 1.05f;
-  c.step_height[k] = 0.3f;
-  c.sin_incline[k] = 1.0f;
-  c.state[k] = PointState::measured;
+  const RevolutionCloud c = one_point(1.05f, 1.05f, 0.3f, 1.0f);
   MapParams mp;
   ObstacleModels models(default_class_params(), mp);
   TerrainClassMap terrain;

@@ -9,7 +9,12 @@ ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
     : params_(params),
       model_(model),
       grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0, 0}),
-      occupied_logit_(logit(params.occupied)) {}
+      occupied_logit_(logit(params.occupied)) {
+  for (int i = 0; i <= kPercentSteps; ++i) {
+    const float l = params.logit_min + (params.logit_max - params.logit_min) * static_cast<float>(i) / kPercentSteps;
+    percent_[static_cast<std::size_t>(i)] = static_cast<std::int8_t>(std::lround(100.0f * logistic(l)));
+  }
+}
 
 void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept {
   ++revolution_;
@@ -127,12 +132,15 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
 void ObstacleMap::export_occupancy(std::span<std::int8_t> out) const noexcept {
   const CellIndex o = grid_.origin();
   const std::int32_t w = grid_.size_x();
+  const float lo = params_.logit_min;
+  const float scale = kPercentSteps / std::max(params_.logit_max - params_.logit_min, 1e-6f);
   for (std::int32_t y = 0; y < grid_.size_y(); ++y) {
     for (std::int32_t x = 0; x < w; ++x) {
       const ObstacleCell& c = grid_.at({o.x + x, o.y + y});
       const auto i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
       if (i >= out.size()) return;
-      out[i] = c.seen == 0 ? std::int8_t{-1} : static_cast<std::int8_t>(std::lround(100.0f * logistic(c.logit)));
+      const int step = std::clamp(static_cast<int>((c.logit - lo) * scale + 0.5f), 0, kPercentSteps);
+      out[i] = c.seen == 0 ? std::int8_t{-1} : percent_[static_cast<std::size_t>(step)];
     }
   }
 }

@@ -9,6 +9,7 @@
 // free once a later revolution sees it without one.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -67,15 +68,20 @@ class ObstacleMap {
   const MapCounters& counters() const noexcept { return counters_; }
 
   // Row-major copy from the map's origin (row 0 = lowest y): 0..100 percent
-  // occupancy, -1 unknown (the ROS OccupancyGrid convention).
+  // occupancy, -1 unknown (the ROS OccupancyGrid convention). The percentages
+  // come from a table over the clamped log-odds (within 1 of the exact value),
+  // so a snapshot costs no exponentials.
   void export_occupancy(std::span<std::int8_t> out) const noexcept;
 
  private:
   template <FusionModel M>
   void integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept;
 
+  static constexpr int kPercentSteps = 1024;
+
   MapParams params_;
   FusionModel model_;
+  std::array<std::int8_t, kPercentSteps + 1> percent_{};
   RollingGrid<ObstacleCell> grid_;
   float occupied_logit_;
   std::uint32_t revolution_ = 0;
