@@ -57,14 +57,13 @@ class TruthCells {
     cls_.assign(n, 255);
     near_.assign(n, 0);
     std::vector<std::array<std::uint16_t, perception::kTerrainClasses>> counts(n);
-    static constexpr int kRank[] = {0, 3, 2, 1};
     for (int j = 0; j < o.height; ++j) {
       for (int i = 0; i < o.width; ++i) {
         const double px = o.x0 + i * rr, py = o.y0 + j * rr;
         const std::size_t k = index(static_cast<std::int32_t>(std::floor(px / res)), static_cast<std::int32_t>(std::floor(py / res)));
         const std::size_t src = static_cast<std::size_t>(j) * static_cast<std::size_t>(o.width) + static_cast<std::size_t>(i);
         const std::uint8_t c = std::min<std::uint8_t>(o.data[src], 3);
-        if (kRank[c] > kRank[code_[k]]) code_[k] = c;
+        if (sim::truth_rank(c) > sim::truth_rank(code_[k])) code_[k] = c;
         const std::uint8_t t = truth.terrain.data[src];
         if (t < perception::kTerrainClasses) ++counts[k][t];
       }
@@ -536,9 +535,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
         vel::PositionPacket pp;
         if (vel::decode_position_packet(e->payload, pp) == vel::PositionError::none) clock.on_position_packet(pp);
       } else if (e->stream == lidar_stream && e->payload.size() == vel::kDataPacketSize) {
-        std::uint32_t us = 0;
-        for (int b = 3; b >= 0; --b) us = (us << 8) | e->payload[vel::kTimestampOffset + static_cast<std::size_t>(b)];
-        const std::int64_t t = clock.resolve(us, e->time_ns);
+        const std::int64_t t = clock.resolve(vel::read_u32(e->payload.data() + vel::kTimestampOffset), e->time_ns);
         if (assembler->add_packet(e->payload, t, sink) != vel::PacketError::none) ++report.malformed_packets;
       } else if (e->stream == lidar_stream) {
         ++report.malformed_packets;

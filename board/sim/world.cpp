@@ -379,9 +379,7 @@ void World::build_blocks() {
 void World::build_truth() {
   truth_.assign(h_.size(), static_cast<std::uint8_t>(ObstacleTruth::free));
   auto mark = [&](std::size_t idx, ObstacleTruth code) {
-    // Solid obstacles win over negative ones, which win over vegetation.
-    static constexpr int rank[] = {0, 3, 2, 1};
-    if (rank[static_cast<int>(code)] > rank[truth_[idx]]) truth_[idx] = static_cast<std::uint8_t>(code);
+    if (truth_rank(static_cast<std::uint8_t>(code)) > truth_rank(truth_[idx])) truth_[idx] = static_cast<std::uint8_t>(code);
   };
   for (int j = 0; j < ny_; ++j) {
     for (int i = 0; i < nx_; ++i) {

@@ -33,6 +33,13 @@ struct Hit {
 // Codes of the obstacle truth raster.
 enum class ObstacleTruth : std::uint8_t { free = 0, obstacle = 1, negative = 2, vegetation = 3 };
 
+// Where several codes meet in one cell, the higher rank wins: solid
+// obstacles over negative ones over vegetation over free.
+constexpr int truth_rank(std::uint8_t code) noexcept {
+  constexpr int kRank[] = {0, 3, 2, 1};
+  return code < 4 ? kRank[code] : 0;
+}
+
 class World {
  public:
   static std::unique_ptr<World> build(const Scenario& scenario, const RoadNetwork& roads, std::uint64_t seed);

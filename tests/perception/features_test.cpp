@@ -159,8 +159,7 @@ TEST(Smoothing, AveragesNoiseAndKeepsEdges) {
   }
   FeatureParams p;
   p.smoothing_half_window = 5;
-  std::vector<double> scratch(3 * (kColumns + 1));
-  smooth_rings(c, p, scratch);
+  smooth_rings(c, p);
   for (int j = 10; j < 170; ++j) EXPECT_NEAR(c.z[c.index(0, j)], 0.0f, 0.02f / 11 + 1e-6f) << j;
   for (int j = 190; j < 350; ++j) EXPECT_NEAR(c.z[c.index(0, j)], 0.5f, 0.02f / 11 + 1e-6f) << j;
   // The points next to the edge average only their own side.

@@ -268,6 +268,19 @@ TEST(ObstacleConfig, DefaultsAreTheThesisAndErrorsNameTheLine) {
   }
   const ConfigNode range = ConfigNode::parse("obstacles:\n  features: {max_range: 80}\n", "robot.yaml");
   EXPECT_THROW(parse_obstacle_config(range.map("obstacles")), ConfigError);
+  const ConfigNode mount = ConfigNode::parse("obstacles:\n  mount:\n    translation: [0.2, 1.1]\n", "robot.yaml");
+  try {
+    parse_obstacle_config(mount.map("obstacles"));
+    FAIL() << "a two-number translation was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.line(), 3);
+    EXPECT_NE(std::string(e.what()).find("three numbers"), std::string::npos) << e.what();
+  }
+  const ConfigNode mount_ok =
+      ConfigNode::parse("obstacles:\n  mount: {translation: [0.2, 0, 1.1], rotation: [0, 2, 0]}\n", "robot.yaml");
+  const ObstacleConfig m = parse_obstacle_config(mount_ok.map("obstacles"));
+  EXPECT_DOUBLE_EQ(m.mount.translation[2], 1.1);
+  EXPECT_DOUBLE_EQ(m.mount.rotation_deg[1], 2.0);
 }
 
 TEST(ObstaclePipeline, NoHeapOperationsPerRevolutionAfterArm) {

@@ -46,6 +46,7 @@ RevolutionCloud::RevolutionCloud(CloudShape shape) : shape_(shape) {
   step_height.assign(n, 0.0f);
   sin_incline.assign(n, 0.0f);
   state.assign(n, PointState::none);
+  ring_sums.assign(3 * (static_cast<std::size_t>(shape.max_columns) + 1), 0.0);
 }
 
 void RevolutionCloud::reset(int columns) noexcept {

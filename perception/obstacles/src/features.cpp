@@ -6,13 +6,12 @@
 
 namespace trailnav::perception {
 
-void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, std::vector<double>& scratch) noexcept {
+void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept {
   const int half = params.smoothing_half_window;
   if (half <= 0) return;
   const int columns = cloud.columns();
   const auto stride = static_cast<std::size_t>(columns) + 1;
-  if (scratch.size() < 3 * stride) return;  // the caller sized it at start-up
-  double* sx = scratch.data();
+  double* sx = cloud.ring_sums.data();
   double* sy = sx + stride;
   double* sz = sy + stride;
   const float jump = params.smoothing_max_jump;

@@ -46,6 +46,15 @@ TerrainClass class_choice(const ConfigNode& n, std::string_view key, TerrainClas
   return *parse_terrain_class(name);
 }
 
+// An optional list of exactly three numbers, e.g. [x, y, z].
+void triple(const ConfigNode& n, std::string_view key, double lo, double hi, const char* meaning,
+            std::array<double, 3>& out) {
+  if (!n.has(key)) return;
+  const auto v = n.number_list(key, lo, hi);
+  if (v.size() != 3) n.fail(key, std::string("needs three numbers ") + meaning);
+  out = {v[0], v[1], v[2]};
+}
+
 }  // namespace
 
 ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
@@ -84,16 +93,8 @@ ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
   }
   if (auto m = node.optional_map("mount")) {
     MountParams& p = c.mount;
-    const auto t = m->has("translation") ? m->number_list("translation", -10.0, 10.0) : std::vector<double>{};
-    if (!t.empty()) {
-      if (t.size() != 3) m->fail("translation", "needs three numbers [x, y, z] in metres");
-      p.translation = {t[0], t[1], t[2]};
-    }
-    const auto r = m->has("rotation") ? m->number_list("rotation", -180.0, 180.0) : std::vector<double>{};
-    if (!r.empty()) {
-      if (r.size() != 3) m->fail("rotation", "needs three angles [roll, pitch, yaw] in degrees");
-      p.rotation_deg = {r[0], r[1], r[2]};
-    }
+    triple(*m, "translation", -10.0, 10.0, "[x, y, z] in metres", p.translation);
+    triple(*m, "rotation", -180.0, 180.0, "[roll, pitch, yaw] in degrees", p.rotation_deg);
     p.fixed_roll_deg = m->number("fixed_roll", -45.0, 45.0, p.fixed_roll_deg);
     p.fixed_pitch_deg = m->number("fixed_pitch", -45.0, 45.0, p.fixed_pitch_deg);
     m->reject_unknown_keys();

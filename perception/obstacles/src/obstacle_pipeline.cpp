@@ -19,7 +19,6 @@ ObstaclePipeline::ObstaclePipeline(const ObstacleConfig& config, const velodyne:
     : config_(config),
       aligner_(config.mount, config.features),
       cloud_(CloudShape{shape.rings, shape.max_columns}),
-      scratch_(3 * (static_cast<std::size_t>(shape.max_columns) + 1)),
       models_(config.classes, config.map) {
   for (int m = 0; m < kFusionModels; ++m) {
     const auto model = static_cast<FusionModel>(m);
@@ -34,7 +33,7 @@ void ObstaclePipeline::align(const velodyne::RangeImage& image, const PoseTrack*
 }
 
 void ObstaclePipeline::features() noexcept {
-  smooth_rings(cloud_, config_.features, scratch_);
+  smooth_rings(cloud_, config_.features);
   compute_features(cloud_, config_.features, feature_counters_);
 }
 

@@ -52,6 +52,7 @@ class RevolutionCloud {
   std::vector<float> step_height;    // m (Eq. 7.5)
   std::vector<float> sin_incline;    // sin of the incline (Eq. 7.6)
   std::vector<PointState> state;
+  std::vector<double> ring_sums;     // smooth_rings(): prefix sums of one ring, 3 * (max_columns + 1)
 
   // The revolution.
   double ref_x = 0.0;  // odometry-frame position of the reference point
@@ -110,8 +111,7 @@ struct FeatureCounters {
 // 2 * half_window + 1 points, constant cost per point. A window never
 // reaches across a missing point or a range jump larger than
 // `smoothing_max_jump` (an object's edge), so edges stay sharp.
-// `scratch` holds 3 * (max_columns + 1) doubles, allocated by the caller.
-void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, std::vector<double>& scratch) noexcept;
+void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept;
 
 // stepHeight (Eq. 7.5) and sin(incline) (Eq. 7.6) for every valid point from
 // the first neighbour farther than x in each of the four directions (Eqs.

@@ -52,7 +52,6 @@ class ObstaclePipeline {
   ObstacleConfig config_;
   CloudAligner aligner_;
   RevolutionCloud cloud_;
-  std::vector<double> scratch_;
   ObstacleModels models_;
   std::array<std::unique_ptr<ObstacleMap>, kFusionModels> maps_;
   FeatureCounters feature_counters_;
