@@ -22,9 +22,11 @@ struct ObstaclesCliOptions {
 
 void print_score(const char* model, const eval::MapScore& s) {
   const auto all = s.all_free();
-  std::printf("  %s: obstacles %llu/%llu cells found (recall %.4f); ditches %.4f (%llu); bushes %.4f (%llu)\n", model,
-              static_cast<unsigned long long>(s.obstacles.found), static_cast<unsigned long long>(s.obstacles.cells),
-              s.obstacles.recall(), s.negative.recall(), static_cast<unsigned long long>(s.negative.cells),
+  std::printf("  %s: obstacle outlines %llu/%llu cells found (recall %.4f), whole footprints %.4f (%llu); ditches %.4f (%llu); "
+              "bushes %.4f (%llu)\n",
+              model, static_cast<unsigned long long>(s.outlines.found), static_cast<unsigned long long>(s.outlines.cells),
+              s.outlines.recall(), s.obstacles.recall(), static_cast<unsigned long long>(s.obstacles.cells),
+              s.negative.recall(), static_cast<unsigned long long>(s.negative.cells),
               s.vegetation.recall(), static_cast<unsigned long long>(s.vegetation.cells));
   std::printf("      fake obstacles: all %.4f (%llu/%llu)", all.rate(), static_cast<unsigned long long>(all.fake),
               static_cast<unsigned long long>(all.free));

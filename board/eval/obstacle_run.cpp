@@ -56,6 +56,8 @@ class TruthCells {
     code_.assign(n, 0);
     cls_.assign(n, 255);
     near_.assign(n, 0);
+    outline_.assign(n, 0);
+    sighted_.assign(truth.sightings.empty() ? 0 : n, 0);
     std::vector<std::array<std::uint16_t, perception::kTerrainClasses>> counts(n);
     for (int j = 0; j < o.height; ++j) {
       for (int i = 0; i < o.width; ++i) {
@@ -64,6 +66,10 @@ class TruthCells {
         const std::size_t src = static_cast<std::size_t>(j) * static_cast<std::size_t>(o.width) + static_cast<std::size_t>(i);
         const std::uint8_t c = std::min<std::uint8_t>(o.data[src], 3);
         if (sim::truth_rank(c) > sim::truth_rank(code_[k])) code_[k] = c;
+        if (!truth.sightings.empty() && o.data[src] == 1 && truth.sightings[src] != 0) {
+          std::uint32_t& first = sighted_[k];
+          first = first == 0 ? truth.sightings[src] : std::min(first, truth.sightings[src]);
+        }
         const std::uint8_t t = truth.terrain.data[src];
         if (t < perception::kTerrainClasses) ++counts[k][t];
       }
@@ -72,6 +78,19 @@ class TruthCells {
       const auto& c = counts[k];
       const auto best = std::max_element(c.begin(), c.end());
       if (*best > 0) cls_[k] = static_cast<std::uint8_t>(best - c.begin());
+    }
+    // A solid obstacle's outline: its cells with a 4-neighbour that is not
+    // part of a solid obstacle. Only there does the height step; a flat top
+    // is as flat as a road to any geometric detector.
+    auto solid = [&](std::int32_t x, std::int32_t y) {
+      return x >= 0 && y >= 0 && x < nx_ && y < ny_ && code_[local(x, y)] == 1;
+    };
+    for (std::int32_t y = 0; y < ny_; ++y) {
+      for (std::int32_t x = 0; x < nx_; ++x) {
+        if (solid(x, y) && !(solid(x - 1, y) && solid(x + 1, y) && solid(x, y - 1) && solid(x, y + 1))) {
+          outline_[local(x, y)] = 1;
+        }
+      }
     }
     for (std::int32_t y = 0; y < ny_; ++y) {
       for (std::int32_t x = 0; x < nx_; ++x) {
@@ -92,6 +111,12 @@ class TruthCells {
   std::uint8_t code(std::size_t k) const noexcept { return code_[k]; }
   std::uint8_t cls(std::size_t k) const noexcept { return cls_[k]; }
   bool near(std::size_t k) const noexcept { return near_[k] != 0; }
+  bool outline(std::size_t k) const noexcept { return outline_[k] != 0; }
+  bool has_sightings() const noexcept { return !sighted_.empty(); }
+  // Has a lidar return come from the solid obstacle in this cell by `ms` after the start?
+  bool sighted(std::size_t k, std::int64_t ms) const noexcept {
+    return sighted_[k] != 0 && static_cast<std::int64_t>(sighted_[k]) <= ms + 1;
+  }
   double resolution() const noexcept { return res_; }
 
  private:
@@ -100,7 +125,8 @@ class TruthCells {
   }
   double res_;
   std::int32_t ix0_ = 0, iy0_ = 0, nx_ = 0, ny_ = 0;
-  std::vector<std::uint8_t> code_, cls_, near_;
+  std::vector<std::uint8_t> code_, cls_, near_, outline_;
+  std::vector<std::uint32_t> sighted_;
 };
 
 struct NamedShape {
@@ -161,6 +187,11 @@ class Scorer {
           if (map.state(cell) == perception::CellState::occupied) ++cc.fake;
           continue;
         }
+        // A solid obstacle counts once the lidar has seen it (simulated
+        // recordings say when), not when grass around it was seen.
+        if (code == 1 && cells_.has_sightings() && !cells_.sighted(k, (t_ns - truth_.scenario.start_utc_ns) / 1'000'000)) {
+          continue;
+        }
         FoundCells& f = code == 1 ? s.obstacles : code == 2 ? s.negative : s.vegetation;
         ++f.cells;
         bool found = false;
@@ -168,6 +199,10 @@ class Scorer {
           for (std::int32_t tx = -tolerance_; tx <= tolerance_ && !found; ++tx) found = occupied(x + tx, y + ty);
         }
         if (found) ++f.found;
+        if (code == 1 && cells_.outline(k)) {
+          ++s.outlines.cells;
+          if (found) ++s.outlines.found;
+        }
       }
     }
     // Fake obstacles on the robot's next 4 m of true path, within 0.3 m of it.
@@ -473,6 +508,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   auto on_image = [&](const vel::RangeImage& image) {
     if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) return;
     ++report.revolutions;
+    if (options.on_revolution) options.on_revolution(image);
     auto t0 = SteadyClock::now();
     pipeline.align(image, poses ? &*poses : nullptr);
     align_ms += ms_since(t0);

@@ -34,6 +34,8 @@ struct ObstacleRunOptions {
   int tolerance_cells = 1;     // an obstacle cell counts as found when an occupied cell is this close
   int max_revolutions = 0;     // 0: all
   std::function<void(double fraction)> progress;
+  // Called with every revolution before it is processed (benchmarks keep copies).
+  std::function<void(const velodyne::RangeImage&)> on_revolution;
 };
 
 // Scores of one map against the truth, summed over the scored snapshots.
@@ -53,7 +55,8 @@ struct NamedObstacle {
   std::uint64_t detected = 0;   // of them, with an occupied cell on it
 };
 struct MapScore {
-  FoundCells obstacles;   // solid obstacles >= 10 cm
+  FoundCells obstacles;   // solid obstacles >= 10 cm: every observed cell of their footprint
+  FoundCells outlines;    // of them, the cells on the footprint's outline, where the height steps
   FoundCells negative;    // ditches
   FoundCells vegetation;  // bushes, undergrowth
   std::array<ClassCells, perception::kTerrainClasses> classes;

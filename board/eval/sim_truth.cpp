@@ -72,6 +72,22 @@ SimTruthResult load_sim_truth(const std::string& dir) {
   if (Status st = load_raster((fs::path(dir) / "obstacles.png").string(), width, height, t.obstacles); !st) {
     return {std::nullopt, st.message()};
   }
+  const fs::path sight = fs::path(dir) / "sightings.u32";
+  if (fs::exists(sight)) {
+    const auto n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+    std::ifstream s(sight, std::ios::binary);
+    std::vector<char> bytes(n * 4);
+    if (!s.read(bytes.data(), static_cast<std::streamsize>(bytes.size())) || s.peek() != EOF) {
+      return {std::nullopt, sight.string() + ": not " + std::to_string(n) + " uint32 values (" + std::to_string(width) +
+                                " x " + std::to_string(height) + " pixels)"};
+    }
+    t.sightings.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      std::uint32_t v = 0;
+      for (std::size_t b = 0; b < 4; ++b) v |= static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[i * 4 + b])) << (8 * b);
+      t.sightings[i] = v;
+    }
+  }
   const std::string traj = (fs::path(dir) / "trajectory.csv").string();
   std::ifstream in(traj);
   if (!in) return {std::nullopt, traj + ": cannot open"};

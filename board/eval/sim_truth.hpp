@@ -38,6 +38,10 @@ struct SimTruth {
   sim::Scenario scenario;
   TruthRaster terrain;    // sim::TerrainClass codes
   TruthRaster obstacles;  // sim::ObstacleTruth codes
+  // Per obstacle pixel (same layout): ms after the scenario's start + 1 of the
+  // first lidar return from a solid obstacle there; 0 never. Empty for
+  // recordings made before the simulator wrote sightings.u32.
+  std::vector<std::uint32_t> sightings;
   std::vector<TruthPose> trajectory;
 };
 

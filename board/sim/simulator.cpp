@@ -82,7 +82,12 @@ class LidarSim {
       intensity_corrected_.push_back(c.focal_slope != 0.0 || c.min_intensity != 0 || c.max_intensity != 255);
     }
     mount_ = s.robot.lidar_mount;
+    sighted_.assign(static_cast<std::size_t>(world.width()) * static_cast<std::size_t>(world.height()), 0);
   }
+
+  // Per truth pixel: milliseconds after the start (plus one) of the first
+  // return that came from a solid obstacle in it; 0: never seen.
+  const std::vector<std::uint32_t>& sightings() const { return sighted_; }
 
   double packet_start_us(std::uint64_t i) const { return static_cast<double>(i) * packet_period_us_; }
   double packet_period_us() const { return packet_period_us_; }
@@ -162,6 +167,15 @@ class LidarSim {
           const double raw = std::nearbyint(range / step);
           if (raw < 1.0 || raw > 65535.0) continue;
           const auto r16 = static_cast<std::uint16_t>(raw);
+          if (hit.kind == HitKind::object || hit.kind == HitKind::ground) {
+            const Vec3 at = sensor + R * (os + ds * hit.distance);
+            const std::ptrdiff_t px = world_.pixel(at.x(), at.y());
+            if (px >= 0 && world_.obstacle_raster()[static_cast<std::size_t>(px)] ==
+                               static_cast<std::uint8_t>(ObstacleTruth::obstacle)) {
+              std::uint32_t& first = sighted_[static_cast<std::size_t>(px)];
+              if (first == 0) first = static_cast<std::uint32_t>(tg_us / 1000.0) + 1;
+            }
+          }
           double intensity = hit.reflectivity * (0.55 + 0.45 * hit.cos_incidence) + 2.0 * gaussian(hash(key, 0xD2));
           if (intensity_corrected_[lz]) {
             const vel::Point p = d_.point_of(laser, a, r16, 128);
@@ -198,6 +212,7 @@ class LidarSim {
   }
 
   std::uint64_t rays() const { return rays_; }
+  std::vector<std::uint32_t> take_sightings() { return std::move(sighted_); }
   std::uint64_t returns() const { return returns_; }
 
  private:
@@ -213,6 +228,7 @@ class LidarSim {
   double packet_period_us_ = 0.0;
   double rate_ = 0.0;
   double phase0_ = 0.0;
+  std::vector<std::uint32_t> sighted_;
   Vec3 mount_{0, 0, 0};
   std::vector<Vec3> dir0_;
   std::vector<Vec3> origin0_;
@@ -460,6 +476,7 @@ SimReport run_simulation(const SimOptions& o) {
   }
 
   // Lidar data and position packets, in the order they leave the sensor.
+  std::vector<std::uint32_t> sightings;
   {
     const auto t_lidar = Clock::now();
     LidarSim lidar(decoder, s, *world, traj, o.seed);
@@ -485,6 +502,7 @@ SimReport run_simulation(const SimOptions& o) {
       if (o.progress && i % 256 == 0) o.progress(lidar.packet_start_us(i) * 1e-6, report.sim_seconds);
     }
     report.rays = lidar.rays();
+    sightings = lidar.take_sightings();
     report.returns = lidar.returns();
     report.lidar_seconds = seconds_since(t_lidar);
     if (o.progress) o.progress(report.sim_seconds, report.sim_seconds);
@@ -493,7 +511,7 @@ SimReport run_simulation(const SimOptions& o) {
   if (!st) return fail(st.message());
 
   if (o.truth) {
-    if (Status t = write_truth(o.out + "/truth", s, o.seed, *world, roads, traj, geo); !t) return fail(t.message());
+    if (Status t = write_truth(o.out + "/truth", s, o.seed, *world, roads, traj, geo, sightings); !t) return fail(t.message());
     if (Status t = write_osm(o.out + "/world.osm", roads, s, geo); !t) return fail(t.message());
   }
   report.total_seconds = seconds_since(t_start);

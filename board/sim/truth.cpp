@@ -47,7 +47,8 @@ Status write_raster(const std::string& path, const World& w, const std::vector<s
 }  // namespace
 
 Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed, const World& world,
-                   const RoadNetwork& roads, const Trajectory& traj, const GeoFrame& geo) {
+                   const RoadNetwork& roads, const Trajectory& traj, const GeoFrame& geo,
+                   const std::vector<std::uint32_t>& sightings) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return Status::error("cannot create " + dir + ": " + ec.message());
@@ -110,6 +111,20 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
   // Rasters.
   if (Status st = write_raster(dir + "/terrain.png", world, world.terrain_raster()); !st) return st;
   if (Status st = write_raster(dir + "/obstacles.png", world, world.obstacle_raster()); !st) return st;
+  const bool sighted = sightings.size() == world.obstacle_raster().size();
+  if (sighted) {
+    // Little-endian uint32 per pixel, row 0 at the south edge.
+    std::vector<std::uint8_t> bytes(sightings.size() * 4);
+    for (std::size_t i = 0; i < sightings.size(); ++i) {
+      for (std::size_t b = 0; b < 4; ++b) bytes[i * 4 + b] = static_cast<std::uint8_t>(sightings[i] >> (8 * b));
+    }
+    f = std::fopen((dir + "/sightings.u32").c_str(), "wb");
+    if (!f || std::fwrite(bytes.data(), 1, bytes.size(), f) != bytes.size()) {
+      if (f) std::fclose(f);
+      return Status::error("cannot write " + dir + "/sightings.u32");
+    }
+    std::fclose(f);
+  }
   f = std::fopen((dir + "/rasters.yaml").c_str(), "w");
   if (!f) return Status::error("cannot write " + dir + "/rasters.yaml");
   std::fprintf(f,
@@ -125,6 +140,11 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
                "obstacles.png: {0: free, 1: obstacle, 2: negative obstacle, 3: vegetation}\n",
                geo.zone(), geo.north() ? "N" : "S", s.origin_lat, s.origin_lon, world.resolution(), world.width(),
                world.height(), world.x0(), world.y0());
+  if (sighted) {
+    std::fprintf(f,
+                 "sightings.u32: {type: uint32 little-endian, rows: south_up, value: \"ms after the start + 1 of the first "
+                 "lidar return from a solid obstacle in the pixel; 0: never\"}\n");
+  }
   std::fclose(f);
 
   // Overview: terrain colours, obstacles, true trails, OSM ways, the driven path.

@@ -15,6 +15,7 @@
 namespace trailnav::sim {
 
 Status write_truth(const std::string& directory, const Scenario& scenario, std::uint64_t seed, const World& world,
-                   const RoadNetwork& roads, const Trajectory& trajectory, const GeoFrame& geo);
+                   const RoadNetwork& roads, const Trajectory& trajectory, const GeoFrame& geo,
+                   const std::vector<std::uint32_t>& sightings);
 
 }  // namespace trailnav::sim

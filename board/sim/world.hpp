@@ -9,6 +9,8 @@
 #pragma once
 
 #include <array>
+#include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -63,6 +65,13 @@ class World {
   double y0() const noexcept { return y0_; }
   const std::vector<std::uint8_t>& terrain_raster() const noexcept { return cls_; }
   const std::vector<std::uint8_t>& obstacle_raster() const noexcept { return truth_; }
+  // The raster pixel nearest a world point; -1 outside.
+  std::ptrdiff_t pixel(double x, double y) const noexcept {
+    const auto i = static_cast<long>(std::lround((x - x0_) * inv_res_));
+    const auto j = static_cast<long>(std::lround((y - y0_) * inv_res_));
+    if (i < 0 || j < 0 || i >= nx_ || j >= ny_) return -1;
+    return static_cast<std::ptrdiff_t>(j) * nx_ + i;
+  }
 
  private:
   World() = default;

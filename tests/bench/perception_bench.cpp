@@ -1,11 +1,17 @@
-// The obstacle thread's hot path per HDL-64E revolution on the real KITTI
-// scans (about 123 k points): alignment, smoothing + features, and the map
-// update for PW, PS and PC with a terrain-class map, alone and together.
+// The obstacle thread's hot path per HDL-64E revolution: alignment,
+// smoothing + features, and the map update for PW, PS and PC with a
+// terrain-class map, alone and together. Two sources (the first argument):
+// 0 the real KITTI scans (about 123 k points), 1 simulated HDL-64E
+// revolutions of the meadow-block scenario (tall grass, about 105 k points).
 #include <benchmark/benchmark.h>
 
 #include <array>
+#include <filesystem>
 #include <memory>
+#include <stdexcept>
 
+#include "obstacle_run.hpp"
+#include "simulator.hpp"
 #include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 
@@ -14,17 +20,57 @@ namespace {
 using namespace trailnav;
 using namespace trailnav::perception;
 
+using Images = std::vector<std::unique_ptr<velodyne::RangeImage>>;
+
+Images kitti_images() {
+  Images images;
+  std::vector<float> buffer;
+  for (int i = 0; i < 2; ++i) {
+    images.push_back(std::make_unique<velodyne::RangeImage>(kitti_shape()));
+    const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
+    if (!load_kitti_scan(path, buffer, *images.back())) throw std::runtime_error("cannot read " + path);
+  }
+  return images;
+}
+
+// Two revolutions of a simulated HDL-64E in meadow-block, made once.
+const Images& sim_images() {
+  static const Images images = [] {
+    const auto dir = std::filesystem::temp_directory_path() / "trailnav-perception-bench";
+    sim::SimOptions o;
+    o.scenario = "meadow-block";
+    o.duration = 1.6;
+    o.lidar = "HDL-64E";
+    o.out = dir.string();
+    const sim::SimReport made = sim::run_simulation(o);
+    if (!made.error.empty()) throw std::runtime_error(made.error);
+    Images out;
+    eval::ObstacleRunOptions r;
+    r.inputs = {dir.string()};
+    r.score_every = 0;
+    r.on_revolution = [&](const velodyne::RangeImage& image) {
+      if (image.points > 50'000 && out.size() < 2) out.push_back(std::make_unique<velodyne::RangeImage>(image));
+    };
+    const eval::ObstacleRunReport report = eval::run_obstacles(r);
+    if (!report.error.empty()) throw std::runtime_error(report.error);
+    std::filesystem::remove_all(dir);
+    if (out.size() < 2) throw std::runtime_error("the simulation gave fewer than two full revolutions");
+    return out;
+  }();
+  return images;
+}
+
 struct Fixture {
-  Fixture(FusionModel model) {
+  Fixture(int source, FusionModel model) {
+    if (source == 0) {
+      owned = kitti_images();
+      for (auto& i : owned) images.push_back(i.get());
+    } else {
+      for (const auto& i : sim_images()) images.push_back(i.get());
+    }
     ObstacleConfig config;
     config.model = model;
-    pipeline = std::move(ObstaclePipeline::create(config, kitti_shape()).pipeline);
-    std::vector<float> buffer;
-    for (int i = 0; i < 2; ++i) {
-      images.push_back(std::make_unique<velodyne::RangeImage>(kitti_shape()));
-      const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
-      if (!load_kitti_scan(path, buffer, *images.back())) throw std::runtime_error("cannot read " + path);
-    }
+    pipeline = std::move(ObstaclePipeline::create(config, images[0]->shape()).pipeline);
     // A terrain map whose cells mix street, dirt and grass.
     auto& g = terrain.grid();
     for (std::int32_t y = 0; y < g.size_y(); ++y) {
@@ -35,9 +81,12 @@ struct Fixture {
     }
   }
   std::unique_ptr<ObstaclePipeline> pipeline;
-  std::vector<std::unique_ptr<velodyne::RangeImage>> images;
+  Images owned;
+  std::vector<const velodyne::RangeImage*> images;
   TerrainClassMap terrain;
 };
+
+const char* source_name(std::int64_t source) { return source == 0 ? "KITTI" : "simulated meadow"; }
 
 void points_counter(benchmark::State& state, const Fixture& f) {
   state.counters["points"] = static_cast<double>(f.images[0]->points);
@@ -46,18 +95,19 @@ void points_counter(benchmark::State& state, const Fixture& f) {
 }
 
 void BM_Align(benchmark::State& state) {
-  Fixture f(FusionModel::pc);
+  Fixture f(static_cast<int>(state.range(0)), FusionModel::pc);
   PoseTrack poses(8);
   poses.push({-1'000'000, 0, 0, 0, 0.01, -0.02, 0.1});
   poses.push({200'000'000, 0.2, 0.01, 0, 0.012, -0.018, 0.12});
   std::size_t i = 0;
   for (auto _ : state) f.pipeline->align(*f.images[i++ % 2], &poses);
+  state.SetLabel(source_name(state.range(0)));
   points_counter(state, f);
 }
-BENCHMARK(BM_Align)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Align)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 void BM_Features(benchmark::State& state) {
-  Fixture f(FusionModel::pc);
+  Fixture f(static_cast<int>(state.range(0)), FusionModel::pc);
   std::size_t i = 0;
   for (auto _ : state) {
     state.PauseTiming();
@@ -65,31 +115,34 @@ void BM_Features(benchmark::State& state) {
     state.ResumeTiming();
     f.pipeline->features();
   }
+  state.SetLabel(source_name(state.range(0)));
   points_counter(state, f);
 }
-BENCHMARK(BM_Features)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Features)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 void BM_MapUpdate(benchmark::State& state) {
-  Fixture f(static_cast<FusionModel>(state.range(0)));
+  Fixture f(static_cast<int>(state.range(0)), static_cast<FusionModel>(state.range(1)));
   f.pipeline->align(*f.images[0], nullptr);
   f.pipeline->features();
   for (auto _ : state) f.pipeline->update_maps(&f.terrain);
-  state.SetLabel(std::string(fusion_model_name(static_cast<FusionModel>(state.range(0)))));
+  state.SetLabel(std::string(source_name(state.range(0))) + ", " +
+                 std::string(fusion_model_name(static_cast<FusionModel>(state.range(1)))));
   points_counter(state, f);
 }
-BENCHMARK(BM_MapUpdate)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MapUpdate)->ArgsProduct({{0, 1}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
 
 void BM_Revolution(benchmark::State& state) {
-  Fixture f(static_cast<FusionModel>(state.range(0)));
+  Fixture f(static_cast<int>(state.range(0)), static_cast<FusionModel>(state.range(1)));
   PoseTrack poses(8);
   poses.push({-1'000'000, 0, 0, 0, 0.01, -0.02, 0.1});
   poses.push({200'000'000, 0.2, 0.01, 0, 0.012, -0.018, 0.12});
   std::size_t i = 0;
   for (auto _ : state) f.pipeline->process(*f.images[i++ % 2], &poses, &f.terrain);
-  state.SetLabel(std::string(fusion_model_name(static_cast<FusionModel>(state.range(0)))) + ": align + features + map");
+  state.SetLabel(std::string(source_name(state.range(0))) + ", " +
+                 std::string(fusion_model_name(static_cast<FusionModel>(state.range(1)))) + ": align + features + map");
   points_counter(state, f);
 }
-BENCHMARK(BM_Revolution)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Revolution)->ArgsProduct({{0, 1}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

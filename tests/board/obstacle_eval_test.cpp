@@ -8,6 +8,7 @@
 #include <filesystem>
 
 #include "obstacle_run.hpp"
+#include "sim_truth.hpp"
 #include "simulator.hpp"
 
 namespace trailnav::eval {
@@ -74,9 +75,32 @@ TEST_F(MeadowBlock, AdaptiveDetectionAvoidsBothFailures) {
   EXPECT_EQ(a.blocked, 0u);
   EXPECT_GT(battery(a), 0u);
   EXPECT_GE(a.obstacles.recall(), s.obstacles.recall() * 0.9);
+  EXPECT_GT(a.outlines.cells, 0u);
+  EXPECT_LE(a.outlines.cells, a.obstacles.cells);
+  EXPECT_GE(a.outlines.recall(), s.outlines.recall() * 0.9);
   // The smooth models differ from PC only through the class distribution.
   ASSERT_TRUE(adaptive.kl.has_value());
   EXPECT_LT(adaptive.kl->mean_ps, adaptive.kl->mean_pw);
+}
+
+// The simulator says when the lidar first saw each solid-obstacle pixel; the
+// scorer counts an obstacle cell only from then on.
+TEST_F(MeadowBlock, SightingsMarkOnlySolidObstaclesTheLidarHit) {
+  const SimTruthResult loaded = load_sim_truth(dir_ + "/truth");
+  ASSERT_TRUE(loaded.truth) << loaded.error;
+  const SimTruth& t = *loaded.truth;
+  ASSERT_EQ(t.sightings.size(), t.obstacles.data.size());
+  std::size_t sighted = 0, solid = 0;
+  const std::uint32_t duration_ms = 32'000 + 1;
+  for (std::size_t i = 0; i < t.sightings.size(); ++i) {
+    if (t.obstacles.data[i] == 1) ++solid;
+    if (t.sightings[i] == 0) continue;
+    ++sighted;
+    EXPECT_EQ(t.obstacles.data[i], 1) << "pixel " << i;
+    EXPECT_LE(t.sightings[i], duration_ms);
+  }
+  EXPECT_GT(sighted, 20u);   // the block and the crate show some of their faces
+  EXPECT_LT(sighted, solid);  // but never all of them: tops in grass, hidden faces
 }
 
 }  // namespace
