@@ -14,6 +14,7 @@
 
 #include "replayer.hpp"
 #include "trailnav/drivers/can/dbc.hpp"
+#include "trailnav/drivers/gps/fix.hpp"
 #include "trailnav/drivers/gps/nmea.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
@@ -58,6 +59,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       }
     }
     start = end + 1;
+  }
+  // The whole input as a GPS byte stream: every fix is a sane one.
+  {
+    gps::LineFramer framer;
+    gps::FixAssembler assembler;
+    gps::GpsFix fix;
+    char json[512];
+    auto check_fix = [&](const gps::GpsFix& f) {
+      check(f.mode >= 0 && f.mode <= 3);
+      if (f.has_fix()) check(std::abs(f.lat) <= 90.0 && std::abs(f.lon) <= 180.0);
+      check(gps::write_tpv_json(f, json) > 0);
+    };
+    framer.feed({data, size}, [&](std::string_view line) {
+      if (assembler.add_line(line, fix)) check_fix(fix);
+    });
+    if (assembler.flush(fix)) check_fix(fix);
+    const gps::GpsCounters& c = assembler.counters();
+    check(c.accepted + c.unsupported + c.rejected_total() == c.lines);
   }
   recording::CanFrame frame;
   (void)replay::decode_can_tunnel({data, size}, frame);

@@ -111,6 +111,7 @@ const char* nmea_error_name(NmeaError e) noexcept {
     case NmeaError::bad_address: return "bad_address";
     case NmeaError::too_few_fields: return "too_few_fields";
     case NmeaError::bad_field: return "bad_field";
+    case NmeaError::bad_coordinate: return "bad_coordinate";
     case NmeaError::unsupported: return "unsupported";
   }
   return "?";
@@ -120,6 +121,8 @@ const char* sentence_type_name(SentenceType t) noexcept {
   switch (t) {
     case SentenceType::gga: return "GGA";
     case SentenceType::rmc: return "RMC";
+    case SentenceType::gll: return "GLL";
+    case SentenceType::gns: return "GNS";
     case SentenceType::gst: return "GST";
     case SentenceType::vtg: return "VTG";
     case SentenceType::gsa: return "GSA";
@@ -180,12 +183,16 @@ NmeaError parse_nmea(std::string_view line, NmeaSentence& out) noexcept {
   for (std::size_t i = 0; i < formatter.size(); ++i) out.address[i] = formatter[i];
 
   bool ok = true;
+  // Coordinates are checked apart, so a bogus position is named as such.
+  auto position = [&](int lat_field, double& lat, double& lon) noexcept {
+    return coordinate(f[lat_field], f[lat_field + 1], 2, lat) && coordinate(f[lat_field + 2], f[lat_field + 3], 3, lon);
+  };
   if (formatter == "GGA") {
     if (f.n < 15) return NmeaError::too_few_fields;
     out.type = SentenceType::gga;
     Gga& g = out.gga;
-    ok = time_of_day(f[1], g.time) && coordinate(f[2], f[3], 2, g.lat) && coordinate(f[4], f[5], 3, g.lon) &&
-         integer(f[6], g.quality, 0) && integer(f[7], g.satellites, -1) && number(f[8], g.hdop) &&
+    if (!position(2, g.lat, g.lon)) return NmeaError::bad_coordinate;
+    ok = time_of_day(f[1], g.time) && integer(f[6], g.quality, 0) && integer(f[7], g.satellites, -1) && number(f[8], g.hdop) &&
          number(f[9], g.altitude) && number(f[11], g.separation) && number(f[13], g.dgps_age);
     ok = ok && g.quality >= 0 && g.quality <= 9;
   } else if (formatter == "RMC") {
@@ -193,12 +200,30 @@ NmeaError parse_nmea(std::string_view line, NmeaSentence& out) noexcept {
     out.type = SentenceType::rmc;
     Rmc& r = out.rmc;
     const char status = flag(f[2]);
-    ok = (status == 'A' || status == 'V') && time_of_day(f[1], r.time) && coordinate(f[3], f[4], 2, r.lat) &&
-         coordinate(f[5], f[6], 3, r.lon) && number(f[7], r.speed_knots) && number(f[8], r.course) &&
+    if (!position(3, r.lat, r.lon)) return NmeaError::bad_coordinate;
+    ok = (status == 'A' || status == 'V') && time_of_day(f[1], r.time) && number(f[7], r.speed_knots) && number(f[8], r.course) &&
          date(f[9], r.day, r.month, r.year) && number(f[10], r.magnetic_variation);
     r.valid = status == 'A';
     if (ok && !std::isnan(r.magnetic_variation) && flag(f[11]) == 'W') r.magnetic_variation = -r.magnetic_variation;
     r.mode = f.n > 12 ? flag(f[12]) : 0;
+  } else if (formatter == "GLL") {
+    if (f.n < 7) return NmeaError::too_few_fields;
+    out.type = SentenceType::gll;
+    Gll& g = out.gll;
+    if (!position(1, g.lat, g.lon)) return NmeaError::bad_coordinate;
+    const char status = flag(f[6]);
+    ok = (status == 'A' || status == 'V') && time_of_day(f[5], g.time);
+    g.valid = status == 'A';
+    g.mode = f.n > 7 ? flag(f[7]) : 0;
+  } else if (formatter == "GNS") {
+    if (f.n < 13) return NmeaError::too_few_fields;
+    out.type = SentenceType::gns;
+    Gns& g = out.gns;
+    if (!position(2, g.lat, g.lon)) return NmeaError::bad_coordinate;
+    const std::string_view modes = f[6];
+    ok = modes.size() <= g.modes.size() && time_of_day(f[1], g.time) && integer(f[7], g.satellites, -1) &&
+         number(f[8], g.hdop) && number(f[9], g.altitude) && number(f[10], g.separation);
+    for (std::size_t i = 0; ok && i < modes.size(); ++i) g.modes[i] = modes[i];
   } else if (formatter == "GST") {
     if (f.n < 9) return NmeaError::too_few_fields;
     out.type = SentenceType::gst;
@@ -233,7 +258,7 @@ NmeaError parse_nmea(std::string_view line, NmeaSentence& out) noexcept {
     Zda& z = out.zda;
     ok = time_of_day(f[1], z.time) && integer(f[2], z.day, 0) && integer(f[3], z.month, 0) && integer(f[4], z.year, 0) &&
          integer(f[5], z.zone_hours, 0) && integer(f[6], z.zone_minutes, 0);
-    ok = ok && z.day >= 0 && z.day <= 31 && z.month >= 0 && z.month <= 12;
+    ok = ok && z.day >= 0 && z.day <= 31 && z.month >= 0 && z.month <= 12 && (z.year == 0 || (z.year >= 1980 && z.year <= 2099));
   } else if (formatter == "HDT") {
     if (f.n < 2) return NmeaError::too_few_fields;
     out.type = SentenceType::hdt;

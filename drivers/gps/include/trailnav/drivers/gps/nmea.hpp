@@ -1,6 +1,6 @@
 // NMEA 0183 sentences from GNSS receivers: framing ($ or !, *hh checksum,
 // length limit), any two-letter talker (GP, GN, GL, GA, GB, BD, ...), and the
-// sentences a navigation stack needs: GGA, RMC, GST, VTG, GSA, ZDA, HDT.
+// sentences a navigation stack needs: GGA, RMC, GLL, GNS, GST, VTG, GSA, ZDA, HDT.
 // A pure parser: no allocation, no I/O. Empty fields are NaN (numbers) or
 // absent (flags), never a made-up default.
 #pragma once
@@ -26,11 +26,12 @@ enum class NmeaError : std::uint8_t {
   bad_address,       // not a talker + sentence address like "GPGGA"
   too_few_fields,    // a field the sentence must have is missing
   bad_field,         // a field that does not parse (text in a number, ...)
+  bad_coordinate,    // latitude or longitude out of range (minutes >= 60, beyond 90 / 180 degrees, bad hemisphere)
   unsupported,       // a valid sentence of a type we do not decode
 };
 const char* nmea_error_name(NmeaError e) noexcept;
 
-enum class SentenceType : std::uint8_t { gga, rmc, gst, vtg, gsa, zda, hdt, other };
+enum class SentenceType : std::uint8_t { gga, rmc, gll, gns, gst, vtg, gsa, zda, hdt, other };
 const char* sentence_type_name(SentenceType t) noexcept;
 
 struct Gga {
@@ -55,6 +56,31 @@ struct Rmc {
   int day = 0, month = 0, year = 0;  // year with century (80..99 -> 19xx); 0 when empty
   double magnetic_variation = 0.0;   // degrees, east positive; NaN when empty
   char mode = 0;            // NMEA 2.3 mode: A autonomous, D differential, E estimated, N not valid, ...; 0 when absent
+};
+
+struct Gll {
+  double lat = 0.0;   // NaN when empty
+  double lon = 0.0;
+  double time = 0.0;  // NaN when empty
+  bool valid = false; // status A
+  char mode = 0;      // NMEA 2.3 mode; 0 when absent
+};
+
+struct Gns {
+  double time = 0.0;
+  double lat = 0.0;
+  double lon = 0.0;
+  std::array<char, 5> modes{};  // one mode letter per constellation (N: no fix); empty when absent
+  int satellites = -1;
+  double hdop = 0.0;
+  double altitude = 0.0;    // m above mean sea level, NaN when empty
+  double separation = 0.0;  // NaN when empty
+  bool any_fix() const noexcept {
+    for (char c : modes) {
+      if (c != 0 && c != 'N') return true;
+    }
+    return false;
+  }
 };
 
 struct Gst {
@@ -99,6 +125,8 @@ struct NmeaSentence {
   SentenceType type = SentenceType::other;
   Gga gga;
   Rmc rmc;
+  Gll gll;
+  Gns gns;
   Gst gst;
   Vtg vtg;
   Gsa gsa;
