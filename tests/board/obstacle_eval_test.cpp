@@ -6,6 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <string>
+
+#include <unistd.h>
 
 #include "obstacle_run.hpp"
 #include "sim_truth.hpp"
@@ -21,7 +24,8 @@ using perception::TerrainClass;
 class MeadowBlock : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = (fs::temp_directory_path() / "trailnav-obstacle-eval-meadow").string();
+    // One directory per process: ctest runs this suite's tests in parallel.
+    dir_ = (fs::temp_directory_path() / ("trailnav-obstacle-eval-meadow-" + std::to_string(::getpid()))).string();
     fs::remove_all(dir_);
     sim::SimOptions o;
     o.scenario = "meadow-block";

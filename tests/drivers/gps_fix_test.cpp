@@ -244,6 +244,15 @@ TEST(GpsFix, ZdaYearOutsideGpsTimeIsRejected) {
   EXPECT_EQ(gps::parse_nmea(line, s), gps::NmeaError::bad_field);
 }
 
+// Found by the fuzzer too: a GSA fix type other than 1-3 became the mode.
+TEST(GpsFix, GsaFixTypeOutsideOneToThreeIsRejected) {
+  gps::NmeaSentence s;
+  const std::string body = "GPGSA,A,7,01,02,04,05,06,09,14,25,30,,,,3.6,2.0,3.0";
+  char line[96];
+  std::snprintf(line, sizeof line, "$%s*%02X", body.c_str(), gps::nmea_checksum(body));
+  EXPECT_EQ(gps::parse_nmea(line, s), gps::NmeaError::bad_field);
+}
+
 TEST(GpsFix, GstGivesErrorEstimates) {
   const Decoded d = decode_file(nmea_log("ublox-zed-f9p-nmea.log"));
   int with_errors = 0;

@@ -228,7 +228,7 @@ bool FixAssembler::close(GpsFix& completed) noexcept {
   if (!simulated && (gga_ok || rmc_ok || other_ok)) {
     f.lat = gga_ok ? e.gga_lat : rmc_ok ? e.rmc_lat : e.other_lat;
     f.lon = gga_ok ? e.gga_lon : rmc_ok ? e.rmc_lon : e.other_lon;
-    if (e.gsa_fix >= 2) {
+    if (e.gsa_fix == 2 || e.gsa_fix == 3) {
       f.mode = e.gsa_fix;
     } else {
       f.mode = finite(f.alt_msl) ? 3 : 2;

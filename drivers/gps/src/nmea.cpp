@@ -249,7 +249,7 @@ NmeaError parse_nmea(std::string_view line, NmeaSentence& out) noexcept {
     out.type = SentenceType::gsa;
     Gsa& g = out.gsa;
     g.selection = flag(f[1]);
-    ok = integer(f[2], g.fix, 0);
+    ok = integer(f[2], g.fix, 0) && g.fix >= 0 && g.fix <= 3;
     for (int i = 0; i < 12 && ok; ++i) ok = integer(f[3 + i], g.satellites[static_cast<std::size_t>(i)], 0);
     ok = ok && number(f[15], g.pdop) && number(f[16], g.hdop) && number(f[17], g.vdop);
   } else if (formatter == "ZDA") {
