@@ -22,20 +22,6 @@ struct GpsDecodeOptions {
   bool explain = false;
 };
 
-const char* explanation(gps::NmeaError e) {
-  switch (e) {
-    case gps::NmeaError::no_start: return "does not start with '$' or '!'";
-    case gps::NmeaError::too_long: return "longer than the sentence limit";
-    case gps::NmeaError::missing_checksum: return "no *hh checksum";
-    case gps::NmeaError::bad_checksum: return "checksum does not match (corrupted in transit)";
-    case gps::NmeaError::bad_address: return "not a talker + sentence address";
-    case gps::NmeaError::too_few_fields: return "fields missing";
-    case gps::NmeaError::bad_field: return "a field does not parse";
-    case gps::NmeaError::bad_coordinate: return "latitude or longitude out of range (bogus position)";
-    default: return "";
-  }
-}
-
 class Printer {
  public:
   Printer(const GpsDecodeOptions& o) : o_(o) {
@@ -87,7 +73,7 @@ int run(const GpsDecodeOptions& o) {
     const gps::NmeaError e = assembler.last_error();
     if (o.explain && e != gps::NmeaError::none && e != gps::NmeaError::unsupported) {
       std::fprintf(stderr, "line %llu: rejected (%s: %s): %.*s\n", static_cast<unsigned long long>(line_no),
-                   gps::nmea_error_name(e), explanation(e), static_cast<int>(std::min<std::size_t>(line.size(), 100)),
+                   gps::nmea_error_name(e), gps::nmea_error_explanation(e), static_cast<int>(std::min<std::size_t>(line.size(), 100)),
                    line.data());
     }
   };
@@ -139,7 +125,7 @@ int run(const GpsDecodeOptions& o) {
     if (c.rejected[i] == 0) continue;
     const auto e = static_cast<gps::NmeaError>(i);
     std::fprintf(stderr, "  rejected %-16s %6llu  (%s)\n", gps::nmea_error_name(e),
-                 static_cast<unsigned long long>(c.rejected[i]), explanation(e));
+                 static_cast<unsigned long long>(c.rejected[i]), gps::nmea_error_explanation(e));
   }
   if (framer.overlong() > 0) {
     std::fprintf(stderr, "  dropped  overlong lines   %6llu  (no line end within %zu bytes)\n",

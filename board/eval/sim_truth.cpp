@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "png.hpp"
+#include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/runtime/config.hpp"
 #include "world.hpp"
 
@@ -76,17 +77,13 @@ SimTruthResult load_sim_truth(const std::string& dir) {
   if (fs::exists(sight)) {
     const auto n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
     std::ifstream s(sight, std::ios::binary);
-    std::vector<char> bytes(n * 4);
-    if (!s.read(bytes.data(), static_cast<std::streamsize>(bytes.size())) || s.peek() != EOF) {
+    std::vector<std::uint8_t> bytes(n * 4);
+    if (!s.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size())) || s.peek() != EOF) {
       return {std::nullopt, sight.string() + ": not " + std::to_string(n) + " uint32 values (" + std::to_string(width) +
                                 " x " + std::to_string(height) + " pixels)"};
     }
     t.sightings.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      std::uint32_t v = 0;
-      for (std::size_t b = 0; b < 4; ++b) v |= static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[i * 4 + b])) << (8 * b);
-      t.sightings[i] = v;
-    }
+    for (std::size_t i = 0; i < n; ++i) t.sightings[i] = velodyne::read_u32(bytes.data() + i * 4);  // little-endian
   }
   const std::string traj = (fs::path(dir) / "trajectory.csv").string();
   std::ifstream in(traj);

@@ -85,10 +85,6 @@ class LidarSim {
     sighted_.assign(static_cast<std::size_t>(world.width()) * static_cast<std::size_t>(world.height()), 0);
   }
 
-  // Per truth pixel: milliseconds after the start (plus one) of the first
-  // return that came from a solid obstacle in it; 0: never seen.
-  const std::vector<std::uint32_t>& sightings() const { return sighted_; }
-
   double packet_start_us(std::uint64_t i) const { return static_cast<double>(i) * packet_period_us_; }
   double packet_period_us() const { return packet_period_us_; }
 
@@ -212,6 +208,8 @@ class LidarSim {
   }
 
   std::uint64_t rays() const { return rays_; }
+  // Per truth pixel: milliseconds after the start (plus one) of the first
+  // return that came from a solid obstacle in it; 0: never seen.
   std::vector<std::uint32_t> take_sightings() { return std::move(sighted_); }
   std::uint64_t returns() const { return returns_; }
 

@@ -253,6 +253,15 @@ TEST(GpsFix, GsaFixTypeOutsideOneToThreeIsRejected) {
   EXPECT_EQ(gps::parse_nmea(line, s), gps::NmeaError::bad_field);
 }
 
+TEST(GpsFix, EveryRejectionHasANameAndAnExplanation) {
+  for (std::size_t i = 0; i < gps::kNmeaErrors; ++i) {
+    const auto e = static_cast<gps::NmeaError>(i);
+    EXPECT_STRNE(gps::nmea_error_name(e), "?") << i;
+    EXPECT_STRNE(gps::nmea_error_explanation(e), "?") << i;
+  }
+  EXPECT_STREQ(gps::nmea_error_name(gps::NmeaError::bad_coordinate), "bad_coordinate");
+}
+
 TEST(GpsFix, GstGivesErrorEstimates) {
   const Decoded d = decode_file(nmea_log("ublox-zed-f9p-nmea.log"));
   int with_errors = 0;

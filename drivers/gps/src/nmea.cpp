@@ -117,6 +117,23 @@ const char* nmea_error_name(NmeaError e) noexcept {
   return "?";
 }
 
+const char* nmea_error_explanation(NmeaError e) noexcept {
+  switch (e) {
+    case NmeaError::none: return "accepted";
+    case NmeaError::empty: return "an empty line";
+    case NmeaError::no_start: return "does not start with '$' or '!'";
+    case NmeaError::too_long: return "longer than the sentence limit";
+    case NmeaError::missing_checksum: return "no *hh checksum";
+    case NmeaError::bad_checksum: return "checksum does not match (corrupted in transit)";
+    case NmeaError::bad_address: return "not a talker + sentence address";
+    case NmeaError::too_few_fields: return "fields missing";
+    case NmeaError::bad_field: return "a field does not parse or is out of range";
+    case NmeaError::bad_coordinate: return "latitude or longitude out of range (bogus position)";
+    case NmeaError::unsupported: return "a sentence type not decoded (GSV, proprietary, ...)";
+  }
+  return "?";
+}
+
 const char* sentence_type_name(SentenceType t) noexcept {
   switch (t) {
     case SentenceType::gga: return "GGA";

@@ -92,7 +92,7 @@ struct GpsCounters {
   std::uint64_t accepted = 0;  // sentences merged into fixes
   std::uint64_t fixes = 0;     // epochs completed
   std::uint64_t with_position = 0;
-  std::array<std::uint64_t, 16> rejected{};  // by NmeaError
+  std::array<std::uint64_t, kNmeaErrors> rejected{};  // by NmeaError
   std::uint64_t unsupported = 0;             // valid sentences we do not decode (GSV, proprietary, ...)
   std::uint64_t stale_date = 0;              // epochs before any date was known
   std::uint64_t date_rollovers = 0;

@@ -29,7 +29,10 @@ enum class NmeaError : std::uint8_t {
   bad_coordinate,    // latitude or longitude out of range (minutes >= 60, beyond 90 / 180 degrees, bad hemisphere)
   unsupported,       // a valid sentence of a type we do not decode
 };
+inline constexpr std::size_t kNmeaErrors = static_cast<std::size_t>(NmeaError::unsupported) + 1;
 const char* nmea_error_name(NmeaError e) noexcept;
+// What a rejection means, for diagnostics ("checksum does not match ...").
+const char* nmea_error_explanation(NmeaError e) noexcept;
 
 enum class SentenceType : std::uint8_t { gga, rmc, gll, gns, gst, vtg, gsa, zda, hdt, other };
 const char* sentence_type_name(SentenceType t) noexcept;
