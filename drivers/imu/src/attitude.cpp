@@ -19,7 +19,9 @@ constexpr double kWindow = 0.5;
 std::string check_attitude_options(const AttitudeOptions& o) {
   auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
   if (!(std::isfinite(o.tilt_gain) && o.tilt_gain >= 0.0)) return "tilt_gain must be zero or positive";
+  if (!(std::isfinite(o.tilt_bias_gain) && o.tilt_bias_gain >= 0.0)) return "tilt_bias_gain must be zero or positive";
   if (!positive(o.gravity_tolerance) || o.gravity_tolerance >= 1.0) return "gravity_tolerance must be in (0, 1)";
+  if (!(std::isfinite(o.accel_smoothing) && o.accel_smoothing >= 0.0)) return "accel_smoothing must be zero or positive";
   if (!positive(o.standstill_gyro_std)) return "standstill_gyro_std must be positive";
   if (!positive(o.standstill_accel_std)) return "standstill_accel_std must be positive";
   if (!(std::isfinite(o.standstill_time) && o.standstill_time >= 0.0)) return "standstill_time must be zero or positive";
@@ -112,7 +114,14 @@ const Attitude& AttitudeFilter::update(const ImuSample& s) noexcept {
   if (s.has(kRateOfTurn) && s.has(kAcceleration)) {
     detect_standstill(s, dt);
     omega = vec(s.rate_of_turn) - vec(out_.gyro_bias);
-    const Eigen::Vector3d f = vec(s.acceleration) - vec(kinematic_);
+    const Eigen::Vector3d measured = vec(s.acceleration) - vec(kinematic_);
+    Eigen::Vector3d f = vec(gravity_);
+    if (!initialised_ || options_.accel_smoothing <= 0.0) {
+      f = measured;
+    } else if (dt > 0.0) {
+      f += std::min(1.0, dt / options_.accel_smoothing) * (measured - f);
+    }
+    gravity_ = {f.x(), f.y(), f.z()};
     const double g = f.norm();
     Eigen::Quaterniond q = to_eigen(q_);
     if (!initialised_ && g > 0.0) {
@@ -126,7 +135,13 @@ const Attitude& AttitudeFilter::update(const ImuSample& s) noexcept {
       const double weight = std::max(0.0, 1.0 - std::abs(g / kStandardGravity - 1.0) / options_.gravity_tolerance);
       if (weight > 0.0) {
         const Eigen::Vector3d up = q.conjugate() * Eigen::Vector3d::UnitZ();  // predicted, sensor frame
-        correction = options_.tilt_gain * weight * (f / g).cross(up);
+        const Eigen::Vector3d error = weight * (f / g).cross(up);
+        correction = options_.tilt_gain * error;
+        if (!out_.standstill && options_.tilt_bias_gain > 0.0) {
+          Eigen::Vector3d b = vec(out_.gyro_bias) - options_.tilt_bias_gain * dt * error;
+          if (b.norm() > options_.max_bias) b *= options_.max_bias / b.norm();
+          out_.gyro_bias = {b.x(), b.y(), b.z()};
+        }
       }
       const Eigen::Vector3d theta = (omega + correction) * dt;
       const double angle = theta.norm();

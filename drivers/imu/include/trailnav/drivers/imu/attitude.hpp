@@ -5,9 +5,13 @@
 // allow it; otherwise a complementary filter integrates the rate of turn and
 // pulls the tilt towards the measured gravity direction (Mahony-style, with a
 // proportional gain that fades out while the acceleration's magnitude is far
-// from g). Gyro bias is learned only at standstill: when, over a window, the
+// from g). The gravity direction is taken from the low-passed specific force,
+// so that a vehicle's vibration and bumps average out instead of switching
+// the correction off. Gyro bias is learned only at standstill: when, over a window, the
 // rate of turn and the specific force barely vary and the latter is close to
-// g (or when the odometry says the wheels stand still). Pure: no allocation.
+// g (or when the odometry says the wheels stand still); while moving, the
+// integral of the gravity error keeps learning the bias of the tilt axes
+// (the heading axis' bias is unobservable from gravity on level ground). Pure: no allocation.
 #pragma once
 
 #include <array>
@@ -21,7 +25,9 @@ namespace trailnav::imu {
 struct AttitudeOptions {
   bool use_device_orientation = true;  // take roll/pitch from the device's quaternion when present
   double tilt_gain = 1.0;              // 1/s: how fast the tilt follows gravity (Kp)
+  double tilt_bias_gain = 0.05;        // 1/s^2: gyro bias learned from the gravity error while moving (Ki)
   double gravity_tolerance = 0.05;     // fraction of g: beyond it the gravity correction is off
+  double accel_smoothing = 0.2;        // s: low-pass of the specific force used for the correction (vibration)
   double standstill_gyro_std = 0.01;   // rad/s: rate-of-turn spread below which the IMU may be still
   double standstill_accel_std = 0.05;  // m/s^2: specific-force spread below which it may be still
   double standstill_time = 1.0;        // s the above must hold before bias learning starts
@@ -87,6 +93,7 @@ class AttitudeFilter {
   std::int64_t last_ns_ = 0;
   // Exponential means and variances for standstill detection.
   std::array<double, 3> gyro_mean_{}, accel_mean_{};
+  std::array<double, 3> gravity_{0, 0, 0};  // low-passed specific force minus kinematic acceleration
   double gyro_var_ = 0.0, accel_var_ = 0.0;
   double still_for_ = 0.0;
   int hint_ = -1;
