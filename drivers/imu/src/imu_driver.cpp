@@ -1,0 +1,134 @@
+#include "trailnav/drivers/imu/imu_driver.hpp"
+
+#include <cstring>
+
+namespace trailnav::imu {
+
+const char* imu_protocol_name(ImuProtocol p) noexcept { return p == ImuProtocol::xsens ? "xsens" : "line"; }
+
+const char* imu_health_name(ImuHealth h) noexcept {
+  switch (h) {
+    case ImuHealth::no_link: return "no_link";
+    case ImuHealth::no_data: return "no_data";
+    case ImuHealth::device_error: return "device_error";
+    case ImuHealth::ok: return "ok";
+  }
+  return "unknown";
+}
+
+ImuDriver::Created ImuDriver::create(const ImuDriverOptions& options) {
+  Created r;
+  if (std::string e = check_attitude_options(options.attitude); !e.empty()) {
+    r.error = options.name + ": attitude: " + e;
+    return r;
+  }
+  if (!(options.data_timeout > 0.0)) {
+    r.error = options.name + ": data_timeout must be positive";
+    return r;
+  }
+  if (options.xsens_output_count > options.xsens_outputs.size()) {
+    r.error = options.name + ": at most 8 Xsens output items";
+    return r;
+  }
+  auto made = link::ByteLink::create(options.link);
+  if (!made.link) {
+    r.error = options.name + ": " + made.error;
+    return r;
+  }
+  r.driver.reset(new ImuDriver(options, std::move(made.link)));
+  return r;
+}
+
+ImuDriver::ImuDriver(const ImuDriverOptions& options, std::unique_ptr<link::ByteLink> link)
+    : options_(options), link_(std::move(link)), filter_(options.attitude) {}
+
+void ImuDriver::start_device() noexcept {
+  std::size_t n = encode_xbus(mid::kGoToConfig, {}, command_);
+  link_->write({command_.data(), n});
+  if (options_.xsens_output_count > 0) {
+    std::array<std::uint8_t, 8 * 4 + 8> config{};
+    n = encode_output_configuration({options_.xsens_outputs.data(), options_.xsens_output_count}, config);
+    link_->write({config.data(), n});
+  }
+  n = encode_xbus(mid::kGoToMeasurement, {}, command_);
+  link_->write({command_.data(), n});
+}
+
+void ImuDriver::on_sample(ImuSample& s, Nanos now) noexcept {
+  s.time_ns = link_->receive_ns();
+  ImuReading& slot = latest_.write_slot();
+  slot.sample = s;
+  slot.attitude = filter_.update(s);
+  if (!queue_.try_push(slot)) ++local_.queue_drops;
+  latest_.publish();
+  ++local_.samples;
+  last_sample_ = now;
+}
+
+void ImuDriver::run(const TaskTick& tick) {
+  const Nanos now = tick.started;
+  const auto bytes = link_->poll(now);
+  if (link_->just_opened() && options_.protocol == ImuProtocol::xsens && options_.xsens_start) start_device();
+  if (!bytes.empty()) {
+    if (options_.protocol == ImuProtocol::xsens) {
+      xbus_.feed(bytes, [&](const XbusMessage& m) {
+        if (m.mid == mid::kError) {
+          ++local_.device_errors;
+          local_.last_device_error = m.payload.empty() ? 0 : m.payload[0];
+          last_device_error_ = now;
+          return;
+        }
+        if (m.mid != mid::kMtData2) return;  // acknowledgements and replies
+        ImuSample s;
+        const XsensError e = decode_mtdata2(m.payload, s, &local_.items);
+        if (e != XsensError::none) {
+          ++local_.xsens_rejected[static_cast<std::size_t>(e)];
+          return;
+        }
+        on_sample(s, now);
+      });
+    } else {
+      lines_.feed(bytes, [&](std::string_view line) {
+        ImuSample s;
+        const LineError e = parse_imu_line(line, s);
+        if (e != LineError::none) {
+          ++local_.line_rejected[static_cast<std::size_t>(e)];
+          return;
+        }
+        on_sample(s, now);
+      });
+    }
+  }
+  publish_status(now);
+}
+
+void ImuDriver::publish_status(Nanos now) noexcept {
+  local_.link_state = link_->state();
+  local_.link = link_->counters();
+  local_.xbus = xbus_.counters();
+  local_.attitude_counters = filter_.counters();
+  local_.attitude = filter_.attitude();
+  std::memcpy(local_.last_link_error.data(), link_->last_error(), local_.last_link_error.size());
+  local_.last_link_error.back() = '\0';
+  const Nanos timeout = seconds_to_nanos(options_.data_timeout);
+  if (link_->state() != link::LinkState::open) {
+    local_.health = ImuHealth::no_link;
+  } else if (last_sample_ < 0 || now - last_sample_ > timeout) {
+    local_.health = ImuHealth::no_data;
+  } else if (last_device_error_ >= 0 && now - last_device_error_ <= timeout) {
+    local_.health = ImuHealth::device_error;
+  } else {
+    local_.health = ImuHealth::ok;
+  }
+  if (shared_mutex_.try_lock()) {
+    shared_ = local_;
+    shared_mutex_.unlock();
+  }
+}
+
+ImuDriverStatus ImuDriver::status() const noexcept {
+  std::lock_guard lock(shared_mutex_);
+  return shared_;
+}
+
+}  // namespace trailnav::imu
