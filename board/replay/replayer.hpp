@@ -21,24 +21,8 @@
 
 namespace trailnav::replay {
 
-inline constexpr std::uint16_t kDefaultCanTunnelPort = 29536;
-
-// The CAN tunnel datagram: 24-byte header, then the data bytes.
-//   0  "TNCN"            magic
-//   4  u8 version (1)    u8 flags: bit 0 CAN FD, bit 1 FD bit-rate switch, bit 2 FD error state
-//   6  u16 reserved (0)
-//   8  i64 LE            the frame's recorded time, ns since the epoch
-//  16  u32 LE            id, SocketCAN encoding (EFF 0x80000000, RTR 0x40000000, ERR 0x20000000)
-//  20  u8 length         data bytes that follow (0..64)
-//  21  3 bytes reserved (0)
-inline constexpr std::size_t kCanTunnelHeader = 24;
-struct CanTunnelDatagram {
-  std::array<std::uint8_t, kCanTunnelHeader + 64> bytes{};
-  std::size_t size = 0;
-  std::span<const std::uint8_t> view() const noexcept { return {bytes.data(), size}; }
-};
-CanTunnelDatagram encode_can_tunnel(const recording::CanFrame& frame) noexcept;
-bool decode_can_tunnel(std::span<const std::uint8_t> datagram, recording::CanFrame& frame);
+// CAN frames go out as trailnav's tunnel datagrams (trailnav/drivers/can/frame.hpp).
+inline constexpr std::uint16_t kDefaultCanTunnelPort = can::kDefaultTunnelPort;
 
 struct ReplayOptions {
   double rate = 1.0;       // speed-up over the recorded timing

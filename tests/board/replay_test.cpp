@@ -271,7 +271,7 @@ TEST(Replay, SerialAndCanStreamsArriveIntact) {
       while ((n = ::read(fd, buffer, sizeof buffer)) > 0) read_back.insert(read_back.end(), buffer, buffer + n);
       for (const udp::Datagram& d : tunnel->receive(1)) {
         recording::CanFrame f;
-        ASSERT_TRUE(replay::decode_can_tunnel(d.payload, f));
+        ASSERT_TRUE(can::decode_tunnel(d.payload, f));
         received.push_back(f);
       }
       if (finished) break;
@@ -318,19 +318,19 @@ TEST(Replay, CanTunnelDatagramsRoundTrip) {
   f.id = 0x09F80102u | recording::kCanEffFlag;
   f.length = 8;
   for (int i = 0; i < 8; ++i) f.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(i * 17);
-  const auto bytes = replay::encode_can_tunnel(f);
-  ASSERT_EQ(bytes.size, replay::kCanTunnelHeader + 8);
+  const auto bytes = can::encode_tunnel(f);
+  ASSERT_EQ(bytes.size, can::kTunnelHeader + 8);
   recording::CanFrame back;
-  ASSERT_TRUE(replay::decode_can_tunnel(bytes.view(), back));
+  ASSERT_TRUE(can::decode_tunnel(bytes.view(), back));
   EXPECT_EQ(back.id, f.id);
   EXPECT_EQ(back.time_ns, f.time_ns);
   EXPECT_EQ(back.data, f.data);
   auto broken = bytes;
   broken.bytes[20] = 9;  // length does not match
-  EXPECT_FALSE(replay::decode_can_tunnel(broken.view(), back));
+  EXPECT_FALSE(can::decode_tunnel(broken.view(), back));
   broken = bytes;
   broken.bytes[0] = 'X';
-  EXPECT_FALSE(replay::decode_can_tunnel(broken.view(), back));
+  EXPECT_FALSE(can::decode_tunnel(broken.view(), back));
 }
 
 }  // namespace

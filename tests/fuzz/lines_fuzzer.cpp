@@ -41,9 +41,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       check(recording::parse_candump_line(written, again, interface2, error));
       check(again.id == frame.id && again.length == frame.length && again.fd == frame.fd);
       check(again.time_ns / 1000 == frame.time_ns / 1000 || frame.time_ns < 0);
-      const auto tunnel = replay::encode_can_tunnel(frame);
+      const auto tunnel = can::encode_tunnel(frame);
       recording::CanFrame back;
-      check(replay::decode_can_tunnel(tunnel.view(), back));
+      check(can::decode_tunnel(tunnel.view(), back));
       check(back.id == frame.id && back.length == frame.length && back.time_ns == frame.time_ns);
     }
     std::int64_t t = 0;
@@ -79,7 +79,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     check(c.accepted + c.unsupported + c.rejected_total() == c.lines);
   }
   recording::CanFrame frame;
-  (void)replay::decode_can_tunnel({data, size}, frame);
+  (void)can::decode_tunnel({data, size}, frame);
   const auto dbc = can::parse_dbc(text, "fuzz.dbc");
   if (dbc.dbc) {
     for (const can::DbcMessage& m : dbc.dbc->messages) {

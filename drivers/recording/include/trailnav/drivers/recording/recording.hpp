@@ -20,6 +20,7 @@
 #include <string_view>
 #include <vector>
 
+#include "trailnav/drivers/can/frame.hpp"
 #include "trailnav/runtime/status.hpp"
 
 namespace trailnav::recording {
@@ -53,20 +54,11 @@ struct ManifestResult {
 ManifestResult load_manifest(const std::string& path);
 Status write_manifest(const std::string& path, const Manifest& manifest);
 
-// CAN frames as SocketCAN encodes them: id with CAN_EFF_FLAG (0x80000000),
-// CAN_RTR_FLAG (0x40000000) and CAN_ERR_FLAG (0x20000000).
-inline constexpr std::uint32_t kCanEffFlag = 0x80000000u;
-inline constexpr std::uint32_t kCanRtrFlag = 0x40000000u;
-inline constexpr std::uint32_t kCanErrFlag = 0x20000000u;
-
-struct CanFrame {
-  std::int64_t time_ns = 0;
-  std::uint32_t id = 0;
-  std::uint8_t length = 0;
-  bool fd = false;
-  std::uint8_t fd_flags = 0;
-  std::array<std::uint8_t, 64> data{};
-};
+// CAN frames as SocketCAN encodes them (see trailnav/drivers/can/frame.hpp).
+using CanFrame = can::Frame;
+inline constexpr std::uint32_t kCanEffFlag = can::kEffFlag;
+inline constexpr std::uint32_t kCanRtrFlag = can::kRtrFlag;
+inline constexpr std::uint32_t kCanErrFlag = can::kErrFlag;
 
 // One line of a candump log, "(1436509052.249713) can0 123#11223344". False
 // with `error` set when malformed.
