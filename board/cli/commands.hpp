@@ -13,5 +13,6 @@ void add_sim_command(CLI::App& app);
 void add_obstacles_command(CLI::App& app);
 void add_gps_decode_command(CLI::App& app);
 void add_imu_decode_command(CLI::App& app);
+void add_can_decode_command(CLI::App& app);
 
 }  // namespace trailnav::cli
