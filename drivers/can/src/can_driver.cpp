@@ -228,7 +228,7 @@ void CanDriver::run(const TaskTick& tick) {
           ++local_.malformed;
           continue;
         }
-        f.time_ns = d.receive_ns;  // as a bus would timestamp it, not the recording's time
+        if (!options_.tunnel_recorded_time) f.time_ns = d.receive_ns;  // as a bus would time it
         on_frame(f, now);
       }
       if (batch.size() < 64) break;

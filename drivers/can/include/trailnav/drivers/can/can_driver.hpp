@@ -29,6 +29,9 @@ struct CanDriverOptions {
   CanTransport transport = CanTransport::tunnel;
   std::string interface = "can0";                     // socketcan
   udp::Endpoint tunnel{0x7F000001u, kDefaultTunnelPort};  // tunnel: address to listen on
+  // Tunnel: time frames by the recording's timestamps in the datagrams rather
+  // than on arrival (replays faster or slower than real time).
+  bool tunnel_recorded_time = false;
   WheelOdometryOptions odometry;
   double backoff = 0.5;       // s before reopening a failed interface, doubling ...
   double max_backoff = 8.0;   // ... up to this

@@ -1,0 +1,111 @@
+// The bench: a simulated recording replayed by `trailnav replay`'s engine —
+// GPS and IMU bytes into pseudo-terminals, CAN frames into the UDP tunnel —
+// read by the GPS, IMU and CAN driver tasks on the scheduler, as on the robot.
+// Every sentence, sample and frame the simulator wrote arrives, and the
+// wheel odometry measures the distance the truth says was driven.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "replayer.hpp"
+#include "simulator.hpp"
+#include "trailnav/drivers/can/can_driver.hpp"
+#include "trailnav/drivers/gps/gps_driver.hpp"
+#include "trailnav/drivers/imu/imu_driver.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+
+using namespace trailnav;
+namespace fs = std::filesystem;
+
+TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-drivers-bench-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  sim::SimOptions so;
+  so.scenario = "urban";
+  so.seed = 2;
+  so.duration = 6.0;
+  so.out = dir.string();
+  const sim::SimReport sr = sim::run_simulation(so);
+  ASSERT_EQ(sr.error, "");
+
+  auto dbc = can::load_dbc("board/sim/trailnav-robot.dbc");
+  ASSERT_TRUE(dbc.dbc) << dbc.error;
+  can::CanDriverOptions co;
+  co.tunnel = {0x7F000001u, 0};
+  co.tunnel_recorded_time = true;  // replayed at twice the speed
+  co.odometry.left = {"WHEEL_SPEEDS", "SpeedLeft"};
+  co.odometry.right = {"WHEEL_SPEEDS", "SpeedRight"};
+  co.odometry.track = 0.55;
+  auto can_driver = can::CanDriver::create(*dbc.dbc, co);
+  ASSERT_TRUE(can_driver.driver) << can_driver.error;
+
+  replay::ReplayOptions ro;
+  ro.rate = 2.0;
+  ro.can_tunnel = can_driver.driver->tunnel_endpoint();
+  ro.serial_links["gps"] = (dir / "gps-link").string();
+  ro.serial_links["imu"] = (dir / "imu-link").string();
+  auto replayer = replay::Replayer::create(dir.string(), ro);
+  ASSERT_TRUE(replayer.replayer) << replayer.error;
+
+  gps::GpsDriverOptions go;
+  go.link.device = ro.serial_links["gps"];
+  go.link.baud = 9600;
+  auto gps_driver = gps::GpsDriver::create(go);
+  ASSERT_TRUE(gps_driver.driver) << gps_driver.error;
+  imu::ImuDriverOptions io;
+  io.link.device = ro.serial_links["imu"];
+  auto imu_driver = imu::ImuDriver::create(io);
+  ASSERT_TRUE(imu_driver.driver) << imu_driver.error;
+
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  ASSERT_TRUE(scheduler.add({"gps", TaskKind::periodic, 100.0, 2 * kNanosPerMilli, 0, -1}, *gps_driver.driver));
+  ASSERT_TRUE(scheduler.add({"imu", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, *imu_driver.driver));
+  ASSERT_TRUE(scheduler.add({"can", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, *can_driver.driver));
+  ASSERT_TRUE(scheduler.start());
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the drivers open their links
+  const replay::ReplayReport report = replayer.replayer->run();
+  std::this_thread::sleep_for(std::chrono::milliseconds(150));
+  scheduler.stop();
+
+  const gps::GpsDriverStatus gs = gps_driver.driver->status();
+  const imu::ImuDriverStatus is = imu_driver.driver->status();
+  const can::CanDriverStatus cs = can_driver.driver->status();
+  std::printf("[ bench ] %.1f s at 2x: GPS %llu lines, %llu fixes; IMU %llu samples; CAN %llu frames, "
+              "odometry %.2f m\n",
+              report.recording_s, static_cast<unsigned long long>(gs.gps.lines),
+              static_cast<unsigned long long>(gs.published), static_cast<unsigned long long>(is.samples),
+              static_cast<unsigned long long>(cs.frames), cs.odometry.distance);
+  EXPECT_EQ(gs.gps.lines, sr.nmea_sentences);
+  EXPECT_EQ(gs.gps.rejected_total(), 0u);
+  EXPECT_EQ(gs.published, sr.nmea_sentences / 4);  // GGA, RMC, GST, VTG per epoch
+  EXPECT_EQ(gs.health, gps::GpsHealth::fix);
+  EXPECT_EQ(is.samples, sr.imu_messages);
+  EXPECT_EQ(is.xbus.bad_checksum, 0u);
+  // Nobody drains the IMU queue here: it fills to its capacity, then counts.
+  EXPECT_EQ(is.queue_drops, sr.imu_messages - std::min<std::uint64_t>(sr.imu_messages, imu::kImuQueueCapacity));
+  EXPECT_EQ(cs.frames, sr.can_frames);
+  EXPECT_EQ(cs.malformed, 0u);
+  EXPECT_EQ(cs.odometry_counters.updates, sr.can_frames / 2);  // speeds and ticks alternate
+  // The distance the truth says the robot drove in those 6 s.
+  std::ifstream truth(dir / "truth" / "trajectory.csv");
+  std::string line, last;
+  std::getline(truth, line);
+  while (std::getline(truth, line)) last = line;
+  double arc = 0.0;
+  {
+    // route_arc is the 13th column.
+    std::size_t pos = 0;
+    for (int c = 0; c < 12; ++c) pos = last.find(',', pos) + 1;
+    arc = std::stod(last.substr(pos));
+  }
+  ASSERT_GT(arc, 3.0);
+  EXPECT_NEAR(cs.odometry.distance, arc, 0.05 * arc);  // wheel scale errors and slip of a few per cent
+  fs::remove_all(dir);
+}
