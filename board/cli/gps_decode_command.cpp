@@ -85,11 +85,7 @@ int run(const GpsDecodeOptions& o) {
       std::fprintf(stderr, "trailnav gps-decode: %s\n", opened.error.c_str());
       return 1;
     }
-    int stream = -1;
-    const auto& streams = opened.reader->streams();
-    for (std::size_t i = 0; i < streams.size(); ++i) {
-      if (streams[i].name == o.stream && streams[i].kind == recording::StreamKind::serial) stream = static_cast<int>(i);
-    }
+    const int stream = opened.reader->stream_index(o.stream, recording::StreamKind::serial);
     if (stream < 0) {
       std::fprintf(stderr, "trailnav gps-decode: %s has no serial stream named '%s' (--stream)\n", o.input.c_str(),
                    o.stream.c_str());

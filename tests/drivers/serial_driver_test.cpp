@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +23,7 @@
 #include <vector>
 
 #include "test_data.hpp"
+#include "xsens_vectors.hpp"
 #include "trailnav/drivers/gps/gps_driver.hpp"
 #include "trailnav/drivers/imu/imu_driver.hpp"
 #include "trailnav/drivers/link/byte_link.hpp"
@@ -338,19 +340,8 @@ TEST(GpsDriver, RealReceiverLogThroughAPtyGivesTheOfflineFixes) {
 
 namespace {
 
-std::vector<std::uint8_t> hex(const std::string& text) {
-  std::vector<std::uint8_t> out;
-  std::istringstream in(text);
-  std::string byte;
-  while (in >> byte) out.push_back(static_cast<std::uint8_t>(std::stoul(byte, nullptr, 16)));
-  return out;
-}
-
-std::vector<std::uint8_t> xbus(std::uint8_t mid, const std::vector<std::uint8_t>& payload) {
-  std::vector<std::uint8_t> out(payload.size() + 8);
-  out.resize(imu::encode_xbus(mid, payload, out));
-  return out;
-}
+using test::hex;
+using test::xbus;
 
 const char* kMti300 =
     "10 20 02 46 82 10 60 04 01 C4 FC 3E 20 10 10 3F 71 CE 6C BE A5 6B CF 3C 61 3B D8 BD 69 1D 25 80 20 0C BB B1 7D "
@@ -420,12 +411,47 @@ TEST(ImuDriver, LineFormatOverUdp) {
   o.link.kind = link::LinkKind::udp;
   o.link.endpoint = {0x7F000001u, 0};
   o.protocol = imu::ImuProtocol::line;
+  o.attitude.use_device_orientation = false;
   auto made = imu::ImuDriver::create(o);
   ASSERT_TRUE(made.driver);
-  tick(*made.driver, ms(1));
-  // The bound port is the link's; find it through a second poll's status.
-  ASSERT_EQ(made.driver->status().link_state, link::LinkState::open);
-  EXPECT_EQ(made.driver->status().health, imu::ImuHealth::no_data);
+  Nanos now = ms(1);
+  tick(*made.driver, now);
+  imu::ImuDriverStatus st = made.driver->status();
+  ASSERT_EQ(st.link_state, link::LinkState::open);
+  ASSERT_NE(st.udp_port, 0);
+  EXPECT_EQ(st.health, imu::ImuHealth::no_data);
+  const int tx = socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_addr.s_addr = htonl(0x7F000001u);
+  to.sin_port = htons(st.udp_port);
+  // Level and still, 5 degrees of roll; one line corrupt, one not ours.
+  const double g = imu::kStandardGravity, r = 5.0 * M_PI / 180.0;
+  for (int k = 0; k < 100; ++k) {
+    imu::ImuSample s;
+    s.sample_time = k * 0.01;
+    s.acceleration = {0.0, g * std::sin(r), g * std::cos(r)};
+    s.fields = imu::kSampleTime | imu::kRateOfTurn | imu::kAcceleration;
+    char line[200];
+    std::size_t n = imu::format_imu_line(s, line, sizeof line);
+    if (k == 50) line[10] = '7';
+    sendto(tx, line, n, 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+  }
+  const char* other = "$GPGGA,1,2*00\r\n";
+  sendto(tx, other, std::strlen(other), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+  ::close(tx);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  // About 7 kB: two polls of the 4 kB buffer, no datagram cut in two.
+  tick(*made.driver, now += ms(5));
+  tick(*made.driver, now += ms(5));
+  st = made.driver->status();
+  EXPECT_EQ(st.link.truncated, 0u);
+  EXPECT_EQ(st.samples, 99u);
+  EXPECT_EQ(st.line_rejected[static_cast<std::size_t>(imu::LineError::bad_checksum)], 1u);
+  EXPECT_EQ(st.line_rejected[static_cast<std::size_t>(imu::LineError::not_imu)], 1u);
+  EXPECT_EQ(st.health, imu::ImuHealth::ok);
+  EXPECT_NEAR(st.attitude.roll, r, 1e-9);
+  EXPECT_NEAR(st.attitude.pitch, 0.0, 1e-9);
 }
 
 // The drivers under the real scheduler, armed: fed through pseudo-terminals

@@ -254,15 +254,9 @@ void CanDriver::publish_status(Nanos now) noexcept {
     local_.health = CanHealth::ok;
   }
   if (last_reading_ >= 0 && local_.open) current_backoff_ = options_.backoff;
-  if (shared_mutex_.try_lock()) {
-    shared_ = local_;
-    shared_mutex_.unlock();
-  }
+  shared_.post(local_);
 }
 
-CanDriverStatus CanDriver::status() const noexcept {
-  std::lock_guard lock(shared_mutex_);
-  return shared_;
-}
+CanDriverStatus CanDriver::status() const noexcept { return shared_.read(); }
 
 }  // namespace trailnav::can

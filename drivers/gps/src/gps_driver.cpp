@@ -62,6 +62,7 @@ void GpsDriver::run(const TaskTick& tick) {
 void GpsDriver::publish_status(Nanos now) noexcept {
   local_.link_state = link_->state();
   local_.link = link_->counters();
+  local_.udp_port = link_->bound_port();
   local_.gps = assembler_.counters();
   local_.overlong_lines = framer_.overlong();
   local_.last_fix_age = last_fix_ < 0 ? -1.0 : nanos_to_seconds(now - last_fix_);
@@ -77,15 +78,9 @@ void GpsDriver::publish_status(Nanos now) noexcept {
   } else {
     local_.health = GpsHealth::no_fix;
   }
-  if (shared_mutex_.try_lock()) {
-    shared_ = local_;
-    shared_mutex_.unlock();
-  }
+  shared_.post(local_);
 }
 
-GpsDriverStatus GpsDriver::status() const noexcept {
-  std::lock_guard lock(shared_mutex_);
-  return shared_;
-}
+GpsDriverStatus GpsDriver::status() const noexcept { return shared_.read(); }
 
 }  // namespace trailnav::gps

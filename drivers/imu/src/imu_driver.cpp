@@ -105,6 +105,7 @@ void ImuDriver::run(const TaskTick& tick) {
 void ImuDriver::publish_status(Nanos now) noexcept {
   local_.link_state = link_->state();
   local_.link = link_->counters();
+  local_.udp_port = link_->bound_port();
   local_.xbus = xbus_.counters();
   local_.attitude_counters = filter_.counters();
   local_.attitude = filter_.attitude();
@@ -120,15 +121,9 @@ void ImuDriver::publish_status(Nanos now) noexcept {
   } else {
     local_.health = ImuHealth::ok;
   }
-  if (shared_mutex_.try_lock()) {
-    shared_ = local_;
-    shared_mutex_.unlock();
-  }
+  shared_.post(local_);
 }
 
-ImuDriverStatus ImuDriver::status() const noexcept {
-  std::lock_guard lock(shared_mutex_);
-  return shared_;
-}
+ImuDriverStatus ImuDriver::status() const noexcept { return shared_.read(); }
 
 }  // namespace trailnav::imu

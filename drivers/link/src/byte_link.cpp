@@ -276,6 +276,16 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
   if (state_ != LinkState::open) return {};
   std::size_t got = 0;
   while (got < options_.buffer_bytes) {
+    if (options_.kind == LinkKind::udp) {
+      // A datagram is read whole or not at all: one that does not fit what is
+      // left of the buffer waits for the next poll instead of being cut.
+      const ssize_t next = ::recv(fd_, nullptr, 0, MSG_PEEK | MSG_TRUNC | MSG_DONTWAIT);
+      if (next < 0) break;
+      if (static_cast<std::size_t>(next) > options_.buffer_bytes - got) {
+        if (got > 0) break;
+        ++counters_.truncated;  // larger than the whole buffer: its tail is lost
+      }
+    }
     const ssize_t n = ::read(fd_, buffer_.get() + got, options_.buffer_bytes - got);
     if (n > 0) {
       got += static_cast<std::size_t>(n);

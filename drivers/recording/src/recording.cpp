@@ -545,6 +545,13 @@ RecordingReader::Opened RecordingReader::open(const std::string& path) {
   return result;
 }
 
+int RecordingReader::stream_index(std::string_view name, StreamKind kind) const noexcept {
+  for (std::size_t i = 0; i < streams_.size(); ++i) {
+    if (streams_[i].name == name && streams_[i].kind == kind) return static_cast<int>(i);
+  }
+  return -1;
+}
+
 std::optional<Event> RecordingReader::next() {
   Source* best = nullptr;
   for (auto& s : sources_) {

@@ -99,15 +99,9 @@ void VelodyneDriver::publish_counters() noexcept {
   local_.time_source = clock_.source();
   local_.time_steps = clock_.steps();
   local_.time_clamped = clock_.clamped();
-  if (shared_mutex_.try_lock()) {
-    shared_ = local_;
-    shared_mutex_.unlock();
-  }
+  shared_.post(local_);
 }
 
-DriverCounters VelodyneDriver::counters() const noexcept {
-  std::lock_guard lock(shared_mutex_);
-  return shared_;
-}
+DriverCounters VelodyneDriver::counters() const noexcept { return shared_.read(); }
 
 }  // namespace trailnav::velodyne

@@ -10,13 +10,13 @@
 #include <array>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <string>
 
 #include "trailnav/drivers/can/wheel_odometry.hpp"
 #include "trailnav/drivers/udp/udp_receiver.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
 #include "trailnav/runtime/spsc_queue.hpp"
 
 namespace trailnav::can {
@@ -100,8 +100,7 @@ class CanDriver final : public Task {
   Mailbox<OdometryState> latest_;
   SpscQueue<OdometryState, kOdometryQueueCapacity> queue_;
   CanDriverStatus local_;
-  mutable std::mutex shared_mutex_;
-  CanDriverStatus shared_;
+  StatusBoard<CanDriverStatus> shared_;
 };
 
 struct CanDriver::Created {

@@ -12,13 +12,13 @@
 #include <array>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <string>
 
 #include "trailnav/drivers/gps/fix.hpp"
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
 
 namespace trailnav::gps {
 
@@ -46,6 +46,7 @@ struct GpsDriverStatus {
   GpsHealth health = GpsHealth::no_link;
   link::LinkState link_state = link::LinkState::closed;
   link::LinkCounters link;
+  std::uint16_t udp_port = 0;  // udp links: the port bound (chosen by the kernel when 0)
   GpsCounters gps;
   std::uint64_t overlong_lines = 0;
   std::uint64_t published = 0;
@@ -81,8 +82,7 @@ class GpsDriver final : public Task {
   Nanos last_fix_ = -1;
   std::int64_t last_receive_ns_ = 0;
   GpsDriverStatus local_;
-  mutable std::mutex shared_mutex_;
-  GpsDriverStatus shared_;
+  StatusBoard<GpsDriverStatus> shared_;
 };
 
 struct GpsDriver::Created {

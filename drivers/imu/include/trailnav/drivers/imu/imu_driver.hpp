@@ -11,7 +11,6 @@
 #include <array>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <string>
 
 #include "trailnav/drivers/gps/fix.hpp"
@@ -21,6 +20,7 @@
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
 #include "trailnav/runtime/spsc_queue.hpp"
 
 namespace trailnav::imu {
@@ -60,6 +60,7 @@ struct ImuDriverStatus {
   ImuHealth health = ImuHealth::no_link;
   link::LinkState link_state = link::LinkState::closed;
   link::LinkCounters link;
+  std::uint16_t udp_port = 0;  // udp links: the port bound (chosen by the kernel when 0)
   XbusCounters xbus;
   MtData2Counters items;
   std::array<std::uint64_t, kXsensErrors> xsens_rejected{};
@@ -105,8 +106,7 @@ class ImuDriver final : public Task {
   Nanos last_sample_ = -1;
   Nanos last_device_error_ = -1;
   ImuDriverStatus local_;
-  mutable std::mutex shared_mutex_;
-  ImuDriverStatus shared_;
+  StatusBoard<ImuDriverStatus> shared_;
 };
 
 struct ImuDriver::Created {

@@ -56,6 +56,7 @@ struct LinkCounters {
   std::uint64_t silences = 0;       // of those: no bytes for silence_timeout
   std::uint64_t read_errors = 0;
   std::uint64_t bytes = 0;
+  std::uint64_t truncated = 0;     // udp: datagrams larger than buffer_bytes, cut short
   std::uint64_t writes = 0;
   std::uint64_t write_errors = 0;
 };

@@ -95,6 +95,8 @@ class RecordingReader {
   ~RecordingReader();
 
   const std::vector<StreamInfo>& streams() const noexcept { return streams_; }
+  // The index of the stream of this name and kind; -1 when there is none.
+  int stream_index(std::string_view name, StreamKind kind) const noexcept;
   // The next event in time order; nullopt at the end.
   std::optional<Event> next();
   const ReaderCounters& counters() const noexcept { return counters_; }

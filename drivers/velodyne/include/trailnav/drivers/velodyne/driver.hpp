@@ -7,7 +7,6 @@
 #include <array>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 
@@ -16,6 +15,7 @@
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
 
 namespace trailnav::velodyne {
 
@@ -91,10 +91,7 @@ class VelodyneDriver final : public Task {
   std::unique_ptr<udp::UdpReceiver> position_;
   DriverCounters local_;  // the task thread's own
 
-  // Published copy. The task only try_locks, so a reader never blocks it
-  // (a skipped update is made on the next run).
-  mutable std::mutex shared_mutex_;
-  DriverCounters shared_;
+  StatusBoard<DriverCounters> shared_;  // the published copy
 };
 
 struct VelodyneDriver::Created {
