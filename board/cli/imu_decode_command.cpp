@@ -7,14 +7,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "commands.hpp"
-#include "trailnav/drivers/gps/fix.hpp"
 #include "trailnav/drivers/imu/attitude.hpp"
-#include "trailnav/drivers/imu/line_format.hpp"
-#include "trailnav/drivers/imu/xsens.hpp"
+#include "trailnav/drivers/imu/stream_decoder.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 
 namespace trailnav::cli {
@@ -33,15 +32,13 @@ struct ImuDecodeOptions {
 
 struct Summary {
   std::uint64_t samples = 0, printed = 0;
-  std::array<std::uint64_t, imu::kXsensErrors> xsens_errors{};
-  std::array<std::uint64_t, imu::kLineErrors> line_errors{};
-  std::uint64_t device_errors = 0, other_messages = 0, csv_bad_rows = 0;
+  std::uint64_t csv_bad_rows = 0;
   double min_roll = 1e9, max_roll = -1e9, min_pitch = 1e9, max_pitch = -1e9;
 };
 
 class Decoder {
  public:
-  explicit Decoder(const ImuDecodeOptions& o) : o_(o), filter_(options(o)) {
+  Decoder(const ImuDecodeOptions& o, imu::ImuProtocol protocol) : o_(o), filter_(options(o)), stream_(protocol) {
     if (o_.format == "csv") {
       std::printf("time,counter,source,roll_deg,pitch_deg,yaw_deg,yaw_rate_dps,gx,gy,gz,ax,ay,az,standstill\n");
     }
@@ -80,40 +77,14 @@ class Decoder {
     }
   }
 
-  void xsens(std::span<const std::uint8_t> bytes, std::int64_t time_ns) {
-    xbus_.feed(bytes, [&](const imu::XbusMessage& m) {
-      if (m.mid == imu::mid::kError) {
-        ++summary_.device_errors;
-        const std::uint8_t code = m.payload.empty() ? 0 : m.payload[0];
-        std::fprintf(stderr, "device error 0x%02X: %s\n", code, imu::xsens_device_error_text(code));
-        return;
-      }
-      if (m.mid != imu::mid::kMtData2) {
-        ++summary_.other_messages;
-        return;
-      }
-      imu::ImuSample s;
-      s.time_ns = time_ns;
-      const imu::XsensError e = imu::decode_mtdata2(m.payload, s, &items_);
-      if (e != imu::XsensError::none) {
-        ++summary_.xsens_errors[static_cast<std::size_t>(e)];
-        return;
-      }
-      sample(s);
-    });
-  }
-
-  void lines(std::span<const std::uint8_t> bytes, std::int64_t time_ns) {
-    framer_.feed(bytes, [&](std::string_view line) {
-      imu::ImuSample s;
-      s.time_ns = time_ns;
-      const imu::LineError e = imu::parse_imu_line(line, s);
-      if (e != imu::LineError::none) {
-        ++summary_.line_errors[static_cast<std::size_t>(e)];
-        return;
-      }
-      sample(s);
-    });
+  // Xsens binary or $TNIMU lines, by the decoder's protocol.
+  void bytes(std::span<const std::uint8_t> bytes, std::int64_t time_ns) {
+    const std::uint64_t device_errors = stream_.counters().device_errors;
+    stream_.feed(bytes, time_ns, [&](const imu::ImuSample& s) { sample(s); });
+    if (stream_.counters().device_errors != device_errors) {
+      const std::uint8_t code = stream_.counters().last_device_error;
+      std::fprintf(stderr, "device error 0x%02X: %s\n", code, imu::xsens_device_error_text(code));
+    }
   }
 
   // x-io's CSV: time (s), gyroscope (deg/s), accelerometer (g), magnetometer.
@@ -136,23 +107,23 @@ class Decoder {
     const imu::Attitude& a = filter_.attitude();
     std::fprintf(stderr, "trailnav imu-decode: %s: %llu samples, %llu printed", protocol,
                  static_cast<unsigned long long>(summary_.samples), static_cast<unsigned long long>(summary_.printed));
-    if (xbus_.counters().bytes > 0) {
-      const imu::XbusCounters& x = xbus_.counters();
+    const imu::ImuStreamCounters& k = stream_.counters();
+    if (k.xbus.bytes > 0) {
       std::fprintf(stderr, "; %llu messages, %llu bad checksums, %llu oversize, %llu bytes skipped, %llu other messages",
-                   static_cast<unsigned long long>(x.messages), static_cast<unsigned long long>(x.bad_checksum),
-                   static_cast<unsigned long long>(x.oversize), static_cast<unsigned long long>(x.skipped_bytes),
-                   static_cast<unsigned long long>(summary_.other_messages));
+                   static_cast<unsigned long long>(k.xbus.messages), static_cast<unsigned long long>(k.xbus.bad_checksum),
+                   static_cast<unsigned long long>(k.xbus.oversize), static_cast<unsigned long long>(k.xbus.skipped_bytes),
+                   static_cast<unsigned long long>(k.other_messages));
     }
     std::fprintf(stderr, "\n");
-    for (std::size_t i = 1; i < summary_.xsens_errors.size(); ++i) {
-      if (summary_.xsens_errors[i] == 0) continue;
+    for (std::size_t i = 1; i < k.xsens_rejected.size(); ++i) {
+      if (k.xsens_rejected[i] == 0) continue;
       std::fprintf(stderr, "  rejected MTData2 %-15s %llu\n", imu::xsens_error_name(static_cast<imu::XsensError>(i)),
-                   static_cast<unsigned long long>(summary_.xsens_errors[i]));
+                   static_cast<unsigned long long>(k.xsens_rejected[i]));
     }
-    for (std::size_t i = 2; i < summary_.line_errors.size(); ++i) {  // not_imu lines are other sentences
-      if (summary_.line_errors[i] == 0) continue;
+    for (std::size_t i = 2; i < k.line_rejected.size(); ++i) {  // not_imu lines are other sentences
+      if (k.line_rejected[i] == 0) continue;
       std::fprintf(stderr, "  rejected line    %-15s %llu\n", imu::line_error_name(static_cast<imu::LineError>(i)),
-                   static_cast<unsigned long long>(summary_.line_errors[i]));
+                   static_cast<unsigned long long>(k.line_rejected[i]));
     }
     if (summary_.csv_bad_rows > 0) {
       std::fprintf(stderr, "  unreadable CSV rows %llu\n", static_cast<unsigned long long>(summary_.csv_bad_rows));
@@ -171,9 +142,7 @@ class Decoder {
  private:
   const ImuDecodeOptions& o_;
   imu::AttitudeFilter filter_;
-  imu::XbusFramer xbus_;
-  imu::MtData2Counters items_;
-  gps::LineFramer framer_;
+  imu::ImuStreamDecoder stream_;
   Summary summary_;
 };
 
@@ -202,8 +171,11 @@ int run(const ImuDecodeOptions& o) {
     std::fprintf(stderr, "trailnav imu-decode: --every must be 1 or more\n");
     return 2;
   }
-  Decoder decoder(o);
   std::string protocol = o.protocol;
+  std::unique_ptr<Decoder> decoder;
+  auto make = [&] {
+    if (!decoder) decoder = std::make_unique<Decoder>(o, protocol == "xsens" ? imu::ImuProtocol::xsens : imu::ImuProtocol::line);
+  };
   std::error_code ec;
   if (std::filesystem::is_directory(o.input, ec)) {
     auto opened = recording::RecordingReader::open(o.input);
@@ -224,11 +196,8 @@ int run(const ImuDecodeOptions& o) {
     while (auto e = opened.reader->next()) {
       if (e->stream != stream) continue;
       if (protocol == "auto") protocol = sniff(e->payload);
-      if (protocol == "xsens") {
-        decoder.xsens(e->payload, e->time_ns);
-      } else {
-        decoder.lines(e->payload, e->time_ns);
-      }
+      make();
+      decoder->bytes(e->payload, e->time_ns);
     }
   } else {
     std::ifstream in(o.input, std::ios::binary);
@@ -241,28 +210,26 @@ int run(const ImuDecodeOptions& o) {
     std::size_t got = static_cast<std::size_t>(in.gcount());
     const std::span<const std::uint8_t> head(reinterpret_cast<const std::uint8_t*>(buf.data()), std::min<std::size_t>(got, 512));
     if (protocol == "auto") protocol = sniff(head);
+    make();
     if (protocol == "xio-csv") {
       in.clear();
       in.seekg(0);
       std::string row;
       std::getline(in, row);  // header
-      while (std::getline(in, row)) decoder.xio_row(row);
+      while (std::getline(in, row)) decoder->xio_row(row);
     } else {
       while (got > 0) {
         const std::span<const std::uint8_t> bytes(reinterpret_cast<const std::uint8_t*>(buf.data()), got);
-        if (protocol == "xsens") {
-          decoder.xsens(bytes, 0);
-        } else {
-          decoder.lines(bytes, 0);
-        }
+        decoder->bytes(bytes, 0);
         in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
         got = static_cast<std::size_t>(in.gcount());
       }
       const std::uint8_t eol = '\n';
-      if (protocol == "line") decoder.lines(std::span(&eol, 1), 0);
+      if (protocol == "line") decoder->bytes(std::span(&eol, 1), 0);
     }
   }
-  decoder.report(protocol.c_str());
+  make();  // an empty recording stream still gets its (empty) report
+  decoder->report(protocol.c_str());
   return 0;
 }
 

@@ -80,14 +80,14 @@ TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
   std::printf("[ bench ] %.1f s at 2x: GPS %llu lines, %llu fixes; IMU %llu samples; CAN %llu frames, "
               "odometry %.2f m\n",
               report.recording_s, static_cast<unsigned long long>(gs.gps.lines),
-              static_cast<unsigned long long>(gs.published), static_cast<unsigned long long>(is.samples),
+              static_cast<unsigned long long>(gs.published), static_cast<unsigned long long>(is.stream.samples),
               static_cast<unsigned long long>(cs.frames), cs.odometry.distance);
   EXPECT_EQ(gs.gps.lines, sr.nmea_sentences);
   EXPECT_EQ(gs.gps.rejected_total(), 0u);
   EXPECT_EQ(gs.published, sr.nmea_sentences / 4);  // GGA, RMC, GST, VTG per epoch
   EXPECT_EQ(gs.health, gps::GpsHealth::fix);
-  EXPECT_EQ(is.samples, sr.imu_messages);
-  EXPECT_EQ(is.xbus.bad_checksum, 0u);
+  EXPECT_EQ(is.stream.samples, sr.imu_messages);
+  EXPECT_EQ(is.stream.xbus.bad_checksum, 0u);
   // Nobody drains the IMU queue here: it fills to its capacity, then counts.
   EXPECT_EQ(is.queue_drops, sr.imu_messages - std::min<std::uint64_t>(sr.imu_messages, imu::kImuQueueCapacity));
   EXPECT_EQ(cs.frames, sr.can_frames);

@@ -380,8 +380,8 @@ TEST(ImuDriver, XsensOverAPtyStartsTheDeviceDecodesAndReportsDeviceErrors) {
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   tick(d, now += ms(5));
   imu::ImuDriverStatus st = d.status();
-  EXPECT_EQ(st.samples, 9u);
-  EXPECT_EQ(st.xbus.bad_checksum, 1u);
+  EXPECT_EQ(st.stream.samples, 9u);
+  EXPECT_EQ(st.stream.xbus.bad_checksum, 1u);
   EXPECT_EQ(st.health, imu::ImuHealth::ok);
   imu::ImuReading r;
   int queued = 0;
@@ -399,7 +399,7 @@ TEST(ImuDriver, XsensOverAPtyStartsTheDeviceDecodesAndReportsDeviceErrors) {
   tick(d, now += ms(5));
   st = d.status();
   EXPECT_EQ(st.health, imu::ImuHealth::device_error);
-  EXPECT_EQ(st.last_device_error, 0x1E);
+  EXPECT_EQ(st.stream.last_device_error, 0x1E);
   // No samples for longer than data_timeout: no_data.
   tick(d, now += ms(600));
   EXPECT_EQ(d.status().health, imu::ImuHealth::no_data);
@@ -446,9 +446,9 @@ TEST(ImuDriver, LineFormatOverUdp) {
   tick(*made.driver, now += ms(5));
   st = made.driver->status();
   EXPECT_EQ(st.link.truncated, 0u);
-  EXPECT_EQ(st.samples, 99u);
-  EXPECT_EQ(st.line_rejected[static_cast<std::size_t>(imu::LineError::bad_checksum)], 1u);
-  EXPECT_EQ(st.line_rejected[static_cast<std::size_t>(imu::LineError::not_imu)], 1u);
+  EXPECT_EQ(st.stream.samples, 99u);
+  EXPECT_EQ(st.stream.line_rejected[static_cast<std::size_t>(imu::LineError::bad_checksum)], 1u);
+  EXPECT_EQ(st.stream.line_rejected[static_cast<std::size_t>(imu::LineError::not_imu)], 1u);
   EXPECT_EQ(st.health, imu::ImuHealth::ok);
   EXPECT_NEAR(st.attitude.roll, r, 1e-9);
   EXPECT_NEAR(st.attitude.pitch, 0.0, 1e-9);
@@ -510,7 +510,7 @@ TEST(SerialDrivers, ArmedDriversNeverTouchTheHeapEvenAcrossReconnection) {
   EXPECT_GE(gs.link.opens, 2u);
   EXPECT_GE(gs.link.closes, 1u);
   EXPECT_GT(gs.published, 50u);
-  EXPECT_GE(is.samples, 390u);
+  EXPECT_GE(is.stream.samples, 390u);
   std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
   const std::size_t n = alloc_guard::report(rows);
   for (std::size_t k = 0; k < n; ++k) {

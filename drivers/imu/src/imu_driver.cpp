@@ -4,8 +4,6 @@
 
 namespace trailnav::imu {
 
-const char* imu_protocol_name(ImuProtocol p) noexcept { return p == ImuProtocol::xsens ? "xsens" : "line"; }
-
 const char* imu_health_name(ImuHealth h) noexcept {
   switch (h) {
     case ImuHealth::no_link: return "no_link";
@@ -40,7 +38,7 @@ ImuDriver::Created ImuDriver::create(const ImuDriverOptions& options) {
 }
 
 ImuDriver::ImuDriver(const ImuDriverOptions& options, std::unique_ptr<link::ByteLink> link)
-    : options_(options), link_(std::move(link)), filter_(options.attitude) {}
+    : options_(options), link_(std::move(link)), decoder_(options.protocol), filter_(options.attitude) {}
 
 void ImuDriver::start_device() noexcept {
   std::size_t n = encode_xbus(mid::kGoToConfig, {}, command_);
@@ -54,14 +52,12 @@ void ImuDriver::start_device() noexcept {
   link_->write({command_.data(), n});
 }
 
-void ImuDriver::on_sample(ImuSample& s, Nanos now) noexcept {
-  s.time_ns = link_->receive_ns();
+void ImuDriver::on_sample(const ImuSample& s, Nanos now) noexcept {
   ImuReading& slot = latest_.write_slot();
   slot.sample = s;
   slot.attitude = filter_.update(s);
   if (!queue_.try_push(slot)) ++local_.queue_drops;
   latest_.publish();
-  ++local_.samples;
   last_sample_ = now;
 }
 
@@ -70,34 +66,9 @@ void ImuDriver::run(const TaskTick& tick) {
   const auto bytes = link_->poll(now);
   if (link_->just_opened() && options_.protocol == ImuProtocol::xsens && options_.xsens_start) start_device();
   if (!bytes.empty()) {
-    if (options_.protocol == ImuProtocol::xsens) {
-      xbus_.feed(bytes, [&](const XbusMessage& m) {
-        if (m.mid == mid::kError) {
-          ++local_.device_errors;
-          local_.last_device_error = m.payload.empty() ? 0 : m.payload[0];
-          last_device_error_ = now;
-          return;
-        }
-        if (m.mid != mid::kMtData2) return;  // acknowledgements and replies
-        ImuSample s;
-        const XsensError e = decode_mtdata2(m.payload, s, &local_.items);
-        if (e != XsensError::none) {
-          ++local_.xsens_rejected[static_cast<std::size_t>(e)];
-          return;
-        }
-        on_sample(s, now);
-      });
-    } else {
-      lines_.feed(bytes, [&](std::string_view line) {
-        ImuSample s;
-        const LineError e = parse_imu_line(line, s);
-        if (e != LineError::none) {
-          ++local_.line_rejected[static_cast<std::size_t>(e)];
-          return;
-        }
-        on_sample(s, now);
-      });
-    }
+    const std::uint64_t device_errors = decoder_.counters().device_errors;
+    decoder_.feed(bytes, link_->receive_ns(), [&](const ImuSample& s) { on_sample(s, now); });
+    if (decoder_.counters().device_errors != device_errors) last_device_error_ = now;
   }
   publish_status(now);
 }
@@ -106,7 +77,7 @@ void ImuDriver::publish_status(Nanos now) noexcept {
   local_.link_state = link_->state();
   local_.link = link_->counters();
   local_.udp_port = link_->bound_port();
-  local_.xbus = xbus_.counters();
+  local_.stream = decoder_.counters();
   local_.attitude_counters = filter_.counters();
   local_.attitude = filter_.attitude();
   std::memcpy(local_.last_link_error.data(), link_->last_error(), local_.last_link_error.size());

@@ -1,4 +1,5 @@
 #include "trailnav/drivers/imu/xsens.hpp"
+#include "trailnav/drivers/imu/stream_decoder.hpp"
 
 #include <Eigen/Geometry>
 #include <cmath>
@@ -252,5 +253,7 @@ std::size_t encode_output_configuration(std::span<const OutputItem> items, std::
   }
   return encode_xbus(mid::kSetOutputConfiguration, std::span<const std::uint8_t>(payload.data(), o), out);
 }
+
+const char* imu_protocol_name(ImuProtocol p) noexcept { return p == ImuProtocol::xsens ? "xsens" : "line"; }
 
 }  // namespace trailnav::imu

@@ -13,10 +13,8 @@
 #include <memory>
 #include <string>
 
-#include "trailnav/drivers/gps/fix.hpp"
 #include "trailnav/drivers/imu/attitude.hpp"
-#include "trailnav/drivers/imu/line_format.hpp"
-#include "trailnav/drivers/imu/xsens.hpp"
+#include "trailnav/drivers/imu/stream_decoder.hpp"
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
@@ -24,9 +22,6 @@
 #include "trailnav/runtime/spsc_queue.hpp"
 
 namespace trailnav::imu {
-
-enum class ImuProtocol : std::uint8_t { xsens, line };
-const char* imu_protocol_name(ImuProtocol p) noexcept;
 
 struct ImuDriverOptions {
   std::string name = "imu";
@@ -61,13 +56,7 @@ struct ImuDriverStatus {
   link::LinkState link_state = link::LinkState::closed;
   link::LinkCounters link;
   std::uint16_t udp_port = 0;  // udp links: the port bound (chosen by the kernel when 0)
-  XbusCounters xbus;
-  MtData2Counters items;
-  std::array<std::uint64_t, kXsensErrors> xsens_rejected{};
-  std::array<std::uint64_t, kLineErrors> line_rejected{};
-  std::uint64_t device_errors = 0;
-  std::uint8_t last_device_error = 0;
-  std::uint64_t samples = 0;
+  ImuStreamCounters stream;  // bytes to samples: messages, rejections by reason, device errors
   std::uint64_t queue_drops = 0;  // samples the consumer did not take in time
   AttitudeCounters attitude_counters;
   Attitude attitude;
@@ -91,14 +80,13 @@ class ImuDriver final : public Task {
 
  private:
   ImuDriver(const ImuDriverOptions& options, std::unique_ptr<link::ByteLink> link);
-  void on_sample(ImuSample& s, Nanos now) noexcept;
+  void on_sample(const ImuSample& s, Nanos now) noexcept;
   void start_device() noexcept;
   void publish_status(Nanos now) noexcept;
 
   ImuDriverOptions options_;
   std::unique_ptr<link::ByteLink> link_;
-  XbusFramer xbus_;
-  gps::LineFramer lines_;
+  ImuStreamDecoder decoder_;
   AttitudeFilter filter_;
   Mailbox<ImuReading> latest_;
   SpscQueue<ImuReading, kImuQueueCapacity> queue_;
