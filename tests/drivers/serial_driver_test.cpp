@@ -224,6 +224,12 @@ TEST(ByteLink, UdpAndTcpOnLoopback) {
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(poll_bytes(*made.link, now), "$GPGGA,1\r\n$GPRMC,2\r\n");
+  // A datagram longer than max_datagram_bytes is cut to it, and counted.
+  const std::string big(2000, 'x');
+  sendto(tx, big.data(), big.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+  std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(poll_bytes(*made.link, now).size(), made.link->options().max_datagram_bytes);
+  EXPECT_EQ(made.link->counters().truncated, 1u);
   ::close(tx);
 
   // TCP: connects, reads, notices the server closing, reconnects.

@@ -154,6 +154,10 @@ ByteLink::Created ByteLink::create(const LinkOptions& options) {
     r.error = format_link(options) + ": buffer_bytes must be within 64 .. 1048576";
     return r;
   }
+  if (options.kind == LinkKind::udp && (options.max_datagram_bytes < 1 || options.max_datagram_bytes > options.buffer_bytes)) {
+    r.error = format_link(options) + ": max_datagram_bytes must be within 1 .. buffer_bytes";
+    return r;
+  }
   r.link.reset(new ByteLink(options));
   return r;
 }
@@ -276,17 +280,20 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
   if (state_ != LinkState::open) return {};
   std::size_t got = 0;
   while (got < options_.buffer_bytes) {
+    ssize_t n = 0;
     if (options_.kind == LinkKind::udp) {
-      // A datagram is read whole or not at all: one that does not fit what is
-      // left of the buffer waits for the next poll instead of being cut.
-      const ssize_t next = ::recv(fd_, nullptr, 0, MSG_PEEK | MSG_TRUNC | MSG_DONTWAIT);
-      if (next < 0) break;
-      if (static_cast<std::size_t>(next) > options_.buffer_bytes - got) {
-        if (got > 0) break;
-        ++counters_.truncated;  // larger than the whole buffer: its tail is lost
+      // Datagrams are read whole: only while a largest one still fits. MSG_TRUNC
+      // returns the real length, so a datagram that was cut is known and counted.
+      const std::size_t limit = options_.max_datagram_bytes;
+      if (options_.buffer_bytes - got < limit) break;
+      n = ::recv(fd_, buffer_.get() + got, limit, MSG_TRUNC | MSG_DONTWAIT);
+      if (n > 0 && static_cast<std::size_t>(n) > limit) {
+        ++counters_.truncated;
+        n = static_cast<ssize_t>(limit);
       }
+    } else {
+      n = ::read(fd_, buffer_.get() + got, options_.buffer_bytes - got);
     }
-    const ssize_t n = ::read(fd_, buffer_.get() + got, options_.buffer_bytes - got);
     if (n > 0) {
       got += static_cast<std::size_t>(n);
       continue;

@@ -37,6 +37,7 @@ struct LinkOptions {
   double backoff = 0.5;          // s before the first reopen attempt
   double max_backoff = 8.0;      // s, the longest wait between attempts
   std::size_t buffer_bytes = 4096;  // read per poll at most
+  std::size_t max_datagram_bytes = 1472;  // udp: longer datagrams are cut (counted as truncated)
 };
 
 // "serial:/dev/ttyUSB0@115200", "udp:127.0.0.1:10110", "udp::10110",
@@ -56,7 +57,7 @@ struct LinkCounters {
   std::uint64_t silences = 0;       // of those: no bytes for silence_timeout
   std::uint64_t read_errors = 0;
   std::uint64_t bytes = 0;
-  std::uint64_t truncated = 0;     // udp: datagrams larger than buffer_bytes, cut short
+  std::uint64_t truncated = 0;     // udp: datagrams longer than max_datagram_bytes, cut short
   std::uint64_t writes = 0;
   std::uint64_t write_errors = 0;
 };
