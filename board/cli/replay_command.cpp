@@ -23,6 +23,7 @@ struct ReplayCliOptions {
   std::vector<std::string> to;
   std::string can_interface;
   std::string can_tunnel = "127.0.0.1:29536";
+  std::string gpio_tunnel = "127.0.0.1:29537";
   std::vector<std::string> serial_links;
   double skip = 0.0;
   double duration = 0.0;
@@ -86,6 +87,12 @@ int run_replay(const ReplayCliOptions& o) {
     return 2;
   }
   options.can_tunnel = *tunnel;
+  auto gpio_tunnel = udp::parse_endpoint(o.gpio_tunnel, error);
+  if (!gpio_tunnel) {
+    std::fprintf(stderr, "trailnav replay: --gpio-tunnel: %s\n", error.c_str());
+    return 2;
+  }
+  options.gpio_tunnel = *gpio_tunnel;
 
   ProgressBar progress("replay", 100.0, "%");
   if (!o.quiet) options.progress = [&](double part) { progress.update(part * 100.0); };
@@ -158,6 +165,8 @@ void add_replay_command(CLI::App& app) {
   cmd->add_option("--to", o.to, "STREAM=ADDRESS:PORT for any UDP stream (repeatable)");
   cmd->add_option("--can-interface", o.can_interface, "Send CAN frames onto this SocketCAN interface (e.g. vcan0)");
   cmd->add_option("--can-tunnel", o.can_tunnel, "Where the CAN tunnel sends when there is no --can-interface")
+      ->capture_default_str();
+  cmd->add_option("--gpio-tunnel", o.gpio_tunnel, "Where GPIO streams (e-stop levels) are sent, as GPIO tunnel datagrams")
       ->capture_default_str();
   cmd->add_option("--serial-link", o.serial_links, "STREAM=PATH: a symlink to the stream's pseudo-terminal (repeatable)");
   cmd->add_option("--skip", o.skip, "Start this many seconds into the recording")->check(CLI::NonNegativeNumber);

@@ -52,9 +52,9 @@ int run_sim(SimCliOptions& o) {
   std::fprintf(stderr, "  lidar: %llu data packets, %llu position packets, %llu rays, %llu returns\n",
                static_cast<unsigned long long>(r.lidar_packets), static_cast<unsigned long long>(r.position_packets),
                static_cast<unsigned long long>(r.rays), static_cast<unsigned long long>(r.returns));
-  std::fprintf(stderr, "  gps: %llu NMEA sentences; imu: %llu MTData2 messages; can: %llu frames\n",
+  std::fprintf(stderr, "  gps: %llu NMEA sentences; imu: %llu MTData2 messages; can: %llu frames; gpio: %llu levels\n",
                static_cast<unsigned long long>(r.nmea_sentences), static_cast<unsigned long long>(r.imu_messages),
-               static_cast<unsigned long long>(r.can_frames));
+               static_cast<unsigned long long>(r.can_frames), static_cast<unsigned long long>(r.gpio_levels));
   const double rays_per_s = r.lidar_seconds > 0 ? static_cast<double>(r.rays) / r.lidar_seconds : 0.0;
   std::fprintf(stderr, "  speed: world built in %.2f s; lidar %.2f M rays/s = %.2fx real time; total %.2f s\n",
                r.world_seconds, rays_per_s / 1e6, r.lidar_seconds > 0 ? r.sim_seconds / r.lidar_seconds : 0.0,

@@ -56,6 +56,15 @@ struct UdpOutput final : Replayer::Output {
   bool send(const recording::Event& e) override { return sender->send(e.payload); }
 };
 
+struct GpioTunnelOutput final : Replayer::Output {
+  std::shared_ptr<udp::UdpSender> sender;
+  bool send(const recording::Event& e) override {
+    const std::string_view line(reinterpret_cast<const char*>(e.payload.data()), e.payload.size());
+    const gpio::TunnelDatagram d = gpio::encode_tunnel(line, e.gpio_value, e.time_ns);
+    return d.size > 0 && sender->send(d.view());
+  }
+};
+
 struct CanTunnelOutput final : Replayer::Output {
   std::shared_ptr<udp::UdpSender> sender;
   bool send(const recording::Event& e) override { return sender->send(can::encode_tunnel(*e.can).view()); }
@@ -173,6 +182,7 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
   }
 
   std::shared_ptr<udp::UdpSender> tunnel;
+  std::shared_ptr<udp::UdpSender> gpio_tunnel;
   for (const recording::StreamInfo& s : r->reader_->streams()) {
     StreamReport report;
     report.name = s.name;
@@ -229,6 +239,19 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
         report.target = "can-tunnel udp " + udp::format_endpoint(options.can_tunnel);
         r->outputs_.push_back(std::move(out));
       }
+    } else if (s.kind == StreamKind::gpio) {
+      if (!gpio_tunnel) {
+        auto sender = udp::UdpSender::open(options.gpio_tunnel);
+        if (!sender.sender) {
+          result.error = "GPIO tunnel: " + sender.error;
+          return result;
+        }
+        gpio_tunnel = std::move(sender.sender);
+      }
+      auto out = std::make_unique<GpioTunnelOutput>();
+      out->sender = gpio_tunnel;
+      report.target = "gpio-tunnel udp " + udp::format_endpoint(options.gpio_tunnel);
+      r->outputs_.push_back(std::move(out));
     } else {
       auto out = std::make_unique<PtyOutput>();
       if (std::string error = open_pty(*out, s.baud); !error.empty()) {

@@ -1,7 +1,7 @@
 // The bench replayer: re-sends a recording with its original timing — UDP
 // streams to loopback ports, serial streams into pseudo-terminals, CAN frames
 // onto a SocketCAN interface or, where there is none, into a UDP tunnel on
-// loopback (format in docs/recording.md). Measures how far each send is from
+// loopback, GPIO levels into the GPIO tunnel on loopback (format in docs/recording.md). Measures how far each send is from
 // its schedule.
 #pragma once
 
@@ -15,14 +15,17 @@
 #include <string>
 #include <vector>
 
+#include "trailnav/drivers/gpio/line_tunnel.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_sender.hpp"
 #include "trailnav/runtime/histogram.hpp"
 
 namespace trailnav::replay {
 
-// CAN frames go out as trailnav's tunnel datagrams (trailnav/drivers/can/frame.hpp).
+// CAN frames go out as trailnav's tunnel datagrams (trailnav/drivers/can/frame.hpp),
+// GPIO levels as GPIO tunnel datagrams (trailnav/drivers/gpio/line_tunnel.hpp).
 inline constexpr std::uint16_t kDefaultCanTunnelPort = can::kDefaultTunnelPort;
+inline constexpr std::uint16_t kDefaultGpioTunnelPort = gpio::kDefaultTunnelPort;
 
 struct ReplayOptions {
   double rate = 1.0;       // speed-up over the recorded timing
@@ -31,6 +34,7 @@ struct ReplayOptions {
   std::map<std::string, udp::Endpoint> udp_targets;  // per stream name; default 127.0.0.1:<recorded port>
   std::string can_interface;                          // SocketCAN interface; empty: the UDP tunnel
   udp::Endpoint can_tunnel{0x7F000001u, kDefaultCanTunnelPort};
+  udp::Endpoint gpio_tunnel{0x7F000001u, kDefaultGpioTunnelPort};
   std::map<std::string, std::string> serial_links;    // per stream name: a symlink to its pseudo-terminal
   double skip_s = 0.0;      // start this far into the recording
   double duration_s = 0.0;  // replay only this much (0: all)

@@ -147,6 +147,18 @@ Scenario read(const ConfigNode& root, const std::string& text, const std::string
   if (!start_ns) root.fail("start_utc", "expected a UTC time like 2026-06-21T10:00:00Z");
   s.start_utc_ns = *start_ns;
   s.duration = root.number("duration", 0.0, 36000.0, 0.0);
+  if (root.has("estop")) {
+    for (const ConfigNode& e : root.map_list("estop")) {
+      EstopPress p;
+      p.at = e.number("at", 0.0, 36000.0);
+      p.hold = e.number("hold", 0.01, 600.0, p.hold);
+      if (!s.estop.empty() && p.at <= s.estop.back().at + s.estop.back().hold + 0.05) {
+        e.fail("at", "presses must come in time order, at least 50 ms after the previous release");
+      }
+      e.reject_unknown_keys();
+      s.estop.push_back(p);
+    }
+  }
 
   const ConfigNode world = root.map("world");
   const auto extent = world.number_list("extent", -kBig, kBig);

@@ -151,6 +151,12 @@ struct WheelSpec {
   double ticks_per_metre = 2000.0;
 };
 
+// Presses of the robot's emergency stop (GPIO line ESTOP in the recording).
+struct EstopPress {
+  double at = 0.0;    // s after the start
+  double hold = 0.5;  // s held; the release bounces for a few milliseconds
+};
+
 struct WorldSpec {
   double xmin = -20, ymin = -20, xmax = 20, ymax = 20;  // m, east/north of the origin
   double resolution = 0.1;
@@ -185,6 +191,7 @@ struct Scenario {
   GpsSpec gps;
   ImuSpec imu;
   WheelSpec wheels;
+  std::vector<EstopPress> estop;
 
   const Trail* trail(std::string_view name) const noexcept;
 };

@@ -365,6 +365,7 @@ SimReport run_simulation(const SimOptions& o) {
   const int gps_stream = w.add_serial_stream("gps", s.gps.baud, "NMEA 0183: GGA, RMC, GST, VTG");
   const int imu_stream = w.add_serial_stream("imu", s.imu.baud, "Xsens MT binary, MTData2");
   const int can_stream = w.add_can_stream("wheels", "can0", "wheel odometry, board/sim/trailnav-robot.dbc");
+  const int gpio_stream = w.add_gpio_stream("gpio", "emergency stop (line ESTOP, 1: pressed)");
   Status st = Status::ok();
   auto check = [&](Status result) {
     if (st && !result) st = result;
@@ -470,6 +471,26 @@ SimReport run_simulation(const SimOptions& o) {
       if (!ok) return fail("wheel odometry does not fit the robot DBC's signals at t = " + std::to_string(t) + " s");
       check(w.write_can(can_stream, tf));
       report.can_frames += 2;
+    }
+  }
+
+  // The e-stop line: its level at the start, then each press; mechanical
+  // contacts bounce on release (two short re-closures within 4 ms).
+  {
+    auto level = [&](double t, bool v) {
+      check(w.write_gpio(gpio_stream, s.start_utc_ns + ns(t), "ESTOP", v));
+      ++report.gpio_levels;
+    };
+    level(0.0, false);
+    for (const EstopPress& p : s.estop) {
+      if (p.at >= report.sim_seconds) break;
+      const double off = p.at + p.hold;
+      level(p.at, true);
+      level(off, false);
+      level(off + 0.0012, true);
+      level(off + 0.0019, false);
+      level(off + 0.0031, true);
+      level(off + 0.0040, false);
     }
   }
 

@@ -40,6 +40,7 @@ struct SimReport {
   std::uint64_t nmea_sentences = 0;
   std::uint64_t imu_messages = 0;
   std::uint64_t can_frames = 0;
+  std::uint64_t gpio_levels = 0;
 };
 
 SimReport run_simulation(const SimOptions& options);

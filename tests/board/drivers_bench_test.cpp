@@ -1,8 +1,10 @@
 // The bench: a simulated recording replayed by `trailnav replay`'s engine —
-// GPS and IMU bytes into pseudo-terminals, CAN frames into the UDP tunnel —
-// read by the GPS, IMU and CAN driver tasks on the scheduler, as on the robot.
-// Every sentence, sample and frame the simulator wrote arrives, and the
-// wheel odometry measures the distance the truth says was driven.
+// GPS and IMU bytes into pseudo-terminals, CAN frames and the e-stop line
+// into their UDP tunnels — read by the GPS, IMU, CAN and GPIO driver tasks on
+// the scheduler, as on the robot. Every sentence, sample, frame and line level
+// the simulator wrote arrives, the wheel odometry measures the distance the
+// truth says was driven, and the e-stop press with its bouncing release is
+// seen as one press.
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -16,6 +18,7 @@
 #include "replayer.hpp"
 #include "simulator.hpp"
 #include "trailnav/drivers/can/can_driver.hpp"
+#include "trailnav/drivers/gpio/gpio_driver.hpp"
 #include "trailnav/drivers/gps/gps_driver.hpp"
 #include "trailnav/drivers/imu/imu_driver.hpp"
 #include "trailnav/runtime/scheduler.hpp"
@@ -23,7 +26,7 @@
 using namespace trailnav;
 namespace fs = std::filesystem;
 
-TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
+TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuCanAndGpioDrivers) {
   const fs::path dir = fs::temp_directory_path() / ("trailnav-drivers-bench-" + std::to_string(::getpid()));
   fs::remove_all(dir);
   sim::SimOptions so;
@@ -45,9 +48,17 @@ TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
   auto can_driver = can::CanDriver::create(*dbc.dbc, co);
   ASSERT_TRUE(can_driver.driver) << can_driver.error;
 
+  gpio::GpioDriverOptions po;
+  po.transport = gpio::GpioTransport::tunnel;
+  po.tunnel = {0x7F000001u, 0};
+  po.estop_release_debounce = 0.02;
+  auto gpio_driver = gpio::GpioDriver::create(po);
+  ASSERT_TRUE(gpio_driver.driver) << gpio_driver.error;
+
   replay::ReplayOptions ro;
   ro.rate = 2.0;
   ro.can_tunnel = can_driver.driver->tunnel_endpoint();
+  ro.gpio_tunnel = gpio_driver.driver->tunnel_endpoint();
   ro.serial_links["gps"] = (dir / "gps-link").string();
   ro.serial_links["imu"] = (dir / "imu-link").string();
   auto replayer = replay::Replayer::create(dir.string(), ro);
@@ -68,6 +79,7 @@ TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
   ASSERT_TRUE(scheduler.add({"gps", TaskKind::periodic, 100.0, 2 * kNanosPerMilli, 0, -1}, *gps_driver.driver));
   ASSERT_TRUE(scheduler.add({"imu", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, *imu_driver.driver));
   ASSERT_TRUE(scheduler.add({"can", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, *can_driver.driver));
+  ASSERT_TRUE(scheduler.add({"gpio", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, *gpio_driver.driver));
   ASSERT_TRUE(scheduler.start());
   std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the drivers open their links
   const replay::ReplayReport report = replayer.replayer->run();
@@ -77,6 +89,7 @@ TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
   const gps::GpsDriverStatus gs = gps_driver.driver->status();
   const imu::ImuDriverStatus is = imu_driver.driver->status();
   const can::CanDriverStatus cs = can_driver.driver->status();
+  const gpio::GpioDriverStatus ps = gpio_driver.driver->status();
   std::printf("[ bench ] %.1f s at 2x: GPS %llu lines, %llu fixes; IMU %llu samples; CAN %llu frames, "
               "odometry %.2f m\n",
               report.recording_s, static_cast<unsigned long long>(gs.gps.lines),
@@ -107,5 +120,14 @@ TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuAndCanDrivers) {
   }
   ASSERT_GT(arc, 3.0);
   EXPECT_NEAR(cs.odometry.distance, arc, 0.05 * arc);  // wheel scale errors and slip of a few per cent
+  // The urban scenario's e-stop test at 3 s: the level at the start, one
+  // press, a release with two bounces.
+  EXPECT_EQ(sr.gpio_levels, 7u);
+  EXPECT_EQ(ps.tunnel_levels, sr.gpio_levels);
+  EXPECT_EQ(ps.malformed, 0u);
+  EXPECT_EQ(ps.estop_counters.bounces, 2u);
+  EXPECT_EQ(ps.estop_counters.engagements, 2u);  // unknown -> engaged at the first level, then the press
+  EXPECT_EQ(ps.estop_counters.releases, 2u);
+  EXPECT_EQ(ps.estop, gpio::EstopState::released);
   fs::remove_all(dir);
 }

@@ -1,7 +1,8 @@
 // Fuzzes the text and datagram formats of bench recordings and sensors:
-// candump log lines, serial log lines, NMEA sentences and RMC times, CAN
-// tunnel datagrams, DBC databases and the recording manifest. Round trips
+// candump log lines, serial and GPIO log lines, NMEA sentences and RMC times, CAN
+// and GPIO tunnel datagrams, DBC databases and the recording manifest. Round trips
 // are checked where a format has one.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include "replayer.hpp"
 #include "trailnav/drivers/can/dbc.hpp"
 #include "trailnav/drivers/gps/fix.hpp"
+#include "trailnav/drivers/gpio/line_tunnel.hpp"
 #include "trailnav/drivers/gps/nmea.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
@@ -48,6 +50,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     std::int64_t t = 0;
     if (recording::parse_serial_line(line, t, bytes, error)) check(!bytes.empty());
+    std::string gpio_name;
+    bool gpio_value = false;
+    if (recording::parse_gpio_line(line, t, gpio_name, gpio_value, error)) {
+      const auto tunnel = gpio::encode_tunnel(gpio_name, gpio_value, t);
+      gpio::LineLevel level;
+      check(gpio::decode_tunnel(tunnel.view(), level));
+      check(level.line() == gpio_name && level.value == gpio_value && level.time_ns == t);
+    }
     (void)velodyne::rmc_utc_ns(line);
     gps::NmeaSentence sentence;
     if (gps::parse_nmea(line, sentence) == gps::NmeaError::none) {
@@ -80,6 +90,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   recording::CanFrame frame;
   (void)can::decode_tunnel({data, size}, frame);
+  gpio::LineLevel level;
+  if (gpio::decode_tunnel({data, size}, level)) {
+    const auto again = gpio::encode_tunnel(level.line(), level.value, level.time_ns);
+    check(again.size == size && std::equal(again.bytes.begin(), again.bytes.begin() + static_cast<std::ptrdiff_t>(size), data));
+  }
   const auto dbc = can::parse_dbc(text, "fuzz.dbc");
   if (dbc.dbc) {
     for (const can::DbcMessage& m : dbc.dbc->messages) {

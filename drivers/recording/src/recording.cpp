@@ -12,6 +12,7 @@
 #include <map>
 
 #include "trailnav/drivers/capture/capture_reader.hpp"
+#include "trailnav/drivers/gpio/line_tunnel.hpp"
 #include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/runtime/config.hpp"
 
@@ -115,6 +116,8 @@ const char* stream_kind_name(StreamKind kind) noexcept {
       return "can";
     case StreamKind::serial:
       return "serial";
+    case StreamKind::gpio:
+      return "gpio";
   }
   return "?";
 }
@@ -138,8 +141,11 @@ ManifestResult load_manifest(const std::string& path) {
         s.fail("name", info.name.empty() ? "must not be empty" : "'" + info.name + "' names two streams");
       }
       names[info.name] = 1;
-      const std::string kind = s.choice("kind", {"udp", "can", "serial"});
-      info.kind = kind == "udp" ? StreamKind::udp : kind == "can" ? StreamKind::can : StreamKind::serial;
+      const std::string kind = s.choice("kind", {"udp", "can", "serial", "gpio"});
+      info.kind = kind == "udp"      ? StreamKind::udp
+                  : kind == "can"    ? StreamKind::can
+                  : kind == "serial" ? StreamKind::serial
+                                     : StreamKind::gpio;
       info.file = s.string("file");
       if (info.file.empty() || info.file.front() == '/' || info.file.find("..") != std::string::npos) {
         s.fail("file", "must be a path inside the recording directory");
@@ -313,6 +319,32 @@ std::string format_serial_line(std::int64_t time_ns, std::span<const std::uint8_
   return out;
 }
 
+bool parse_gpio_line(std::string_view line, std::int64_t& time_ns, std::string& name, bool& value, std::string& error) {
+  while (!line.empty() && (line.back() == '\r' || line.back() == '\n' || line.back() == ' ')) line.remove_suffix(1);
+  if (!parse_stamp(line, time_ns, error)) return false;
+  const std::size_t space = line.rfind(' ');
+  if (space == std::string_view::npos || space + 2 != line.size() || (line.back() != '0' && line.back() != '1')) {
+    error = "expected 'LINE 0' or 'LINE 1' after the time";
+    return false;
+  }
+  const std::string_view n = line.substr(0, space);
+  if (!gpio::valid_line_name(n)) {
+    error = "line name '" + std::string(n) + "' must be 1 to 31 printable characters without spaces";
+    return false;
+  }
+  name.assign(n);
+  value = line.back() == '1';
+  return true;
+}
+
+std::string format_gpio_line(std::int64_t time_ns, std::string_view name, bool value) {
+  std::string out = format_stamp(time_ns);
+  out += ' ';
+  out += name;
+  out += value ? " 1" : " 0";
+  return out;
+}
+
 // ---------------------------------------------------------------- reader
 
 struct RecordingReader::Source {
@@ -450,6 +482,31 @@ struct RecordingReader::SerialSource final : LineSource {
   }
 };
 
+struct RecordingReader::GpioSource final : LineSource {
+  int stream = 0;
+  std::string name;
+
+  bool advance(RecordingReader& reader) override {
+    std::string error;
+    while (next_line()) {
+      std::int64_t t = 0;
+      bool value = false;
+      if (!parse_gpio_line(line, t, name, value, error)) {
+        problem(reader, error);
+        continue;
+      }
+      event = Event{};
+      event.time_ns = t;
+      event.stream = stream;
+      event.kind = StreamKind::gpio;
+      event.payload = {reinterpret_cast<const std::uint8_t*>(name.data()), name.size()};
+      event.gpio_value = value;
+      return true;
+    }
+    return false;
+  }
+};
+
 void RecordingReader::note_problem(const std::string& problem) {
   ++counters_.bad_lines;
   if (first_problem_.empty()) first_problem_ = problem;
@@ -533,8 +590,13 @@ RecordingReader::Opened RecordingReader::open(const std::string& path) {
         r->sources_.push_back(std::move(source));
       }
       c->stream_of_interface[s.interface] = static_cast<int>(i);
-    } else {
+    } else if (s.kind == StreamKind::serial) {
       auto source = std::make_unique<SerialSource>();
+      if (!source->open_file(file, result.error)) return result;
+      source->stream = static_cast<int>(i);
+      r->sources_.push_back(std::move(source));
+    } else {
+      auto source = std::make_unique<GpioSource>();
       if (!source->open_file(file, result.error)) return result;
       source->stream = static_cast<int>(i);
       r->sources_.push_back(std::move(source));
@@ -600,6 +662,7 @@ RecordingWriter::Created RecordingWriter::create(const std::string& directory, c
   Created result;
   std::error_code ec;
   fs::create_directories(fs::path(directory) / "serial", ec);
+  if (!ec) fs::create_directories(fs::path(directory) / "gpio", ec);
   if (ec) {
     result.error = "cannot create " + directory + ": " + ec.message();
     return result;
@@ -616,7 +679,7 @@ RecordingWriter::~RecordingWriter() {
 }
 
 int RecordingWriter::add_stream(StreamInfo info) {
-  if (info.kind == StreamKind::serial) {
+  if (info.kind == StreamKind::serial || info.kind == StreamKind::gpio) {
     serial_.push_back(std::fopen((fs::path(directory_) / info.file).c_str(), "w"));
   } else {
     serial_.push_back(nullptr);
@@ -652,6 +715,15 @@ int RecordingWriter::add_serial_stream(const std::string& name, int baud, const 
   s.kind = StreamKind::serial;
   s.file = "serial/" + name + ".log";
   s.baud = baud;
+  s.description = description;
+  return add_stream(std::move(s));
+}
+
+int RecordingWriter::add_gpio_stream(const std::string& name, const std::string& description) {
+  StreamInfo s;
+  s.name = name;
+  s.kind = StreamKind::gpio;
+  s.file = "gpio/" + name + ".log";
   s.description = description;
   return add_stream(std::move(s));
 }
@@ -746,6 +818,18 @@ Status RecordingWriter::write_serial(int stream, std::int64_t time_ns, std::span
   if (bytes.empty()) return Status::ok();
   const std::string line = format_serial_line(time_ns, bytes);
   std::fprintf(f, "%s\n", line.c_str());
+  return Status::ok();
+}
+
+Status RecordingWriter::write_gpio(int stream, std::int64_t time_ns, std::string_view line, bool value) {
+  if (stream < 0 || static_cast<std::size_t>(stream) >= manifest_.streams.size() ||
+      manifest_.streams[static_cast<std::size_t>(stream)].kind != StreamKind::gpio) {
+    return Status::error("write_gpio: stream " + std::to_string(stream) + " is not a GPIO stream");
+  }
+  if (!gpio::valid_line_name(line)) return Status::error("write_gpio: invalid line name '" + std::string(line) + "'");
+  std::FILE* f = serial_[static_cast<std::size_t>(stream)];
+  if (f == nullptr) return Status::error("cannot write the GPIO log of stream " + std::to_string(stream));
+  std::fprintf(f, "%s\n", format_gpio_line(time_ns, line, value).c_str());
   return Status::ok();
 }
 

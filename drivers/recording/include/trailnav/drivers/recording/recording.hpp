@@ -5,6 +5,7 @@
 //   udp.pcap            UDP traffic: lidar data and position packets, NMEA over UDP, ...
 //   can.log             CAN frames, can-utils candump log format
 //   serial/<name>.log   serial byte streams: "(seconds.micros) HEXBYTES" per read
+//   gpio/<name>.log     GPIO line levels: "(seconds.micros) LINE 0|1" per change
 //
 // A bare pcap, pcapng or raw Velodyne file is read as a recording of its UDP
 // streams alone. Offline tooling: allocates freely.
@@ -25,7 +26,7 @@
 
 namespace trailnav::recording {
 
-enum class StreamKind : std::uint8_t { udp, can, serial };
+enum class StreamKind : std::uint8_t { udp, can, serial, gpio };
 const char* stream_kind_name(StreamKind kind) noexcept;
 
 struct StreamInfo {
@@ -69,21 +70,27 @@ std::string format_candump_line(const CanFrame& frame, std::string_view interfac
 bool parse_serial_line(std::string_view line, std::int64_t& time_ns, std::vector<std::uint8_t>& bytes, std::string& error);
 std::string format_serial_line(std::int64_t time_ns, std::span<const std::uint8_t> bytes);
 
+// One line of a GPIO log, "(1436509052.249713) ESTOP 1": the line's logical
+// level (1: active) from that time on. Names as in trailnav/drivers/gpio/line_tunnel.hpp.
+bool parse_gpio_line(std::string_view line, std::int64_t& time_ns, std::string& name, bool& value, std::string& error);
+std::string format_gpio_line(std::int64_t time_ns, std::string_view name, bool value);
+
 // One record of a recording, in time order over all streams.
 struct Event {
   std::int64_t time_ns = 0;
   int stream = 0;  // index into streams()
   StreamKind kind = StreamKind::udp;
-  std::span<const std::uint8_t> payload;  // udp and serial; valid until the next call
+  std::span<const std::uint8_t> payload;  // udp and serial: the bytes; gpio: the line name; valid until the next call
   std::uint32_t source_ip = 0;            // udp
   std::uint16_t source_port = 0;          // udp
   const CanFrame* can = nullptr;          // can
+  bool gpio_value = false;                // gpio: the line's level
 };
 
 struct ReaderCounters {
   std::uint64_t events = 0;
   std::uint64_t unassigned_udp = 0;  // datagrams to a port no stream claims: skipped
-  std::uint64_t bad_lines = 0;       // unparsable CAN or serial log lines: skipped
+  std::uint64_t bad_lines = 0;       // unparsable CAN, serial or GPIO log lines: skipped
 };
 
 class RecordingReader {
@@ -113,6 +120,7 @@ class RecordingReader {
   struct LineSource;
   struct CanSource;
   struct SerialSource;
+  struct GpioSource;
 
   void note_problem(const std::string& problem);
 
@@ -142,12 +150,14 @@ class RecordingWriter {
   int add_udp_stream(const std::string& name, std::uint16_t port, const std::string& description = "");
   int add_can_stream(const std::string& name, const std::string& interface, const std::string& description = "");
   int add_serial_stream(const std::string& name, int baud, const std::string& description = "");
+  int add_gpio_stream(const std::string& name, const std::string& description = "");
 
   // A UDP datagram from source to 127.0.0.1:<the stream's port>.
   Status write_udp(int stream, std::int64_t time_ns, std::span<const std::uint8_t> payload,
                    std::uint32_t source_ip = 0xC0A801C9u, std::uint16_t source_port = 2368);
   Status write_can(int stream, const CanFrame& frame);
   Status write_serial(int stream, std::int64_t time_ns, std::span<const std::uint8_t> bytes);
+  Status write_gpio(int stream, std::int64_t time_ns, std::string_view line, bool value);
   Status close();
 
  private:
@@ -158,7 +168,7 @@ class RecordingWriter {
   Manifest manifest_;
   std::unique_ptr<Pcap> pcap_;
   std::FILE* can_ = nullptr;
-  std::vector<std::FILE*> serial_;  // per stream (nullptr for non-serial)
+  std::vector<std::FILE*> serial_;  // per stream: serial and GPIO logs (nullptr for the others)
   bool closed_ = false;
 };
 
