@@ -83,6 +83,8 @@ void add_sim_command(CLI::App& app) {
   cmd->add_option("--calibration", o.sim.calibration,
                   "Velodyne calibration file (default: the model's file in ../shared/data/velodyne/calibration/)");
   cmd->add_option("--out", o.sim.out, "Output recording directory");
+  cmd->add_flag("--no-lidar", [&](std::int64_t) { o.sim.lidar_packets = false; },
+                "Leave the lidar streams empty (for pose work: GPS, IMU, CAN and GPIO only, much faster)");
   cmd->add_flag("--list", o.list, "List the built-in scenarios and exit");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([] {

@@ -97,8 +97,10 @@ SimTruthResult load_sim_truth(const std::string& dir) {
     double time_s = 0, speed = 0, yaw_rate = 0, vl = 0, vr = 0;
     long long utc = 0;
     TruthPose p;
-    if (std::sscanf(line.c_str(), "%lf,%lld,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &time_s, &utc, &p.x, &p.y, &p.z,
-                    &p.roll, &p.pitch, &p.yaw, &speed, &yaw_rate, &vl, &vr, &p.arc) != 13) {
+    const int fields =
+        std::sscanf(line.c_str(), "%lf,%lld,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &time_s, &utc, &p.x, &p.y,
+                    &p.z, &p.roll, &p.pitch, &p.yaw, &speed, &yaw_rate, &vl, &vr, &p.arc, &p.lat, &p.lon);
+    if (fields != 13 && fields != 15) {
       return {std::nullopt, traj + ":" + std::to_string(line_no) + ": not a trajectory row"};
     }
     p.utc_ns = utc;

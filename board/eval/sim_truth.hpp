@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -31,6 +32,8 @@ struct TruthPose {
   std::int64_t utc_ns = 0;
   double x = 0, y = 0, z = 0, roll = 0, pitch = 0, yaw = 0;
   double arc = 0;  // m along the route
+  double lat = std::numeric_limits<double>::quiet_NaN();  // degrees (NaN in recordings made before the column)
+  double lon = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct SimTruth {

@@ -496,7 +496,7 @@ SimReport run_simulation(const SimOptions& o) {
 
   // Lidar data and position packets, in the order they leave the sensor.
   std::vector<std::uint32_t> sightings;
-  {
+  if (o.lidar_packets) {
     const auto t_lidar = Clock::now();
     LidarSim lidar(decoder, s, *world, traj, o.seed);
     std::array<std::uint8_t, vel::kDataPacketSize> pkt{};

@@ -19,6 +19,7 @@ struct SimOptions {
   std::string calibration;         // calibration file override
   std::string out;                 // output directory
   bool truth = true;               // write DIR/truth/
+  bool lidar_packets = true;       // false: no lidar streams' packets (GPS, IMU, CAN and GPIO only; fast)
   // Called now and then with the simulated time done and the total.
   std::function<void(double done, double total)> progress;
 };

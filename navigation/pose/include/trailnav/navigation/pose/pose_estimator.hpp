@@ -1,0 +1,97 @@
+// The robot's pose: the local odometry frame (gyro_odometry.hpp) and its
+// alignment to UTM from GPS (utm_alignment.hpp), fed in time order, and the
+// pose task that runs it on the scheduler: it drains the IMU and wheel
+// odometry queues and the GPS mailbox of the driver tasks, merges them by
+// time and publishes a PoseSnapshot through a mailbox to the perception and
+// navigation threads. Everything is allocated at construction.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "trailnav/drivers/can/can_driver.hpp"
+#include "trailnav/drivers/gps/gps_driver.hpp"
+#include "trailnav/drivers/imu/imu_driver.hpp"
+#include "trailnav/navigation/pose/gyro_odometry.hpp"
+#include "trailnav/navigation/pose/utm_alignment.hpp"
+#include "trailnav/runtime/mailbox.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
+
+namespace trailnav::pose {
+
+struct PoseEstimatorOptions {
+  GyroOdometryOptions odometry;
+  UtmAlignmentOptions utm;
+  // A fix is valid at its UTC time when the receiver gave a date and that time
+  // is within this of the host's receive time; otherwise at the receive time
+  // minus `gps_latency`.
+  double gps_time_tolerance = 2.0;  // s
+  double gps_latency = 0.1;         // s
+};
+
+struct PoseSnapshot {
+  LocalPose local;
+  UtmPose utm;
+  GyroOdometryCounters odometry_counters;
+  UtmAlignmentCounters utm_counters;
+  std::uint64_t sequence = 0;
+};
+
+class PoseEstimator {
+ public:
+  explicit PoseEstimator(const PoseEstimatorOptions& options = {});
+
+  void add_imu(const imu::Attitude& attitude) noexcept { odometry_.add_imu(attitude); }
+  void add_wheels(const can::OdometryState& wheels) noexcept { odometry_.add_wheels(wheels); }
+  // A fix and when its bytes arrived (same clock as the IMU and wheel times).
+  void add_gps(const gps::GpsFix& fix, std::int64_t receive_ns) noexcept;
+
+  const GyroOdometry& odometry() const noexcept { return odometry_; }
+  const UtmAlignment& alignment() const noexcept { return alignment_; }
+  // The current pose in both frames.
+  void snapshot(PoseSnapshot& out) const noexcept;
+  // The time a fix is valid for (see PoseEstimatorOptions).
+  std::int64_t fix_time(const gps::GpsFix& fix, std::int64_t receive_ns) const noexcept;
+
+ private:
+  PoseEstimatorOptions options_;
+  GyroOdometry odometry_;
+  UtmAlignment alignment_;
+};
+
+struct PoseTaskStatus {
+  std::uint64_t runs = 0;
+  std::uint64_t imu_readings = 0, wheel_readings = 0, gps_fixes = 0;
+  std::uint64_t published = 0;
+  LocalPose local;
+  UtmPose utm;
+  GyroOdometryCounters odometry_counters;
+  UtmAlignmentCounters utm_counters;
+};
+
+class PoseTask final : public Task {
+ public:
+  // Any input may be null (a robot without that sensor).
+  PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReading, imu::kImuQueueCapacity>* imu,
+           SpscQueue<can::OdometryState, can::kOdometryQueueCapacity>* wheels, Mailbox<gps::GpsReading>* gps);
+
+  void run(const TaskTick& tick) override;
+
+  Mailbox<PoseSnapshot>& poses() noexcept { return poses_; }
+  PoseTaskStatus status() const noexcept { return shared_.read(); }
+  const PoseEstimator& estimator() const noexcept { return estimator_; }
+
+ private:
+  PoseEstimator estimator_;
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity>* imu_;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity>* wheels_;
+  Mailbox<gps::GpsReading>* gps_;
+  std::array<imu::Attitude, imu::kImuQueueCapacity> imu_batch_{};
+  std::array<can::OdometryState, can::kOdometryQueueCapacity> wheel_batch_{};
+  Mailbox<PoseSnapshot> poses_;
+  PoseTaskStatus local_;
+  StatusBoard<PoseTaskStatus> shared_;
+};
+
+}  // namespace trailnav::pose

@@ -1,0 +1,170 @@
+// The robot in UTM: GPS fixes aligned with the local odometry frame.
+//
+// The GPS track is smoothed by estimating the transform from the odometry
+// frame to UTM (a 2-D rotation and translation) rather than the robot's
+// position itself: between fixes the pose comes from odometry, which is
+// smooth, and each fix corrects the transform. An extended Kalman filter
+// carries six states with their covariance: the transform (easting,
+// northing, rotation), the residual yaw-rate bias of the odometry's gyro,
+// and the GPS's own slowly wandering error (east, north; a first-order
+// Gauss-Markov process with correlation time `gps_bias_time`, which keeps a
+// receiver's correlated error from looking like a thousand independent
+// measurements). A fix's sigma (GST, or HDOP x UERE) is taken as its total
+// error: `gps_white_sigma` of it is white noise, the rest the wandering error:
+//
+//   - prediction: the transform rotates at the gyro bias' rate, and takes a
+//     random walk per metre driven and per second, applied as a rotation
+//     about the robot's current position (the current position is what
+//     odometry knows best), and its translation a random walk per metre;
+//   - update: the antenna's UTM position (the GPS lever arm rotated by the
+//     robot's attitude) = transform(antenna) + GPS error + white noise, the
+//     white part being what the fix's GST sigma (or HDOP x UERE) leaves
+//     beyond the wandering error;
+//   - the gyro bias estimate is handed back to the odometry after each fix
+//     (GyroOdometry::set_yaw_rate_bias), so the local frame stops drifting
+//     once GPS has seen the robot turn or drive straight for a while;
+//   - outliers: a fix whose squared Mahalanobis distance exceeds `gate` is
+//     rejected and counted; `jump_after` rejected fixes in a row that agree
+//     with each other mean the GPS itself jumped (a new correction source,
+//     RTK lost): the filter re-anchors on them and counts a jump.
+//
+// Heading needs motion: fixes are buffered until the robot has moved
+// `min_baseline` metres, then a robust least-squares fit of all buffered
+// pairs (two passes, residuals beyond 3 sigma dropped) starts the filter.
+// Before that only the position is known (`heading_valid` false).
+//
+// Coordinates are in one UTM zone, chosen from the first fix unless
+// configured, and kept when the robot crosses into the next zone. Headings
+// are grid headings (counter-clockwise from grid east); `convergence` gives
+// the angle from grid north to true north at the robot. Allocates only in
+// the constructor.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "trailnav/drivers/gps/fix.hpp"
+#include "trailnav/navigation/pose/gyro_odometry.hpp"
+
+namespace trailnav::pose {
+
+struct UtmAlignmentOptions {
+  int zone = 0;                       // UTM zone 1..60; 0: from the first fix
+  std::array<double, 3> antenna{0.0, 0.0, 0.0};  // m, GPS antenna in the robot frame (x forward, y left, z up)
+  double min_baseline = 5.0;          // m the robot must move before the heading is estimated
+  std::size_t init_capacity = 256;    // fixes buffered before the heading is known (oldest dropped)
+  double uere = 4.0;                  // m, sigma = HDOP x UERE for fixes without GST
+  double min_sigma = 0.3;             // m, floor of a fix's sigma
+  double max_sigma = 30.0;            // m, fixes less certain than this are not used
+  double heading_walk = 0.003;        // rad per sqrt(m) driven
+  double heading_walk_time = 0.0005;  // rad per sqrt(s)
+  double position_walk = 0.02;        // m per sqrt(m) driven
+  double gyro_bias_sigma = 0.005;     // rad/s, prior of the odometry's residual yaw-rate bias
+  double gyro_bias_walk = 2e-5;       // rad/s per sqrt(s)
+  double gps_white_sigma = 1.5;       // m, the white part of a fix's error (the rest wanders)
+  double gps_bias_time = 120.0;       // s, correlation time of the wandering part
+  double gate = 16.0;                 // squared Mahalanobis distance (2 dof) beyond which a fix is an outlier
+  int jump_after = 5;                 // outliers in a row that agree: the GPS jumped
+  double jump_agreement = 2.0;        // m: how closely those outliers must agree
+  double max_fix_age = 1.0;           // s between a fix's time and the newest odometry; older fixes are skipped
+};
+
+struct UtmAlignmentCounters {
+  std::uint64_t fixes = 0;          // fixes offered
+  std::uint64_t no_position = 0;    // without a 2-D or 3-D fix
+  std::uint64_t too_uncertain = 0;  // sigma above max_sigma
+  std::uint64_t no_odometry = 0;    // no odometry pose at the fix's time
+  std::uint64_t used = 0;           // accepted by the filter or the initial fit
+  std::uint64_t outliers = 0;       // rejected by the gate
+  std::uint64_t jumps = 0;          // re-anchored after agreeing outliers
+  std::uint64_t initial_fit_rejected = 0;  // buffered fixes the initial fit dropped
+};
+
+struct UtmPose {
+  bool position_valid = false;
+  bool heading_valid = false;
+  std::int64_t time_ns = 0;
+  int zone = 0;
+  bool north = true;
+  double easting = 0.0, northing = 0.0;  // m, the robot's origin (not the antenna)
+  double altitude = 0.0;                 // m above the ellipsoid (from the last fix and odometry's z)
+  double yaw = 0.0;                      // rad, grid heading, counter-clockwise from grid east
+  double latitude = 0.0, longitude = 0.0;  // degrees, WGS84
+  double convergence = 0.0;              // rad, meridian convergence at the robot
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // (easting, northing, yaw)
+  double sigma_position() const noexcept;  // m, sqrt of the larger eigenvalue of the position covariance
+};
+
+class UtmAlignment {
+ public:
+  explicit UtmAlignment(const UtmAlignmentOptions& options = {});
+
+  // A GPS fix; `time_ns` is the time it is valid for, on the odometry's
+  // clock. Hands the gyro bias estimate back to the odometry.
+  void add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdometry& odometry) noexcept;
+  // The robot's pose in UTM for a local pose.
+  UtmPose utm(const LocalPose& local) const noexcept;
+
+  bool heading_valid() const noexcept { return aligned_; }
+  // The transform odometry -> UTM: easting, northing, rotation.
+  Eigen::Vector3d transform() const noexcept { return state_.head<3>(); }
+  // Its covariance.
+  Eigen::Matrix3d covariance() const noexcept { return cov_.topLeftCorner<3, 3>(); }
+  // The yaw-rate bias handed to the odometry so far (rad/s), and the GPS
+  // error estimate (east, north, m).
+  double gyro_bias() const noexcept { return gyro_bias_applied_; }
+  Eigen::Vector2d gps_error() const noexcept { return state_.tail<2>(); }
+  int zone() const noexcept { return zone_; }
+  const UtmAlignmentCounters& counters() const noexcept { return counters_; }
+  const UtmAlignmentOptions& options() const noexcept { return options_; }
+
+  // UTM in the alignment's zone (GeographicLib); false outside its range.
+  bool forward(double lat, double lon, double& easting, double& northing, double& convergence) const noexcept;
+  bool reverse(double easting, double northing, double& lat, double& lon) const noexcept;
+
+ private:
+  struct Pair {
+    Eigen::Vector2d odom;  // antenna in the odometry frame
+    Eigen::Vector2d utm;
+    double sigma = 1.0;
+    double distance = 0.0;  // odometry distance at the fix
+    std::int64_t time_ns = 0;
+  };
+  Eigen::Vector2d antenna_in_odom(const LocalPose& p) const noexcept;
+  using Vector6 = Eigen::Matrix<double, 6, 1>;
+  using Matrix6 = Eigen::Matrix<double, 6, 6>;
+  void predict(const LocalPose& p) noexcept;
+  // Process noise of the transform for a step of dd metres and dt seconds
+  // at odometry position p (rotation about p).
+  void add_drift(Eigen::Ref<Eigen::Matrix3d> cov, const Eigen::Vector2d& p, double dd, double dt) const noexcept;
+  double white_sigma(double fix_sigma) const noexcept;
+  double wander_sigma(double fix_sigma) const noexcept;
+  void try_initial_fit() noexcept;
+
+  UtmAlignmentOptions options_;
+  int zone_ = 0;
+  bool north_ = true;
+  bool aligned_ = false;
+  Vector6 state_ = Vector6::Zero();  // tx, ty, theta, gyro bias, GPS error east, north
+  Matrix6 cov_ = Matrix6::Identity();
+  double gyro_bias_applied_ = 0.0;
+  double wander_ = 0.0;  // m, the wandering error's sigma from the latest fix
+  double last_distance_ = 0.0;
+  std::int64_t last_time_ = 0;
+  std::vector<Pair> init_;  // capacity fixed at construction
+  std::array<Eigen::Vector2d, 16> rejected_{};
+  int rejected_count_ = 0;
+  // The last used fix, for the position before the heading is known.
+  Eigen::Vector2d last_fix_ = Eigen::Vector2d::Zero();
+  Eigen::Vector2d last_fix_odom_ = Eigen::Vector2d::Zero();
+  double last_fix_sigma_ = 0.0;
+  double last_altitude_ = 0.0;
+  double last_altitude_z_ = 0.0;
+  bool have_fix_ = false;
+  UtmAlignmentCounters counters_;
+};
+
+}  // namespace trailnav::pose

@@ -1,0 +1,250 @@
+// Pose estimation: gyro-aided odometry on hand-made motions (a circle at
+// known speed and turn rate, a standstill that must not turn, the wheels
+// alone when the IMU falls silent, lookups by time), the UTM alignment on a
+// synthetic drive with a known odometry->UTM transform, white GPS noise,
+// outliers and a permanent jump, and the pose task on the scheduler without
+// heap use once armed.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <thread>
+
+#include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+using namespace trailnav;
+using namespace trailnav::pose;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr std::int64_t kStart = 1'782'045'000'000'000'000LL;
+constexpr std::int64_t ms(double v) { return static_cast<std::int64_t>(v * 1e6); }
+
+imu::Attitude attitude(std::int64_t t, double yaw_rate, double roll = 0.0, double pitch = 0.0) {
+  imu::Attitude a;
+  a.time_ns = t;
+  a.yaw_rate = yaw_rate;
+  a.roll = roll;
+  a.pitch = pitch;
+  return a;
+}
+
+can::OdometryState wheels(std::int64_t t, double speed, double yaw_rate) {
+  can::OdometryState w;
+  w.time_ns = t;
+  w.speed = speed;
+  w.yaw_rate = yaw_rate;
+  return w;
+}
+
+gps::GpsFix fix_at(const UtmAlignment& ref, double e, double n, std::int64_t t, double sigma) {
+  double lat = 0, lon = 0;
+  EXPECT_TRUE(ref.reverse(e, n, lat, lon));
+  gps::GpsFix f;
+  f.mode = 3;
+  f.status = gps::FixStatus::gps;
+  f.lat = lat;
+  f.lon = lon;
+  f.alt_msl = 270.0;
+  f.geoid_sep = 48.0;
+  f.sigma_lat = f.sigma_lon = sigma;
+  f.has_date = true;
+  f.utc_ns = t;
+  return f;
+}
+
+}  // namespace
+
+TEST(GyroOdometry, DrivesACircleOfTheRightRadius) {
+  GyroOdometryOptions o;
+  o.history = 8192;
+  GyroOdometry odo(o);
+  const double v = 1.5, w = 0.15;  // radius 10 m
+  for (int k = 0; k <= 4189; ++k) {  // 41.89 s: one full turn
+    const std::int64_t t = kStart + ms(10.0 * k);
+    if (k % 2 == 0) odo.add_wheels(wheels(t, v, w));
+    odo.add_imu(attitude(t, w));
+  }
+  const LocalPose& p = odo.pose();
+  EXPECT_NEAR(p.distance, v * 41.89, 0.02);
+  EXPECT_NEAR(std::hypot(p.x, p.y), 0.0, 0.05);  // back where it started
+  EXPECT_NEAR(std::abs(p.yaw), 2 * kPi - 0.15 * 41.89 + 0.0, 0.01);
+  // Half way the robot is a diameter to the left.
+  LocalPose half;
+  ASSERT_TRUE(odo.pose_at(kStart + ms(41890.0 / 2), half));
+  EXPECT_NEAR(half.x, 0.0, 0.05);
+  EXPECT_NEAR(half.y, 20.0, 0.05);
+  EXPECT_EQ(odo.counters().gaps, 0u);
+  EXPECT_EQ(p.source, PoseSource::gyro_odometry);
+}
+
+TEST(GyroOdometry, StandstillHoldsTheHeadingAgainstGyroDrift) {
+  GyroOdometry odo;
+  for (int k = 0; k <= 1000; ++k) {
+    const std::int64_t t = kStart + ms(10.0 * k);
+    if (k % 2 == 0) odo.add_wheels(wheels(t, 0.0, 0.0));
+    odo.add_imu(attitude(t, 0.01));  // a biased gyro
+  }
+  EXPECT_EQ(odo.pose().yaw, 0.0);
+  EXPECT_EQ(odo.pose().x, 0.0);
+  EXPECT_TRUE(odo.pose().standstill);
+  EXPECT_GT(odo.counters().standstill_steps, 900u);
+  // The bias handed back from GPS is taken off from then on.
+  odo.set_yaw_rate_bias(0.01);
+  for (int k = 1001; k <= 2000; ++k) {
+    const std::int64_t t = kStart + ms(10.0 * k);
+    if (k % 2 == 0) odo.add_wheels(wheels(t, 1.0, 0.0));
+    odo.add_imu(attitude(t, 0.01));
+  }
+  EXPECT_NEAR(odo.pose().yaw, 0.0, 1e-9);
+  EXPECT_NEAR(odo.pose().x, 10.0, 0.02);
+}
+
+TEST(GyroOdometry, WheelsCarryThePoseWhenTheImuFallsSilentAndPitchClimbs) {
+  GyroOdometry odo;
+  for (int k = 0; k <= 100; ++k) {
+    const std::int64_t t = kStart + ms(10.0 * k);
+    odo.add_wheels(wheels(t, 1.0, 0.0));
+    odo.add_imu(attitude(t, 0.0, 0.0, -0.1));  // nose up 0.1 rad
+  }
+  EXPECT_NEAR(odo.pose().z, std::sin(0.1) * 1.0, 0.01);
+  EXPECT_NEAR(odo.pose().x, std::cos(0.1) * 1.0, 0.01);
+  for (int k = 101; k <= 300; ++k) odo.add_wheels(wheels(kStart + ms(10.0 * k), 1.0, 0.1));
+  EXPECT_EQ(odo.pose().source, PoseSource::wheels_only);
+  EXPECT_NEAR(odo.pose().yaw, 0.1 * 1.9, 0.02);  // the IMU timed out after 0.1 s
+  EXPECT_GT(odo.counters().wheel_steps, 180u);
+  LocalPose p;
+  EXPECT_FALSE(odo.pose_at(kStart + ms(5000.0), p));  // beyond the newest
+}
+
+TEST(UtmAlignment, FindsTheTransformDespiteOutliersAndFollowsAJump) {
+  UtmAlignmentOptions o;
+  o.zone = 32;
+  o.antenna = {0.2, 0.0, 1.2};
+  UtmAlignment ref(o);
+  // A known reference point to project from (zone 32, Freiburg).
+  double e0 = 0, n0 = 0, g = 0;
+  UtmAlignment tmp(o);
+  ASSERT_TRUE(tmp.forward(48.0133, 7.8353, e0, n0, g));
+  const double theta = 0.7;  // odometry frame -> grid rotation
+  GyroOdometry odo;
+  UtmAlignment align(o);
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  double heading = 0.0, x = 0.0, y = 0.0;  // the truth, in the odometry frame
+  for (int k = 0; k <= 12000; ++k) {  // 120 s at 100 Hz: straight, a quarter turn, straight
+    const double ts = 0.01 * k;
+    const std::int64_t t = kStart + ms(10.0 * k);
+    const double w = ts > 40 && ts < 50 ? kPi / 20 : 0.0;
+    if (k > 0) {
+      const double mid = heading + 0.5 * w * 0.01;
+      x += 1.2 * 0.01 * std::cos(mid);
+      y += 1.2 * 0.01 * std::sin(mid);
+      heading += w * 0.01;
+    }
+    odo.add_wheels(wheels(t, 1.2, w));
+    odo.add_imu(attitude(t, w + 0.002));  // a gyro bias the GPS must find
+    if (k % 10 == 0 && k > 0) {
+      const double ax = x + std::cos(heading) * 0.2, ay = y + std::sin(heading) * 0.2;
+      double e = e0 + std::cos(theta) * ax - std::sin(theta) * ay + noise(rng);
+      double n = n0 + std::sin(theta) * ax + std::cos(theta) * ay + noise(rng);
+      if (k % 170 == 0) e += 25.0;  // multipath outliers
+      if (ts > 80) n += 8.0;        // the correction source changed: a lasting jump
+      align.add_fix(fix_at(ref, e, n, t, 0.35), t, odo);
+    }
+  }
+  ASSERT_TRUE(align.heading_valid());
+  const UtmAlignmentCounters& c = align.counters();
+  EXPECT_GE(c.outliers, 6u);
+  EXPECT_EQ(c.jumps, 1u);
+  EXPECT_NEAR(align.gyro_bias(), 0.002, 0.0005);
+  // The robot's UTM position now: the truth plus the jump the GPS made.
+  const UtmPose u = align.utm(odo.pose());
+  const double te = e0 + std::cos(theta) * x - std::sin(theta) * y;
+  const double tn = n0 + std::sin(theta) * x + std::cos(theta) * y + 8.0;
+  EXPECT_NEAR(u.easting, te, 0.5);
+  EXPECT_NEAR(u.northing, tn, 0.5);
+  EXPECT_NEAR(std::remainder(u.yaw - (heading + theta), 2 * kPi), 0.0, 0.02);
+  EXPECT_GT(u.sigma_position(), 0.05);
+  EXPECT_LT(u.sigma_position(), 2.0);
+  EXPECT_NEAR(u.latitude, 48.0133, 0.01);
+  EXPECT_EQ(u.zone, 32);
+}
+
+TEST(UtmAlignment, NoHeadingBeforeTheRobotMovesAndBadFixesAreCounted) {
+  GyroOdometry odo;
+  UtmAlignment align;
+  gps::GpsFix none;
+  align.add_fix(none, kStart, odo);
+  EXPECT_EQ(align.counters().no_position, 1u);
+  odo.add_imu(attitude(kStart, 0.0));
+  UtmAlignmentOptions zo;
+  zo.zone = 32;
+  UtmAlignment ref(zo);
+  double e = 0, n = 0, g = 0;
+  ASSERT_TRUE(ref.forward(48.0133, 7.8353, e, n, g));
+  align.add_fix(fix_at(ref, e, n, kStart, 100.0), kStart, odo);
+  EXPECT_EQ(align.counters().too_uncertain, 1u);
+  align.add_fix(fix_at(ref, e, n, kStart, 1.0), kStart, odo);
+  EXPECT_EQ(align.zone(), 32);
+  EXPECT_FALSE(align.heading_valid());
+  const UtmPose u = align.utm(odo.pose());
+  EXPECT_TRUE(u.position_valid);
+  EXPECT_FALSE(u.heading_valid);
+  EXPECT_NEAR(u.easting, e, 1e-6);
+  align.add_fix(fix_at(ref, e, n, kStart + ms(10000), 1.0), kStart + ms(10000), odo);
+  EXPECT_EQ(align.counters().no_odometry, 1u);
+}
+
+TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
+  ASSERT_TRUE(alloc_guard::hook_installed());
+  alloc_guard::set_fatal(false);
+  alloc_guard::reset_counters();
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+  Mailbox<gps::GpsReading> gps_box;
+  PoseEstimatorOptions o;
+  o.utm.zone = 32;
+  PoseTask task(o, &imu_queue, &wheel_queue, &gps_box);
+  UtmAlignment ref(o.utm);
+  double e0 = 0, n0 = 0, g = 0;
+  ASSERT_TRUE(ref.forward(48.0133, 7.8353, e0, n0, g));
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  ASSERT_TRUE(scheduler.add({"pose", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, task));
+  ASSERT_TRUE(scheduler.start());
+  ASSERT_TRUE(alloc_guard::arm());
+  for (int k = 0; k < 1500; ++k) {
+    const std::int64_t t = kStart + ms(10.0 * k);
+    imu::ImuReading r;
+    r.attitude = attitude(t, 0.0);
+    while (!imu_queue.try_push(r)) std::this_thread::sleep_for(std::chrono::microseconds(100));
+    while (!wheel_queue.try_push(wheels(t, 2.0, 0.0))) std::this_thread::sleep_for(std::chrono::microseconds(100));
+    if (k % 10 == 5) {
+      gps::GpsReading& slot = gps_box.write_slot();
+      slot.fix = fix_at(ref, e0 + 0.02 * (k - 5), n0, t - ms(50), 0.5);
+      slot.receive_ns = t;
+      gps_box.publish();
+      std::this_thread::sleep_for(std::chrono::milliseconds(8));  // the task takes each fix (10 Hz GPS, 200 Hz task)
+    }
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  scheduler.stop();
+  alloc_guard::disarm();
+  const PoseTaskStatus s = task.status();
+  EXPECT_EQ(s.imu_readings, 1500u);
+  EXPECT_EQ(s.wheel_readings, 1500u);
+  EXPECT_GT(s.gps_fixes, 100u);
+  EXPECT_TRUE(s.utm.heading_valid);
+  EXPECT_NEAR(s.local.x, 2.0 * 14.99, 0.05);
+  EXPECT_NEAR(s.utm.yaw, 0.0, 0.05);  // driving grid east
+  std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
+  const std::size_t n = alloc_guard::report(rows);
+  for (std::size_t k = 0; k < n; ++k) {
+    ADD_FAILURE() << "thread '" << rows[k].name << "' made " << rows[k].allocations << " heap operations after arm()";
+  }
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+}
