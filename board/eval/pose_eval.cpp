@@ -15,19 +15,15 @@
 #include "trailnav/drivers/imu/attitude.hpp"
 #include "trailnav/drivers/imu/stream_decoder.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
+#include "trailnav/navigation/pose/angles.hpp"
 
 namespace trailnav::eval {
 namespace {
 
 namespace fs = std::filesystem;
-constexpr double kPi = 3.14159265358979323846;
+using pose::kPi;
+using pose::wrap_angle;
 constexpr double kRad2Deg = 180.0 / kPi;
-
-double wrap(double a) noexcept {
-  while (a > kPi) a -= 2 * kPi;
-  while (a < -kPi) a += 2 * kPi;
-  return a;
-}
 
 // The true pose at time t, interpolated.
 struct TruthAt {
@@ -44,7 +40,7 @@ bool truth_at(const std::vector<TruthPose>& traj, std::int64_t t, TruthAt& out) 
   const double f = b.utc_ns == a.utc_ns ? 0.0 : static_cast<double>(t - a.utc_ns) / static_cast<double>(b.utc_ns - a.utc_ns);
   out.x = a.x + f * (b.x - a.x);
   out.y = a.y + f * (b.y - a.y);
-  out.yaw = wrap(a.yaw + f * wrap(b.yaw - a.yaw));
+  out.yaw = wrap_angle(a.yaw + f * wrap_angle(b.yaw - a.yaw));
   out.arc = a.arc + f * (b.arc - a.arc);
   out.lat = a.lat + f * (b.lat - a.lat);
   out.lon = a.lon + f * (b.lon - a.lon);
@@ -196,7 +192,7 @@ PoseEvalResult evaluate_pose(const std::string& recording, const PoseEvalOptions
     const double rot = s.truth.yaw - s.eyaw;
     px = s.truth.x + std::cos(rot) * dx - std::sin(rot) * dy;
     py = s.truth.y + std::sin(rot) * dx + std::cos(rot) * dy;
-    yaw_err = wrap((e.eyaw - s.eyaw) - (e.truth.yaw - s.truth.yaw));
+    yaw_err = wrap_angle((e.eyaw - s.eyaw) - (e.truth.yaw - s.truth.yaw));
   };
   {
     double px = 0, py = 0, ye = 0;
@@ -262,7 +258,7 @@ PoseEvalResult evaluate_pose(const std::string& recording, const PoseEvalOptions
   for (Sample& s : samples) {
     if (!s.utm) continue;
     if (r.aligned_after_m < 0) r.aligned_after_m = s.truth.arc - arc0;
-    s.heading_err = wrap(s.uyaw - (s.truth.yaw + grid_rotation));
+    s.heading_err = wrap_angle(s.uyaw - (s.truth.yaw + grid_rotation));
     errors.push_back(s.utm_err);
     heading_sum += std::abs(s.heading_err) * kRad2Deg;
     r.heading_max_deg = std::max(r.heading_max_deg, std::abs(s.heading_err) * kRad2Deg);

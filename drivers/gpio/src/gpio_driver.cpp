@@ -266,8 +266,7 @@ void GpioDriver::read_tunnel(Nanos now) noexcept {
   }
 }
 
-void GpioDriver::set_output(gpiod_line* line, const std::string& name, bool value, Nanos now) noexcept {
-  (void)now;
+void GpioDriver::set_output(gpiod_line* line, const std::string& name, bool value) noexcept {
   if (line != nullptr && gpiod_line_set_value(line, value ? 1 : 0) != 0) {
     ++local_.write_errors;
     fail("writing an output line", errno);
@@ -282,16 +281,15 @@ void GpioDriver::drive_outputs(Nanos now) noexcept {
   if (!options_.heartbeat_line.empty() && now >= next_toggle_) {
     local_.heartbeat = !local_.heartbeat;
     ++local_.heartbeat_toggles;
-    set_output(heartbeat_line_, options_.heartbeat_line, local_.heartbeat, now);
+    set_output(heartbeat_line_, options_.heartbeat_line, local_.heartbeat);
     const Nanos period = seconds_to_nanos(options_.heartbeat_period);
     next_toggle_ = next_toggle_ < 0 || now - next_toggle_ > period ? now + period : next_toggle_ + period;
   }
   local_.ready = ready_.load(std::memory_order_relaxed);
   const bool status = local_.ready && !debouncer_.engaged() && local_.health == GpioHealth::ok;
   if (!options_.status_line.empty() && (status != local_.status_output || !status_written_)) {
-    local_.status_output = status;
     status_written_ = true;
-    set_output(status_line_, options_.status_line, status, now);
+    set_output(status_line_, options_.status_line, status);
   }
   local_.status_output = status;
 }

@@ -1,18 +1,13 @@
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 
+#include "trailnav/navigation/pose/angles.hpp"
+
 #include <algorithm>
 #include <cmath>
 
 namespace trailnav::pose {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
-double wrap(double a) noexcept {
-  while (a > kPi) a -= 2 * kPi;
-  while (a < -kPi) a += 2 * kPi;
-  return a;
-}
 
 std::int64_t seconds_ns(double s) noexcept { return static_cast<std::int64_t>(s * 1e9); }
 
@@ -84,7 +79,7 @@ void GyroOdometry::step(std::int64_t t, double yaw_rate, double roll, double pit
     pose_.y += ds * std::sin(yaw_mid) * std::cos(pitch_mid);
     pose_.z -= ds * std::sin(pitch_mid);  // ZYX: positive pitch puts the nose down
     pose_.distance += std::abs(ds);
-    pose_.yaw = wrap(pose_.yaw + yaw_rate * dt);
+    pose_.yaw = wrap_angle(pose_.yaw + yaw_rate * dt);
   }
   pose_.roll = roll;
   pose_.pitch = pitch;
@@ -122,7 +117,7 @@ bool GyroOdometry::pose_at(std::int64_t t, LocalPose& out) const noexcept {
     const double dt = static_cast<double>(t - newest.time_ns) * 1e-9;
     out.x += newest.speed * dt * std::cos(newest.yaw);
     out.y += newest.speed * dt * std::sin(newest.yaw);
-    out.yaw = wrap(newest.yaw + newest.yaw_rate * dt);
+    out.yaw = wrap_angle(newest.yaw + newest.yaw_rate * dt);
     out.time_ns = t;
     return true;
   }
@@ -151,7 +146,7 @@ bool GyroOdometry::pose_at(std::int64_t t, LocalPose& out) const noexcept {
   out.z = a.z + f * (b.z - a.z);
   out.roll = a.roll + f * (b.roll - a.roll);
   out.pitch = a.pitch + f * (b.pitch - a.pitch);
-  out.yaw = wrap(a.yaw + f * wrap(b.yaw - a.yaw));
+  out.yaw = wrap_angle(a.yaw + f * wrap_angle(b.yaw - a.yaw));
   out.distance = a.distance + f * (b.distance - a.distance);
   return true;
 }

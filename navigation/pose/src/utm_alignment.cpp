@@ -1,5 +1,7 @@
 #include "trailnav/navigation/pose/utm_alignment.hpp"
 
+#include "trailnav/navigation/pose/angles.hpp"
+
 #include <GeographicLib/UTMUPS.hpp>
 
 #include <Eigen/Dense>
@@ -9,7 +11,6 @@
 namespace trailnav::pose {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
 Eigen::Matrix2d rotation(double a) noexcept {
@@ -20,12 +21,6 @@ Eigen::Matrix2d rotation(double a) noexcept {
 
 // d/dtheta of R(theta) v = J R v, J the 90-degree rotation.
 Eigen::Vector2d perp(const Eigen::Vector2d& v) noexcept { return {-v.y(), v.x()}; }
-
-double wrap(double a) noexcept {
-  while (a > kPi) a -= 2 * kPi;
-  while (a < -kPi) a += 2 * kPi;
-  return a;
-}
 
 bool finite(double v) noexcept { return std::isfinite(v); }
 
@@ -112,7 +107,7 @@ void UtmAlignment::predict(const LocalPose& p) noexcept {
   f.block<2, 1>(0, 3) = perp(rp) * dt;
   const double turn = -state_(3) * dt;
   state_.head<2>() += rp - rotation(state_(2) + turn) * pos;
-  state_(2) = wrap(state_(2) + turn);
+  state_(2) = wrap_angle(state_(2) + turn);
   // The GPS error decays towards zero.
   const double decay = options_.gps_bias_time > 0.0 ? std::exp(-dt / options_.gps_bias_time) : 0.0;
   f(4, 4) = f(5, 5) = decay;
@@ -307,7 +302,7 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
   rejected_count_ = 0;
   const Eigen::Matrix<double, 6, 2> k = cov_ * h.transpose() * s_inv;
   state_ += k * nu;
-  state_(2) = wrap(state_(2));
+  state_(2) = wrap_angle(state_(2));
   const Matrix6 ikh = Matrix6::Identity() - k * h;
   cov_ = ikh * cov_ * ikh.transpose() + white * white * k * k.transpose();  // Joseph form
   cov_ = 0.5 * (cov_ + cov_.transpose());
@@ -346,7 +341,7 @@ UtmPose UtmAlignment::utm(const LocalPose& local) const noexcept {
     u.position_valid = u.heading_valid = true;
     u.easting = m.x();
     u.northing = m.y();
-    u.yaw = wrap(local.yaw + state_(2));
+    u.yaw = wrap_angle(local.yaw + state_(2));
     // Propagate the transform's covariance, grown by the drift since the last fix.
     Eigen::Matrix3d c = cov_.topLeftCorner<3, 3>();
     const double dd = std::max(0.0, local.distance - last_distance_);

@@ -114,7 +114,7 @@ class GpioDriver final : public Task {
   void read_chip(Nanos now) noexcept;
   void read_tunnel(Nanos now) noexcept;
   void drive_outputs(Nanos now) noexcept;
-  void set_output(gpiod_line* line, const std::string& name, bool value, Nanos now) noexcept;
+  void set_output(gpiod_line* line, const std::string& name, bool value) noexcept;
   void fail(const char* what, int err) noexcept;
 
   GpioDriverOptions options_;
