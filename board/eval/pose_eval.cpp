@@ -12,6 +12,7 @@
 #include "simulator.hpp"
 #include "trailnav/drivers/can/dbc.hpp"
 #include "trailnav/drivers/gps/fix.hpp"
+#include "trailnav/drivers/gps/gps_driver.hpp"
 #include "trailnav/drivers/imu/attitude.hpp"
 #include "trailnav/drivers/imu/stream_decoder.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
@@ -113,6 +114,8 @@ PoseEvalResult evaluate_pose(const std::string& recording, const PoseEvalOptions
   gps::GpsFix fix;
   std::int64_t gps_last = -1;
   bool epoch_open = false;
+  // An epoch ends when its burst has been quiet as long as the GPS driver waits.
+  const std::int64_t epoch_gap = seconds_to_nanos(gps::GpsDriverOptions{}.epoch_gap);
 
   // Raw fixes, for their own error.
   struct RawFix {
@@ -127,7 +130,7 @@ PoseEvalResult evaluate_pose(const std::string& recording, const PoseEvalOptions
   std::vector<Sample> samples;
   std::uint64_t events = 0;
   while (auto e = reader.next()) {
-    if (epoch_open && e->time_ns - gps_last > 40'000'000) {
+    if (epoch_open && e->time_ns - gps_last > epoch_gap) {
       if (assembler.flush(fix)) take_fix(fix, gps_last);
       epoch_open = false;
     }

@@ -235,7 +235,9 @@ void GpioDriver::read_chip(Nanos now) noexcept {
       debouncer_.input(true, t <= now && now - t < kNanosPerSecond ? t : now);
     }
   }
-  // The level now decides when the release may come.
+  // A released stop with no edge since is still released: no level read
+  // needed. Otherwise the level now decides when the release may come.
+  if (ready == 0 && debouncer_.state() == EstopState::released) return;
   const int level = gpiod_line_get_value(estop_line_);
   if (level < 0) {
     ++local_.read_errors;
@@ -243,7 +245,7 @@ void GpioDriver::read_chip(Nanos now) noexcept {
     debouncer_.lost();
     return;
   }
-  if (level == 1 || debouncer_.state() != EstopState::released) debouncer_.input(level == 1, now);
+  debouncer_.input(level == 1, now);
 }
 
 void GpioDriver::read_tunnel(Nanos now) noexcept {
