@@ -46,6 +46,12 @@ std::optional<udp::Endpoint> VelodyneDriver::position_endpoint() const noexcept 
   return position_->local();
 }
 
+void VelodyneDriver::Sink::complete(RangeImage& image) noexcept {
+  image.completed_receive_ns = receive_ns;
+  mailbox.publish();
+  if (event != nullptr) event->signal(run_started);
+}
+
 void VelodyneDriver::handle_position(std::span<const std::uint8_t> payload, std::int64_t receive_ns) noexcept {
   PositionPacket packet;
   if (decode_position_packet(payload, packet) != PositionError::none) {
@@ -64,7 +70,8 @@ void VelodyneDriver::handle_position(std::span<const std::uint8_t> payload, std:
   positions_.publish();
 }
 
-void VelodyneDriver::run(const TaskTick&) {
+void VelodyneDriver::run(const TaskTick& tick) {
+  sink_.run_started = tick.started;
   if (position_) {
     for (int b = 0; b < options_.max_batches_per_run; ++b) {
       const auto batch = position_->receive();
@@ -84,6 +91,7 @@ void VelodyneDriver::run(const TaskTick&) {
         continue;
       }
       const std::int64_t t = clock_.resolve(read_u32(d.payload.data() + kTimestampOffset), d.receive_ns);
+      sink_.receive_ns = d.receive_ns;
       assembler_->add_packet(d.payload, t, sink_);
       local_.last_packet_ns = d.receive_ns;
     }

@@ -69,6 +69,14 @@ void PoseTask::run(const TaskTick& tick) {
     local_.utm = slot.utm;
     local_.odometry_counters = slot.odometry_counters;
     local_.utm_counters = slot.utm_counters;
+    const LocalPose& l = slot.local;
+    if (pose_out_ != nullptr && l.source != PoseSource::none && l.time_ns > last_out_ns_) {
+      if (pose_out_->try_push(perception::Pose{l.time_ns, l.x, l.y, l.z, l.roll, l.pitch, l.yaw})) {
+        last_out_ns_ = l.time_ns;
+      } else {
+        ++local_.pose_queue_drops;
+      }
+    }
   }
   shared_.post(local_);
 }

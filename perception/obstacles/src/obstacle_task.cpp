@@ -15,6 +15,7 @@ void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, Obstacl
   out.robot_y = cloud.robot_y;
   out.robot_yaw = cloud.robot_yaw;
   out.time_ns = cloud.time_ns;
+  out.received_ns = 0;
   out.revolution = cloud.sequence;
   map.export_occupancy(out.occupancy);
 }
@@ -35,7 +36,10 @@ void ObstacleTask::run(const TaskTick&) {
     }
   }
   const velodyne::RangeImage* image = revolutions_.try_read();
-  if (image == nullptr || image->sequence == last_sequence_) return;
+  if (image == nullptr || image->sequence == last_sequence_) {
+    shared_.post(counters_);
+    return;
+  }
   if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
   last_sequence_ = image->sequence;
   pipeline_.process(*image, track_.size() > 0 ? &track_ : nullptr, terrain_map_);
@@ -43,7 +47,11 @@ void ObstacleTask::run(const TaskTick&) {
   ObstacleSnapshot& snap = out_.write_slot();
   take_snapshot(pipeline_.map(), pipeline_.cloud(), snap);
   snap.terrain_sequence = terrain_map_ != nullptr ? terrain_map_->sequence : 0;
+  snap.received_ns = image->completed_receive_ns;
   out_.publish();
+  if (notify_ != nullptr) notify_->notify();
+  counters_.pipeline = pipeline_.counters();
+  shared_.post(counters_);
 }
 
 }  // namespace trailnav::perception

@@ -16,6 +16,8 @@
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/spsc_queue.hpp"
+#include "trailnav/runtime/status_board.hpp"
+#include "trailnav/runtime/wakeup.hpp"
 
 namespace trailnav::perception {
 
@@ -34,13 +36,11 @@ struct ObstacleSnapshot {
   double robot_y = 0.0;
   double robot_yaw = 0.0;
   std::int64_t time_ns = 0;           // end of the revolution
+  std::int64_t received_ns = 0;       // host receive time of the packet that completed it (0 offline)
   std::uint64_t revolution = 0;       // the range image's sequence number
   std::uint64_t terrain_sequence = 0; // terrain map used (0: none)
   std::vector<std::int8_t> occupancy; // row-major, row 0 = lowest y
 };
-
-inline constexpr std::size_t kPoseQueueCapacity = 1024;
-using PoseQueue = SpscQueue<Pose, kPoseQueueCapacity>;
 
 struct ObstacleTaskCounters {
   std::uint64_t runs = 0;
@@ -48,6 +48,7 @@ struct ObstacleTaskCounters {
   std::uint64_t skipped = 0;           // revolutions replaced in the mailbox before this task saw them
   std::uint64_t poses = 0;
   std::uint64_t terrain_maps = 0;
+  PipelineCounters pipeline;
 };
 
 class ObstacleTask final : public Task {
@@ -56,8 +57,14 @@ class ObstacleTask final : public Task {
   ObstacleTask(ObstaclePipeline& pipeline, Mailbox<velodyne::RangeImage>& revolutions, PoseQueue* poses,
                Mailbox<TerrainClassMap>* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history = 512);
 
+  // Woken after each published snapshot (the DDS publisher). Before the scheduler starts.
+  void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
+
   void run(const TaskTick& tick) override;
+  // The task thread's own counters.
   const ObstacleTaskCounters& counters() const noexcept { return counters_; }
+  // A copy for other threads (health).
+  ObstacleTaskCounters status() const noexcept { return shared_.read(); }
 
  private:
   ObstaclePipeline& pipeline_;
@@ -69,6 +76,8 @@ class ObstacleTask final : public Task {
   const TerrainClassMap* terrain_map_ = nullptr;
   std::uint64_t last_sequence_ = 0;
   ObstacleTaskCounters counters_;
+  StatusBoard<ObstacleTaskCounters> shared_;
+  Wakeup* notify_ = nullptr;
 };
 
 // Fills a snapshot from a map (no allocation when the sizes match).

@@ -12,6 +12,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "trailnav/runtime/spsc_queue.hpp"
+
 namespace trailnav::perception {
 
 struct Pose {
@@ -23,6 +25,10 @@ struct Pose {
   double pitch = 0.0;
   double yaw = 0.0;
 };
+
+// Pose samples from the pose thread to the obstacle (and terrain) thread.
+inline constexpr std::size_t kPoseQueueCapacity = 1024;
+using PoseQueue = SpscQueue<Pose, kPoseQueueCapacity>;
 
 enum class PoseLookup : std::uint8_t {
   interpolated,  // between two samples

@@ -68,6 +68,9 @@ class VelodyneDriver final : public Task {
   void run(const TaskTick& tick) override;
 
   Mailbox<RangeImage>& revolutions() noexcept { return revolutions_; }
+  // Signalled after each revolution is published (an event-driven obstacle
+  // task waits on it). Before the scheduler starts.
+  void set_revolution_event(TaskEvent* event) noexcept { sink_.event = event; }
   Mailbox<PositionSnapshot>& positions() noexcept { return positions_; }
   DriverCounters counters() const noexcept;
   const DriverOptions& options() const noexcept { return options_; }
@@ -83,8 +86,19 @@ class VelodyneDriver final : public Task {
   DriverOptions options_;
   PacketDecoder decoder_;
   std::optional<RevolutionAssembler> assembler_;
+  // Publishes each revolution with its completing packet's receive time.
+  struct Sink final : RevolutionSink {
+    explicit Sink(Mailbox<RangeImage>& m) noexcept : mailbox(m) {}
+    RangeImage& next_image() noexcept override { return mailbox.write_slot(); }
+    void complete(RangeImage& image) noexcept override;
+    Mailbox<RangeImage>& mailbox;
+    TaskEvent* event = nullptr;
+    std::int64_t receive_ns = 0;  // of the packet being added
+    Nanos run_started = 0;        // the driver's current run (scheduler clock)
+  };
+
   Mailbox<RangeImage> revolutions_;
-  MailboxRevolutionSink sink_;
+  Sink sink_;
   Mailbox<PositionSnapshot> positions_;
   SensorClock clock_;
   std::unique_ptr<udp::UdpReceiver> data_;

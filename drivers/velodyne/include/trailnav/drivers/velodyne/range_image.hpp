@@ -79,6 +79,9 @@ class RangeImage {
   std::uint32_t packets = 0;       // data packets that contributed
   std::uint32_t lost_packets = 0;  // packets inferred lost inside this revolution
   std::uint32_t collisions = 0;    // firings dropped because their column already had one
+  // Host receive time (CLOCK_REALTIME ns) of the packet that completed this
+  // revolution, set by the driver task (0 offline): where latency is measured from.
+  std::int64_t completed_receive_ns = 0;
 
   // Clears the first `columns` columns (no allocation). Used by the assembler.
   void reset(int columns) noexcept;

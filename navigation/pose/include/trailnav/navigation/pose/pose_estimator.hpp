@@ -14,6 +14,7 @@
 #include "trailnav/drivers/imu/imu_driver.hpp"
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 #include "trailnav/navigation/pose/utm_alignment.hpp"
+#include "trailnav/perception/pose_track.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/status_board.hpp"
@@ -64,6 +65,7 @@ struct PoseTaskStatus {
   std::uint64_t runs = 0;
   std::uint64_t imu_readings = 0, wheel_readings = 0, gps_fixes = 0;
   std::uint64_t published = 0;
+  std::uint64_t pose_queue_drops = 0;  // samples the perception threads' queue had no room for
   LocalPose local;
   UtmPose utm;
   GyroOdometryCounters odometry_counters;
@@ -75,6 +77,10 @@ class PoseTask final : public Task {
   // Any input may be null (a robot without that sensor).
   PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReading, imu::kImuQueueCapacity>* imu,
            SpscQueue<can::OdometryState, can::kOdometryQueueCapacity>* wheels, Mailbox<gps::GpsReading>* gps);
+
+  // Also pushes every new local pose into this queue (the obstacle thread's
+  // motion compensation). Before the scheduler starts.
+  void set_pose_output(perception::PoseQueue* queue) noexcept { pose_out_ = queue; }
 
   void run(const TaskTick& tick) override;
 
@@ -90,6 +96,8 @@ class PoseTask final : public Task {
   std::array<imu::Attitude, imu::kImuQueueCapacity> imu_batch_{};
   std::array<can::OdometryState, can::kOdometryQueueCapacity> wheel_batch_{};
   Mailbox<PoseSnapshot> poses_;
+  perception::PoseQueue* pose_out_ = nullptr;
+  std::int64_t last_out_ns_ = 0;
   PoseTaskStatus local_;
   StatusBoard<PoseTaskStatus> shared_;
 };

@@ -1,0 +1,277 @@
+#include "messages.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include "trailnav/navigation/pose/gyro_odometry.hpp"
+#include "trailnav/navigation/pose/utm_alignment.hpp"
+#include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/perception/terrain_class_map.hpp"
+
+namespace trailnav::dds {
+
+template <std::size_t N>
+void FixedString<N>::set(std::string_view s) noexcept {
+  const std::size_t n = std::min(s.size(), N - 1);
+  std::memcpy(text.data(), s.data(), n);
+  text[n] = '\0';
+}
+
+builtin_interfaces_msg_dds__Time_ to_time(std::int64_t utc_ns) noexcept {
+  std::int64_t sec = utc_ns / 1'000'000'000;
+  std::int64_t nsec = utc_ns % 1'000'000'000;
+  if (nsec < 0) {
+    nsec += 1'000'000'000;
+    --sec;
+  }
+  return {static_cast<std::int32_t>(sec), static_cast<std::uint32_t>(nsec)};
+}
+
+geometry_msgs_msg_dds__Quaternion_ to_quaternion(double roll, double pitch, double yaw) noexcept {
+  const double cr = std::cos(0.5 * roll), sr = std::sin(0.5 * roll);
+  const double cp = std::cos(0.5 * pitch), sp = std::sin(0.5 * pitch);
+  const double cy = std::cos(0.5 * yaw), sy = std::sin(0.5 * yaw);
+  geometry_msgs_msg_dds__Quaternion_ q;
+  q.w = cr * cp * cy + sr * sp * sy;
+  q.x = sr * cp * cy - cr * sp * sy;
+  q.y = cr * sp * cy + sr * cp * sy;
+  q.z = cr * cp * sy - sr * sp * cy;
+  return q;
+}
+
+// --- OccupancyGrid ---
+
+OccupancyGridMessage::OccupancyGridMessage(std::int32_t width, std::int32_t height, std::string_view frame_id)
+    : data_(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), std::int8_t{-1}) {
+  frame_.set(frame_id);
+  msg_.header.frame_id = frame_.c_str();
+  msg_.info.width = static_cast<std::uint32_t>(width);
+  msg_.info.height = static_cast<std::uint32_t>(height);
+  msg_.info.origin.orientation.w = 1.0;
+  msg_.data._buffer = data_.data();
+  msg_.data._length = static_cast<std::uint32_t>(data_.size());
+  msg_.data._maximum = static_cast<std::uint32_t>(data_.size());
+  msg_.data._release = false;
+}
+
+void OccupancyGridMessage::fill(const perception::ObstacleSnapshot& s, bool stale, int occupied_percent) noexcept {
+  msg_.header.stamp = to_time(s.time_ns);
+  msg_.info.map_load_time = msg_.header.stamp;
+  msg_.info.resolution = static_cast<float>(s.resolution);
+  msg_.info.origin.position.x = s.origin_x;
+  msg_.info.origin.position.y = s.origin_y;
+  msg_.info.origin.position.z = 0.0;
+  const std::size_t n = std::min(data_.size(), s.occupancy.size());
+  if (!stale) {
+    std::memcpy(data_.data(), s.occupancy.data(), n);
+    return;
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int8_t v = s.occupancy[i];
+    data_[i] = v > occupied_percent ? v : std::int8_t{-1};
+  }
+}
+
+// --- PoseStamped ---
+
+PoseStampedMessage::PoseStampedMessage(std::string_view frame_id) {
+  frame_.set(frame_id);
+  msg_.header.frame_id = frame_.c_str();
+  msg_.pose.orientation.w = 1.0;
+}
+
+void PoseStampedMessage::fill(std::int64_t utc_ns, double x, double y, double z, double roll, double pitch,
+                              double yaw) noexcept {
+  msg_.header.stamp = to_time(utc_ns);
+  msg_.pose.position = {x, y, z};
+  msg_.pose.orientation = to_quaternion(roll, pitch, yaw);
+}
+
+void PoseStampedMessage::fill(const pose::LocalPose& p) noexcept {
+  fill(p.time_ns, p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
+}
+
+// --- UTM pose and NavSatFix ---
+
+UtmFixMessages::UtmFixMessages(std::string_view fix_frame_id) {
+  fix_frame_.set(fix_frame_id);
+  utm_frame_.set("utm");
+  utm_.header.frame_id = utm_frame_.c_str();
+  fix_.header.frame_id = fix_frame_.c_str();
+  utm_.pose.pose.orientation.w = 1.0;
+}
+
+bool UtmFixMessages::fill(const pose::UtmPose& u) noexcept {
+  if (!u.position_valid) return false;
+  char frame[16];
+  std::snprintf(frame, sizeof frame, "utm_%d%c", u.zone, u.north ? 'N' : 'S');
+  utm_frame_.set(frame);
+  utm_.header.stamp = to_time(u.time_ns);
+  utm_.pose.pose.position = {u.easting, u.northing, u.altitude};
+  utm_.pose.pose.orientation = to_quaternion(0.0, 0.0, u.yaw);
+  // Row-major 6x6 over (x, y, z, roll, pitch, yaw). The alignment estimates
+  // easting, northing and yaw; z, roll and pitch get a variance of 1e6 (unknown).
+  std::fill(std::begin(utm_.pose.covariance), std::end(utm_.pose.covariance), 0.0);
+  const auto& c = u.covariance;
+  utm_.pose.covariance[0] = c(0, 0);
+  utm_.pose.covariance[1] = c(0, 1);
+  utm_.pose.covariance[6] = c(1, 0);
+  utm_.pose.covariance[7] = c(1, 1);
+  utm_.pose.covariance[5] = c(0, 2);
+  utm_.pose.covariance[11] = c(1, 2);
+  utm_.pose.covariance[30] = c(2, 0);
+  utm_.pose.covariance[31] = c(2, 1);
+  utm_.pose.covariance[35] = u.heading_valid ? c(2, 2) : 1e6;
+  utm_.pose.covariance[14] = 1e6;  // z, roll, pitch: not estimated
+  utm_.pose.covariance[21] = 1e6;
+  utm_.pose.covariance[28] = 1e6;
+
+  fix_.header.stamp = utm_.header.stamp;
+  fix_.status.status = 0;   // STATUS_FIX
+  fix_.status.service = 1;  // SERVICE_GPS
+  fix_.latitude = u.latitude;
+  fix_.longitude = u.longitude;
+  fix_.altitude = u.altitude;
+  // East, north, up in m^2 (ENU, as NavSatFix defines it); grid and true
+  // east/north differ by the convergence, negligible for the variance.
+  std::fill(std::begin(fix_.position_covariance), std::end(fix_.position_covariance), 0.0);
+  fix_.position_covariance[0] = c(0, 0);
+  fix_.position_covariance[1] = c(0, 1);
+  fix_.position_covariance[3] = c(1, 0);
+  fix_.position_covariance[4] = c(1, 1);
+  fix_.position_covariance[8] = std::max(c(0, 0), c(1, 1)) * 4.0;
+  fix_.position_covariance_type = 3;  // COVARIANCE_TYPE_KNOWN
+  return true;
+}
+
+// --- Path ---
+
+PathMessage::PathMessage(std::size_t capacity, std::string_view frame_id) : poses_(capacity) {
+  frame_.set(frame_id);
+  msg_.header.frame_id = frame_.c_str();
+  for (auto& p : poses_) {
+    p.header.frame_id = frame_.c_str();
+    p.pose.orientation.w = 1.0;
+  }
+  msg_.poses._buffer = poses_.data();
+  msg_.poses._maximum = static_cast<std::uint32_t>(poses_.size());
+  msg_.poses._length = 0;
+  msg_.poses._release = false;
+}
+
+void PathMessage::clear(std::int64_t utc_ns) noexcept {
+  msg_.header.stamp = to_time(utc_ns);
+  msg_.poses._length = 0;
+}
+
+bool PathMessage::add(std::int64_t utc_ns, double x, double y, double yaw) noexcept {
+  if (msg_.poses._length >= poses_.size()) return false;
+  geometry_msgs_msg_dds__PoseStamped_& p = poses_[msg_.poses._length++];
+  p.header.stamp = to_time(utc_ns);
+  p.pose.position = {x, y, 0.0};
+  p.pose.orientation = to_quaternion(0.0, 0.0, yaw);
+  return true;
+}
+
+// --- TerrainClassMap ---
+
+TerrainClassMapMessage::TerrainClassMapMessage(std::int32_t width, std::int32_t height, std::string_view frame_id)
+    : class_id_(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), std::uint8_t{255}),
+      confidence_(class_id_.size(), std::uint8_t{0}) {
+  frame_.set(frame_id);
+  msg_.header.frame_id = frame_.c_str();
+  msg_.info.width = static_cast<std::uint32_t>(width);
+  msg_.info.height = static_cast<std::uint32_t>(height);
+  msg_.info.origin.orientation.w = 1.0;
+  for (std::size_t i = 0; i < names_.size(); ++i) {
+    names_[i].set(perception::terrain_class_name(static_cast<perception::TerrainClass>(i)));
+    name_ptrs_[i] = names_[i].c_str();
+  }
+  msg_.class_names._buffer = name_ptrs_.data();
+  msg_.class_names._length = msg_.class_names._maximum = static_cast<std::uint32_t>(name_ptrs_.size());
+  msg_.class_names._release = false;
+  msg_.class_id._buffer = class_id_.data();
+  msg_.class_id._length = msg_.class_id._maximum = static_cast<std::uint32_t>(class_id_.size());
+  msg_.class_id._release = false;
+  msg_.confidence._buffer = confidence_.data();
+  msg_.confidence._length = msg_.confidence._maximum = static_cast<std::uint32_t>(confidence_.size());
+  msg_.confidence._release = false;
+}
+
+void TerrainClassMapMessage::set_header(std::int64_t utc_ns, double resolution, double origin_x,
+                                        double origin_y) noexcept {
+  msg_.header.stamp = to_time(utc_ns);
+  msg_.info.map_load_time = msg_.header.stamp;
+  msg_.info.resolution = static_cast<float>(resolution);
+  msg_.info.origin.position = {origin_x, origin_y, 0.0};
+}
+
+// --- DiagnosticArray ---
+
+DiagnosticsMessage::DiagnosticsMessage() : store_(kStatuses), statuses_(kStatuses) {
+  frame_.set("");
+  msg_.header.frame_id = frame_.c_str();
+  for (std::size_t i = 0; i < kStatuses; ++i) {
+    Status& s = store_[i];
+    diagnostic_msgs_msg_dds__DiagnosticStatus_& d = statuses_[i];
+    d.name = s.name.c_str();
+    d.message = s.message.c_str();
+    d.hardware_id = s.hardware_id.c_str();
+    for (std::size_t k = 0; k < kValues; ++k) {
+      s.pairs[k].key = s.keys[k].c_str();
+      s.pairs[k].value = s.values[k].c_str();
+    }
+    d.values._buffer = s.pairs.data();
+    d.values._maximum = static_cast<std::uint32_t>(kValues);
+    d.values._length = 0;
+    d.values._release = false;
+  }
+  msg_.status._buffer = statuses_.data();
+  msg_.status._maximum = static_cast<std::uint32_t>(kStatuses);
+  msg_.status._length = 0;
+  msg_.status._release = false;
+}
+
+void DiagnosticsMessage::clear(std::int64_t utc_ns) noexcept {
+  msg_.header.stamp = to_time(utc_ns);
+  msg_.status._length = 0;
+}
+
+bool DiagnosticsMessage::begin(Level level, std::string_view name, std::string_view message,
+                               std::string_view hardware_id) noexcept {
+  if (msg_.status._length >= kStatuses) return false;
+  const std::size_t i = msg_.status._length++;
+  Status& s = store_[i];
+  s.name.set(name);
+  s.message.set(message);
+  s.hardware_id.set(hardware_id);
+  statuses_[i].level = level;
+  statuses_[i].values._length = 0;
+  return true;
+}
+
+void DiagnosticsMessage::value(std::string_view key, std::string_view value) noexcept {
+  if (msg_.status._length == 0) return;
+  const std::size_t i = msg_.status._length - 1;
+  auto& seq = statuses_[i].values;
+  if (seq._length >= kValues) return;
+  store_[i].keys[seq._length].set(key);
+  store_[i].values[seq._length].set(value);
+  ++seq._length;
+}
+
+void DiagnosticsMessage::value(std::string_view key, std::uint64_t v) noexcept {
+  char text[24];
+  std::snprintf(text, sizeof text, "%llu", static_cast<unsigned long long>(v));
+  value(key, std::string_view(text));
+}
+
+void DiagnosticsMessage::value(std::string_view key, double v, int decimals) noexcept {
+  char text[40];
+  std::snprintf(text, sizeof text, "%.*f", decimals, v);
+  value(key, std::string_view(text));
+}
+
+}  // namespace trailnav::dds

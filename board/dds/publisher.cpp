@@ -1,0 +1,156 @@
+#include "publisher.hpp"
+
+#include <algorithm>
+#include <ctime>
+
+namespace trailnav::dds {
+
+namespace {
+std::int64_t utc_now_ns() noexcept {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+}  // namespace
+
+DdsPublisher::DdsPublisher(Clock& clock, const PublisherOptions& options, PublisherInputs inputs)
+    : clock_(clock), options_(options), inputs_(std::move(inputs)), pose_msg_(options.odom_frame),
+      utm_msg_(options.fix_frame) {}
+
+DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, const PublisherOptions& options,
+                                           PublisherInputs inputs) {
+  Created result;
+  std::unique_ptr<DdsPublisher> p(new DdsPublisher(clock, options, std::move(inputs)));
+  auto make = [&](std::unique_ptr<Writer>& out, const dds_topic_descriptor_t& type, const std::string& name,
+                  EndpointQos qos) {
+    if (!result.error.empty()) return;
+    auto w = Writer::create(domain, type, name, qos);
+    if (!w.writer) {
+      result.error = w.error;
+      return;
+    }
+    out = std::move(w.writer);
+  };
+  if (p->inputs_.obstacles != nullptr) {
+    const perception::ObstacleSnapshot* shape = p->inputs_.obstacle_shape;
+    if (shape == nullptr) {
+      result.error = "publisher: the obstacle map's size is missing";
+      return result;
+    }
+    p->grid_.emplace(shape->size_x, shape->size_y, options.odom_frame);
+    make(p->map_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.obstacle_map, {true, 1});
+  }
+  if (p->inputs_.poses != nullptr) {
+    make(p->pose_writer_, geometry_msgs_msg_dds__PoseStamped__desc, options.topics.pose, {true, 1});
+    make(p->utm_writer_, geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, options.topics.utm_pose, {true, 1});
+    make(p->fix_writer_, sensor_msgs_msg_dds__NavSatFix__desc, options.topics.fix, {true, 1});
+  }
+  make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
+  if (!result.error.empty()) return result;
+  result.publisher = std::move(p);
+  return result;
+}
+
+DdsPublisher::~DdsPublisher() { stop(); }
+
+void DdsPublisher::start() {
+  if (running_.exchange(true)) return;
+  thread_ = std::thread([this] { loop(); });
+}
+
+void DdsPublisher::stop() {
+  if (!running_.exchange(false)) return;
+  wakeup_.notify();
+  if (thread_.joinable()) thread_.join();
+}
+
+PublisherStats DdsPublisher::stats() const noexcept {
+  PublisherStats s;
+  s.maps = maps_.load(std::memory_order_relaxed);
+  s.stale_maps = stale_maps_.load(std::memory_order_relaxed);
+  s.poses = poses_.load(std::memory_order_relaxed);
+  s.fixes = fixes_.load(std::memory_order_relaxed);
+  s.health = health_.load(std::memory_order_relaxed);
+  s.write_failures = failures_.load(std::memory_order_relaxed);
+  s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
+  s.last_map_ns = last_map_ns_.load(std::memory_order_relaxed);
+  return s;
+}
+
+void DdsPublisher::publish_health(Nanos now) noexcept {
+  health_msg_.clear(utc_now_ns());
+  if (inputs_.health) inputs_.health(health_msg_, now);
+  const PublisherStats s = stats();
+  const bool stale = s.lidar_stale;
+  health_msg_.begin(stale ? DiagnosticsMessage::warn : DiagnosticsMessage::ok, "trailnavd: publisher",
+                    stale ? "obstacle map stale: free cells sent as unknown" : "publishing", "trailnavd");
+  health_msg_.value("obstacle_maps", s.maps);
+  health_msg_.value("stale_maps", s.stale_maps);
+  health_msg_.value("poses", s.poses);
+  health_msg_.value("fixes", s.fixes);
+  health_msg_.value("write_failures", s.write_failures);
+  if (health_writer_->write(&health_msg_.sample())) {
+    health_.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    failures_.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void DdsPublisher::loop() noexcept {
+  const Nanos health_period = seconds_to_nanos(options_.health_period);
+  const Nanos pose_period = options_.pose_rate_hz > 0.0 ? seconds_to_nanos(1.0 / options_.pose_rate_hz) : 0;
+  const Nanos stale_after = seconds_to_nanos(options_.stale_after);
+  Nanos next_health = clock_.now();
+  Nanos next_pose = clock_.now();
+  Nanos last_map = 0, last_stale = 0;
+  bool any_map = false;
+  while (running_.load(std::memory_order_acquire)) {
+    Nanos now = clock_.now();
+    Nanos wait = next_health - now;
+    if (pose_writer_ && pose_period > 0) wait = std::min(wait, next_pose - now);
+    if (map_writer_ && any_map) wait = std::min(wait, std::max<Nanos>(last_map + stale_after - now, 0) + kNanosPerMilli);
+    if (wait > 0) wakeup_.wait_for(std::min<Nanos>(wait, 100 * kNanosPerMilli));
+    if (!running_.load(std::memory_order_acquire)) break;
+    now = clock_.now();
+
+    if (map_writer_) {
+      if (const perception::ObstacleSnapshot* snap = inputs_.obstacles->try_read()) {
+        grid_->fill(*snap, false, options_.occupied_percent);
+        if (map_writer_->write(&grid_->sample(), snap->received_ns)) {
+          maps_.fetch_add(1, std::memory_order_relaxed);
+        } else {
+          failures_.fetch_add(1, std::memory_order_relaxed);
+        }
+        any_map = true;
+        last_map = now;
+        last_map_ns_.store(now, std::memory_order_relaxed);
+        lidar_stale_.store(false, std::memory_order_relaxed);
+      } else if (any_map && now - last_map > stale_after && now - last_stale >= kNanosPerSecond) {
+        grid_->fill(inputs_.obstacles->last_read(), true, options_.occupied_percent);
+        if (map_writer_->write(&grid_->sample())) stale_maps_.fetch_add(1, std::memory_order_relaxed);
+        last_stale = now;
+        lidar_stale_.store(true, std::memory_order_relaxed);
+      }
+    }
+    if (pose_writer_ && now >= next_pose) {
+      next_pose = std::max(next_pose + pose_period, now);
+      if (const pose::PoseSnapshot* p = inputs_.poses->try_read()) {
+        if (p->local.source != pose::PoseSource::none) {
+          pose_msg_.fill(p->local);
+          if (pose_writer_->write(&pose_msg_.sample())) poses_.fetch_add(1, std::memory_order_relaxed);
+        }
+        if (utm_msg_.fill(p->utm)) {
+          const bool a = utm_writer_->write(&utm_msg_.utm());
+          const bool b = fix_writer_->write(&utm_msg_.fix());
+          if (a && b) fixes_.fetch_add(1, std::memory_order_relaxed);
+        }
+      }
+    }
+    if (now >= next_health) {
+      next_health = std::max(next_health + health_period, now);
+      publish_health(now);
+    }
+  }
+}
+
+}  // namespace trailnav::dds

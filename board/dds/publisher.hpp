@@ -1,0 +1,108 @@
+// The publisher thread: the only thread of trailnavd that calls DDS. Real-time
+// tasks publish snapshots into mailboxes and post a Wakeup; this thread takes
+// the newest snapshot, fills the preallocated sample and writes it. Cyclone
+// allocates inside dds_write (serialisation), on this thread only.
+//
+// Obstacle maps go out as soon as they are made, stamped (source time) with
+// the receive time of the lidar packet that completed their revolution, so a
+// subscriber measures the whole latency. Poses go out at `pose_rate_hz`,
+// health every `health_period`. When the lidar falls silent for
+// `stale_after`, the last map is sent again once a second with its free cells
+// turned unknown: a planner never keeps driving on old free space.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "dds.hpp"
+#include "messages.hpp"
+#include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/runtime/clock.hpp"
+#include "trailnav/runtime/mailbox.hpp"
+#include "trailnav/runtime/wakeup.hpp"
+
+namespace trailnav::dds {
+
+struct TopicNames {
+  std::string obstacle_map = "trailnav/obstacle_map";
+  std::string terrain_map = "trailnav/terrain_map";
+  std::string terrain_cost = "trailnav/terrain_cost";
+  std::string pose = "trailnav/pose";
+  std::string utm_pose = "trailnav/utm_pose";
+  std::string fix = "trailnav/fix";
+  std::string subgoal = "trailnav/subgoal";
+  std::string subgoal_path = "trailnav/subgoal_path";
+  std::string health = "diagnostics";
+};
+
+struct PublisherOptions {
+  TopicNames topics;
+  std::string odom_frame = "odom";
+  std::string fix_frame = "gps";
+  double pose_rate_hz = 20.0;
+  double health_period = 1.0;  // s
+  double stale_after = 0.5;    // s without a new obstacle map before the lidar counts as silent
+  int occupied_percent = 50;
+};
+
+struct PublisherInputs {
+  perception::ObstacleSnapshot* obstacle_shape = nullptr;  // only its size is used
+  Mailbox<perception::ObstacleSnapshot>* obstacles = nullptr;
+  Mailbox<pose::PoseSnapshot>* poses = nullptr;
+  // Fills the health statuses (called on the publisher thread before each health sample).
+  std::function<void(DiagnosticsMessage&, Nanos now)> health;
+};
+
+struct PublisherStats {
+  std::uint64_t maps = 0, stale_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
+  bool lidar_stale = false;
+  std::int64_t last_map_ns = 0;  // runtime clock
+};
+
+class DdsPublisher {
+ public:
+  struct Created;
+  static Created create(const Domain& domain, Clock& clock, const PublisherOptions& options, PublisherInputs inputs);
+  ~DdsPublisher();
+  DdsPublisher(const DdsPublisher&) = delete;
+  DdsPublisher& operator=(const DdsPublisher&) = delete;
+
+  Wakeup& wakeup() noexcept { return wakeup_; }
+  void start();
+  void stop();
+  PublisherStats stats() const noexcept;
+
+ private:
+  DdsPublisher(Clock& clock, const PublisherOptions& options, PublisherInputs inputs);
+  void loop() noexcept;
+  void publish_health(Nanos now) noexcept;
+
+  Clock& clock_;
+  PublisherOptions options_;
+  PublisherInputs inputs_;
+  Wakeup wakeup_;
+  std::unique_ptr<Writer> map_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
+  std::optional<OccupancyGridMessage> grid_;
+  PoseStampedMessage pose_msg_;
+  UtmFixMessages utm_msg_;
+  DiagnosticsMessage health_msg_;
+  std::atomic<bool> running_{false};
+  std::thread thread_;
+  // Publisher thread's state, copied out under the atomics below.
+  std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
+  std::atomic<bool> lidar_stale_{false};
+  std::atomic<std::int64_t> last_map_ns_{0};
+};
+
+struct DdsPublisher::Created {
+  std::unique_ptr<DdsPublisher> publisher;
+  std::string error;
+};
+
+}  // namespace trailnav::dds
