@@ -1,0 +1,314 @@
+#include "daemon.hpp"
+
+#include <cstdio>
+#include <ctime>
+
+#include "trailnav/drivers/velodyne/calibration.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+namespace trailnav::daemon {
+
+namespace {
+
+std::int64_t utc_now_ns() noexcept {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+const TaskSpec* find_task(const std::vector<TaskSpec>& tasks, std::string_view name) {
+  for (const TaskSpec& t : tasks) {
+    if (t.name == name) return &t;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+Daemon::Daemon(const RobotConfig& config) : config_(config) {}
+
+Daemon::~Daemon() { stop(); }
+
+Daemon::Created Daemon::create(const RobotConfig& config) {
+  Created result;
+  std::unique_ptr<Daemon> d(new Daemon(config));
+  auto fail = [&](const std::string& what) {
+    result.error = what;
+    return std::move(result);
+  };
+  d->scheduler_ = std::make_unique<Scheduler>(d->clock_, config.runtime.scheduler);
+
+  if (config.lidar) {
+    const LidarSection& l = *config.lidar;
+    std::optional<velodyne::Calibration> calibration;
+    if (l.calibration.empty()) {
+      calibration = velodyne::builtin_calibration(l.model);
+    } else {
+      auto c = velodyne::load_calibration(l.calibration);
+      if (!c.calibration) return fail("lidar: " + c.error);
+      calibration = std::move(c.calibration);
+    }
+    velodyne::DecoderOptions dopt;
+    dopt.selection = velodyne::ReturnSelection::strongest;
+    auto decoder = velodyne::PacketDecoder::create(l.model, *calibration, dopt);
+    if (!decoder.decoder) return fail("lidar: " + decoder.error);
+    auto driver = velodyne::VelodyneDriver::create(std::move(*decoder.decoder), l.driver);
+    if (!driver.driver) return fail(driver.error);
+    d->lidar_ = std::move(driver.driver);
+  }
+  if (config.gps) {
+    auto g = gps::GpsDriver::create(*config.gps);
+    if (!g.driver) return fail("gps: " + g.error);
+    d->gps_ = std::move(g.driver);
+  }
+  if (config.imu) {
+    auto i = imu::ImuDriver::create(*config.imu);
+    if (!i.driver) return fail("imu: " + i.error);
+    d->imu_ = std::move(i.driver);
+  }
+  if (config.can) {
+    auto dbc = can::load_dbc(config.can->dbc);
+    if (!dbc.dbc) return fail("can: " + dbc.error);
+    d->dbc_ = std::move(*dbc.dbc);
+    auto c = can::CanDriver::create(*d->dbc_, config.can->driver);
+    if (!c.driver) return fail("can: " + c.error);
+    d->can_ = std::move(c.driver);
+  }
+  if (config.gpio) {
+    auto g = gpio::GpioDriver::create(*config.gpio);
+    if (!g.driver) return fail("gpio: " + g.error);
+    d->gpio_ = std::move(g.driver);
+  }
+  if (config.pose) {
+    d->pose_ = std::make_unique<pose::PoseTask>(*config.pose, d->imu_ ? &d->imu_->readings() : nullptr,
+                                                d->can_ ? &d->can_->readings() : nullptr,
+                                                d->gps_ ? &d->gps_->fixes() : nullptr);
+  }
+  if (config.obstacles) {
+    const velodyne::RangeImageShape shape = d->lidar_->revolutions().last_read().shape();
+    auto made = perception::ObstaclePipeline::create(*config.obstacles, shape);
+    if (!made.pipeline) return fail("obstacles: " + made.error);
+    d->pipeline_ = std::move(made.pipeline);
+    const int n = config.obstacles->map.size;
+    d->snapshot_shape_ = std::make_unique<perception::ObstacleSnapshot>(n, n);
+    d->obstacle_out_ = std::make_unique<Mailbox<perception::ObstacleSnapshot>>(n, n);
+    if (d->pose_ && config.obstacles_use_pose) {
+      d->pose_queue_ = std::make_unique<perception::PoseQueue>();
+      d->pose_->set_pose_output(d->pose_queue_.get());
+    }
+    d->obstacles_ = std::make_unique<perception::ObstacleTask>(*d->pipeline_, d->lidar_->revolutions(),
+                                                               d->pose_queue_.get(), nullptr, *d->obstacle_out_);
+    d->lidar_->set_revolution_event(&d->revolution_event_);
+  }
+
+  auto domain = dds::Domain::create(config.dds.domain, config.dds.cyclone_xml);
+  if (!domain.domain) {
+    return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
+  }
+  d->domain_ = std::move(domain.domain);
+  dds::PublisherInputs inputs;
+  inputs.obstacles = d->obstacle_out_.get();
+  inputs.obstacle_shape = d->snapshot_shape_.get();
+  inputs.poses = d->pose_ ? &d->pose_->poses() : nullptr;
+  Daemon* self = d.get();
+  inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
+  dds::PublisherOptions popt = config.dds.publisher;
+  if (config.obstacles) popt.occupied_percent = static_cast<int>(config.obstacles->map.occupied * 100.0f);
+  auto pub = dds::DdsPublisher::create(*d->domain_, d->clock_, popt, std::move(inputs));
+  if (!pub.publisher) return fail("dds: " + pub.error);
+  d->publisher_ = std::move(pub.publisher);
+  if (d->obstacles_) d->obstacles_->set_notify(&d->publisher_->wakeup());
+
+  // The task table, in a fixed order.
+  auto add = [&](const char* name, Task* task, TaskEvent* event) -> bool {
+    if (task == nullptr) return true;
+    const TaskSpec* spec = find_task(config.tasks, name);
+    if (Status st = d->scheduler_->add(*spec, *task, event); !st) {
+      result.error = st.message();
+      return false;
+    }
+    return true;
+  };
+  if (!add("lidar", d->lidar_.get(), nullptr) || !add("gps", d->gps_.get(), nullptr) ||
+      !add("imu", d->imu_.get(), nullptr) || !add("can", d->can_.get(), nullptr) ||
+      !add("gpio", d->gpio_.get(), nullptr) || !add("pose", d->pose_.get(), nullptr) ||
+      !add("obstacles", d->obstacles_.get(), &d->revolution_event_)) {
+    return result;
+  }
+  d->last_runs_.assign(d->scheduler_->task_count(), 0);
+  result.daemon = std::move(d);
+  return result;
+}
+
+Status Daemon::start() {
+  publisher_->start();
+  if (Status st = scheduler_->start(); !st) {
+    publisher_->stop();
+    return st;
+  }
+  if (gpio_) gpio_->set_ready(true);
+  // From here on the real-time tasks are watched for heap use.
+  alloc_guard::reset_counters();
+  armed_ = alloc_guard::arm();
+  return Status::ok();
+}
+
+void Daemon::stop() {
+  if (gpio_) gpio_->set_ready(false);
+  if (scheduler_ && scheduler_->running()) scheduler_->stop();
+  if (publisher_) publisher_->stop();
+  if (armed_) {
+    alloc_guard::disarm();
+    armed_ = false;
+  }
+}
+
+bool Daemon::alive() noexcept {
+  // Periodic tasks must have run since the last call; event tasks may idle.
+  bool ok = scheduler_->running();
+  for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
+    const std::uint64_t runs = scheduler_->stats(i).runs;
+    if (scheduler_->spec(i).kind == TaskKind::periodic && runs == last_runs_[i]) ok = false;
+    last_runs_[i] = runs;
+  }
+  return ok;
+}
+
+DaemonSummary Daemon::summary() const {
+  DaemonSummary s;
+  if (obstacles_) s.revolutions = obstacles_->status().revolutions;
+  s.maps_published = publisher_ ? publisher_->stats().maps : 0;
+  for (std::size_t i = 0; i < scheduler_->task_count(); ++i) s.overruns += scheduler_->stats(i).overruns;
+  s.rt_allocations = alloc_guard::total_allocations();
+  s.realtime = scheduler_->realtime_active();
+  s.memory_locked = scheduler_->memory_locked();
+  return s;
+}
+
+std::string Daemon::status_line() const {
+  const DaemonSummary s = summary();
+  char text[200];
+  std::snprintf(text, sizeof text, "%llu revolutions, %llu maps published, %llu overruns, %llu real-time allocations",
+                static_cast<unsigned long long>(s.revolutions), static_cast<unsigned long long>(s.maps_published),
+                static_cast<unsigned long long>(s.overruns), static_cast<unsigned long long>(s.rt_allocations));
+  return text;
+}
+
+std::string Daemon::task_report() const {
+  std::string out;
+  for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
+    const TaskStats st = scheduler_->stats(i);
+    char line[240];
+    std::snprintf(line, sizeof line,
+                  "  %-10s runs %8llu  overruns %llu  slips %llu  exec p50 %.3f p99 %.3f max %.3f ms  "
+                  "latency p99 %.3f ms\n",
+                  scheduler_->spec(i).name.c_str(), static_cast<unsigned long long>(st.runs),
+                  static_cast<unsigned long long>(st.overruns), static_cast<unsigned long long>(st.slips),
+                  nanos_to_seconds(st.execution.p50) * 1e3, nanos_to_seconds(st.execution.p99) * 1e3,
+                  nanos_to_seconds(st.execution.max) * 1e3, nanos_to_seconds(st.latency.p99) * 1e3);
+    out += line;
+  }
+  return out;
+}
+
+void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
+  using L = dds::DiagnosticsMessage;
+  const std::int64_t utc = utc_now_ns();
+  const double stale_after = config_.dds.publisher.stale_after;
+  if (lidar_) {
+    const velodyne::DriverCounters c = lidar_->counters();
+    const double silent = c.last_packet_ns > 0 ? static_cast<double>(utc - c.last_packet_ns) * 1e-9 : -1.0;
+    const bool stale = silent < 0.0 || silent > stale_after;
+    char msg[96];
+    if (silent < 0.0) {
+      std::snprintf(msg, sizeof msg, "no data packet yet");
+    } else if (stale) {
+      std::snprintf(msg, sizeof msg, "silent for %.1f s: obstacle map stale", silent);
+    } else {
+      std::snprintf(msg, sizeof msg, "receiving");
+    }
+    m.begin(stale ? L::error : L::ok, "trailnavd: lidar", msg,
+            lidar_->decoder().model().name);
+    m.value("stale", stale ? std::string_view("true") : std::string_view("false"));
+    m.value("packets", c.data.datagrams);
+    m.value("revolutions", c.assembler.revolutions);
+    m.value("lost_packets", c.assembler.lost_packets);
+    m.value("malformed", c.assembler.malformed + c.wrong_size);
+    m.value("kernel_drops", c.data.kernel_drops);
+    m.value("position_packets", c.position_packets);
+    m.value("time_source", velodyne::time_source_name(c.time_source));
+  }
+  if (gps_) {
+    const gps::GpsDriverStatus s = gps_->status();
+    const bool ok = s.health == gps::GpsHealth::fix;
+    m.begin(ok ? L::ok : (s.health == gps::GpsHealth::no_fix ? L::warn : L::error), "trailnavd: gps",
+            gps::gps_health_name(s.health), config_.gps->link.device);
+    m.value("stale", s.health == gps::GpsHealth::no_data || s.health == gps::GpsHealth::no_link ? std::string_view("true")
+                                                                                              : std::string_view("false"));
+    m.value("lines", s.gps.lines);
+    m.value("fixes", s.published);
+    m.value("rejected", s.gps.rejected_total());
+  }
+  if (imu_) {
+    const imu::ImuDriverStatus s = imu_->status();
+    m.begin(s.health == imu::ImuHealth::ok ? L::ok : L::error, "trailnavd: imu", imu::imu_health_name(s.health),
+            config_.imu->link.device);
+    m.value("stale", s.health == imu::ImuHealth::ok ? std::string_view("false") : std::string_view("true"));
+    m.value("samples", s.stream.samples);
+    m.value("queue_drops", s.queue_drops);
+  }
+  if (can_) {
+    const can::CanDriverStatus s = can_->status();
+    m.begin(s.health == can::CanHealth::ok ? L::ok : L::error, "trailnavd: can", can::can_health_name(s.health),
+            can::can_transport_name(config_.can->driver.transport));
+    m.value("stale", s.health == can::CanHealth::ok ? std::string_view("false") : std::string_view("true"));
+    m.value("frames", s.frames);
+    m.value("malformed", s.malformed);
+    m.value("bus_off", s.bus_off);
+    m.value("distance_m", s.odometry.distance, 2);
+  }
+  if (gpio_) {
+    const gpio::GpioDriverStatus s = gpio_->status();
+    const bool released = s.estop == gpio::EstopState::released;
+    m.begin(s.health != gpio::GpioHealth::ok ? L::error : (released ? L::ok : L::warn), "trailnavd: gpio",
+            released ? "e-stop released" : "e-stop engaged or unknown",
+            gpio::gpio_transport_name(config_.gpio->transport));
+    m.value("estop", gpio::estop_state_name(s.estop));
+    m.value("engagements", s.estop_counters.engagements);
+  }
+  if (pose_) {
+    const pose::PoseTaskStatus s = pose_->status();
+    m.begin(s.local.source == pose::PoseSource::none ? L::warn : L::ok, "trailnavd: pose",
+            pose::pose_source_name(s.local.source), "");
+    m.value("utm_valid", s.utm.position_valid ? std::string_view("true") : std::string_view("false"));
+    m.value("heading_valid", s.utm.heading_valid ? std::string_view("true") : std::string_view("false"));
+    m.value("sigma_m", s.utm.position_valid ? s.utm.sigma_position() : 0.0, 2);
+    m.value("distance_m", s.local.distance, 2);
+    m.value("queue_drops", s.pose_queue_drops);
+  }
+  if (obstacles_) {
+    const perception::ObstacleTaskCounters c = obstacles_->status();
+    m.begin(c.skipped > 0 ? L::warn : L::ok, "trailnavd: obstacles",
+            c.skipped > 0 ? "revolutions skipped (too slow)" : "ok", "");
+    m.value("revolutions", c.revolutions);
+    m.value("skipped", c.skipped);
+    m.value("poses", c.poses);
+  }
+  for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
+    const TaskStats st = scheduler_->stats(i);
+    char name[64];
+    std::snprintf(name, sizeof name, "trailnavd: task %s", scheduler_->spec(i).name.c_str());
+    m.begin(st.overruns > 0 ? L::warn : L::ok, name, st.overruns > 0 ? "overruns" : "on time", "");
+    m.value("runs", st.runs);
+    m.value("overruns", st.overruns);
+    m.value("slips", st.slips);
+    m.value("exec_p99_ms", nanos_to_seconds(st.execution.p99) * 1e3, 3);
+    m.value("exec_max_ms", nanos_to_seconds(st.execution.max) * 1e3, 3);
+  }
+  m.begin(alloc_guard::total_allocations() > 0 ? L::error : L::ok, "trailnavd: memory",
+          armed_ ? "real-time threads watched" : "allocation guard not armed", "");
+  m.value("rt_allocations", alloc_guard::total_allocations());
+  (void)now;
+}
+
+}  // namespace trailnav::daemon

@@ -1,0 +1,90 @@
+// trailnavd's body: everything a robot config names, created and allocated at
+// start-up, run on the runtime's scheduler, published over DDS.
+//
+//   drivers (lidar, gps, imu, can, gpio)  -- real-time tasks
+//   pose                                  -- real-time task: IMU + wheels + GPS
+//   obstacles                             -- real-time task, woken per revolution
+//   publisher                             -- plain thread, the only one that calls DDS
+//
+// Real-time tasks hand snapshots through mailboxes and queues and never
+// allocate once the runtime is armed; the publisher may (Cyclone serialises
+// into its own buffers).
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "dds.hpp"
+#include "publisher.hpp"
+#include "robot_config.hpp"
+#include "trailnav/perception/obstacle_pipeline.hpp"
+#include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/runtime/clock.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+
+namespace trailnav::daemon {
+
+struct DaemonSummary {
+  std::uint64_t revolutions = 0;
+  std::uint64_t maps_published = 0;
+  std::uint64_t overruns = 0;
+  std::uint64_t rt_allocations = 0;
+  bool realtime = false;
+  bool memory_locked = false;
+};
+
+class Daemon {
+ public:
+  struct Created;
+  // Opens every port and socket and allocates everything; an error says
+  // which part failed and why.
+  static Created create(const RobotConfig& config);
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  // Starts the publisher and the tasks, then arms the allocation guard.
+  Status start();
+  void stop();
+
+  // One line for systemd's STATUS= and the log.
+  std::string status_line() const;
+  // False when a task has stopped making progress (for the watchdog).
+  bool alive() noexcept;
+  DaemonSummary summary() const;
+  // Task statistics, one line per task.
+  std::string task_report() const;
+
+ private:
+  explicit Daemon(const RobotConfig& config);
+  void fill_health(dds::DiagnosticsMessage& msg, Nanos now) const;
+
+  RobotConfig config_;
+  MonotonicClock clock_;
+  std::unique_ptr<Scheduler> scheduler_;
+  std::unique_ptr<velodyne::VelodyneDriver> lidar_;
+  TaskEvent revolution_event_;
+  std::unique_ptr<gps::GpsDriver> gps_;
+  std::unique_ptr<imu::ImuDriver> imu_;
+  std::optional<can::Dbc> dbc_;
+  std::unique_ptr<can::CanDriver> can_;
+  std::unique_ptr<gpio::GpioDriver> gpio_;
+  std::unique_ptr<pose::PoseTask> pose_;
+  std::unique_ptr<perception::PoseQueue> pose_queue_;
+  std::unique_ptr<perception::ObstaclePipeline> pipeline_;
+  std::unique_ptr<perception::ObstacleSnapshot> snapshot_shape_;
+  std::unique_ptr<Mailbox<perception::ObstacleSnapshot>> obstacle_out_;
+  std::unique_ptr<perception::ObstacleTask> obstacles_;
+  std::unique_ptr<dds::Domain> domain_;
+  std::unique_ptr<dds::DdsPublisher> publisher_;
+  std::vector<std::uint64_t> last_runs_;
+  bool armed_ = false;
+};
+
+struct Daemon::Created {
+  std::unique_ptr<Daemon> daemon;
+  std::string error;
+};
+
+}  // namespace trailnav::daemon

@@ -1,0 +1,253 @@
+#include "robot_config.hpp"
+
+#include <filesystem>
+#include <thread>
+
+#include "trailnav/drivers/link/byte_link.hpp"
+#include "trailnav/drivers/velodyne/calibration.hpp"
+
+namespace trailnav::daemon {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string resolve(const ConfigNode& node, const std::string& path) {
+  if (path.empty() || fs::path(path).is_absolute()) return path;
+  return (fs::path(node.file()).parent_path() / path).lexically_normal().string();
+}
+
+udp::Endpoint endpoint(const ConfigNode& node, std::string_view key, const std::string& fallback) {
+  const std::string text = node.string(key, fallback);
+  std::string error;
+  auto e = udp::parse_endpoint(text, error);
+  if (!e) node.fail(key, "'" + text + "' is not an address:port (" + error + ")");
+  return *e;
+}
+
+link::LinkOptions link_options(const ConfigNode& node) {
+  const std::string text = node.string("link");
+  std::string error;
+  auto l = link::parse_link(text, error);
+  if (!l) node.fail("link", "'" + text + "': " + error);
+  l->silence_timeout = node.number("silence_timeout_s", 0.0, 3600.0, l->silence_timeout);
+  return *l;
+}
+
+can::SignalRef signal_ref(const ConfigNode& node, std::string_view key, bool required) {
+  const std::string text = required ? node.string(key) : node.string(key, "");
+  if (text.empty()) return {};
+  const auto dot = text.find('.');
+  if (dot == std::string::npos || dot == 0 || dot + 1 == text.size()) {
+    node.fail(key, "'" + text + "' must be MESSAGE.Signal, as named in the DBC file");
+  }
+  return {text.substr(0, dot), text.substr(dot + 1)};
+}
+
+std::array<double, 3> vec3(const ConfigNode& node, std::string_view key, std::array<double, 3> fallback) {
+  if (!node.has(key)) return fallback;
+  const auto v = node.number_list(key, -100.0, 100.0);
+  if (v.size() != 3) node.fail(key, "needs three numbers [x, y, z] in metres");
+  return {v[0], v[1], v[2]};
+}
+
+LidarSection parse_lidar(const ConfigNode& n) {
+  LidarSection s;
+  const std::string model = n.string("model");
+  const auto m = velodyne::parse_model(model);
+  if (!m) n.fail("model", "unknown lidar model '" + model + "' (VLP-16, VLP-16-HiRes, VLP-32C, HDL-32E, HDL-64E)");
+  s.model = *m;
+  const std::string calib = n.string("calibration", "builtin");
+  if (calib != "builtin") {
+    s.calibration = resolve(n, calib);
+    if (!fs::exists(s.calibration)) n.fail("calibration", "no such file: " + s.calibration);
+  } else if (!velodyne::builtin_calibration(s.model)) {
+    n.fail("calibration", "the " + model + " has no built-in calibration: name its calibration file");
+  }
+  s.driver.name = "lidar";
+  s.driver.data.bind = endpoint(n, "data", "127.0.0.1:2368");
+  const std::string position = n.string("position", "none");
+  if (position == "none") {
+    s.driver.position.reset();
+  } else {
+    udp::ReceiverOptions p;
+    std::string error;
+    auto e = udp::parse_endpoint(position, error);
+    if (!e) n.fail("position", "'" + position + "' is not an address:port or 'none' (" + error + ")");
+    p.bind = *e;
+    s.driver.position = p;
+  }
+  s.driver.assembler.rpm = n.number("rpm", 300.0, 1200.0, 600.0);
+  s.driver.assembler.min_rpm = std::min(300.0, s.driver.assembler.rpm);
+  n.reject_unknown_keys();
+  return s;
+}
+
+gps::GpsDriverOptions parse_gps(const ConfigNode& n) {
+  gps::GpsDriverOptions o;
+  o.link = link_options(n);
+  o.fix_timeout = n.number("fix_timeout_s", 0.1, 600.0, o.fix_timeout);
+  n.reject_unknown_keys();
+  return o;
+}
+
+imu::ImuDriverOptions parse_imu(const ConfigNode& n) {
+  imu::ImuDriverOptions o;
+  o.link = link_options(n);
+  o.protocol = n.choice("protocol", {"xsens", "line"}, "xsens") == "xsens" ? imu::ImuProtocol::xsens : imu::ImuProtocol::line;
+  o.xsens_start = n.boolean("xsens_start", false);
+  o.data_timeout = n.number("data_timeout_s", 0.01, 60.0, o.data_timeout);
+  n.reject_unknown_keys();
+  return o;
+}
+
+CanSection parse_can(const ConfigNode& n) {
+  CanSection s;
+  s.dbc = resolve(n, n.string("dbc"));
+  if (!fs::exists(s.dbc)) n.fail("dbc", "no such file: " + s.dbc);
+  can::CanDriverOptions& o = s.driver;
+  o.transport = n.choice("transport", {"socketcan", "tunnel"}) == "socketcan" ? can::CanTransport::socketcan
+                                                                               : can::CanTransport::tunnel;
+  o.interface = n.string("interface", o.interface);
+  o.tunnel = endpoint(n, "tunnel", "127.0.0.1:29536");
+  o.odometry.left = signal_ref(n, "left", true);
+  o.odometry.right = signal_ref(n, "right", true);
+  o.odometry.speed_scale = n.number("speed_scale", 1e-6, 1e6, o.odometry.speed_scale);
+  o.odometry.track = n.number("track", 0.05, 5.0);
+  o.data_timeout = n.number("data_timeout_s", 0.01, 60.0, o.data_timeout);
+  n.reject_unknown_keys();
+  return s;
+}
+
+gpio::GpioDriverOptions parse_gpio(const ConfigNode& n) {
+  gpio::GpioDriverOptions o;
+  o.transport = n.choice("transport", {"chip", "tunnel"}) == "chip" ? gpio::GpioTransport::chip : gpio::GpioTransport::tunnel;
+  o.chip = n.string("chip", o.chip);
+  o.tunnel = endpoint(n, "tunnel", "127.0.0.1:29537");
+  o.estop_line = n.string("estop_line", o.estop_line);
+  o.estop_active_low = n.boolean("estop_active_low", o.estop_active_low);
+  o.estop_release_debounce = n.number("estop_release_debounce_s", 0.0, 10.0, o.estop_release_debounce);
+  o.heartbeat_line = n.string("heartbeat_line", "");
+  o.status_line = n.string("status_line", "");
+  o.outputs_active_low = n.boolean("outputs_active_low", o.outputs_active_low);
+  n.reject_unknown_keys();
+  return o;
+}
+
+pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles) {
+  pose::PoseEstimatorOptions o;
+  o.utm.antenna = vec3(n, "antenna", o.utm.antenna);
+  o.utm.zone = static_cast<int>(n.integer("utm_zone", 0, 60, 0));
+  o.utm.min_baseline = n.number("min_baseline_m", 0.5, 1000.0, o.utm.min_baseline);
+  feed_obstacles = n.boolean("feed_obstacles", true);
+  n.reject_unknown_keys();
+  return o;
+}
+
+DdsSection parse_dds(const ConfigNode& n) {
+  DdsSection d;
+  d.domain = static_cast<std::uint32_t>(n.integer("domain", 0, 232, 0));
+  const std::string config = n.string("cyclone_config", "loopback");
+  if (config == "loopback") {
+    d.cyclone_xml = dds::loopback_config();
+  } else {
+    d.cyclone_config = resolve(n, config);
+    auto text = dds::read_cyclone_config(d.cyclone_config);
+    if (!text.error.empty()) n.fail("cyclone_config", text.error);
+    d.cyclone_xml = std::move(text.xml);
+  }
+  dds::PublisherOptions& p = d.publisher;
+  if (auto t = n.optional_map("topics")) {
+    auto topic = [&](std::string_view key, std::string& out) {
+      out = t->string(key, out);
+      if (out.empty() || out.front() == '/' || out.back() == '/' || out.find(' ') != std::string::npos) {
+        t->fail(key, "'" + out + "' is not a topic name (ROS 2 style, e.g. trailnav/obstacle_map)");
+      }
+    };
+    topic("obstacle_map", p.topics.obstacle_map);
+    topic("terrain_map", p.topics.terrain_map);
+    topic("terrain_cost", p.topics.terrain_cost);
+    topic("pose", p.topics.pose);
+    topic("utm_pose", p.topics.utm_pose);
+    topic("fix", p.topics.fix);
+    topic("subgoal", p.topics.subgoal);
+    topic("subgoal_path", p.topics.subgoal_path);
+    topic("health", p.topics.health);
+    t->reject_unknown_keys();
+  }
+  p.odom_frame = n.string("odom_frame", p.odom_frame);
+  p.fix_frame = n.string("fix_frame", p.fix_frame);
+  p.pose_rate_hz = n.number("pose_rate_hz", 0.0, 1000.0, p.pose_rate_hz);
+  p.health_period = n.number("health_period_s", 0.05, 60.0, p.health_period);
+  p.stale_after = n.number("stale_after_s", 0.05, 60.0, p.stale_after);
+  n.reject_unknown_keys();
+  return d;
+}
+
+}  // namespace
+
+RobotConfig parse_robot_config(const ConfigNode& root) {
+  RobotConfig c;
+  c.file = root.file();
+  if (auto r = root.optional_map("robot")) {
+    c.name = r->string("name", "");
+    r->reject_unknown_keys();
+  }
+  c.runtime = parse_runtime_settings(root.map("runtime"));
+  if (auto n = root.optional_map("lidar")) c.lidar = parse_lidar(*n);
+  if (auto n = root.optional_map("gps")) c.gps = parse_gps(*n);
+  if (auto n = root.optional_map("imu")) c.imu = parse_imu(*n);
+  if (auto n = root.optional_map("can")) c.can = parse_can(*n);
+  if (auto n = root.optional_map("gpio")) c.gpio = parse_gpio(*n);
+  if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose);
+  if (auto n = root.optional_map("obstacles")) {
+    c.obstacles = perception::parse_obstacle_config(*n);
+    if (!c.lidar) root.fail("obstacles", "the obstacle map needs a lidar: add a 'lidar' section");
+    const std::string problem = perception::check_obstacle_config(*c.obstacles);
+    if (!problem.empty()) root.fail("obstacles", problem);
+  }
+  if (c.pose && !c.imu && !c.can) root.fail("pose", "the pose needs wheel odometry ('can') or an IMU ('imu')");
+  c.dds = parse_dds(root.map("dds"));
+
+  const int cpus = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  c.tasks = parse_task_table(root, "tasks", cpus);
+  auto need = [&](bool configured, const char* name, TaskKind kind) {
+    if (!configured) return;
+    const TaskSpec& t = require_task(c.tasks, name, root, "tasks");
+    if (t.kind != kind) {
+      root.fail("tasks", std::string("task '") + name + "' must be " +
+                             (kind == TaskKind::event ? "event-driven (it runs when a revolution is complete)"
+                                                      : "periodic (it polls its inputs)"));
+    }
+  };
+  need(c.lidar.has_value(), "lidar", TaskKind::periodic);
+  need(c.gps.has_value(), "gps", TaskKind::periodic);
+  need(c.imu.has_value(), "imu", TaskKind::periodic);
+  need(c.can.has_value(), "can", TaskKind::periodic);
+  need(c.gpio.has_value(), "gpio", TaskKind::periodic);
+  need(c.pose.has_value(), "pose", TaskKind::periodic);
+  need(c.obstacles.has_value(), "obstacles", TaskKind::event);
+  const std::vector<std::string> known = {"lidar", "gps", "imu", "can", "gpio", "pose", "obstacles"};
+  for (const TaskSpec& t : c.tasks) {
+    const bool used = (t.name == "lidar" && c.lidar) || (t.name == "gps" && c.gps) || (t.name == "imu" && c.imu) ||
+                      (t.name == "can" && c.can) || (t.name == "gpio" && c.gpio) || (t.name == "pose" && c.pose) ||
+                      (t.name == "obstacles" && c.obstacles);
+    if (!used) {
+      root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
+                         "lidar, gps, imu, can, gpio, pose, obstacles");
+    }
+  }
+  root.reject_unknown_keys();
+  return c;
+}
+
+RobotConfigResult load_robot_config(const std::string& path) {
+  try {
+    const ConfigNode root = ConfigNode::load_file(path);
+    return {parse_robot_config(root), {}};
+  } catch (const ConfigError& e) {
+    return {std::nullopt, e.what()};
+  }
+}
+
+}  // namespace trailnav::daemon

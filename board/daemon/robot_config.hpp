@@ -1,0 +1,68 @@
+// One robot config (YAML) for trailnavd: the sensors and how they are
+// reached, calibrations and extrinsics, the obstacle map, the task table and
+// DDS. Read once at start-up; every problem is one ConfigError naming the
+// file, the line and the key (docs/trailnavd.md lists every key).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "publisher.hpp"
+#include "trailnav/drivers/can/can_driver.hpp"
+#include "trailnav/drivers/gpio/gpio_driver.hpp"
+#include "trailnav/drivers/gps/gps_driver.hpp"
+#include "trailnav/drivers/imu/imu_driver.hpp"
+#include "trailnav/drivers/velodyne/driver.hpp"
+#include "trailnav/drivers/velodyne/model.hpp"
+#include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/runtime/runtime_config.hpp"
+
+namespace trailnav::daemon {
+
+struct LidarSection {
+  velodyne::Model model = velodyne::Model::vlp16;
+  std::string calibration;  // a file, or empty: the model's built-in one
+  velodyne::DriverOptions driver;
+};
+
+struct CanSection {
+  std::string dbc;  // file
+  can::CanDriverOptions driver;
+};
+
+struct DdsSection {
+  std::uint32_t domain = 0;
+  std::string cyclone_config;  // file; empty: the built-in loopback configuration
+  std::string cyclone_xml;     // its text
+  dds::PublisherOptions publisher;
+};
+
+struct RobotConfig {
+  std::string file;
+  std::string name;
+  RuntimeSettings runtime;
+  std::vector<TaskSpec> tasks;
+  std::optional<LidarSection> lidar;
+  std::optional<gps::GpsDriverOptions> gps;
+  std::optional<imu::ImuDriverOptions> imu;
+  std::optional<CanSection> can;
+  std::optional<gpio::GpioDriverOptions> gpio;
+  std::optional<pose::PoseEstimatorOptions> pose;
+  std::optional<perception::ObstacleConfig> obstacles;
+  bool obstacles_use_pose = true;
+  DdsSection dds;
+};
+
+// Throws ConfigError. Relative paths are taken from the config file's directory.
+RobotConfig parse_robot_config(const ConfigNode& root);
+
+struct RobotConfigResult {
+  std::optional<RobotConfig> config;
+  std::string error;  // "file:line: key: problem"
+};
+RobotConfigResult load_robot_config(const std::string& path);
+
+}  // namespace trailnav::daemon
