@@ -15,5 +15,6 @@ void add_gps_decode_command(CLI::App& app);
 void add_imu_decode_command(CLI::App& app);
 void add_can_decode_command(CLI::App& app);
 void add_pose_eval_command(CLI::App& app);
+void add_echo_command(CLI::App& app);
 
 }  // namespace trailnav::cli

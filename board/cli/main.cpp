@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_imu_decode_command(app);
   trailnav::cli::add_can_decode_command(app);
   trailnav::cli::add_pose_eval_command(app);
+  trailnav::cli::add_echo_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,262 @@
+// `trailnav echo <topic>`: subscribes to one of trailnavd's topics (or any ROS 2
+// topic of a type trailnav knows) and prints what arrives: a summary per
+// sample, then rate, sizes and latency. Maps can be saved as PNG.
+#include <algorithm>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "dds.hpp"
+#include "diagnostic_msgs.h"
+#include "geometry_msgs.h"
+#include "nav_msgs.h"
+#include "sensor_msgs.h"
+#include "trailnav_msgs.h"
+#include "png.hpp"
+#include "subscriber.hpp"
+
+namespace trailnav::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+volatile std::sig_atomic_t g_stop = 0;
+void on_signal(int) { g_stop = 1; }
+
+struct EchoOptions {
+  std::string topic;
+  std::string png_dir;
+  int count = 0;
+  double timeout = 10.0;
+  unsigned domain = 0;
+  std::string cyclone_config;
+  bool quiet = false;
+};
+
+double stamp_s(const builtin_interfaces_msg_dds__Time_& t) { return t.sec + 1e-9 * t.nanosec; }
+
+// The obstacle map as it looks to a person: unknown blue-grey, free white to
+// occupied black by percentage, obstacles tinted; north (+y) up.
+Status write_grid_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g) {
+  const std::uint32_t w = g.info.width, h = g.info.height;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  for (std::uint32_t row = 0; row < h; ++row) {
+    const std::uint32_t y = h - 1 - row;
+    for (std::uint32_t x = 0; x < w; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      const std::int8_t v = i < g.data._length ? g.data._buffer[i] : std::int8_t{-1};
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
+      if (v < 0) {
+        px[0] = 60, px[1] = 70, px[2] = 90;
+        continue;
+      }
+      const auto level = static_cast<std::uint8_t>(255 - (std::min<int>(v, 100) * 255) / 100);
+      px[0] = px[1] = px[2] = level;
+      if (v > 50) px[0] = px[1] = static_cast<std::uint8_t>(level / 2);
+    }
+  }
+  return write_png(path, w, h, PngColor::rgb, rgb);
+}
+
+// Terrain classes in colour: street grey, dirt brown, grass green, vegetation dark green, other purple.
+Status write_terrain_png(const std::string& path, const trailnav_msgs_msg_dds__TerrainClassMap_& t) {
+  static const std::uint8_t kColors[5][3] = {{150, 150, 150}, {150, 110, 60}, {120, 200, 90}, {30, 110, 40}, {150, 90, 170}};
+  const std::uint32_t w = t.info.width, h = t.info.height;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  for (std::uint32_t row = 0; row < h; ++row) {
+    const std::uint32_t y = h - 1 - row;
+    for (std::uint32_t x = 0; x < w; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      const std::uint8_t c = i < t.class_id._length ? t.class_id._buffer[i] : 255;
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
+      if (c >= 5) {
+        px[0] = 60, px[1] = 70, px[2] = 90;
+        continue;
+      }
+      for (int k = 0; k < 3; ++k) px[k] = kColors[c][k];
+    }
+  }
+  return write_png(path, w, h, PngColor::rgb, rgb);
+}
+
+void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_ms) {
+  char head[96];
+  std::snprintf(head, sizeof head, "#%llu %7.1f kB %7.2f ms", static_cast<unsigned long long>(n),
+                static_cast<double>(r.wire_bytes) / 1000.0, latency_ms);
+  if (r.type == &nav_msgs_msg_dds__OccupancyGrid__desc) {
+    const auto& g = *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample);
+    std::uint64_t occ = 0, fr = 0, unk = 0;
+    for (std::uint32_t i = 0; i < g.data._length; ++i) {
+      const std::int8_t v = g.data._buffer[i];
+      if (v < 0) {
+        ++unk;
+      } else if (v > 50) {
+        ++occ;
+      } else {
+        ++fr;
+      }
+    }
+    std::printf("%s  stamp %.3f  %ux%u @ %.3f m, origin (%.2f, %.2f) in %s: %llu occupied, %llu free, %llu unknown\n",
+                head, stamp_s(g.header.stamp), g.info.width, g.info.height, static_cast<double>(g.info.resolution),
+                g.info.origin.position.x, g.info.origin.position.y, g.header.frame_id, static_cast<unsigned long long>(occ),
+                static_cast<unsigned long long>(fr), static_cast<unsigned long long>(unk));
+  } else if (r.type == &geometry_msgs_msg_dds__PoseStamped__desc) {
+    const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
+    const auto& q = p.pose.orientation;
+    const double yaw = std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+    std::printf("%s  stamp %.3f  %s x %.3f y %.3f z %.3f m, yaw %.1f deg\n", head, stamp_s(p.header.stamp),
+                p.header.frame_id, p.pose.position.x, p.pose.position.y, p.pose.position.z, yaw * 180.0 / M_PI);
+  } else if (r.type == &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc) {
+    const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseWithCovarianceStamped_*>(r.sample);
+    std::printf("%s  stamp %.3f  %s easting %.2f northing %.2f m, sigma %.2f / %.2f m\n", head, stamp_s(p.header.stamp),
+                p.header.frame_id, p.pose.pose.position.x, p.pose.pose.position.y, std::sqrt(p.pose.covariance[0]),
+                std::sqrt(p.pose.covariance[7]));
+  } else if (r.type == &sensor_msgs_msg_dds__NavSatFix__desc) {
+    const auto& f = *static_cast<const sensor_msgs_msg_dds__NavSatFix_*>(r.sample);
+    std::printf("%s  stamp %.3f  lat %.7f lon %.7f alt %.2f m\n", head, stamp_s(f.header.stamp), f.latitude,
+                f.longitude, f.altitude);
+  } else if (r.type == &diagnostic_msgs_msg_dds__DiagnosticArray__desc) {
+    const auto& a = *static_cast<const diagnostic_msgs_msg_dds__DiagnosticArray_*>(r.sample);
+    static const char* const kLevels[] = {"OK", "WARN", "ERROR", "STALE"};
+    std::printf("%s  stamp %.3f  %u statuses\n", head, stamp_s(a.header.stamp), a.status._length);
+    for (std::uint32_t i = 0; i < a.status._length; ++i) {
+      const auto& s = a.status._buffer[i];
+      std::printf("    %-5s %s: %s", s.level < 4 ? kLevels[s.level] : "?", s.name, s.message);
+      for (std::uint32_t k = 0; k < s.values._length; ++k) std::printf("  %s=%s", s.values._buffer[k].key, s.values._buffer[k].value);
+      std::printf("\n");
+    }
+  } else if (r.type == &nav_msgs_msg_dds__Path__desc) {
+    const auto& p = *static_cast<const nav_msgs_msg_dds__Path_*>(r.sample);
+    std::printf("%s  stamp %.3f  %s, %u poses", head, stamp_s(p.header.stamp), p.header.frame_id, p.poses._length);
+    if (p.poses._length > 0) {
+      const auto& a = p.poses._buffer[0].pose.position;
+      const auto& b = p.poses._buffer[p.poses._length - 1].pose.position;
+      std::printf(" from (%.2f, %.2f) to (%.2f, %.2f)", a.x, a.y, b.x, b.y);
+    }
+    std::printf("\n");
+  } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
+    const auto& t = *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample);
+    std::uint64_t counts[6] = {};
+    for (std::uint32_t i = 0; i < t.class_id._length; ++i) ++counts[std::min<std::uint8_t>(t.class_id._buffer[i], 5)];
+    std::printf("%s  stamp %.3f  %ux%u @ %.3f m:", head, stamp_s(t.header.stamp), t.info.width, t.info.height,
+                static_cast<double>(t.info.resolution));
+    for (std::uint32_t c = 0; c < t.class_names._length && c < 5; ++c) {
+      std::printf(" %s %llu", t.class_names._buffer[c], static_cast<unsigned long long>(counts[c]));
+    }
+    std::printf(" unknown %llu\n", static_cast<unsigned long long>(counts[5]));
+  }
+}
+
+int run_echo(const EchoOptions& o) {
+  std::string xml = dds::loopback_config();
+  if (!o.cyclone_config.empty()) {
+    auto text = dds::read_cyclone_config(o.cyclone_config);
+    if (!text.error.empty()) {
+      std::fprintf(stderr, "trailnav echo: %s\n", text.error.c_str());
+      return 2;
+    }
+    xml = text.xml;
+  }
+  if (!o.png_dir.empty()) {
+    std::error_code ec;
+    fs::create_directories(o.png_dir, ec);
+    if (ec) {
+      std::fprintf(stderr, "trailnav echo: cannot create %s: %s\n", o.png_dir.c_str(), ec.message().c_str());
+      return 1;
+    }
+  }
+  auto domain = dds::Domain::create(o.domain, xml);
+  if (!domain.domain) {
+    std::fprintf(stderr, "trailnav echo: %s\n", domain.error.c_str());
+    return 1;
+  }
+  auto sub = dds::Subscriber::create(*domain.domain, o.topic, nullptr, o.timeout);
+  if (!sub.subscriber) {
+    std::fprintf(stderr, "trailnav echo: %s\n", sub.error.c_str());
+    return 1;
+  }
+  std::fprintf(stderr, "trailnav echo: %s (%s), DDS domain %u\n", sub.subscriber->topic().c_str(),
+               sub.subscriber->type().m_typename, o.domain);
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+
+  std::uint64_t n = 0, bytes = 0, pngs = 0;
+  std::vector<double> latencies;
+  std::int64_t first_ns = 0, last_ns = 0;
+  double silent = 0.0;
+  std::string base = o.topic;
+  std::replace(base.begin(), base.end(), '/', '_');
+  while (!g_stop && (o.count == 0 || n < static_cast<std::uint64_t>(o.count))) {
+    const int got = sub.subscriber->take(0.2, [&](const dds::ReceivedSample& r) {
+      if (o.count > 0 && n >= static_cast<std::uint64_t>(o.count)) return;
+      ++n;
+      bytes += r.wire_bytes;
+      if (first_ns == 0) first_ns = r.receive_ns;
+      last_ns = r.receive_ns;
+      const double latency_ms = static_cast<double>(r.receive_ns - r.source_ns) * 1e-6;
+      latencies.push_back(latency_ms);
+      if (!o.quiet) print_sample(r, n, latency_ms);
+      if (!o.png_dir.empty()) {
+        char name[64];
+        std::snprintf(name, sizeof name, "-%06llu.png", static_cast<unsigned long long>(n));
+        const std::string path = (fs::path(o.png_dir) / (base + name)).string();
+        Status st;
+        if (r.type == &nav_msgs_msg_dds__OccupancyGrid__desc) {
+          st = write_grid_png(path, *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample));
+          ++pngs;
+        } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
+          st = write_terrain_png(path, *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample));
+          ++pngs;
+        }
+        if (!st) std::fprintf(stderr, "trailnav echo: %s\n", st.message().c_str());
+      }
+    });
+    silent = got > 0 ? 0.0 : silent + 0.2;
+    if (silent >= o.timeout) {
+      std::fprintf(stderr, "trailnav echo: nothing for %.0f s, stopping\n", o.timeout);
+      break;
+    }
+  }
+  std::sort(latencies.begin(), latencies.end());
+  auto pct = [&](double p) {
+    return latencies.empty() ? 0.0 : latencies[std::min(latencies.size() - 1, static_cast<std::size_t>(p * static_cast<double>(latencies.size())))];
+  };
+  const double span = static_cast<double>(last_ns - first_ns) * 1e-9;
+  std::printf("%s: %llu samples, %.2f Hz, mean %.1f kB; latency (source time to here) p50 %.2f ms, p99 %.2f ms, max %.2f ms",
+              sub.subscriber->topic().c_str(), static_cast<unsigned long long>(n), n > 1 && span > 0 ? static_cast<double>(n - 1) / span : 0.0,
+              n ? static_cast<double>(bytes) / static_cast<double>(n) / 1000.0 : 0.0, pct(0.5), pct(0.99),
+              latencies.empty() ? 0.0 : latencies.back());
+  if (pngs > 0) std::printf("; %llu PNGs in %s", static_cast<unsigned long long>(pngs), o.png_dir.c_str());
+  std::printf("\n");
+  return n > 0 ? 0 : 1;
+}
+
+}  // namespace
+
+void add_echo_command(CLI::App& app) {
+  auto o = std::make_shared<EchoOptions>();
+  auto* cmd = app.add_subcommand("echo",
+                                 "Print what arrives on a trailnavd topic (DDS, ROS 2 naming): one line per sample with "
+                                 "its size and latency, then rate and latency percentiles; save maps as PNG.\n"
+                                 "Topics of the bench config: trailnav/obstacle_map, trailnav/pose, trailnav/utm_pose, "
+                                 "trailnav/fix, diagnostics (docs/dds.md). Exit 1 when nothing arrived.");
+  cmd->add_option("topic", o->topic, "Topic name without the rt/ prefix, e.g. trailnav/obstacle_map")->required();
+  cmd->add_option("--png", o->png_dir, "Save every map (obstacle map, terrain map) as DIR/<topic>-<n>.png");
+  cmd->add_option("--count", o->count, "Stop after this many samples (0: until Ctrl-C or silence)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--timeout", o->timeout, "Seconds to wait for a writer, and of silence before stopping")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  cmd->add_option("--domain", o->domain, "DDS domain id")->capture_default_str()->check(CLI::Range(0, 232));
+  cmd->add_option("--cyclone-config", o->cyclone_config,
+                  "Cyclone DDS XML configuration (default: loopback only: interface lo, no multicast)");
+  cmd->add_flag("--quiet", o->quiet, "Only the summary at the end");
+  cmd->callback([o] {
+    const int rc = run_echo(*o);
+    if (rc != 0) std::exit(rc);
+  });
+}
+
+}  // namespace trailnav::cli
