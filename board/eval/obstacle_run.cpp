@@ -432,7 +432,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     if (calib.empty() && truth) calib = truth->scenario.lidar.calibration;
     if (calib.empty()) calib = sim::default_calibration_file(*model);
     std::optional<vel::Calibration> calibration;
-    if (!calib.empty()) {
+    if (!calib.empty() && calib != "builtin") {
       auto c = vel::load_calibration(calib);
       if (!c.calibration) {
         report.error = c.error;
@@ -474,7 +474,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   perception::ObstaclePipeline& pipeline = *made.pipeline;
 
   std::optional<perception::PoseTrack> poses;
-  if (truth) {
+  if (truth && options.truth_poses) {
     poses.emplace(truth->trajectory.size() + 1);
     fill_pose_track(*truth, *poses);
   }
@@ -522,6 +522,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     t0 = SteadyClock::now();
     pipeline.update_maps(terrain ? &*terrain : nullptr);
     map_ms += ms_since(t0);
+    if (options.on_processed) options.on_processed(pipeline);
     const auto rev = report.revolutions;
     if (scorer && options.score_every > 0 && rev % static_cast<std::uint64_t>(options.score_every) == 0) {
       for (int m = 0; m < perception::kFusionModels; ++m) {

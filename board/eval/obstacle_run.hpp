@@ -26,7 +26,7 @@ struct ObstacleRunOptions {
   std::vector<std::string> inputs;  // one recording directory or capture file, or KITTI .bin files
   perception::ObstacleConfig config;
   TerrainMode terrain = TerrainMode::config;
-  std::string calibration;   // empty: the recording's scenario or the model's default
+  std::string calibration;   // empty: the recording's scenario or the model's default; "builtin": the model's built-in one
   std::string out_dir;       // empty: no files
   int png_every = 0;         // revolutions between map pictures (0: only the last)
   int score_every = 5;       // revolutions between scored snapshots
@@ -36,6 +36,12 @@ struct ObstacleRunOptions {
   std::function<void(double fraction)> progress;
   // Called with every revolution before it is processed (benchmarks keep copies).
   std::function<void(const velodyne::RangeImage&)> on_revolution;
+  // Called after every revolution is processed (trailnavd's end-to-end test
+  // compares the maps it publishes with these).
+  std::function<void(const perception::ObstaclePipeline&)> on_processed;
+  // A simulated recording's true trajectory as the pose stream; false: no
+  // pose stream (fixed orientation, the map stays where it started).
+  bool truth_poses = true;
 };
 
 // Scores of one map against the truth, summed over the scored snapshots.
