@@ -6,6 +6,7 @@
 namespace trailnav::cli {
 
 void add_demo_command(CLI::App& app);
+void add_bench_demo_command(CLI::App& app);
 void add_jitter_command(CLI::App& app);
 void add_decode_command(CLI::App& app);
 void add_replay_command(CLI::App& app);

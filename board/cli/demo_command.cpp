@@ -1,4 +1,4 @@
-// `trailnav demo`: the runtime on its own. A simulated robot drives a curving
+// `trailnav runtime-demo`: the runtime on its own. A simulated robot drives a curving
 // trail; the task table's threads integrate its odometry, move a 600 x 600
 // obstacle grid and a 300 x 300 terrain grid with it, mark what is around it,
 // and hand snapshots to a non-real-time reader through mailboxes — the data
@@ -246,7 +246,7 @@ int run_demo(const std::string& config_path, std::optional<double> duration_over
                    : spec.name == "terrain_map"  ? scheduler.add(spec, terrain_task)
                                                  : Status::error("task '" + spec.name + "' is not part of the demo");
     if (!added) {
-      std::fprintf(stderr, "trailnav demo: %s\n", added.message().c_str());
+      std::fprintf(stderr, "trailnav runtime-demo: %s\n", added.message().c_str());
       log::stop();
       return 2;
     }
@@ -254,12 +254,12 @@ int run_demo(const std::string& config_path, std::optional<double> duration_over
 
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
-  std::printf("trailnav demo: %zu tasks, obstacle grid %dx%d at %.2f m, terrain grid %dx%d at %.2f m, %.1f s\n",
+  std::printf("trailnav runtime-demo: %zu tasks, obstacle grid %dx%d at %.2f m, terrain grid %dx%d at %.2f m, %.1f s\n",
               config.tasks.size(), config.obstacle_grid.size_cells, config.obstacle_grid.size_cells,
               config.obstacle_grid.resolution_m, config.terrain_grid.size_cells, config.terrain_grid.size_cells,
               config.terrain_grid.resolution_m, config.duration_s);
   if (Status s = scheduler.start(); !s) {
-    std::fprintf(stderr, "trailnav demo: %s\n", s.message().c_str());
+    std::fprintf(stderr, "trailnav runtime-demo: %s\n", s.message().c_str());
     log::stop();
     return 1;
   }
@@ -269,7 +269,7 @@ int run_demo(const std::string& config_path, std::optional<double> duration_over
   // --- the reader side: not real-time ---
   std::uint64_t obstacle_snapshots = 0;
   std::uint64_t terrain_snapshots = 0;
-  ProgressBar progress("demo", config.duration_s, "s");
+  ProgressBar progress("runtime-demo", config.duration_s, "s");
   const Nanos start = clock.now();
   while (g_interrupted == 0) {
     const double elapsed = nanos_to_seconds(clock.now() - start);
@@ -292,7 +292,7 @@ int run_demo(const std::string& config_path, std::optional<double> duration_over
   const std::uint64_t heap_ops = print_allocation_report(stdout);
   if (!png_path.empty() && obstacle_maps.last_read_sequence() > 0) {
     if (Status s = save_obstacle_png(obstacle_maps.last_read(), png_path); !s) {
-      std::fprintf(stderr, "trailnav demo: %s\n", s.message().c_str());
+      std::fprintf(stderr, "trailnav runtime-demo: %s\n", s.message().c_str());
     } else {
       std::printf("obstacle map written to %s\n", png_path.c_str());
     }
@@ -305,7 +305,7 @@ int run_demo(const std::string& config_path, std::optional<double> duration_over
 
 void add_demo_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(
-      "demo",
+      "runtime-demo",
       "Run the real-time runtime on a simulated robot: the task table's threads move a 600x600 obstacle grid and a\n"
       "300x300 terrain grid with the robot and hand snapshots to a reader, then print per-task runs, overruns,\n"
       "slips and timing, and the heap operations seen on real-time threads after arm (must be 0; exit code 1 if not).");

@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
       "trailnav"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("trailnav ") + TRAILNAV_VERSION);
+  trailnav::cli::add_bench_demo_command(app);
   trailnav::cli::add_demo_command(app);
   trailnav::cli::add_jitter_command(app);
   trailnav::cli::add_decode_command(app);

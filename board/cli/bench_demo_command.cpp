@@ -1,0 +1,292 @@
+// `trailnav demo`: the whole bench in one command. It makes a simulated
+// recording, starts trailnavd on the bench robot config (loopback only),
+// replays the recording into it in real time — lidar and e-stop over UDP,
+// GPS and IMU through pseudo-terminals, wheel speeds through the CAN tunnel —
+// and listens on DDS like a planner: obstacle maps (saved as PNG), poses and
+// health. It ends with what arrived, the latency, and trailnavd's own report.
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench_config.hpp"
+#include "commands.hpp"
+#include "dds.hpp"
+#include "diagnostic_msgs.h"
+#include "geometry_msgs.h"
+#include "nav_msgs.h"
+#include "png.hpp"
+#include "replayer.hpp"
+#include "simulator.hpp"
+#include "subscriber.hpp"
+#include "terminal.hpp"
+
+extern char** environ;
+
+namespace trailnav::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct BenchDemoOptions {
+  std::string scenario = "urban";
+  double seconds = 20.0;
+  std::string out = "build/demo";
+  std::string png;
+  int png_every = 20;
+  unsigned domain = 0;
+};
+
+void replace_all(std::string& text, const std::string& from, const std::string& to) {
+  for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
+    text.replace(at, from.size(), to);
+  }
+}
+
+Status write_map_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g) {
+  const std::uint32_t w = g.info.width, h = g.info.height;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  for (std::uint32_t row = 0; row < h; ++row) {
+    const std::uint32_t y = h - 1 - row;
+    for (std::uint32_t x = 0; x < w; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      const std::int8_t v = i < g.data._length ? g.data._buffer[i] : std::int8_t{-1};
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
+      if (v < 0) {
+        px[0] = 60, px[1] = 70, px[2] = 90;
+        continue;
+      }
+      const auto level = static_cast<std::uint8_t>(255 - (std::min<int>(v, 100) * 255) / 100);
+      px[0] = px[1] = px[2] = level;
+      if (v > 50) px[0] = px[1] = static_cast<std::uint8_t>(level / 2);
+    }
+  }
+  return write_png(path, w, h, PngColor::rgb, rgb);
+}
+
+std::string sibling_binary(const char* name) {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string(name) : (self.parent_path() / name).string();
+}
+
+int run_bench_demo(const BenchDemoOptions& o) {
+  const fs::path out = fs::absolute(o.out);
+  std::error_code ec;
+  fs::create_directories(out / "maps", ec);
+  if (ec) {
+    std::fprintf(stderr, "trailnav demo: cannot create %s: %s\n", out.c_str(), ec.message().c_str());
+    return 1;
+  }
+  // 1. The recording.
+  sim::SimOptions so;
+  so.scenario = o.scenario;
+  so.duration = o.seconds;
+  so.out = (out / "recording").string();
+  {
+    ProgressBar bar("simulate " + o.scenario, o.seconds, "s");
+    so.progress = [&](double done, double) { bar.update(done); };
+    const sim::SimReport sr = sim::run_simulation(so);
+    bar.finish();
+    if (!sr.error.empty()) {
+      std::fprintf(stderr, "trailnav demo: %s\n", sr.error.c_str());
+      return 1;
+    }
+    std::printf("1. recording: scenario %s, %.0f s, %s -> %s\n", o.scenario.c_str(), sr.sim_seconds, sr.lidar_model.c_str(),
+                so.out.c_str());
+  }
+  // 2. trailnavd on the bench config, its pseudo-terminals and DBC in OUT.
+  std::string config = kBenchRobotConfig;
+  replace_all(config, "/tmp/trailnav-bench/", (out / "").string());
+  replace_all(config, "../sim/trailnav-robot.dbc", "trailnav-robot.dbc");
+  replace_all(config, "  domain: 0", "  domain: " + std::to_string(o.domain));
+  replace_all(config, "  log_sink: auto ", "  log_sink: stderr");
+  std::ofstream(out / "trailnav-robot.dbc") << sim::robot_dbc_text();
+  std::ofstream(out / "bench.yaml") << config;
+  const std::string daemon_log = (out / "trailnavd.log").string();
+  std::vector<std::string> args = {sibling_binary("trailnavd"), "--config", (out / "bench.yaml").string()};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 2, daemon_log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  pid_t pid = 0;
+  const int spawned = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawned != 0) {
+    std::fprintf(stderr, "trailnav demo: cannot start %s: %s\n", argv[0], std::strerror(spawned));
+    return 1;
+  }
+  std::printf("2. trailnavd started (pid %d): %s, log %s\n", static_cast<int>(pid), (out / "bench.yaml").c_str(),
+              daemon_log.c_str());
+  auto stop_daemon = [&]() -> std::string {
+    ::kill(pid, SIGTERM);
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    std::ifstream in(daemon_log);
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+  };
+
+  // 3. The planner's side: DDS on loopback.
+  auto domain = dds::Domain::create(o.domain, dds::loopback_config());
+  if (!domain.domain) {
+    std::fprintf(stderr, "trailnav demo: %s\n%s", domain.error.c_str(), stop_daemon().c_str());
+    return 1;
+  }
+  auto maps = dds::Subscriber::create(*domain.domain, "trailnav/obstacle_map", &nav_msgs_msg_dds__OccupancyGrid__desc, 0);
+  auto poses = dds::Subscriber::create(*domain.domain, "trailnav/pose", &geometry_msgs_msg_dds__PoseStamped__desc, 0);
+  auto health = dds::Subscriber::create(*domain.domain, "diagnostics", &diagnostic_msgs_msg_dds__DiagnosticArray__desc, 0);
+  if (!maps.subscriber || !poses.subscriber || !health.subscriber) {
+    std::fprintf(stderr, "trailnav demo: cannot subscribe\n%s", stop_daemon().c_str());
+    return 1;
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // trailnavd opens its links; discovery settles
+  if (::waitpid(pid, nullptr, WNOHANG) == pid) {
+    std::ifstream in(daemon_log);
+    std::stringstream text;
+    text << in.rdbuf();
+    std::fprintf(stderr, "trailnav demo: trailnavd stopped at start-up:\n%s", text.str().c_str());
+    return 1;
+  }
+
+  // 4. Replay in real time while listening.
+  replay::ReplayOptions ro;
+  ro.serial_links["gps"] = (out / "gps").string();
+  ro.serial_links["imu"] = (out / "imu").string();
+  auto replayer = replay::Replayer::create(so.out, ro);
+  if (!replayer.replayer) {
+    std::fprintf(stderr, "trailnav demo: %s\n%s", replayer.error.c_str(), stop_daemon().c_str());
+    return 1;
+  }
+  std::printf("3. replaying into trailnavd in real time; listening on DDS (loopback) like a planner\n");
+  std::atomic<bool> playing{true};
+  std::atomic<double> done{0.0};
+  ro.progress = nullptr;
+  std::thread player([&] {
+    replayer.replayer->run();
+    playing = false;
+  });
+  ProgressBar bar("replay", o.seconds, "s");
+  std::uint64_t n_maps = 0, n_stale = 0, n_poses = 0, n_health = 0, pngs = 0;
+  std::string driving_health;
+  std::vector<double> latency;
+  std::vector<std::int8_t> last_map;
+  nav_msgs_msg_dds__OccupancyGrid_ last_header{};
+  std::string last_pose, last_health;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto listen = [&](double wait) {
+    maps.subscriber->take(wait, [&](const dds::ReceivedSample& r) {
+      const auto& g = *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample);
+      if (n_maps > 0 && g.header.stamp.sec == last_header.header.stamp.sec &&
+          g.header.stamp.nanosec == last_header.header.stamp.nanosec) {
+        ++n_stale;  // the last map again, free cells unknown: the lidar has gone quiet
+        return;
+      }
+      ++n_maps;
+      latency.push_back(static_cast<double>(r.receive_ns - r.source_ns) * 1e-6);
+      last_map.assign(g.data._buffer, g.data._buffer + g.data._length);
+      last_header = g;
+      last_header.data = {};
+      if (o.png_every > 0 && n_maps % static_cast<std::uint64_t>(o.png_every) == 0) {
+        char name[48];
+        std::snprintf(name, sizeof name, "obstacle_map-%04llu.png", static_cast<unsigned long long>(n_maps));
+        if (write_map_png((out / "maps" / name).string(), g)) ++pngs;
+      }
+    });
+    poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
+      ++n_poses;
+      char text[128];
+      std::snprintf(text, sizeof text, "x %.2f m, y %.2f m in %s", p.pose.position.x, p.pose.position.y, p.header.frame_id);
+      last_pose = text;
+    });
+    health.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& a = *static_cast<const diagnostic_msgs_msg_dds__DiagnosticArray_*>(r.sample);
+      ++n_health;
+      static const char* const kLevels[] = {"OK", "WARN", "ERROR", "STALE"};
+      last_health.clear();
+      for (std::uint32_t i = 0; i < a.status._length; ++i) {
+        const auto& s = a.status._buffer[i];
+        if (std::string_view(s.name).find("task ") != std::string_view::npos) continue;
+        last_health += std::string("     ") + (s.level < 4 ? kLevels[s.level] : "?") + "  " + s.name + ": " + s.message + "\n";
+      }
+    });
+  };
+  while (playing) {
+    listen(0.05);
+    driving_health = last_health;
+    bar.update(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  bar.finish();
+  player.join();
+  for (int i = 0; i < 5; ++i) listen(0.1);
+  const std::string report = stop_daemon();
+
+  std::sort(latency.begin(), latency.end());
+  auto pct = [&](double p) {
+    return latency.empty() ? 0.0 : latency[std::min(latency.size() - 1, static_cast<std::size_t>(p * static_cast<double>(latency.size())))];
+  };
+  std::printf("4. received: %llu obstacle maps (latency from the revolution's last packet: p50 %.2f ms, p99 %.2f ms), "
+              "%llu poses (last: %s), %llu health messages\n",
+              static_cast<unsigned long long>(n_maps), pct(0.5), pct(0.99), static_cast<unsigned long long>(n_poses),
+              last_pose.c_str(), static_cast<unsigned long long>(n_health));
+  std::printf("   health while driving:\n%s", driving_health.c_str());
+  std::printf("   after the recording ended: the last map resent %llu time(s) as stale (free cells unknown); health then:\n%s",
+              static_cast<unsigned long long>(n_stale), last_health.c_str());
+  std::printf("   %llu map PNGs in %s\n", static_cast<unsigned long long>(pngs), (out / "maps").c_str());
+  if (!o.png.empty() && !last_map.empty()) {
+    last_header.data._buffer = last_map.data();
+    last_header.data._length = static_cast<std::uint32_t>(last_map.size());
+    if (Status st = write_map_png(o.png, last_header); st) {
+      std::printf("   last obstacle map: %s\n", o.png.c_str());
+    } else {
+      std::fprintf(stderr, "trailnav demo: %s\n", st.message().c_str());
+    }
+  }
+  std::printf("5. trailnavd after SIGTERM:\n");
+  std::istringstream lines(report);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.find("info") == std::string::npos || line.find("stopped") != std::string::npos) std::printf("   %s\n", line.c_str());
+  }
+  return n_maps > 0 && n_poses > 0 && n_health > 0 ? 0 : 1;
+}
+
+}  // namespace
+
+void add_bench_demo_command(CLI::App& app) {
+  auto o = std::make_shared<BenchDemoOptions>();
+  auto* cmd = app.add_subcommand(
+      "demo",
+      "The bench demo: simulate a recording, start trailnavd on the bench config (board/robots/bench.yaml, all on\n"
+      "loopback), replay the recording into it in real time and receive its DDS topics like a planner: obstacle\n"
+      "maps (saved as PNG), poses, health. Prints what arrived, the latency and trailnavd's report.");
+  cmd->add_option("--scenario", o->scenario, "Simulator scenario (docs/simulator.md)")->capture_default_str();
+  cmd->add_option("--seconds", o->seconds, "Seconds to drive (and replay)")->capture_default_str()->check(CLI::Range(2.0, 600.0));
+  cmd->add_option("--out", o->out, "Directory for the recording, the config, trailnavd's log and the map PNGs")->capture_default_str();
+  cmd->add_option("--png", o->png, "Also write the last obstacle map received to this PNG file");
+  cmd->add_option("--png-every", o->png_every, "Save every Nth map received in OUT/maps (0: none)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  cmd->add_option("--domain", o->domain, "DDS domain id")->capture_default_str()->check(CLI::Range(0, 232));
+  cmd->callback([o] {
+    const int rc = run_bench_demo(*o);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+}
+
+}  // namespace trailnav::cli

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# Installs the trailnav Debian package into a fresh, empty root with
+# `dpkg --root`, checks its files, the unit and the config, removes and purges
+# it, and checks that nothing of it is left. Touches nothing outside a
+# temporary directory. Usage: toolchain/check-deb.sh [build/package/trailnav_*.deb]
+set -euo pipefail
+
+deb=${1:-$(ls build/package/trailnav_*.deb 2>/dev/null | tail -n1)}
+[[ -f "$deb" ]] || { echo "check-deb: no package; build it with: cmake --workflow --preset package" >&2; exit 1; }
+root=$(mktemp -d)
+trap 'rm -rf "$root"' EXIT
+mkdir -p "$root/var/lib/dpkg/updates" "$root/var/lib/dpkg/info" "$root/var/log"
+touch "$root/var/lib/dpkg/status"
+
+echo "check-deb: $deb"
+dpkg-deb --field "$deb" Package Version Architecture Depends
+# A fresh root has none of the shared libraries the package depends on: dpkg
+# is told to install anyway; apt resolves them on a real system.
+dpkg --root="$root" --log=/dev/null --force-depends --force-not-root -i "$deb" >/dev/null
+status=$(dpkg-query --admindir="$root/var/lib/dpkg" -W -f='${Status}' trailnav)
+[[ "$status" == "install ok installed" ]] || { echo "check-deb: status after install: $status" >&2; exit 1; }
+for f in usr/bin/trailnavd usr/bin/trailnav usr/lib/systemd/system/trailnavd.service etc/trailnav/robot.yaml \
+         etc/trailnav/cyclone.xml etc/trailnav/trailnav-robot.dbc usr/share/trailnav/robots/bench.yaml; do
+  [[ -e "$root/$f" ]] || { echo "check-deb: missing /$f" >&2; exit 1; }
+done
+grep -q "ExecStart=/usr/bin/trailnavd --config /etc/trailnav/robot.yaml" "$root/usr/lib/systemd/system/trailnavd.service"
+conffiles=$(cat "$root/var/lib/dpkg/info/trailnav.conffiles")
+[[ "$conffiles" == *"/etc/trailnav/robot.yaml"* ]] || { echo "check-deb: robot.yaml is not a conffile" >&2; exit 1; }
+# The installed binary validates the installed config.
+"$root/usr/bin/trailnavd" --config "$root/etc/trailnav/robot.yaml" --check
+files=$(dpkg --root="$root" -L trailnav | wc -l)
+echo "check-deb: installed $files paths"
+
+dpkg --root="$root" --log=/dev/null --force-not-root --purge trailnav >/dev/null
+left=$(cd "$root" && find . -mindepth 1 -not -path './var/lib/dpkg*' -not -path './var/log*' -type f | head)
+if [[ -n "$left" ]]; then
+  echo "check-deb: left after purge:" >&2
+  echo "$left" >&2
+  exit 1
+fi
+status=$(dpkg-query --admindir="$root/var/lib/dpkg" -W -f='${Status}' trailnav 2>/dev/null || echo "not known")
+echo "check-deb: after purge: $status; no files left"
+echo "check-deb: ok"
