@@ -16,7 +16,9 @@ echo "check-deb: $deb"
 dpkg-deb --field "$deb" Package Version Architecture Depends
 # A fresh root has none of the shared libraries the package depends on: dpkg
 # is told to install anyway; apt resolves them on a real system.
-dpkg --root="$root" --log=/dev/null --force-depends --force-not-root -i "$deb" >/dev/null
+log=$(mktemp)
+trap 'rm -rf "$root" "$log"' EXIT
+dpkg --root="$root" --log=/dev/null --force-depends --force-not-root -i "$deb" >"$log" 2>&1 || { cat "$log" >&2; exit 1; }
 status=$(dpkg-query --admindir="$root/var/lib/dpkg" -W -f='${Status}' trailnav)
 [[ "$status" == "install ok installed" ]] || { echo "check-deb: status after install: $status" >&2; exit 1; }
 for f in usr/bin/trailnavd usr/bin/trailnav usr/lib/systemd/system/trailnavd.service etc/trailnav/robot.yaml \

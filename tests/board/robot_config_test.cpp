@@ -1,0 +1,103 @@
+// trailnavd's robot config: the shipped examples are valid, and every kind of
+// mistake is one error naming the file, the line and the key.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "robot_config.hpp"
+
+using namespace trailnav;
+namespace fs = std::filesystem;
+
+namespace {
+
+const char* kMinimal =
+    "runtime: {realtime: off}\n"
+    "lidar: {model: VLP-16, data: 127.0.0.1:2368}\n"
+    "obstacles: {model: PC}\n"
+    "dds: {domain: 3}\n"
+    "tasks:\n"
+    "  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 0.5}\n"
+    "  - {name: obstacles, kind: event, budget_ms: 20}\n";
+
+// Writes `text` next to the repository's board/robots (so relative paths resolve the same way).
+std::string load_error(const std::string& text) {
+  const fs::path p = fs::path("board/robots") / ("test-" + std::to_string(::getpid()) + ".yaml");
+  { std::ofstream(p) << text; }
+  const auto r = daemon::load_robot_config(p.string());
+  fs::remove(p);
+  return r.config ? std::string() : r.error;
+}
+
+}  // namespace
+
+TEST(RobotConfig, ShippedExamplesAreValid) {
+  for (const char* f : {"board/robots/bench.yaml", "board/robots/robot-example.yaml"}) {
+    const auto r = daemon::load_robot_config(f);
+    ASSERT_TRUE(r.config) << r.error;
+    EXPECT_TRUE(r.config->lidar.has_value()) << f;
+    EXPECT_TRUE(r.config->obstacles.has_value()) << f;
+    EXPECT_TRUE(r.config->pose.has_value()) << f;
+    EXPECT_EQ(r.config->tasks.size(), 7u) << f;
+  }
+  const auto bench = daemon::load_robot_config("board/robots/bench.yaml");
+  EXPECT_NE(bench.config->dds.cyclone_xml.find("<AllowMulticast>false</AllowMulticast>"), std::string::npos);
+  EXPECT_NE(bench.config->dds.cyclone_xml.find("127.0.0.1"), std::string::npos);
+  EXPECT_TRUE(fs::exists(bench.config->can->dbc));
+}
+
+TEST(RobotConfig, MinimalLidarAndObstacleConfigIsValid) {
+  EXPECT_EQ(load_error(kMinimal), "");
+}
+
+TEST(RobotConfig, MistakesNameFileLineAndKey) {
+  std::string e = load_error(std::string(kMinimal) + "lidr: {model: VLP-16}\n");
+  EXPECT_NE(e.find("test-"), std::string::npos) << e;
+  EXPECT_NE(e.find(":8:"), std::string::npos) << e;
+  EXPECT_NE(e.find("lidr"), std::string::npos) << e;
+
+  std::string text = kMinimal;
+  text.replace(text.find("VLP-16"), 6, "VLP-99");
+  e = load_error(text);
+  EXPECT_NE(e.find(":2:"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown lidar model 'VLP-99'"), std::string::npos) << e;
+
+  text = kMinimal;
+  text.replace(text.find("127.0.0.1:2368"), 14, "localhost");
+  e = load_error(text);
+  EXPECT_NE(e.find("lidar.data"), std::string::npos) << e;
+
+  text = kMinimal;
+  text.replace(text.find("kind: event"), 11, "kind: periodic, rate_hz: 10");
+  e = load_error(text);
+  EXPECT_NE(e.find("task 'obstacles' must be event-driven"), std::string::npos) << e;
+
+  e = load_error(std::string(kMinimal) + "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n");
+  EXPECT_NE(e.find("task 'gps' has nothing to run"), std::string::npos) << e;
+
+  e = load_error(std::string(kMinimal) + "gps: {link: 'serial:/dev/ttyUSB0@115200'}\n");
+  EXPECT_NE(e.find("'gps'"), std::string::npos) << e;  // the task table lacks it
+
+  e = load_error(std::string(kMinimal) +
+                 "can: {transport: tunnel, dbc: no-such.dbc, left: A.B, right: A.C, track: 0.5}\n");
+  EXPECT_NE(e.find("can.dbc"), std::string::npos) << e;
+  EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+
+  e = load_error(std::string(kMinimal) +
+                 "can: {transport: tunnel, dbc: ../sim/trailnav-robot.dbc, left: SpeedLeft, right: A.C, track: 0.5}\n");
+  EXPECT_NE(e.find("MESSAGE.Signal"), std::string::npos) << e;
+
+  text = kMinimal;
+  text.replace(text.find("dds: {domain: 3}"), 16, "dds: {domain: 3, cyclone_config: missing.xml}");
+  e = load_error(text);
+  EXPECT_NE(e.find("cannot read the Cyclone DDS configuration"), std::string::npos) << e;
+
+  text = kMinimal;
+  text.replace(text.find("dds: {domain: 3}"), 16, "dds: {domain: 3, topics: {obstacle_map: /abs}}");
+  e = load_error(text);
+  EXPECT_NE(e.find("not a topic name"), std::string::npos) << e;
+}
