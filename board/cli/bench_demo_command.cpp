@@ -28,7 +28,7 @@
 #include "diagnostic_msgs.h"
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
-#include "png.hpp"
+#include "map_png.hpp"
 #include "replayer.hpp"
 #include "simulator.hpp"
 #include "subscriber.hpp"
@@ -54,27 +54,6 @@ void replace_all(std::string& text, const std::string& from, const std::string& 
   for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
     text.replace(at, from.size(), to);
   }
-}
-
-Status write_map_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g) {
-  const std::uint32_t w = g.info.width, h = g.info.height;
-  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
-  for (std::uint32_t row = 0; row < h; ++row) {
-    const std::uint32_t y = h - 1 - row;
-    for (std::uint32_t x = 0; x < w; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      const std::int8_t v = i < g.data._length ? g.data._buffer[i] : std::int8_t{-1};
-      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
-      if (v < 0) {
-        px[0] = 60, px[1] = 70, px[2] = 90;
-        continue;
-      }
-      const auto level = static_cast<std::uint8_t>(255 - (std::min<int>(v, 100) * 255) / 100);
-      px[0] = px[1] = px[2] = level;
-      if (v > 50) px[0] = px[1] = static_cast<std::uint8_t>(level / 2);
-    }
-  }
-  return write_png(path, w, h, PngColor::rgb, rgb);
 }
 
 std::string sibling_binary(const char* name) {
@@ -207,7 +186,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
       if (o.png_every > 0 && n_maps % static_cast<std::uint64_t>(o.png_every) == 0) {
         char name[48];
         std::snprintf(name, sizeof name, "obstacle_map-%04llu.png", static_cast<unsigned long long>(n_maps));
-        if (write_map_png((out / "maps" / name).string(), g)) ++pngs;
+        if (write_occupancy_png((out / "maps" / name).string(), g)) ++pngs;
       }
     });
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
@@ -254,7 +233,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
   if (!o.png.empty() && !last_map.empty()) {
     last_header.data._buffer = last_map.data();
     last_header.data._length = static_cast<std::uint32_t>(last_map.size());
-    if (Status st = write_map_png(o.png, last_header); st) {
+    if (Status st = write_occupancy_png(o.png, last_header); st) {
       std::printf("   last obstacle map: %s\n", o.png.c_str());
     } else {
       std::fprintf(stderr, "trailnav demo: %s\n", st.message().c_str());

@@ -16,7 +16,7 @@
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
 #include "trailnav_msgs.h"
-#include "png.hpp"
+#include "map_png.hpp"
 #include "subscriber.hpp"
 
 namespace trailnav::cli {
@@ -38,50 +38,6 @@ struct EchoOptions {
 };
 
 double stamp_s(const builtin_interfaces_msg_dds__Time_& t) { return t.sec + 1e-9 * t.nanosec; }
-
-// The obstacle map as it looks to a person: unknown blue-grey, free white to
-// occupied black by percentage, obstacles tinted; north (+y) up.
-Status write_grid_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g) {
-  const std::uint32_t w = g.info.width, h = g.info.height;
-  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
-  for (std::uint32_t row = 0; row < h; ++row) {
-    const std::uint32_t y = h - 1 - row;
-    for (std::uint32_t x = 0; x < w; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      const std::int8_t v = i < g.data._length ? g.data._buffer[i] : std::int8_t{-1};
-      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
-      if (v < 0) {
-        px[0] = 60, px[1] = 70, px[2] = 90;
-        continue;
-      }
-      const auto level = static_cast<std::uint8_t>(255 - (std::min<int>(v, 100) * 255) / 100);
-      px[0] = px[1] = px[2] = level;
-      if (v > 50) px[0] = px[1] = static_cast<std::uint8_t>(level / 2);
-    }
-  }
-  return write_png(path, w, h, PngColor::rgb, rgb);
-}
-
-// Terrain classes in colour: street grey, dirt brown, grass green, vegetation dark green, other purple.
-Status write_terrain_png(const std::string& path, const trailnav_msgs_msg_dds__TerrainClassMap_& t) {
-  static const std::uint8_t kColors[5][3] = {{150, 150, 150}, {150, 110, 60}, {120, 200, 90}, {30, 110, 40}, {150, 90, 170}};
-  const std::uint32_t w = t.info.width, h = t.info.height;
-  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
-  for (std::uint32_t row = 0; row < h; ++row) {
-    const std::uint32_t y = h - 1 - row;
-    for (std::uint32_t x = 0; x < w; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      const std::uint8_t c = i < t.class_id._length ? t.class_id._buffer[i] : 255;
-      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
-      if (c >= 5) {
-        px[0] = 60, px[1] = 70, px[2] = 90;
-        continue;
-      }
-      for (int k = 0; k < 3; ++k) px[k] = kColors[c][k];
-    }
-  }
-  return write_png(path, w, h, PngColor::rgb, rgb);
-}
 
 void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_ms) {
   char head[96];
@@ -206,7 +162,7 @@ int run_echo(const EchoOptions& o) {
         const std::string path = (fs::path(o.png_dir) / (base + name)).string();
         Status st;
         if (r.type == &nav_msgs_msg_dds__OccupancyGrid__desc) {
-          st = write_grid_png(path, *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample));
+          st = write_occupancy_png(path, *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample));
           ++pngs;
         } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
           st = write_terrain_png(path, *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample));

@@ -10,12 +10,6 @@ namespace trailnav::daemon {
 
 namespace {
 
-std::int64_t utc_now_ns() noexcept {
-  timespec ts{};
-  ::clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 const TaskSpec* find_task(const std::vector<TaskSpec>& tasks, std::string_view name) {
   for (const TaskSpec& t : tasks) {
     if (t.name == name) return &t;
@@ -213,7 +207,7 @@ std::string Daemon::task_report() const {
 
 void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   using L = dds::DiagnosticsMessage;
-  const std::int64_t utc = utc_now_ns();
+  const std::int64_t utc = wall_clock_ns();
   const double stale_after = config_.dds.publisher.stale_after;
   if (lidar_) {
     const velodyne::DriverCounters c = lidar_->counters();

@@ -5,14 +5,6 @@
 
 namespace trailnav::dds {
 
-namespace {
-std::int64_t utc_now_ns() noexcept {
-  timespec ts{};
-  ::clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-}  // namespace
-
 DdsPublisher::DdsPublisher(Clock& clock, const PublisherOptions& options, PublisherInputs inputs)
     : clock_(clock), options_(options), inputs_(std::move(inputs)), pose_msg_(options.odom_frame),
       utm_msg_(options.fix_frame) {}
@@ -78,7 +70,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
 }
 
 void DdsPublisher::publish_health(Nanos now) noexcept {
-  health_msg_.clear(utc_now_ns());
+  health_msg_.clear(wall_clock_ns());
   if (inputs_.health) inputs_.health(health_msg_, now);
   const PublisherStats s = stats();
   const bool stale = s.lidar_stale;

@@ -11,17 +11,12 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "trailnav/runtime/clock.hpp"
 #include "trailnav_msgs.h"
 
 namespace trailnav::dds {
 
 namespace {
-std::int64_t utc_now_ns() noexcept {
-  timespec ts{};
-  ::clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 // The type name of the first writer of `topic` that discovery reports.
 std::string discover_type(const Domain& domain, const std::string& topic, double timeout_s) {
   const dds_entity_t reader = dds_create_reader(domain.participant(), DDS_BUILTIN_TOPIC_DCPSPUBLICATION, nullptr, nullptr);
@@ -117,7 +112,7 @@ int Subscriber::take(double timeout_s, const std::function<void(const ReceivedSa
     ddsi_serdata* sd = nullptr;
     dds_sample_info_t info;
     if (dds_takecdr(reader_, &sd, 1, &info, DDS_ANY_STATE) != 1) break;
-    const std::int64_t now = utc_now_ns();
+    const std::int64_t now = wall_clock_ns();
     if (info.valid_data) {
       ReceivedSample r;
       r.type = type_;

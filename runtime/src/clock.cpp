@@ -68,4 +68,10 @@ void SimulatedClock::resume_sleepers() noexcept {
   interrupted_ = false;
 }
 
+Nanos wall_clock_ns() noexcept {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<Nanos>(ts.tv_sec) * kNanosPerSecond + ts.tv_nsec;
+}
+
 }  // namespace trailnav

@@ -19,6 +19,10 @@ inline constexpr Nanos kNanosPerMicro = 1'000;
 
 constexpr Nanos seconds_to_nanos(double s) noexcept { return static_cast<Nanos>(s * 1e9); }
 constexpr double nanos_to_seconds(Nanos n) noexcept { return static_cast<double>(n) * 1e-9; }
+
+// UTC now (CLOCK_REALTIME, ns since the epoch): the time base of packet
+// receive stamps and message headers, not of scheduling.
+Nanos wall_clock_ns() noexcept;
 constexpr double nanos_to_millis(Nanos n) noexcept { return static_cast<double>(n) * 1e-6; }
 constexpr double nanos_to_micros(Nanos n) noexcept { return static_cast<double>(n) * 1e-3; }
 
