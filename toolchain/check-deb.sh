@@ -28,6 +28,14 @@ done
 grep -q "ExecStart=/usr/bin/trailnavd --config /etc/trailnav/robot.yaml" "$root/usr/lib/systemd/system/trailnavd.service"
 conffiles=$(cat "$root/var/lib/dpkg/info/trailnav.conffiles")
 [[ "$conffiles" == *"/etc/trailnav/robot.yaml"* ]] || { echo "check-deb: robot.yaml is not a conffile" >&2; exit 1; }
+# The unit passes systemd-analyze verify (with ExecStart pointed at the
+# installed binary, which lives in the temporary root) and its exposure score.
+unitdir="$root/unit-check"
+mkdir -p "$unitdir"
+sed "s|/usr/bin/trailnavd|$root/usr/bin/trailnavd|g" "$root/usr/lib/systemd/system/trailnavd.service" >"$unitdir/trailnavd.service"
+systemd-analyze verify "$unitdir/trailnavd.service"
+systemd-analyze security --offline=true "$unitdir/trailnavd.service" | tail -n1
+rm -rf "$unitdir"
 # The installed binary validates the installed config.
 "$root/usr/bin/trailnavd" --config "$root/etc/trailnav/robot.yaml" --check
 files=$(dpkg --root="$root" -L trailnav | wc -l)

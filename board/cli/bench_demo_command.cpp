@@ -33,6 +33,7 @@
 #include "simulator.hpp"
 #include "subscriber.hpp"
 #include "terminal.hpp"
+#include "trailnav/runtime/histogram.hpp"
 
 extern char** environ;
 
@@ -156,8 +157,6 @@ int run_bench_demo(const BenchDemoOptions& o) {
   }
   std::printf("3. replaying into trailnavd in real time; listening on DDS (loopback) like a planner\n");
   std::atomic<bool> playing{true};
-  std::atomic<double> done{0.0};
-  ro.progress = nullptr;
   std::thread player([&] {
     replayer.replayer->run();
     playing = false;
@@ -165,7 +164,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
   ProgressBar bar("replay", o.seconds, "s");
   std::uint64_t n_maps = 0, n_stale = 0, n_poses = 0, n_health = 0, pngs = 0;
   std::string driving_health;
-  std::vector<double> latency;
+  DurationHistogram latency;  // ns, within 3 %
   std::vector<std::int8_t> last_map;
   nav_msgs_msg_dds__OccupancyGrid_ last_header{};
   std::string last_pose, last_health;
@@ -179,7 +178,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
         return;
       }
       ++n_maps;
-      latency.push_back(static_cast<double>(r.receive_ns - r.source_ns) * 1e-6);
+      latency.record(r.receive_ns - r.source_ns);
       last_map.assign(g.data._buffer, g.data._buffer + g.data._length);
       last_header = g;
       last_header.data = {};
@@ -218,13 +217,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
   for (int i = 0; i < 5; ++i) listen(0.1);
   const std::string report = stop_daemon();
 
-  std::sort(latency.begin(), latency.end());
-  auto pct = [&](double p) {
-    return latency.empty() ? 0.0 : latency[std::min(latency.size() - 1, static_cast<std::size_t>(p * static_cast<double>(latency.size())))];
-  };
+  const DurationSummary lat = latency.summary();
   std::printf("4. received: %llu obstacle maps (latency from the revolution's last packet: p50 %.2f ms, p99 %.2f ms), "
               "%llu poses (last: %s), %llu health messages\n",
-              static_cast<unsigned long long>(n_maps), pct(0.5), pct(0.99), static_cast<unsigned long long>(n_poses),
+              static_cast<unsigned long long>(n_maps), nanos_to_seconds(lat.p50) * 1e3, nanos_to_seconds(lat.p99) * 1e3, static_cast<unsigned long long>(n_poses),
               last_pose.c_str(), static_cast<unsigned long long>(n_health));
   std::printf("   health while driving:\n%s", driving_health.c_str());
   std::printf("   after the recording ended: the last map resent %llu time(s) as stale (free cells unknown); health then:\n%s",

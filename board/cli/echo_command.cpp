@@ -17,6 +17,7 @@
 #include "sensor_msgs.h"
 #include "trailnav_msgs.h"
 #include "map_png.hpp"
+#include "trailnav/runtime/histogram.hpp"
 #include "subscriber.hpp"
 
 namespace trailnav::cli {
@@ -141,7 +142,7 @@ int run_echo(const EchoOptions& o) {
   std::signal(SIGTERM, on_signal);
 
   std::uint64_t n = 0, bytes = 0, pngs = 0;
-  std::vector<double> latencies;
+  DurationHistogram latencies;  // ns, within 3 %
   std::int64_t first_ns = 0, last_ns = 0;
   double silent = 0.0;
   std::string base = o.topic;
@@ -154,7 +155,7 @@ int run_echo(const EchoOptions& o) {
       if (first_ns == 0) first_ns = r.receive_ns;
       last_ns = r.receive_ns;
       const double latency_ms = static_cast<double>(r.receive_ns - r.source_ns) * 1e-6;
-      latencies.push_back(latency_ms);
+      latencies.record(r.receive_ns - r.source_ns);
       if (!o.quiet) print_sample(r, n, latency_ms);
       if (!o.png_dir.empty()) {
         char name[64];
@@ -177,15 +178,12 @@ int run_echo(const EchoOptions& o) {
       break;
     }
   }
-  std::sort(latencies.begin(), latencies.end());
-  auto pct = [&](double p) {
-    return latencies.empty() ? 0.0 : latencies[std::min(latencies.size() - 1, static_cast<std::size_t>(p * static_cast<double>(latencies.size())))];
-  };
+  const DurationSummary lat = latencies.summary();
+  const auto ms = [](Nanos v) { return nanos_to_seconds(v) * 1e3; };
   const double span = static_cast<double>(last_ns - first_ns) * 1e-9;
   std::printf("%s: %llu samples, %.2f Hz, mean %.1f kB; latency (source time to here) p50 %.2f ms, p99 %.2f ms, max %.2f ms",
               sub.subscriber->topic().c_str(), static_cast<unsigned long long>(n), n > 1 && span > 0 ? static_cast<double>(n - 1) / span : 0.0,
-              n ? static_cast<double>(bytes) / static_cast<double>(n) / 1000.0 : 0.0, pct(0.5), pct(0.99),
-              latencies.empty() ? 0.0 : latencies.back());
+              n ? static_cast<double>(bytes) / static_cast<double>(n) / 1000.0 : 0.0, ms(lat.p50), ms(lat.p99), ms(lat.max));
   if (pngs > 0) std::printf("; %llu PNGs in %s", static_cast<unsigned long long>(pngs), o.png_dir.c_str());
   std::printf("\n");
   return n > 0 ? 0 : 1;

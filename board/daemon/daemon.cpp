@@ -84,7 +84,6 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     if (!made.pipeline) return fail("obstacles: " + made.error);
     d->pipeline_ = std::move(made.pipeline);
     const int n = config.obstacles->map.size;
-    d->snapshot_shape_ = std::make_unique<perception::ObstacleSnapshot>(n, n);
     d->obstacle_out_ = std::make_unique<Mailbox<perception::ObstacleSnapshot>>(n, n);
     if (d->pose_ && config.obstacles_use_pose) {
       d->pose_queue_ = std::make_unique<perception::PoseQueue>();
@@ -102,7 +101,6 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   d->domain_ = std::move(domain.domain);
   dds::PublisherInputs inputs;
   inputs.obstacles = d->obstacle_out_.get();
-  inputs.obstacle_shape = d->snapshot_shape_.get();
   inputs.poses = d->pose_ ? &d->pose_->poses() : nullptr;
   Daemon* self = d.get();
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };

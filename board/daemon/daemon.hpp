@@ -73,7 +73,6 @@ class Daemon {
   std::unique_ptr<pose::PoseTask> pose_;
   std::unique_ptr<perception::PoseQueue> pose_queue_;
   std::unique_ptr<perception::ObstaclePipeline> pipeline_;
-  std::unique_ptr<perception::ObstacleSnapshot> snapshot_shape_;
   std::unique_ptr<Mailbox<perception::ObstacleSnapshot>> obstacle_out_;
   std::unique_ptr<perception::ObstacleTask> obstacles_;
   std::unique_ptr<dds::Domain> domain_;

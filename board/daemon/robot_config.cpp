@@ -1,5 +1,6 @@
 #include "robot_config.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <thread>
 
@@ -211,27 +212,31 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
 
   const int cpus = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   c.tasks = parse_task_table(root, "tasks", cpus);
-  auto need = [&](bool configured, const char* name, TaskKind kind) {
-    if (!configured) return;
-    const TaskSpec& t = require_task(c.tasks, name, root, "tasks");
-    if (t.kind != kind) {
-      root.fail("tasks", std::string("task '") + name + "' must be " +
-                             (kind == TaskKind::event ? "event-driven (it runs when a revolution is complete)"
-                                                      : "periodic (it polls its inputs)"));
-    }
+  // One row per part: is it configured, and how must its task run.
+  struct Part {
+    const char* name;
+    bool configured;
+    TaskKind kind;
   };
-  need(c.lidar.has_value(), "lidar", TaskKind::periodic);
-  need(c.gps.has_value(), "gps", TaskKind::periodic);
-  need(c.imu.has_value(), "imu", TaskKind::periodic);
-  need(c.can.has_value(), "can", TaskKind::periodic);
-  need(c.gpio.has_value(), "gpio", TaskKind::periodic);
-  need(c.pose.has_value(), "pose", TaskKind::periodic);
-  need(c.obstacles.has_value(), "obstacles", TaskKind::event);
-  const std::vector<std::string> known = {"lidar", "gps", "imu", "can", "gpio", "pose", "obstacles"};
+  const Part parts[] = {{"lidar", c.lidar.has_value(), TaskKind::periodic},
+                        {"gps", c.gps.has_value(), TaskKind::periodic},
+                        {"imu", c.imu.has_value(), TaskKind::periodic},
+                        {"can", c.can.has_value(), TaskKind::periodic},
+                        {"gpio", c.gpio.has_value(), TaskKind::periodic},
+                        {"pose", c.pose.has_value(), TaskKind::periodic},
+                        {"obstacles", c.obstacles.has_value(), TaskKind::event}};
+  for (const Part& part : parts) {
+    if (!part.configured) continue;
+    const TaskSpec& t = require_task(c.tasks, part.name, root, "tasks");
+    if (t.kind != part.kind) {
+      root.fail("tasks", std::string("task '") + part.name + "' must be " +
+                             (part.kind == TaskKind::event ? "event-driven (it runs when a revolution is complete)"
+                                                           : "periodic (it polls its inputs)"));
+    }
+  }
   for (const TaskSpec& t : c.tasks) {
-    const bool used = (t.name == "lidar" && c.lidar) || (t.name == "gps" && c.gps) || (t.name == "imu" && c.imu) ||
-                      (t.name == "can" && c.can) || (t.name == "gpio" && c.gpio) || (t.name == "pose" && c.pose) ||
-                      (t.name == "obstacles" && c.obstacles);
+    const bool used = std::any_of(std::begin(parts), std::end(parts),
+                                  [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
                          "lidar, gps, imu, can, gpio, pose, obstacles");

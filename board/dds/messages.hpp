@@ -18,6 +18,7 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "trailnav/perception/terrain_class_map.hpp"
 #include "trailnav_msgs.h"
 
 namespace trailnav::pose {
@@ -26,7 +27,7 @@ struct UtmPose;
 }  // namespace trailnav::pose
 namespace trailnav::perception {
 struct ObstacleSnapshot;
-}
+}  // namespace trailnav::perception
 
 namespace trailnav::dds {
 
@@ -127,8 +128,8 @@ class TerrainClassMapMessage {
 
  private:
   FixedString<64> frame_;
-  std::array<FixedString<16>, 5> names_;
-  std::array<char*, 5> name_ptrs_{};
+  std::array<FixedString<16>, perception::kTerrainClasses> names_;
+  std::array<char*, perception::kTerrainClasses> name_ptrs_{};
   std::vector<std::uint8_t> class_id_, confidence_;
   trailnav_msgs_msg_dds__TerrainClassMap_ msg_{};
 };

@@ -24,12 +24,10 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     out = std::move(w.writer);
   };
   if (p->inputs_.obstacles != nullptr) {
-    const perception::ObstacleSnapshot* shape = p->inputs_.obstacle_shape;
-    if (shape == nullptr) {
-      result.error = "publisher: the obstacle map's size is missing";
-      return result;
-    }
-    p->grid_.emplace(shape->size_x, shape->size_y, options.odom_frame);
+    // Every slot of the mailbox was built with the map's size; the reader's
+    // own slot can be looked at before the writer starts.
+    const perception::ObstacleSnapshot& shape = p->inputs_.obstacles->last_read();
+    p->grid_.emplace(shape.size_x, shape.size_y, options.odom_frame);
     make(p->map_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.obstacle_map, {true, 1});
   }
   if (p->inputs_.poses != nullptr) {
@@ -65,7 +63,6 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.health = health_.load(std::memory_order_relaxed);
   s.write_failures = failures_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
-  s.last_map_ns = last_map_ns_.load(std::memory_order_relaxed);
   return s;
 }
 
@@ -115,7 +112,6 @@ void DdsPublisher::loop() noexcept {
         }
         any_map = true;
         last_map = now;
-        last_map_ns_.store(now, std::memory_order_relaxed);
         lidar_stale_.store(false, std::memory_order_relaxed);
       } else if (any_map && now - last_map > stale_after && now - last_stale >= kNanosPerSecond) {
         grid_->fill(inputs_.obstacles->last_read(), true, options_.occupied_percent);

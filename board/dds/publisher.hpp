@@ -52,8 +52,7 @@ struct PublisherOptions {
 };
 
 struct PublisherInputs {
-  perception::ObstacleSnapshot* obstacle_shape = nullptr;  // only its size is used
-  Mailbox<perception::ObstacleSnapshot>* obstacles = nullptr;
+  Mailbox<perception::ObstacleSnapshot>* obstacles = nullptr;  // its slots give the map's size
   Mailbox<pose::PoseSnapshot>* poses = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
   std::function<void(DiagnosticsMessage&, Nanos now)> health;
@@ -62,7 +61,6 @@ struct PublisherInputs {
 struct PublisherStats {
   std::uint64_t maps = 0, stale_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
   bool lidar_stale = false;
-  std::int64_t last_map_ns = 0;  // runtime clock
 };
 
 class DdsPublisher {
@@ -97,7 +95,6 @@ class DdsPublisher {
   // Publisher thread's state, copied out under the atomics below.
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
   std::atomic<bool> lidar_stale_{false};
-  std::atomic<std::int64_t> last_map_ns_{0};
 };
 
 struct DdsPublisher::Created {

@@ -38,6 +38,7 @@
 #include "robot_config.hpp"
 #include "simulator.hpp"
 #include "subscriber.hpp"
+#include "trailnav/runtime/histogram.hpp"
 
 extern char** environ;
 
@@ -49,7 +50,7 @@ namespace {
 struct DaemonRun {
   std::size_t maps = 0, matched = 0, identical = 0, offline = 0, poses = 0, health = 0;
   std::size_t stale = 0, stale_correct = 0;  // maps resent after the lidar fell silent
-  std::vector<double> latency_ms;
+  DurationSummary latency;  // last packet of a revolution -> subscriber
   long rss_start_kb = 0, rss_end_kb = 0;
   int exit_code = -1;
   std::string stderr_text;
@@ -156,6 +157,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   }
 
   std::map<std::int64_t, std::vector<std::int8_t>> received;
+  DurationHistogram latency;
   std::atomic<bool> replaying{true};
   std::thread player([&] {
     std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the daemon opens its links and discovery settles
@@ -180,7 +182,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
         return;
       }
       received[stamp].assign(g.data._buffer, g.data._buffer + g.data._length);
-      out.latency_ms.push_back(static_cast<double>(r.receive_ns - r.source_ns) * 1e-6);
+      latency.record(r.receive_ns - r.source_ns);
     });
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.poses; });
     health.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.health; });
@@ -203,6 +205,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   out.stderr_text = read_file(err_path);
   out.maps = received.size();
+  out.latency = latency.summary();
 
   // The offline pipeline on the same recording, same obstacle config, no pose stream.
   eval::ObstacleRunOptions oo;
@@ -238,13 +241,11 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
 }
 
 void report(const DaemonRun& r, const char* what) {
-  std::vector<double> l = r.latency_ms;
-  std::sort(l.begin(), l.end());
-  const auto pct = [&](double p) { return l.empty() ? 0.0 : l[std::min(l.size() - 1, static_cast<std::size_t>(p * static_cast<double>(l.size())))]; };
+  const auto ms = [](Nanos v) { return nanos_to_seconds(v) * 1e3; };
   std::printf("[ trailnavd %s ] maps %zu (offline %zu, same stamp %zu, identical %zu), stale resent %zu, poses %zu, health %zu; "
               "latency last packet -> subscriber p50 %.2f ms p99 %.2f ms max %.2f ms; RSS %ld -> %ld kB\n%s",
-              what, r.maps, r.offline, r.matched, r.identical, r.stale, r.poses, r.health, pct(0.5), pct(0.99),
-              l.empty() ? 0.0 : l.back(), r.rss_start_kb, r.rss_end_kb, r.stderr_text.c_str());
+              what, r.maps, r.offline, r.matched, r.identical, r.stale, r.poses, r.health, ms(r.latency.p50), ms(r.latency.p99),
+              ms(r.latency.max), r.rss_start_kb, r.rss_end_kb, r.stderr_text.c_str());
 }
 
 std::uint64_t number_before(const std::string& text, const std::string& label) {
