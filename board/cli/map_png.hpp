@@ -15,5 +15,7 @@ namespace trailnav::cli {
 Status write_occupancy_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& grid);
 // Street grey, dirt brown, grass green, vegetation dark green, other purple, unknown blue-grey.
 Status write_terrain_png(const std::string& path, const trailnav_msgs_msg_dds__TerrainClassMap_& map);
+// The same from class ids, row-major with row 0 the lowest y (>= 5: unknown).
+Status write_class_png(const std::string& path, std::uint32_t width, std::uint32_t height, const std::uint8_t* class_id);
 
 }  // namespace trailnav::cli

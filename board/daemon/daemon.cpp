@@ -79,7 +79,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                 d->gps_ ? &d->gps_->fixes() : nullptr);
   }
   if (config.obstacles) {
-    const velodyne::RangeImageShape shape = d->lidar_->revolutions().last_read().shape();
+    const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
     auto made = perception::ObstaclePipeline::create(*config.obstacles, shape);
     if (!made.pipeline) return fail("obstacles: " + made.error);
     d->pipeline_ = std::move(made.pipeline);
@@ -87,7 +87,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     d->obstacle_out_ = std::make_unique<Mailbox<perception::ObstacleSnapshot>>(n, n);
     if (d->pose_ && config.obstacles_use_pose) {
       d->pose_queue_ = std::make_unique<perception::PoseQueue>();
-      d->pose_->set_pose_output(d->pose_queue_.get());
+      d->pose_->add_pose_output(d->pose_queue_.get());
     }
     d->obstacles_ = std::make_unique<perception::ObstacleTask>(*d->pipeline_, d->lidar_->revolutions(),
                                                                d->pose_queue_.get(), nullptr, *d->obstacle_out_);

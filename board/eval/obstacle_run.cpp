@@ -7,15 +7,9 @@
 #include <filesystem>
 
 #include "png.hpp"
+#include "revolution_source.hpp"
 #include "sim_truth.hpp"
-#include "simulator.hpp"
-#include "trailnav/drivers/recording/recording.hpp"
-#include "trailnav/drivers/velodyne/calibration.hpp"
-#include "trailnav/drivers/velodyne/decoder.hpp"
-#include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
-#include "trailnav/drivers/velodyne/sensor_clock.hpp"
-#include "trailnav/perception/kitti.hpp"
 #include "world.hpp"
 
 namespace trailnav::eval {
@@ -280,37 +274,6 @@ double mean_kl(const ObstacleMap& p_map, const ObstacleMap& q_map) {
   return n ? sum / static_cast<double>(n) : 0.0;
 }
 
-// Receives finished revolutions from the assembler and runs them at once.
-class ImmediateSink final : public vel::RevolutionSink {
- public:
-  ImmediateSink(vel::RangeImageShape shape, std::function<void(const vel::RangeImage&)> on_image)
-      : a_(shape), b_(shape), on_image_(std::move(on_image)) {}
-  vel::RangeImage& next_image() noexcept override { return use_a_ ? a_ : b_; }
-  void complete(vel::RangeImage& image) noexcept override {
-    use_a_ = !use_a_;
-    on_image_(image);
-  }
-
- private:
-  vel::RangeImage a_, b_;
-  bool use_a_ = true;
-  std::function<void(const vel::RangeImage&)> on_image_;
-};
-
-std::optional<vel::Model> sniff_model(const std::string& input, int stream, std::string& error) {
-  auto opened = recording::RecordingReader::open(input);
-  if (!opened.reader) {
-    error = opened.error;
-    return std::nullopt;
-  }
-  while (auto e = opened.reader->next()) {
-    if (e->stream != stream || e->payload.size() != vel::kDataPacketSize) continue;
-    if (auto m = vel::detect_model(e->payload)) return m;
-  }
-  error = input + ": no lidar data packet names its model";
-  return std::nullopt;
-}
-
 }  // namespace
 
 Status write_obstacle_png(const std::string& path, const ObstacleMap& map, double robot_x, double robot_y) {
@@ -357,30 +320,17 @@ Status write_obstacle_png(const std::string& path, const ObstacleMap& map, doubl
 
 ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   ObstacleRunReport report;
-  if (options.inputs.empty()) {
-    report.error = "no input: give a recording directory, a pcap file or KITTI .bin scans";
+  auto opened = RevolutionSource::open(options.inputs, options.calibration);
+  if (!opened.source) {
+    report.error = opened.error;
     return report;
   }
-  const bool kitti = std::all_of(options.inputs.begin(), options.inputs.end(),
-                                 [](const std::string& p) { return fs::path(p).extension() == ".bin"; });
-  if (!kitti && options.inputs.size() > 1) {
-    report.error = "give one recording or capture file (or only KITTI .bin scans)";
-    return report;
-  }
+  RevolutionSource& source = *opened.source;
+  report.input_kind = source.input_kind();
+  report.model_name = source.model_name();
+  const std::optional<SimTruth>& truth = source.truth();
   perception::ObstacleConfig config = options.config;
-
-  // Truth, when the input is a simulated recording.
-  std::optional<SimTruth> truth;
-  if (!kitti && fs::is_directory(fs::path(options.inputs[0]) / "truth")) {
-    auto loaded = load_sim_truth((fs::path(options.inputs[0]) / "truth").string());
-    if (!loaded.truth) {
-      report.error = loaded.error;
-      return report;
-    }
-    truth = std::move(loaded.truth);
-    const auto& m = truth->scenario.robot.lidar_mount;
-    if (config.mount.translation == std::array<double, 3>{0.0, 0.0, 0.0}) config.mount.translation = {m.x(), m.y(), m.z()};
-  }
+  if (truth && config.mount.translation == std::array<double, 3>{0.0, 0.0, 0.0}) config.mount.translation = source.mount_translation();
   if (options.terrain == TerrainMode::truth && !truth) {
     report.error = "--terrain truth needs a simulated recording (a directory with truth/)";
     return report;
@@ -393,77 +343,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       return report;
     }
   }
-
-  // The sensor: KITTI scans, or the recording's lidar.
-  vel::RangeImageShape shape = perception::kitti_shape();
-  std::optional<vel::PacketDecoder> decoder;
-  std::optional<vel::RevolutionAssembler> assembler;
-  int lidar_stream = -1, position_stream = -1;
-  if (kitti) {
-    report.input_kind = "kitti";
-    report.model_name = "HDL-64E (KITTI)";
-  } else {
-    report.input_kind = "recording";
-    auto opened = recording::RecordingReader::open(options.inputs[0]);
-    if (!opened.reader) {
-      report.error = opened.error;
-      return report;
-    }
-    const auto& streams = opened.reader->streams();
-    for (std::size_t i = 0; i < streams.size(); ++i) {
-      if (streams[i].kind != recording::StreamKind::udp) continue;
-      if (lidar_stream < 0 && (streams[i].name == "lidar" || streams[i].port == 2368)) lidar_stream = static_cast<int>(i);
-      if (position_stream < 0 && (streams[i].name == "lidar-position" || streams[i].port == 8308)) {
-        position_stream = static_cast<int>(i);
-      }
-    }
-    if (lidar_stream < 0) {
-      report.error = options.inputs[0] + ": no UDP stream named 'lidar' or on port 2368";
-      return report;
-    }
-    std::string error;
-    const auto model = sniff_model(options.inputs[0], lidar_stream, error);
-    if (!model) {
-      report.error = error;
-      return report;
-    }
-    report.model_name = std::string(vel::model_info(*model).name);
-    std::string calib = options.calibration;
-    if (calib.empty() && truth) calib = truth->scenario.lidar.calibration;
-    if (calib.empty()) calib = sim::default_calibration_file(*model);
-    std::optional<vel::Calibration> calibration;
-    if (!calib.empty() && calib != "builtin") {
-      auto c = vel::load_calibration(calib);
-      if (!c.calibration) {
-        report.error = c.error;
-        return report;
-      }
-      calibration = std::move(c.calibration);
-    } else {
-      calibration = vel::builtin_calibration(*model);
-      if (!calibration) {
-        report.error = "the " + report.model_name + " needs its calibration: give --calibration FILE";
-        return report;
-      }
-    }
-    vel::DecoderOptions dopt;
-    dopt.selection = vel::ReturnSelection::strongest;
-    auto created = vel::PacketDecoder::create(*model, *calibration, dopt);
-    if (!created.decoder) {
-      report.error = created.error;
-      return report;
-    }
-    decoder.emplace(std::move(*created.decoder));
-    vel::AssemblerOptions aopt;
-    if (truth) aopt.rpm = truth->scenario.lidar.rpm;
-    auto made = vel::RevolutionAssembler::create(*decoder, aopt);
-    if (!made.assembler) {
-      report.error = made.error;
-      return report;
-    }
-    assembler.emplace(std::move(*made.assembler));
-    shape = assembler->shape();
-  }
+  const vel::RangeImageShape shape = source.shape();
 
   config.compare_models = config.compare_models || truth.has_value();
   auto made = perception::ObstaclePipeline::create(config, shape);
@@ -506,7 +386,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     }
   };
   auto on_image = [&](const vel::RangeImage& image) {
-    if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) return;
+    if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) return false;
     ++report.revolutions;
     if (options.on_revolution) options.on_revolution(image);
     auto t0 = SteadyClock::now();
@@ -548,42 +428,14 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       std::snprintf(suffix, sizeof suffix, "-%06llu", static_cast<unsigned long long>(rev));
       write_pngs(suffix);
     }
+    return true;
   };
 
-  if (kitti) {
-    vel::RangeImage image(shape);
-    std::vector<float> buffer;
-    for (std::size_t i = 0; i < options.inputs.size(); ++i) {
-      if (Status st = perception::load_kitti_scan(options.inputs[i], buffer, image); !st) {
-        report.error = st.message();
-        return report;
-      }
-      on_image(image);
-      if (options.progress) options.progress(static_cast<double>(i + 1) / static_cast<double>(options.inputs.size()));
-    }
-  } else {
-    auto opened = recording::RecordingReader::open(options.inputs[0]);
-    recording::RecordingReader& reader = *opened.reader;
-    ImmediateSink sink(shape, on_image);
-    vel::SensorClock clock;
-    std::uint64_t events = 0;
-    while (auto e = reader.next()) {
-      if (e->stream == position_stream && e->payload.size() == vel::kPositionPacketSize) {
-        vel::PositionPacket pp;
-        if (vel::decode_position_packet(e->payload, pp) == vel::PositionError::none) clock.on_position_packet(pp);
-      } else if (e->stream == lidar_stream && e->payload.size() == vel::kDataPacketSize) {
-        const std::int64_t t = clock.resolve(vel::read_u32(e->payload.data() + vel::kTimestampOffset), e->time_ns);
-        if (assembler->add_packet(e->payload, t, sink) != vel::PacketError::none) ++report.malformed_packets;
-      } else if (e->stream == lidar_stream) {
-        ++report.malformed_packets;
-      }
-      if (options.progress && ++events % 512 == 0) {
-        options.progress(static_cast<double>(reader.position()) / static_cast<double>(std::max<std::uint64_t>(reader.size(), 1)));
-      }
-      if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) break;
-    }
-    if (options.progress) options.progress(1.0);
+  if (std::string error = source.run(on_image, options.progress); !error.empty()) {
+    report.error = error;
+    return report;
   }
+  report.malformed_packets = source.malformed_packets();
 
   write_pngs("");
   if (!options.out_dir.empty()) {

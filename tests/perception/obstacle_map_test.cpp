@@ -301,10 +301,10 @@ TEST(ObstaclePipeline, NoHeapOperationsPerRevolutionAfterArm) {
       terrain.grid().at({terrain.grid().origin().x + x, terrain.grid().origin().y + y}).set({0.6f, 0.2f, 0.1f, 0.05f, 0.05f});
     }
   }
-  Mailbox<velodyne::RangeImage> revolutions(kitti_shape());
+  Broadcast<velodyne::RangeImage> revolutions(1, kitti_shape());
   Mailbox<ObstacleSnapshot> out(config.map.size, config.map.size);
   PoseQueue pose_queue;
-  ObstacleTask task(pipeline, revolutions, &pose_queue, nullptr, out);
+  ObstacleTask task(pipeline, revolutions.reader(0), &pose_queue, nullptr, out);
 
   alloc_guard::set_fatal(false);
   alloc_guard::mark_realtime_thread("obstacles");

@@ -11,6 +11,10 @@ VelodyneDriver::Created VelodyneDriver::create(PacketDecoder decoder, const Driv
     result.error = options.name + ": " + error;
     return result;
   }
+  if (options.revolution_readers < 1 || options.revolution_readers > 8) {
+    result.error = options.name + ": revolution_readers must be 1 to 8";
+    return result;
+  }
   const RangeImageShape shape = RevolutionAssembler::shape_for(decoder.model(), options.assembler);
   std::unique_ptr<VelodyneDriver> d(new VelodyneDriver(std::move(decoder), options, shape));
   // The assembler refers to the decoder: built on the driver's own.
@@ -37,7 +41,8 @@ VelodyneDriver::Created VelodyneDriver::create(PacketDecoder decoder, const Driv
 VelodyneDriver::VelodyneDriver(PacketDecoder decoder, const DriverOptions& options, RangeImageShape shape)
     : options_(options),
       decoder_(std::move(decoder)),
-      revolutions_(shape),
+      shape_(shape),
+      revolutions_(static_cast<std::size_t>(std::max(1, options.revolution_readers)), shape),
       sink_(revolutions_),
       clock_(options.clock) {}
 

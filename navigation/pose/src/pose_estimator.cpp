@@ -70,11 +70,11 @@ void PoseTask::run(const TaskTick& tick) {
     local_.odometry_counters = slot.odometry_counters;
     local_.utm_counters = slot.utm_counters;
     const LocalPose& l = slot.local;
-    if (pose_out_ != nullptr && l.source != PoseSource::none && l.time_ns > last_out_ns_) {
-      if (pose_out_->try_push(perception::Pose{l.time_ns, l.x, l.y, l.z, l.roll, l.pitch, l.yaw})) {
-        last_out_ns_ = l.time_ns;
-      } else {
-        ++local_.pose_queue_drops;
+    if (pose_outputs_ > 0 && l.source != PoseSource::none && l.time_ns > last_out_ns_) {
+      last_out_ns_ = l.time_ns;
+      const perception::Pose pose{l.time_ns, l.x, l.y, l.z, l.roll, l.pitch, l.yaw};
+      for (std::size_t q = 0; q < pose_outputs_; ++q) {
+        if (!pose_out_[q]->try_push(pose)) ++local_.pose_queue_drops;
       }
     }
   }

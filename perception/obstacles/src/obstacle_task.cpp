@@ -2,8 +2,8 @@
 
 namespace trailnav::perception {
 
-ObstacleTask::ObstacleTask(ObstaclePipeline& pipeline, Mailbox<velodyne::RangeImage>& revolutions, PoseQueue* poses,
-                           Mailbox<TerrainClassMap>* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history)
+ObstacleTask::ObstacleTask(ObstaclePipeline& pipeline, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
+                           Broadcast<TerrainClassMap>::Reader* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history)
     : pipeline_(pipeline), revolutions_(revolutions), poses_(poses), terrain_(terrain), out_(out), track_(pose_history) {}
 
 void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, ObstacleSnapshot& out) noexcept {

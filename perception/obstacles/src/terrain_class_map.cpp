@@ -1,5 +1,8 @@
 #include "trailnav/perception/terrain_class_map.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 namespace trailnav::perception {
 
 namespace {
@@ -34,6 +37,25 @@ void TerrainClassMap::copy_from(const TerrainClassMap& other) noexcept {
   grid_.assign_from(other.grid_);
   sequence = other.sequence;
   time_ns = other.time_ns;
+}
+
+void TerrainClassMap::export_classes(std::span<std::uint8_t> class_id, std::span<std::uint8_t> confidence) const noexcept {
+  const CellIndex o = grid_.origin();
+  std::size_t k = 0;
+  for (std::int32_t y = 0; y < grid_.size_y(); ++y) {
+    for (std::int32_t x = 0; x < grid_.size_x(); ++x, ++k) {
+      if (k >= class_id.size() || k >= confidence.size()) return;
+      const TerrainCell& c = grid_.at({o.x + x, o.y + y});
+      if (!c.known) {
+        class_id[k] = kUnknownClass;
+        confidence[k] = 0;
+        continue;
+      }
+      class_id[k] = static_cast<std::uint8_t>(c.best);
+      const float p = c.p[static_cast<std::size_t>(c.best)];
+      confidence[k] = static_cast<std::uint8_t>(std::lround(255.0f * std::clamp(p, 0.0f, 1.0f)));
+    }
+  }
 }
 
 }  // namespace trailnav::perception

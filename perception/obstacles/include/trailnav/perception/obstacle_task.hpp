@@ -13,6 +13,7 @@
 
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/pose_track.hpp"
+#include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/spsc_queue.hpp"
@@ -54,8 +55,8 @@ struct ObstacleTaskCounters {
 class ObstacleTask final : public Task {
  public:
   // `poses` and `terrain` may be null.
-  ObstacleTask(ObstaclePipeline& pipeline, Mailbox<velodyne::RangeImage>& revolutions, PoseQueue* poses,
-               Mailbox<TerrainClassMap>* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history = 512);
+  ObstacleTask(ObstaclePipeline& pipeline, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
+               Broadcast<TerrainClassMap>::Reader* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history = 512);
 
   // Woken after each published snapshot (the DDS publisher). Before the scheduler starts.
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
@@ -68,9 +69,9 @@ class ObstacleTask final : public Task {
 
  private:
   ObstaclePipeline& pipeline_;
-  Mailbox<velodyne::RangeImage>& revolutions_;
+  Broadcast<velodyne::RangeImage>::Reader& revolutions_;
   PoseQueue* poses_;
-  Mailbox<TerrainClassMap>* terrain_;
+  Broadcast<TerrainClassMap>::Reader* terrain_;
   Mailbox<ObstacleSnapshot>& out_;
   PoseTrack track_;
   const TerrainClassMap* terrain_map_ = nullptr;

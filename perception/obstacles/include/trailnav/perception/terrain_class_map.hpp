@@ -12,6 +12,7 @@
 #include <array>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string_view>
 
 #include "trailnav/runtime/rolling_grid.hpp"
@@ -56,6 +57,12 @@ class TerrainClassMap {
 
   // Copies another map of the same shape (no allocation).
   void copy_from(const TerrainClassMap& other) noexcept;
+
+  // Row-major from the origin (row 0 = lowest y), size_x * size_y entries:
+  // the best class (kUnknownClass where not known) and its probability
+  // scaled to 0..255. No allocation.
+  static constexpr std::uint8_t kUnknownClass = 255;
+  void export_classes(std::span<std::uint8_t> class_id, std::span<std::uint8_t> confidence) const noexcept;
 
   std::uint64_t sequence = 0;   // snapshot number
   std::int64_t time_ns = 0;     // when the snapshot was taken

@@ -1,6 +1,6 @@
 // The Velodyne driver task: receives data and position packets over UDP,
 // times them, assembles revolutions and publishes each one through a
-// Mailbox. Runs periodically on the scheduler (1 kHz is typical) and drains
+// Broadcast (one reader per consuming thread). Runs periodically on the scheduler (1 kHz is typical) and drains
 // its sockets each run; everything is allocated by create().
 #pragma once
 
@@ -13,6 +13,7 @@
 #include "trailnav/drivers/udp/udp_receiver.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
+#include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/status_board.hpp"
@@ -26,6 +27,7 @@ struct DriverOptions {
   AssemblerOptions assembler;
   SensorClockOptions clock;
   int max_batches_per_run = 32;  // bounds one run's work; the rest waits for the next run
+  int revolution_readers = 1;    // threads that read revolutions (obstacles, terrain): one slot each
 
   DriverOptions() {
     data.bind.port = 2368;
@@ -67,7 +69,9 @@ class VelodyneDriver final : public Task {
 
   void run(const TaskTick& tick) override;
 
-  Mailbox<RangeImage>& revolutions() noexcept { return revolutions_; }
+  // Reader i of the revolutions (i < options().revolution_readers), one per thread.
+  Broadcast<RangeImage>::Reader& revolutions(std::size_t reader = 0) noexcept { return revolutions_.reader(reader); }
+  RangeImageShape revolution_shape() const noexcept { return shape_; }
   // Signalled after each revolution is published (an event-driven obstacle
   // task waits on it). Before the scheduler starts.
   void set_revolution_event(TaskEvent* event) noexcept { sink_.event = event; }
@@ -88,16 +92,17 @@ class VelodyneDriver final : public Task {
   std::optional<RevolutionAssembler> assembler_;
   // Publishes each revolution with its completing packet's receive time.
   struct Sink final : RevolutionSink {
-    explicit Sink(Mailbox<RangeImage>& m) noexcept : mailbox(m) {}
+    explicit Sink(Broadcast<RangeImage>& m) noexcept : mailbox(m) {}
     RangeImage& next_image() noexcept override { return mailbox.write_slot(); }
     void complete(RangeImage& image) noexcept override;
-    Mailbox<RangeImage>& mailbox;
+    Broadcast<RangeImage>& mailbox;
     TaskEvent* event = nullptr;
     std::int64_t receive_ns = 0;  // of the packet being added
     Nanos run_started = 0;        // the driver's current run (scheduler clock)
   };
 
-  Mailbox<RangeImage> revolutions_;
+  RangeImageShape shape_;
+  Broadcast<RangeImage> revolutions_;
   Sink sink_;
   Mailbox<PositionSnapshot> positions_;
   SensorClock clock_;

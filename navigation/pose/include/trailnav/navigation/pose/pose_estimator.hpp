@@ -78,9 +78,15 @@ class PoseTask final : public Task {
   PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReading, imu::kImuQueueCapacity>* imu,
            SpscQueue<can::OdometryState, can::kOdometryQueueCapacity>* wheels, Mailbox<gps::GpsReading>* gps);
 
-  // Also pushes every new local pose into this queue (the obstacle thread's
-  // motion compensation). Before the scheduler starts.
-  void set_pose_output(perception::PoseQueue* queue) noexcept { pose_out_ = queue; }
+  // Also pushes every new local pose into this queue (the obstacle and
+  // terrain threads' motion compensation and registration), at most
+  // kMaxPoseOutputs of them. Before the scheduler starts; false when full.
+  static constexpr std::size_t kMaxPoseOutputs = 4;
+  bool add_pose_output(perception::PoseQueue* queue) noexcept {
+    if (queue == nullptr || pose_outputs_ == kMaxPoseOutputs) return false;
+    pose_out_[pose_outputs_++] = queue;
+    return true;
+  }
 
   void run(const TaskTick& tick) override;
 
@@ -96,7 +102,8 @@ class PoseTask final : public Task {
   std::array<imu::Attitude, imu::kImuQueueCapacity> imu_batch_{};
   std::array<can::OdometryState, can::kOdometryQueueCapacity> wheel_batch_{};
   Mailbox<PoseSnapshot> poses_;
-  perception::PoseQueue* pose_out_ = nullptr;
+  std::array<perception::PoseQueue*, kMaxPoseOutputs> pose_out_{};
+  std::size_t pose_outputs_ = 0;
   std::int64_t last_out_ns_ = 0;
   PoseTaskStatus local_;
   StatusBoard<PoseTaskStatus> shared_;

@@ -1,0 +1,254 @@
+// `trailnav terrain-train` and `trailnav terrain-eval`: the terrain
+// classifier offline. Training learns a random forest from labelled cells
+// (simulated recordings' truth, or CSV files users labelled); evaluation runs
+// the terrain analysis over recordings and prints the cell-wise confusion
+// matrices of the integrated map and of single features (thesis Table 7.2).
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "terminal.hpp"
+#include "terrain_run.hpp"
+#include "trailnav/perception/forest_training.hpp"
+
+namespace trailnav::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using perception::ConfusionMatrix;
+using perception::TerrainClass;
+
+bool load_terrain_config(const std::string& file, perception::TerrainConfig& out, const char* who) {
+  if (file.empty()) return true;
+  try {
+    const ConfigNode root = ConfigNode::load_file(file);
+    out = perception::parse_terrain_config(root.map("terrain"));
+    return true;
+  } catch (const ConfigError& e) {
+    std::fprintf(stderr, "%s: %s\n", who, e.what());
+    return false;
+  }
+}
+
+void print_counts(const perception::LabelledFeatures& d) {
+  const auto c = d.class_counts();
+  for (int t = 0; t < perception::kTerrainClasses; ++t) {
+    std::printf("%s %s %llu", t ? "," : "", std::string(perception::terrain_class_name(static_cast<TerrainClass>(t))).c_str(),
+                static_cast<unsigned long long>(c[static_cast<std::size_t>(t)]));
+  }
+}
+
+struct TrainOptions {
+  std::vector<std::string> inputs;
+  std::string out;
+  std::string config_file;
+  std::string save_features;
+  perception::ForestParams forest;
+  std::size_t max_per_class = 40000;
+  bool quiet = false;
+};
+
+int train(TrainOptions& o) {
+  const char* who = "trailnav terrain-train";
+  perception::TerrainConfig config;
+  if (!load_terrain_config(o.config_file, config, who)) return 2;
+  if (std::string e = perception::check_forest_params(o.forest); !e.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, e.c_str());
+    return 2;
+  }
+  perception::LabelledFeatures data;
+  for (const std::string& input : o.inputs) {
+    if (fs::path(input).extension() == ".csv") {
+      const std::size_t before = data.size();
+      if (std::string e = eval::load_labelled_csv(input, data); !e.empty()) {
+        std::fprintf(stderr, "%s: %s\n", who, e.c_str());
+        return 2;
+      }
+      std::printf("%s: %zu labelled cells\n", input.c_str(), data.size() - before);
+      continue;
+    }
+    eval::TerrainRunOptions run;
+    run.input = input;
+    run.config = config;
+    run.collect_samples = true;
+    ProgressBar bar("features " + fs::path(input).filename().string(), 100.0, "%");
+    if (!o.quiet) run.progress = [&](double f) { bar.update(100.0 * f); };
+    eval::TerrainRunReport r = eval::run_terrain(run);
+    if (!o.quiet) bar.finish();
+    if (!r.error.empty()) {
+      std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
+      return 2;
+    }
+    std::printf("%s: %llu revolutions, %llu steps, %zu labelled cell features (%llu mixed cells left out):", input.c_str(),
+                static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(r.counters.steps),
+                r.samples.size(), static_cast<unsigned long long>(r.unlabelled));
+    print_counts(r.samples);
+    std::printf("\n");
+    data.features.insert(data.features.end(), r.samples.features.begin(), r.samples.features.end());
+    data.labels.insert(data.labels.end(), r.samples.labels.begin(), r.samples.labels.end());
+  }
+  if (!o.save_features.empty()) {
+    if (Status st = eval::save_labelled_csv(o.save_features, data); !st) {
+      std::fprintf(stderr, "%s: %s\n", who, st.message().c_str());
+      return 2;
+    }
+    std::printf("wrote %s (%zu labelled cells)\n", o.save_features.c_str(), data.size());
+  }
+  if (o.max_per_class > 0) data.limit_per_class(o.max_per_class, o.forest.seed);
+  std::printf("training on %zu cells:", data.size());
+  print_counts(data);
+  std::printf("\n");
+  ProgressBar bar("trees", o.forest.trees, "trees");
+  const auto trained = perception::train_forest(data, o.forest, o.quiet ? std::function<void(double)>{} : [&](double f) {
+    bar.update(f * o.forest.trees);
+  });
+  if (!o.quiet) bar.finish();
+  if (!trained.forest) {
+    std::fprintf(stderr, "%s: %s\n", who, trained.error.c_str());
+    return 2;
+  }
+  if (Status st = trained.forest->save(o.out); !st) {
+    std::fprintf(stderr, "%s: %s\n", who, st.message().c_str());
+    return 2;
+  }
+  std::printf("forest: %zu trees, %zu nodes, %zu leaves, depth up to %zu; wrote %s\n", trained.forest->trees(),
+              trained.forest->nodes(), trained.forest->leaves(), trained.forest->max_depth(), o.out.c_str());
+  std::printf("out-of-bag confusion (rows: true class, columns: estimated; single features):\n%s",
+              perception::format_confusion(trained.out_of_bag).c_str());
+  return 0;
+}
+
+struct EvalOptions {
+  std::vector<std::string> inputs;
+  std::string model;
+  std::string config_file;
+  bool quiet = false;
+};
+
+// The thesis' Table 7.2 diagonal (integrated map), the goal per class.
+double thesis_recall(int t) {
+  switch (static_cast<TerrainClass>(t)) {
+    case TerrainClass::street: return 0.79;
+    case TerrainClass::grass: return 0.91;
+    case TerrainClass::dirt: return 0.78;
+    case TerrainClass::other: return 0.76;
+    case TerrainClass::vegetation: return 0.0;  // not in the thesis
+  }
+  return 0.0;
+}
+
+int evaluate(EvalOptions& o) {
+  const char* who = "trailnav terrain-eval";
+  perception::TerrainConfig config;
+  if (!load_terrain_config(o.config_file, config, who)) return 2;
+  if (!o.model.empty()) config.model = o.model;
+  if (config.model.empty()) {
+    std::fprintf(stderr, "%s: give --model FILE (or terrain.model in --config)\n", who);
+    return 2;
+  }
+  auto loaded = perception::RandomForest::load(config.model);
+  if (!loaded.forest) {
+    std::fprintf(stderr, "%s: %s\n", who, loaded.error.c_str());
+    return 2;
+  }
+  std::printf("model %s: %zu trees, %zu nodes, depth up to %zu\n", config.model.c_str(), loaded.forest->trees(),
+              loaded.forest->nodes(), loaded.forest->max_depth());
+  ConfusionMatrix integrated, single;
+  double step_ms = 0.0, register_ms = 0.0;
+  std::uint64_t steps = 0, revolutions = 0, features = 0;
+  for (const std::string& input : o.inputs) {
+    eval::TerrainRunOptions run;
+    run.input = input;
+    run.config = config;
+    run.forest = &*loaded.forest;
+    ProgressBar bar("terrain " + fs::path(input).filename().string(), 100.0, "%");
+    if (!o.quiet) run.progress = [&](double f) { bar.update(100.0 * f); };
+    eval::TerrainRunReport r = eval::run_terrain(run);
+    if (!o.quiet) bar.finish();
+    if (!r.error.empty()) {
+      std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
+      return 2;
+    }
+    std::printf("\n%s: %llu revolutions, %llu steps, %llu cell features; align %.2f ms + register %.2f ms per revolution, "
+                "step %.2f ms\n",
+                input.c_str(), static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(r.counters.steps),
+                static_cast<unsigned long long>(r.counters.features), r.align_ms, r.register_ms, r.step_ms);
+    std::printf("integrated map, Eq. 7.15 (single features in brackets):\n%s",
+                perception::format_confusion(r.integrated, &r.single).c_str());
+    for (int t = 0; t < perception::kTerrainClasses; ++t) {
+      for (int p = 0; p < perception::kTerrainClasses; ++p) {
+        integrated.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)] += r.integrated.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)];
+        single.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)] += r.single.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)];
+      }
+    }
+    step_ms += r.step_ms * static_cast<double>(r.counters.steps);
+    register_ms += r.register_ms * static_cast<double>(r.revolutions);
+    steps += r.counters.steps;
+    revolutions += r.revolutions;
+    features += r.counters.features;
+  }
+  if (o.inputs.size() > 1) {
+    std::printf("\nall %zu recordings: integrated map, Eq. 7.15 (single features in brackets):\n%s", o.inputs.size(),
+                perception::format_confusion(integrated, &single).c_str());
+  }
+  std::printf("\nrecall per class (integrated / single feature / thesis Table 7.2):\n");
+  for (int t = 0; t < perception::kTerrainClasses; ++t) {
+    if (integrated.row_total(t) == 0) continue;
+    const double goal = thesis_recall(t);
+    std::printf("  %-11s %.3f / %.3f / %s%s\n", std::string(perception::terrain_class_name(static_cast<TerrainClass>(t))).c_str(),
+                integrated.recall(t), single.recall(t), goal > 0 ? std::to_string(goal).substr(0, 4).c_str() : "-",
+                goal > 0 && integrated.recall(t) < goal ? "  (below the thesis)" : "");
+  }
+  std::printf("time: register %.2f ms per revolution, classification step %.2f ms (%llu steps, %llu features)\n",
+              revolutions ? register_ms / static_cast<double>(revolutions) : 0.0, steps ? step_ms / static_cast<double>(steps) : 0.0,
+              static_cast<unsigned long long>(steps), static_cast<unsigned long long>(features));
+  return 0;
+}
+
+}  // namespace
+
+void add_terrain_commands(CLI::App& app) {
+  auto* tr = app.add_subcommand(
+      "terrain-train",
+      "Learn the terrain classifier (thesis §7.2.2): a random forest over the five cell features (max, mean\n"
+      "and standard deviation of remission, roughness, slope). Inputs are simulated recordings, whose\n"
+      "cells are labelled from the truth (only cells of one class), and CSV files of labelled cells\n"
+      "(docs/terrain.md). Prints the out-of-bag confusion matrix. The same inputs and seed give the same\n"
+      "model, byte for byte.\n"
+      "Example:\n"
+      "  trailnav terrain-train build/sim/urban build/sim/forest --out build/terrain.tnrf");
+  static TrainOptions t;
+  tr->add_option("inputs", t.inputs, "Simulated recording directories and/or labelled-cell .csv files")->required();
+  tr->add_option("--out", t.out, "Model file to write")->required();
+  tr->add_option("--config", t.config_file, "YAML file with a `terrain:` section (grid, d, minPoints; docs/terrain.md)");
+  tr->add_option("--trees", t.forest.trees, "Trees in the forest")->capture_default_str();
+  tr->add_option("--features-per-split", t.forest.features_per_split, "Random features tried at each split")
+      ->capture_default_str();
+  tr->add_option("--min-split", t.forest.min_samples_split, "Fewest samples a node needs to be split")->capture_default_str();
+  tr->add_option("--max-depth", t.forest.max_depth, "Deepest tree level (0: unlimited)")->capture_default_str();
+  tr->add_option("--seed", t.forest.seed, "Random seed (bootstrap samples, features per split)")->capture_default_str();
+  tr->add_option("--max-per-class", t.max_per_class, "Keep at most this many cells of each class (0: all)")
+      ->capture_default_str();
+  tr->add_option("--threads", t.forest.threads, "Trees grown in parallel (0: one per core)")->capture_default_str();
+  tr->add_option("--save-features", t.save_features, "Also write every labelled cell feature to this CSV");
+  tr->add_flag("--quiet", t.quiet, "No progress bars");
+  tr->callback([&] { std::exit(train(t)); });
+
+  auto* ev = app.add_subcommand(
+      "terrain-eval",
+      "Run the terrain analysis (thesis §7.2) over simulated recordings with a trained model and print\n"
+      "the cell-wise confusion matrix against the truth, as the thesis' Table 7.2: the integrated class\n"
+      "map (Eq. 7.15) and, in brackets, the forest's answer to each single feature.\n"
+      "Example:\n"
+      "  trailnav terrain-eval build/sim/mixed-route --model build/terrain.tnrf");
+  static EvalOptions e;
+  ev->add_option("inputs", e.inputs, "Simulated recording directories")->required();
+  ev->add_option("--model", e.model, "Model file (trailnav terrain-train)");
+  ev->add_option("--config", e.config_file, "YAML file with a `terrain:` section (docs/terrain.md)");
+  ev->add_flag("--quiet", e.quiet, "No progress bars");
+  ev->callback([&] { std::exit(evaluate(e)); });
+}
+
+}  // namespace trailnav::cli

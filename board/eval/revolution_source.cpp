@@ -1,0 +1,178 @@
+#include "revolution_source.hpp"
+
+#include <algorithm>
+#include <filesystem>
+
+#include "simulator.hpp"
+#include "trailnav/drivers/recording/recording.hpp"
+#include "trailnav/drivers/velodyne/calibration.hpp"
+#include "trailnav/drivers/velodyne/decoder.hpp"
+#include "trailnav/drivers/velodyne/packet.hpp"
+#include "trailnav/drivers/velodyne/sensor_clock.hpp"
+#include "trailnav/perception/kitti.hpp"
+
+namespace trailnav::eval {
+
+namespace fs = std::filesystem;
+namespace vel = trailnav::velodyne;
+
+namespace {
+
+// Receives finished revolutions from the assembler and hands them on at once.
+class ImmediateSink final : public vel::RevolutionSink {
+ public:
+  ImmediateSink(vel::RangeImageShape shape, const std::function<bool(const vel::RangeImage&)>& on_image)
+      : a_(shape), b_(shape), on_image_(on_image) {}
+  vel::RangeImage& next_image() noexcept override { return use_a_ ? a_ : b_; }
+  void complete(vel::RangeImage& image) noexcept override {
+    use_a_ = !use_a_;
+    if (!stopped_) stopped_ = !on_image_(image);
+  }
+  bool stopped() const noexcept { return stopped_; }
+
+ private:
+  vel::RangeImage a_, b_;
+  bool use_a_ = true;
+  bool stopped_ = false;
+  const std::function<bool(const vel::RangeImage&)>& on_image_;
+};
+
+std::optional<vel::Model> sniff_model(const std::string& input, int stream, std::string& error) {
+  auto opened = recording::RecordingReader::open(input);
+  if (!opened.reader) {
+    error = opened.error;
+    return std::nullopt;
+  }
+  while (auto e = opened.reader->next()) {
+    if (e->stream != stream || e->payload.size() != vel::kDataPacketSize) continue;
+    if (auto m = vel::detect_model(e->payload)) return m;
+  }
+  error = input + ": no lidar data packet names its model";
+  return std::nullopt;
+}
+
+}  // namespace
+
+struct RevolutionSource::Impl {
+  std::vector<std::string> inputs;
+  bool kitti = false;
+  int lidar_stream = -1;
+  int position_stream = -1;
+  std::optional<vel::PacketDecoder> decoder;
+  vel::AssemblerOptions assembler_options;
+};
+
+RevolutionSource::RevolutionSource() : impl_(std::make_unique<Impl>()) {}
+RevolutionSource::~RevolutionSource() = default;
+RevolutionSource::RevolutionSource(RevolutionSource&&) noexcept = default;
+
+std::array<double, 3> RevolutionSource::mount_translation() const noexcept {
+  if (!truth_) return {0.0, 0.0, 0.0};
+  const auto& m = truth_->scenario.robot.lidar_mount;
+  return {m.x(), m.y(), m.z()};
+}
+
+RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& inputs, const std::string& calibration) {
+  if (inputs.empty()) return {std::nullopt, "no input: give a recording directory, a pcap file or KITTI .bin scans"};
+  const bool kitti = std::all_of(inputs.begin(), inputs.end(), [](const std::string& p) { return fs::path(p).extension() == ".bin"; });
+  if (!kitti && inputs.size() > 1) return {std::nullopt, "give one recording or capture file (or only KITTI .bin scans)"};
+  RevolutionSource s;
+  Impl& im = *s.impl_;
+  im.inputs = inputs;
+  im.kitti = kitti;
+  if (!kitti && fs::is_directory(fs::path(inputs[0]) / "truth")) {
+    auto loaded = load_sim_truth((fs::path(inputs[0]) / "truth").string());
+    if (!loaded.truth) return {std::nullopt, loaded.error};
+    s.truth_ = std::move(loaded.truth);
+  }
+  if (kitti) {
+    s.kind_ = "kitti";
+    s.model_ = "HDL-64E (KITTI)";
+    s.shape_ = perception::kitti_shape();
+    return {std::move(s), {}};
+  }
+  s.kind_ = "recording";
+  auto opened = recording::RecordingReader::open(inputs[0]);
+  if (!opened.reader) return {std::nullopt, opened.error};
+  const auto& streams = opened.reader->streams();
+  for (std::size_t i = 0; i < streams.size(); ++i) {
+    if (streams[i].kind != recording::StreamKind::udp) continue;
+    if (im.lidar_stream < 0 && (streams[i].name == "lidar" || streams[i].port == 2368)) im.lidar_stream = static_cast<int>(i);
+    if (im.position_stream < 0 && (streams[i].name == "lidar-position" || streams[i].port == 8308)) {
+      im.position_stream = static_cast<int>(i);
+    }
+  }
+  if (im.lidar_stream < 0) return {std::nullopt, inputs[0] + ": no UDP stream named 'lidar' or on port 2368"};
+  std::string error;
+  const auto model = sniff_model(inputs[0], im.lidar_stream, error);
+  if (!model) return {std::nullopt, error};
+  s.model_ = std::string(vel::model_info(*model).name);
+  std::string calib = calibration;
+  if (calib.empty() && s.truth_) calib = s.truth_->scenario.lidar.calibration;
+  if (calib.empty()) calib = sim::default_calibration_file(*model);
+  std::optional<vel::Calibration> cal;
+  if (!calib.empty() && calib != "builtin") {
+    auto c = vel::load_calibration(calib);
+    if (!c.calibration) return {std::nullopt, c.error};
+    cal = std::move(c.calibration);
+  } else {
+    cal = vel::builtin_calibration(*model);
+    if (!cal) return {std::nullopt, "the " + s.model_ + " needs its calibration: give --calibration FILE"};
+  }
+  vel::DecoderOptions dopt;
+  dopt.selection = vel::ReturnSelection::strongest;
+  auto created = vel::PacketDecoder::create(*model, *cal, dopt);
+  if (!created.decoder) return {std::nullopt, created.error};
+  im.decoder.emplace(std::move(*created.decoder));
+  vel::AssemblerOptions aopt;
+  if (s.truth_) aopt.rpm = s.truth_->scenario.lidar.rpm;
+  auto made = vel::RevolutionAssembler::create(*im.decoder, aopt);
+  if (!made.assembler) return {std::nullopt, made.error};
+  im.assembler_options = aopt;
+  s.shape_ = made.assembler->shape();
+  return {std::move(s), {}};
+}
+
+std::string RevolutionSource::run(const std::function<bool(const vel::RangeImage&)>& on_image,
+                                  const std::function<void(double)>& progress) {
+  Impl& im = *impl_;
+  if (im.kitti) {
+    vel::RangeImage image(shape_);
+    std::vector<float> buffer;
+    for (std::size_t i = 0; i < im.inputs.size(); ++i) {
+      if (Status st = perception::load_kitti_scan(im.inputs[i], buffer, image); !st) return st.message();
+      if (!on_image(image)) break;
+      if (progress) progress(static_cast<double>(i + 1) / static_cast<double>(im.inputs.size()));
+    }
+    return {};
+  }
+  auto opened = recording::RecordingReader::open(im.inputs[0]);
+  if (!opened.reader) return opened.error;
+  recording::RecordingReader& reader = *opened.reader;
+  // Every run starts a fresh assembler (runs are independent and repeatable).
+  auto made = vel::RevolutionAssembler::create(*im.decoder, im.assembler_options);
+  if (!made.assembler) return made.error;
+  vel::RevolutionAssembler& assembler = *made.assembler;
+  ImmediateSink sink(shape_, on_image);
+  vel::SensorClock clock;
+  std::uint64_t events = 0;
+  while (auto e = reader.next()) {
+    if (e->stream == im.position_stream && e->payload.size() == vel::kPositionPacketSize) {
+      vel::PositionPacket pp;
+      if (vel::decode_position_packet(e->payload, pp) == vel::PositionError::none) clock.on_position_packet(pp);
+    } else if (e->stream == im.lidar_stream && e->payload.size() == vel::kDataPacketSize) {
+      const std::int64_t t = clock.resolve(vel::read_u32(e->payload.data() + vel::kTimestampOffset), e->time_ns);
+      if (assembler.add_packet(e->payload, t, sink) != vel::PacketError::none) ++malformed_;
+    } else if (e->stream == im.lidar_stream) {
+      ++malformed_;
+    }
+    if (progress && ++events % 512 == 0) {
+      progress(static_cast<double>(reader.position()) / static_cast<double>(std::max<std::uint64_t>(reader.size(), 1)));
+    }
+    if (sink.stopped()) break;
+  }
+  if (progress) progress(1.0);
+  return {};
+}
+
+}  // namespace trailnav::eval

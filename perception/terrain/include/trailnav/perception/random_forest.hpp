@@ -1,0 +1,96 @@
+// A random forest (Breiman) for the terrain classes: inference on flat
+// arrays, no allocation, and a versioned, checksummed model file.
+//
+// Layout: every tree is a run of nodes in pre-order, so an inner node's left
+// child is the next node and only the right child needs an index. A leaf
+// points at a row of class probabilities. One node is 12 bytes; a walk from
+// root to leaf touches one cache line per level at most.
+//
+// Model file (little-endian; docs/terrain.md):
+//   "TNTERRF\0"  magic (8 bytes)
+//   u32 version (1), u32 features (5), u32 classes (5)
+//   u32 trees, u32 nodes, u32 leaves
+//   trees  x u32 first node of each tree
+//   nodes  x { i16 feature (-1: leaf), u16 0, f32 threshold, i32 right child or leaf row }
+//   leaves x classes x f32 probability
+//   u32 CRC-32 (zlib's) of everything before it
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "trailnav/perception/terrain_class_map.hpp"
+#include "trailnav/perception/terrain_features.hpp"
+#include "trailnav/runtime/status.hpp"
+
+namespace trailnav::perception {
+
+struct ForestNode {
+  std::int16_t feature = -1;  // < 0: leaf
+  std::uint16_t reserved = 0;
+  float threshold = 0.0f;     // feature <= threshold: left (the next node); else right
+  std::int32_t next = 0;      // inner: the right child's node index; leaf: its row in the leaf table
+};
+static_assert(sizeof(ForestNode) == 12);
+
+using ClassDistribution = std::array<float, kTerrainClasses>;
+
+class RandomForest {
+ public:
+  static constexpr std::uint32_t kVersion = 1;
+
+  struct Loaded;
+  // Reads and validates a model file.
+  static Loaded load(const std::string& path);
+  // Validates parts (as training produces them); the error names the first problem.
+  static Loaded from_parts(std::vector<std::uint32_t> roots, std::vector<ForestNode> nodes, std::vector<float> leaves);
+
+  Status save(const std::string& path) const;
+
+  // P(t | f): the mean of the trees' leaf distributions.
+  void predict(const FeatureVector& f, ClassDistribution& out) const noexcept {
+    out.fill(0.0f);
+    const ForestNode* nodes = nodes_.data();
+    for (const std::uint32_t root : roots_) {
+      const ForestNode* n = nodes + root;
+      while (n->feature >= 0) n = f[static_cast<std::size_t>(n->feature)] <= n->threshold ? n + 1 : nodes + n->next;
+      const float* p = leaves_.data() + static_cast<std::size_t>(n->next) * kTerrainClasses;
+      for (int t = 0; t < kTerrainClasses; ++t) out[static_cast<std::size_t>(t)] += p[t];
+    }
+    const float inv = 1.0f / static_cast<float>(roots_.size());
+    for (float& v : out) v *= inv;
+  }
+  // One tree's leaf distribution.
+  const float* tree_leaf(std::size_t tree, const FeatureVector& f) const noexcept {
+    const ForestNode* nodes = nodes_.data();
+    const ForestNode* n = nodes + roots_[tree];
+    while (n->feature >= 0) n = f[static_cast<std::size_t>(n->feature)] <= n->threshold ? n + 1 : nodes + n->next;
+    return leaves_.data() + static_cast<std::size_t>(n->next) * kTerrainClasses;
+  }
+
+  std::size_t trees() const noexcept { return roots_.size(); }
+  std::size_t nodes() const noexcept { return nodes_.size(); }
+  std::size_t leaves() const noexcept { return leaves_.size() / kTerrainClasses; }
+  std::size_t max_depth() const noexcept { return max_depth_; }
+  std::span<const std::uint32_t> roots() const noexcept { return roots_; }
+  std::span<const ForestNode> node_table() const noexcept { return nodes_; }
+  std::span<const float> leaf_table() const noexcept { return leaves_; }
+
+ private:
+  RandomForest() = default;
+  std::vector<std::uint32_t> roots_;
+  std::vector<ForestNode> nodes_;
+  std::vector<float> leaves_;
+  std::size_t max_depth_ = 0;
+};
+
+struct RandomForest::Loaded {
+  std::optional<RandomForest> forest;
+  std::string error;
+};
+
+}  // namespace trailnav::perception

@@ -1,0 +1,64 @@
+// The five-dimensional terrain feature of thesis §7.2.1, from running sums of
+// the points registered in one grid cell, so a cell never stores its points.
+//
+// Sums are kept relative to the first point of the cell (shifted data), which
+// keeps float sums of squares accurate however many points arrive.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string_view>
+
+namespace trailnav::perception {
+
+inline constexpr int kTerrainFeatures = 5;
+
+enum class TerrainFeature : std::uint8_t {
+  max_remission = 0,   // 0..255
+  mean_remission = 1,  // 0..255
+  std_remission = 2,   // 0..255
+  roughness = 3,       // m^2: smallest eigenvalue of the points' covariance
+  slope = 4,           // degrees: angle between that eigenvector (the surface normal) and gravity
+};
+std::string_view terrain_feature_name(TerrainFeature f) noexcept;
+
+using FeatureVector = std::array<float, kTerrainFeatures>;
+
+struct CellStats {
+  std::uint32_t n = 0;
+  float x0 = 0.0f, y0 = 0.0f, z0 = 0.0f, r0 = 0.0f;  // the first point (x, y from the cell centre)
+  float max_r = 0.0f;
+  float sr = 0.0f, srr = 0.0f;                        // remission sums, shifted by r0
+  float sx = 0.0f, sy = 0.0f, sz = 0.0f;              // coordinate sums, shifted by the first point
+  float sxx = 0.0f, sxy = 0.0f, sxz = 0.0f, syy = 0.0f, syz = 0.0f, szz = 0.0f;
+
+  // x, y relative to the cell's centre; z in the odometry frame; r the remission.
+  void add(float x, float y, float z, float r) noexcept {
+    if (n == 0) {
+      x0 = x;
+      y0 = y;
+      z0 = z;
+      r0 = r;
+      max_r = r;
+    }
+    ++n;
+    const float dx = x - x0, dy = y - y0, dz = z - z0, dr = r - r0;
+    max_r = r > max_r ? r : max_r;
+    sr += dr;
+    srr += dr * dr;
+    sx += dx;
+    sy += dy;
+    sz += dz;
+    sxx += dx * dx;
+    sxy += dx * dy;
+    sxz += dx * dz;
+    syy += dy * dy;
+    syz += dy * dz;
+    szz += dz * dz;
+  }
+};
+
+// The feature of a cell with at least three points.
+FeatureVector compute_terrain_feature(const CellStats& s) noexcept;
+
+}  // namespace trailnav::perception

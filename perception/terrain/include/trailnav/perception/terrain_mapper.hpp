@@ -1,0 +1,120 @@
+// The terrain analysis of thesis §7.2: lidar points registered with the local
+// odometry pose into a rolling grid of running sums, a five-dimensional
+// feature per cell every d metres driven, the random forest's P(t | f) and the
+// Bayes update of the terrain-class map (Eq. 7.15) with classified cells
+// frozen and re-opened (§7.2.3). Everything is allocated by create().
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "trailnav/perception/cloud.hpp"
+#include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_class_map.hpp"
+#include "trailnav/perception/terrain_config.hpp"
+#include "trailnav/perception/terrain_features.hpp"
+
+namespace trailnav::perception {
+
+struct TerrainCounters {
+  std::uint64_t revolutions = 0;
+  std::uint64_t points = 0;           // registered in a cell
+  std::uint64_t outside = 0;          // aligned, but outside the grid
+  std::uint64_t steps = 0;            // classification steps (every d metres)
+  std::uint64_t features = 0;         // computed and classified
+  std::uint64_t frozen_skipped = 0;   // cells with enough points that were already classified
+  std::uint64_t frozen = 0;           // cells that became classified
+  std::uint64_t reopened = 0;         // classified cells opened again after reopen_after
+  std::uint64_t classified_cells = 0; // at the last step
+  std::uint64_t known_cells = 0;      // at the last step
+  AlignCounters align;
+};
+
+// What an offline tool sees of each cell at a step (training data, scores).
+struct TerrainObservation {
+  CellIndex cell;
+  double x = 0.0, y = 0.0;            // the cell's centre, odometry frame
+  std::uint32_t points = 0;
+  FeatureVector feature{};
+  ClassDistribution likelihood{};     // the forest's P(t | f) (uniform without a forest)
+  const TerrainCell* estimate = nullptr;  // the map's cell after the update
+  bool updated = false;               // false: the cell was classified (frozen) and kept its state
+  std::int64_t time_ns = 0;
+};
+
+class TerrainObserver {
+ public:
+  virtual ~TerrainObserver() = default;
+  virtual void observe(const TerrainObservation& o) = 0;
+};
+
+// Per cell of the registration grid.
+struct TerrainWorkCell {
+  CellStats stats;
+  std::uint16_t observations = 0;  // features folded into the class map since (re)opening
+  bool frozen = false;
+  std::int64_t frozen_ns = 0;
+};
+
+class TerrainMapper {
+ public:
+  struct Created;
+  // `forest` may be null (features only, for training); it must outlive the mapper.
+  static Created create(const TerrainConfig& config, const MountParams& mount, const velodyne::RangeImageShape& shape,
+                        const RandomForest* forest);
+
+  // Aligns and registers one revolution, then runs a classification step if
+  // the robot moved d metres (or max_step_interval passed) since the last.
+  // True when a step ran (the class map changed). `poses` may be null.
+  bool process(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
+
+  // The stages on their own, for benchmarks and tests.
+  void align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
+  void register_cloud() noexcept;
+  bool step_due() const noexcept;
+  void step(std::int64_t now_ns) noexcept;
+
+  // Offline only: told about every cell at every step.
+  void set_observer(TerrainObserver* observer) noexcept { observer_ = observer; }
+
+  const TerrainConfig& config() const noexcept { return config_; }
+  const TerrainClassMap& map() const noexcept { return map_; }
+  const RollingGrid<TerrainWorkCell>& work() const noexcept { return work_; }
+  RollingGrid<TerrainWorkCell>& work() noexcept { return work_; }
+  const RevolutionCloud& cloud() const noexcept { return cloud_; }
+  TerrainCounters counters() const noexcept;
+
+ private:
+  TerrainMapper(const TerrainConfig& config, const MountParams& mount, const velodyne::RangeImageShape& shape,
+                const RandomForest* forest);
+  void update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, std::int64_t now_ns) noexcept;
+
+  TerrainConfig config_;
+  CloudAligner aligner_;
+  RevolutionCloud cloud_;
+  const RandomForest* forest_;
+  RollingGrid<TerrainWorkCell> work_;
+  TerrainClassMap map_;
+  TerrainObserver* observer_ = nullptr;
+  TerrainCounters counters_;
+  bool have_step_ = false;
+  double step_x_ = 0.0, step_y_ = 0.0;
+  std::int64_t step_ns_ = 0;
+};
+
+struct TerrainMapper::Created {
+  std::unique_ptr<TerrainMapper> mapper;
+  std::string error;
+};
+
+// The cost layer of §8.1.2 for one cell: the class costs weighted by the
+// cell's distribution; unknown cells cost `unknown_cost`.
+inline float terrain_cost(const TerrainCell& c, const TerrainConfig& config) noexcept {
+  if (!c.known) return config.unknown_cost;
+  float cost = 0.0f;
+  for (int t = 0; t < kTerrainClasses; ++t) cost += c.p[static_cast<std::size_t>(t)] * config.cost[static_cast<std::size_t>(t)];
+  return cost;
+}
+
+}  // namespace trailnav::perception

@@ -1,0 +1,56 @@
+// The terrain thread (thesis §7.3): a thin scheduler task around
+// TerrainMapper, asynchronous to the obstacle thread. Each run takes the
+// newest revolution from its own reader of the lidar driver's revolutions and
+// the poses the pose thread queued for it; after each classification step it
+// publishes a copy of the class map through a Broadcast (the obstacle fusion,
+// the DDS publisher and navigation each hold a reader). It never allocates
+// after construction and never waits.
+#pragma once
+
+#include <cstdint>
+
+#include "trailnav/perception/pose_track.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
+#include "trailnav/runtime/broadcast.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
+#include "trailnav/runtime/wakeup.hpp"
+
+namespace trailnav::perception {
+
+struct TerrainTaskCounters {
+  std::uint64_t runs = 0;
+  std::uint64_t revolutions = 0;  // processed
+  std::uint64_t skipped = 0;      // revolutions that came and went between two runs
+  std::uint64_t poses = 0;
+  std::uint64_t published = 0;    // class-map snapshots
+  std::int64_t last_step_ns = 0;  // sensor time of the newest step
+  TerrainCounters mapper;
+};
+
+class TerrainTask final : public Task {
+ public:
+  // `poses` may be null (no pose stream: the map stays where it started).
+  TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
+              Broadcast<TerrainClassMap>& out, std::size_t pose_history = 512);
+
+  // Woken after each published class map (the DDS publisher). Before the scheduler starts.
+  void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
+
+  void run(const TaskTick& tick) override;
+  const TerrainTaskCounters& counters() const noexcept { return counters_; }
+  TerrainTaskCounters status() const noexcept { return shared_.read(); }
+
+ private:
+  TerrainMapper& mapper_;
+  Broadcast<velodyne::RangeImage>::Reader& revolutions_;
+  PoseQueue* poses_;
+  Broadcast<TerrainClassMap>& out_;
+  PoseTrack track_;
+  std::uint64_t last_sequence_ = 0;
+  TerrainTaskCounters counters_;
+  StatusBoard<TerrainTaskCounters> shared_;
+  Wakeup* notify_ = nullptr;
+};
+
+}  // namespace trailnav::perception

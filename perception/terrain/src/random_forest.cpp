@@ -1,0 +1,202 @@
+#include "trailnav/perception/random_forest.hpp"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+namespace trailnav::perception {
+
+namespace {
+
+constexpr char kMagic[8] = {'T', 'N', 'T', 'E', 'R', 'R', 'F', '\0'};
+constexpr std::uint32_t kMaxNodes = 1u << 24;
+constexpr std::uint32_t kMaxTrees = 4096;
+
+void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+}
+void put_f32(std::vector<std::uint8_t>& out, float f) {
+  std::uint32_t v;
+  std::memcpy(&v, &f, 4);
+  put_u32(out, v);
+}
+
+class Cursor {
+ public:
+  explicit Cursor(const std::vector<std::uint8_t>& data) : data_(data) {}
+  bool u32(std::uint32_t& v) {
+    if (pos_ + 4 > data_.size()) return false;
+    v = 0;
+    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(data_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
+    pos_ += 4;
+    return true;
+  }
+  bool f32(float& f) {
+    std::uint32_t v;
+    if (!u32(v)) return false;
+    std::memcpy(&f, &v, 4);
+    return true;
+  }
+  std::size_t pos() const noexcept { return pos_; }
+
+ private:
+  const std::vector<std::uint8_t>& data_;
+  std::size_t pos_ = 0;
+};
+
+std::string describe_node(std::size_t tree, std::size_t node) {
+  return "tree " + std::to_string(tree) + ", node " + std::to_string(node);
+}
+
+}  // namespace
+
+RandomForest::Loaded RandomForest::from_parts(std::vector<std::uint32_t> roots, std::vector<ForestNode> nodes,
+                                              std::vector<float> leaves) {
+  Loaded result;
+  if (roots.empty()) return {std::nullopt, "the forest has no trees"};
+  if (roots.size() > kMaxTrees) return {std::nullopt, "too many trees (" + std::to_string(roots.size()) + ")"};
+  if (nodes.size() > kMaxNodes) return {std::nullopt, "too many nodes (" + std::to_string(nodes.size()) + ")"};
+  if (leaves.size() % kTerrainClasses != 0) return {std::nullopt, "the leaf table is not a whole number of rows"};
+  const std::size_t leaf_rows = leaves.size() / kTerrainClasses;
+  for (std::size_t r = 0; r < leaf_rows; ++r) {
+    float sum = 0.0f;
+    for (int t = 0; t < kTerrainClasses; ++t) {
+      const float p = leaves[r * kTerrainClasses + static_cast<std::size_t>(t)];
+      if (!std::isfinite(p) || p < 0.0f || p > 1.0f) {
+        return {std::nullopt, "leaf " + std::to_string(r) + ": probability outside [0, 1]"};
+      }
+      sum += p;
+    }
+    if (std::abs(sum - 1.0f) > 1e-3f) return {std::nullopt, "leaf " + std::to_string(r) + ": probabilities do not sum to 1"};
+  }
+  // Trees are consecutive runs of nodes in pre-order; check every tree walks
+  // only forward and inside its own run, so inference always ends at a leaf.
+  std::size_t max_depth = 0;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack;  // node, depth
+  for (std::size_t t = 0; t < roots.size(); ++t) {
+    const std::uint32_t begin = roots[t];
+    const std::uint32_t end = t + 1 < roots.size() ? roots[t + 1] : static_cast<std::uint32_t>(nodes.size());
+    if (begin >= end || end > nodes.size()) {
+      return {std::nullopt, "tree " + std::to_string(t) + ": its first node is out of order or out of range"};
+    }
+    if (t == 0 && begin != 0) return {std::nullopt, "tree 0 does not start at node 0"};
+    std::size_t visited = 0;
+    stack.assign(1, {begin, 1});
+    while (!stack.empty()) {
+      const auto [i, depth] = stack.back();
+      stack.pop_back();
+      ++visited;
+      if (visited > end - begin) return {std::nullopt, describe_node(t, i) + ": nodes are shared or form a cycle"};
+      max_depth = std::max<std::size_t>(max_depth, depth);
+      const ForestNode& n = nodes[i];
+      if (n.feature < 0) {
+        if (n.next < 0 || static_cast<std::size_t>(n.next) >= leaf_rows) {
+          return {std::nullopt, describe_node(t, i) + ": leaf row " + std::to_string(n.next) + " out of range"};
+        }
+        continue;
+      }
+      if (n.feature >= kTerrainFeatures) {
+        return {std::nullopt, describe_node(t, i) + ": feature " + std::to_string(n.feature) + " out of range"};
+      }
+      if (!std::isfinite(n.threshold)) return {std::nullopt, describe_node(t, i) + ": threshold is not a number"};
+      if (i + 1 >= end || n.next <= static_cast<std::int32_t>(i + 1) || static_cast<std::uint32_t>(n.next) >= end) {
+        return {std::nullopt, describe_node(t, i) + ": child index out of range"};
+      }
+      stack.push_back({static_cast<std::uint32_t>(n.next), depth + 1});
+      stack.push_back({i + 1, depth + 1});
+    }
+    if (visited != end - begin) return {std::nullopt, "tree " + std::to_string(t) + ": has nodes no path reaches"};
+  }
+  RandomForest f;
+  f.roots_ = std::move(roots);
+  f.nodes_ = std::move(nodes);
+  f.leaves_ = std::move(leaves);
+  f.max_depth_ = max_depth;
+  result.forest = std::move(f);
+  return result;
+}
+
+Status RandomForest::save(const std::string& path) const {
+  std::vector<std::uint8_t> out(std::begin(kMagic), std::end(kMagic));
+  put_u32(out, kVersion);
+  put_u32(out, kTerrainFeatures);
+  put_u32(out, kTerrainClasses);
+  put_u32(out, static_cast<std::uint32_t>(roots_.size()));
+  put_u32(out, static_cast<std::uint32_t>(nodes_.size()));
+  put_u32(out, static_cast<std::uint32_t>(leaves()));
+  for (std::uint32_t r : roots_) put_u32(out, r);
+  for (const ForestNode& n : nodes_) {
+    put_u32(out, static_cast<std::uint16_t>(n.feature));
+    put_f32(out, n.threshold);
+    put_u32(out, static_cast<std::uint32_t>(n.next));
+  }
+  for (float p : leaves_) put_f32(out, p);
+  put_u32(out, static_cast<std::uint32_t>(crc32(0L, out.data(), static_cast<uInt>(out.size()))));
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (f == nullptr) return Status::error("cannot write " + path + ": " + std::strerror(errno));
+  const bool ok = std::fwrite(out.data(), 1, out.size(), f) == out.size();
+  if (std::fclose(f) != 0 || !ok || std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    return Status::error("cannot write " + path + ": " + std::strerror(errno));
+  }
+  return Status::ok();
+}
+
+RandomForest::Loaded RandomForest::load(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return {std::nullopt, path + ": cannot open: " + std::strerror(errno)};
+  const std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto fail = [&](const std::string& what) { return Loaded{std::nullopt, path + ": " + what}; };
+  if (data.size() < sizeof kMagic || std::memcmp(data.data(), kMagic, sizeof kMagic) != 0) {
+    return fail("not a trailnav terrain model (trailnav terrain-train writes them)");
+  }
+  Cursor c(data);
+  std::uint32_t skip;
+  c.u32(skip);
+  c.u32(skip);  // the magic
+  std::uint32_t version = 0, features = 0, classes = 0, trees = 0, nodes = 0, leaves = 0;
+  if (!c.u32(version)) return fail("truncated header");
+  if (version != kVersion) {
+    return fail("model format version " + std::to_string(version) + "; this build reads version " + std::to_string(kVersion));
+  }
+  if (!c.u32(features) || !c.u32(classes) || !c.u32(trees) || !c.u32(nodes) || !c.u32(leaves)) return fail("truncated header");
+  if (features != kTerrainFeatures || classes != kTerrainClasses) {
+    return fail("model of " + std::to_string(features) + " features and " + std::to_string(classes) +
+                " classes; this build uses " + std::to_string(kTerrainFeatures) + " and " + std::to_string(kTerrainClasses));
+  }
+  if (trees == 0 || trees > kMaxTrees || nodes > kMaxNodes || leaves > kMaxNodes) return fail("implausible sizes in the header");
+  const std::size_t expected = c.pos() + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
+  if (data.size() != expected) {
+    return fail("size " + std::to_string(data.size()) + " bytes, the header announces " + std::to_string(expected) +
+                " (truncated or corrupt)");
+  }
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, data.data(), static_cast<uInt>(data.size() - 4)));
+  std::uint32_t stored = 0;
+  for (std::size_t i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(data[data.size() - 4 + i]) << (8 * i);
+  if (stored != crc) return fail("checksum mismatch: the file is corrupt");
+  std::vector<std::uint32_t> roots(trees);
+  for (auto& r : roots) c.u32(r);
+  std::vector<ForestNode> table(nodes);
+  for (ForestNode& n : table) {
+    std::uint32_t feature = 0, next = 0;
+    c.u32(feature);
+    c.f32(n.threshold);
+    c.u32(next);
+    n.feature = static_cast<std::int16_t>(static_cast<std::uint16_t>(feature & 0xFFFF));
+    if ((feature >> 16) != 0) return fail("node with a malformed feature field");
+    n.next = static_cast<std::int32_t>(next);
+  }
+  std::vector<float> leaf_table(static_cast<std::size_t>(leaves) * kTerrainClasses);
+  for (float& p : leaf_table) c.f32(p);
+  Loaded loaded = from_parts(std::move(roots), std::move(table), std::move(leaf_table));
+  if (!loaded.forest) loaded.error = path + ": " + loaded.error;
+  return loaded;
+}
+
+}  // namespace trailnav::perception

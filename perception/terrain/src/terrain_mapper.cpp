@@ -1,0 +1,187 @@
+#include "trailnav/perception/terrain_mapper.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace trailnav::perception {
+
+namespace {
+FeatureParams alignment_params(const TerrainConfig& c) {
+  FeatureParams p;
+  p.min_range = c.min_range;
+  p.max_range = c.max_range;
+  return p;
+}
+}  // namespace
+
+TerrainMapper::Created TerrainMapper::create(const TerrainConfig& config, const MountParams& mount,
+                                             const velodyne::RangeImageShape& shape, const RandomForest* forest) {
+  if (std::string problem = check_terrain_config(config); !problem.empty()) return {nullptr, problem};
+  if (shape.rings < 1 || shape.max_columns < 8) {
+    return {nullptr, "range images of " + std::to_string(shape.rings) + " rings x " + std::to_string(shape.max_columns) +
+                         " columns are too small for terrain analysis"};
+  }
+  return {std::unique_ptr<TerrainMapper>(new TerrainMapper(config, mount, shape, forest)), {}};
+}
+
+TerrainMapper::TerrainMapper(const TerrainConfig& config, const MountParams& mount,
+                             const velodyne::RangeImageShape& shape, const RandomForest* forest)
+    : config_(config),
+      aligner_(mount, alignment_params(config)),
+      cloud_(CloudShape{shape.rings, shape.max_columns}),
+      forest_(forest),
+      work_(config.map.size_x, config.map.size_y, config.map.resolution),
+      map_(config.map) {}
+
+TerrainCounters TerrainMapper::counters() const noexcept {
+  TerrainCounters c = counters_;
+  c.align = aligner_.counters();
+  return c;
+}
+
+bool TerrainMapper::process(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept {
+  align(image, poses);
+  register_cloud();
+  if (!step_due()) return false;
+  step(cloud_.time_ns);
+  return true;
+}
+
+void TerrainMapper::align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept {
+  aligner_.align(image, poses, cloud_);
+  ++counters_.revolutions;
+}
+
+void TerrainMapper::register_cloud() noexcept {
+  // Both grids follow the robot together, so a cell and its class share a
+  // world index; cells leaving the map are forgotten by both.
+  work_.move_to(cloud_.robot_x, cloud_.robot_y);
+  map_.grid().move_to(cloud_.robot_x, cloud_.robot_y);
+  const double res = work_.resolution();
+  const double inv = 1.0 / res;
+  const CellIndex lo = work_.origin();
+  const std::int32_t nx = work_.size_x(), ny = work_.size_y();
+  // Cell-centre offsets are taken in double from the reference point, then
+  // the small remainders go to float.
+  const double ref_x = cloud_.ref_x, ref_y = cloud_.ref_y;
+  const auto ref_z = static_cast<float>(cloud_.ref_z);
+  std::uint64_t registered = 0, outside = 0;
+  for (int ring = 0; ring < cloud_.rings(); ++ring) {
+    const std::size_t row = cloud_.index(ring, 0);
+    for (int col = 0; col < cloud_.columns(); ++col) {
+      const std::size_t k = row + static_cast<std::size_t>(col);
+      if (cloud_.state[k] == PointState::none) continue;
+      const double wx = ref_x + static_cast<double>(cloud_.x[k]);
+      const double wy = ref_y + static_cast<double>(cloud_.y[k]);
+      const auto ix = static_cast<std::int32_t>(std::floor(wx * inv));
+      const auto iy = static_cast<std::int32_t>(std::floor(wy * inv));
+      if (ix < lo.x || iy < lo.y || ix >= lo.x + nx || iy >= lo.y + ny) {
+        ++outside;
+        continue;
+      }
+      TerrainWorkCell& w = work_.at({ix, iy});
+      w.stats.add(static_cast<float>(wx - (ix + 0.5) * res), static_cast<float>(wy - (iy + 0.5) * res),
+                  cloud_.z[k] + ref_z, cloud_.intensity[k]);
+      ++registered;
+    }
+  }
+  counters_.points += registered;
+  counters_.outside += outside;
+}
+
+bool TerrainMapper::step_due() const noexcept {
+  if (!have_step_) return true;  // the first revolution starts the first interval
+  const double moved = std::hypot(cloud_.robot_x - step_x_, cloud_.robot_y - step_y_);
+  if (moved >= config_.step_distance) return true;
+  return config_.max_step_interval > 0.0 &&
+         static_cast<double>(cloud_.time_ns - step_ns_) >= config_.max_step_interval * 1e9;
+}
+
+void TerrainMapper::step(std::int64_t now_ns) noexcept {
+  if (!have_step_) {
+    // The first revolution only opens the first interval: points keep
+    // accumulating until the robot has moved d.
+    have_step_ = true;
+    step_x_ = cloud_.robot_x;
+    step_y_ = cloud_.robot_y;
+    step_ns_ = now_ns;
+    return;
+  }
+  step_x_ = cloud_.robot_x;
+  step_y_ = cloud_.robot_y;
+  step_ns_ = now_ns;
+  ++counters_.steps;
+  const CellIndex o = work_.origin();
+  std::uint64_t classified = 0, known = 0;
+  work_.for_each_in_window(o, {o.x + work_.size_x(), o.y + work_.size_y()}, [&](CellIndex i, TerrainWorkCell& w) {
+    TerrainCell& c = map_.grid().at(i);
+    if (w.stats.n > 0 || w.frozen) update_cell(w, c, i, now_ns);
+    classified += w.frozen ? 1 : 0;
+    known += c.known ? 1 : 0;
+  });
+  counters_.classified_cells = classified;
+  counters_.known_cells = known;
+  map_.sequence = counters_.steps;
+  map_.time_ns = now_ns;
+}
+
+void TerrainMapper::update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, std::int64_t now_ns) noexcept {
+  if (w.frozen && config_.reopen_after > 0.0 && static_cast<double>(now_ns - w.frozen_ns) >= config_.reopen_after * 1e9) {
+    // Open the cell again (§7.2.3), softened so new evidence can move it.
+    w.frozen = false;
+    w.observations = 0;
+    std::array<float, kTerrainClasses> p = c.p;
+    for (float& v : p) v = 0.8f * v + 0.2f / kTerrainClasses;
+    c.set(p);
+    ++counters_.reopened;
+  }
+  if (w.stats.n < static_cast<std::uint32_t>(config_.min_points)) return;  // keeps accumulating
+  if (w.frozen && observer_ == nullptr) {
+    ++counters_.frozen_skipped;
+    w.stats = CellStats{};
+    return;
+  }
+  TerrainObservation obs;
+  obs.feature = compute_terrain_feature(w.stats);
+  if (forest_ != nullptr) {
+    forest_->predict(obs.feature, obs.likelihood);
+  } else {
+    obs.likelihood.fill(1.0f / kTerrainClasses);
+  }
+  if (w.frozen) {
+    ++counters_.frozen_skipped;
+  } else if (forest_ != nullptr) {
+    // Eq. 7.15 with a uniform prior: P(t | f_1..n) ∝ P(t | f_n) P(t | f_1..n-1).
+    std::array<float, kTerrainClasses> p{};
+    float sum = 0.0f;
+    for (int t = 0; t < kTerrainClasses; ++t) {
+      const auto k = static_cast<std::size_t>(t);
+      const float prior = c.known ? c.p[k] : 1.0f / kTerrainClasses;
+      p[k] = std::max(obs.likelihood[k], config_.min_likelihood) * prior;
+      sum += p[k];
+    }
+    for (float& v : p) v = std::max(v / sum, config_.min_probability);
+    c.set(p);
+    ++counters_.features;
+    if (w.observations < 0xFFFF) ++w.observations;
+    if (w.observations > config_.freeze_observations && c.p[static_cast<std::size_t>(c.best)] > config_.freeze_probability) {
+      w.frozen = true;
+      w.frozen_ns = now_ns;
+      ++counters_.frozen;
+    }
+    obs.updated = true;
+  }
+  if (observer_ != nullptr) {
+    obs.cell = i;
+    const WorldPoint centre = work_.cell_center(i);
+    obs.x = centre.x;
+    obs.y = centre.y;
+    obs.points = w.stats.n;
+    obs.estimate = &c;
+    obs.time_ns = now_ns;
+    observer_->observe(obs);
+  }
+  w.stats = CellStats{};
+}
+
+}  // namespace trailnav::perception

@@ -1,0 +1,35 @@
+#include "trailnav/perception/terrain_task.hpp"
+
+namespace trailnav::perception {
+
+TerrainTask::TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
+                         Broadcast<TerrainClassMap>& out, std::size_t pose_history)
+    : mapper_(mapper), revolutions_(revolutions), poses_(poses), out_(out), track_(pose_history) {}
+
+void TerrainTask::run(const TaskTick&) {
+  ++counters_.runs;
+  if (poses_ != nullptr) {
+    Pose p;
+    while (poses_->try_pop(p)) {
+      track_.push(p);
+      ++counters_.poses;
+    }
+  }
+  const velodyne::RangeImage* image = revolutions_.try_read();
+  if (image != nullptr && image->sequence != last_sequence_) {
+    if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
+    last_sequence_ = image->sequence;
+    ++counters_.revolutions;
+    if (mapper_.process(*image, track_.size() > 0 ? &track_ : nullptr) && mapper_.map().sequence > 0) {
+      out_.write_slot().copy_from(mapper_.map());
+      out_.publish();
+      ++counters_.published;
+      counters_.last_step_ns = mapper_.map().time_ns;
+      if (notify_ != nullptr) notify_->notify();
+    }
+    counters_.mapper = mapper_.counters();
+  }
+  shared_.post(counters_);
+}
+
+}  // namespace trailnav::perception
