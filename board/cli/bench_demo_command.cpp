@@ -37,6 +37,10 @@
 
 extern char** environ;
 
+// board/cli/builtin_model.S: the simulated-terrain model, for trailnavd on the bench.
+extern "C" const unsigned char trailnav_builtin_terrain_model[];
+extern "C" const unsigned char trailnav_builtin_terrain_model_end[];
+
 namespace trailnav::cli {
 namespace {
 
@@ -92,6 +96,12 @@ int run_bench_demo(const BenchDemoOptions& o) {
   std::string config = kBenchRobotConfig;
   replace_all(config, "/tmp/trailnav-bench/", (out / "").string());
   replace_all(config, "../sim/trailnav-robot.dbc", "trailnav-robot.dbc");
+  replace_all(config, "../models/terrain-sim.tnrf", "terrain-sim.tnrf");
+  {
+    std::ofstream model(out / "terrain-sim.tnrf", std::ios::binary);
+    model.write(reinterpret_cast<const char*>(trailnav_builtin_terrain_model),
+                trailnav_builtin_terrain_model_end - trailnav_builtin_terrain_model);
+  }
   replace_all(config, "  domain: 0", "  domain: " + std::to_string(o.domain));
   replace_all(config, "  log_sink: auto ", "  log_sink: stderr");
   std::ofstream(out / "trailnav-robot.dbc") << sim::robot_dbc_text();
@@ -133,7 +143,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
   auto maps = dds::Subscriber::create(*domain.domain, "trailnav/obstacle_map", &nav_msgs_msg_dds__OccupancyGrid__desc, 0);
   auto poses = dds::Subscriber::create(*domain.domain, "trailnav/pose", &geometry_msgs_msg_dds__PoseStamped__desc, 0);
   auto health = dds::Subscriber::create(*domain.domain, "diagnostics", &diagnostic_msgs_msg_dds__DiagnosticArray__desc, 0);
-  if (!maps.subscriber || !poses.subscriber || !health.subscriber) {
+  auto terrain = dds::Subscriber::create(*domain.domain, "trailnav/terrain_map", &trailnav_msgs_msg_dds__TerrainClassMap__desc, 0);
+  if (!maps.subscriber || !poses.subscriber || !health.subscriber || !terrain.subscriber) {
     std::fprintf(stderr, "trailnav demo: cannot subscribe\n%s", stop_daemon().c_str());
     return 1;
   }
@@ -162,7 +173,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
     playing = false;
   });
   ProgressBar bar("replay", o.seconds, "s");
-  std::uint64_t n_maps = 0, n_stale = 0, n_poses = 0, n_health = 0, pngs = 0;
+  std::uint64_t n_maps = 0, n_stale = 0, n_poses = 0, n_health = 0, pngs = 0, n_terrain = 0;
+  std::string terrain_summary;
   std::string driving_health;
   DurationHistogram latency;  // ns, within 3 %
   std::vector<std::int8_t> last_map;
@@ -187,6 +199,19 @@ int run_bench_demo(const BenchDemoOptions& o) {
         std::snprintf(name, sizeof name, "obstacle_map-%04llu.png", static_cast<unsigned long long>(n_maps));
         if (write_occupancy_png((out / "maps" / name).string(), g)) ++pngs;
       }
+    });
+    terrain.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& t = *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample);
+      ++n_terrain;
+      std::array<std::uint64_t, 6> count{};
+      for (std::uint32_t i = 0; i < t.class_id._length; ++i) ++count[std::min<std::size_t>(t.class_id._buffer[i], 5)];
+      char text[200];
+      std::snprintf(text, sizeof text, "street %llu, dirt %llu, grass %llu, vegetation %llu, other %llu cells",
+                    static_cast<unsigned long long>(count[0]), static_cast<unsigned long long>(count[1]),
+                    static_cast<unsigned long long>(count[2]), static_cast<unsigned long long>(count[3]),
+                    static_cast<unsigned long long>(count[4]));
+      terrain_summary = text;
+      if (write_terrain_png((out / "maps" / "terrain_map.png").string(), t)) ++pngs;
     });
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
@@ -222,6 +247,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
               "%llu poses (last: %s), %llu health messages\n",
               static_cast<unsigned long long>(n_maps), nanos_to_seconds(lat.p50) * 1e3, nanos_to_seconds(lat.p99) * 1e3, static_cast<unsigned long long>(n_poses),
               last_pose.c_str(), static_cast<unsigned long long>(n_health));
+  std::printf("   %llu terrain-class maps (last: %s; picture %s)\n", static_cast<unsigned long long>(n_terrain),
+              terrain_summary.c_str(), (out / "maps" / "terrain_map.png").c_str());
   std::printf("   health while driving:\n%s", driving_health.c_str());
   std::printf("   after the recording ended: the last map resent %llu time(s) as stale (free cells unknown); health then:\n%s",
               static_cast<unsigned long long>(n_stale), last_health.c_str());

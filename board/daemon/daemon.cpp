@@ -89,8 +89,30 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       d->pose_queue_ = std::make_unique<perception::PoseQueue>();
       d->pose_->add_pose_output(d->pose_queue_.get());
     }
-    d->obstacles_ = std::make_unique<perception::ObstacleTask>(*d->pipeline_, d->lidar_->revolutions(),
-                                                               d->pose_queue_.get(), nullptr, *d->obstacle_out_);
+  }
+  // The terrain thread: its own reader of the revolutions and its own pose
+  // queue; its class maps go to the obstacle fusion (reader 0) and the
+  // publisher (reader 1).
+  if (config.terrain) {
+    auto model = perception::RandomForest::load(config.terrain->model);
+    if (!model.forest) return fail("terrain: " + model.error);
+    d->forest_ = std::move(model.forest);
+    const perception::MountParams mount = config.obstacles ? config.obstacles->mount : perception::MountParams{};
+    auto made = perception::TerrainMapper::create(*config.terrain, mount, d->lidar_->revolution_shape(), &*d->forest_);
+    if (!made.mapper) return fail("terrain: " + made.error);
+    d->terrain_mapper_ = std::move(made.mapper);
+    d->terrain_out_ = std::make_unique<Broadcast<perception::TerrainClassMap>>(2, config.terrain->map);
+    if (d->pose_ && config.terrain_use_pose) {
+      d->terrain_pose_queue_ = std::make_unique<perception::PoseQueue>();
+      d->pose_->add_pose_output(d->terrain_pose_queue_.get());
+    }
+    d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_, d->lidar_->revolutions(config.obstacles ? 1 : 0),
+                                                           d->terrain_pose_queue_.get(), *d->terrain_out_);
+  }
+  if (config.obstacles) {
+    d->obstacles_ = std::make_unique<perception::ObstacleTask>(
+        *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
+        d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_);
     d->lidar_->set_revolution_event(&d->revolution_event_);
   }
 
@@ -102,6 +124,11 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   dds::PublisherInputs inputs;
   inputs.obstacles = d->obstacle_out_.get();
   inputs.poses = d->pose_ ? &d->pose_->poses() : nullptr;
+  if (d->terrain_out_) {
+    inputs.terrain = &d->terrain_out_->reader(1);
+    inputs.terrain_cost = config.terrain->cost;
+    inputs.unknown_cost = config.terrain->unknown_cost;
+  }
   Daemon* self = d.get();
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
   dds::PublisherOptions popt = config.dds.publisher;
@@ -110,6 +137,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (!pub.publisher) return fail("dds: " + pub.error);
   d->publisher_ = std::move(pub.publisher);
   if (d->obstacles_) d->obstacles_->set_notify(&d->publisher_->wakeup());
+  if (d->terrain_) d->terrain_->set_notify(&d->publisher_->wakeup());
 
   // The task table, in a fixed order.
   auto add = [&](const char* name, Task* task, TaskEvent* event) -> bool {
@@ -124,7 +152,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (!add("lidar", d->lidar_.get(), nullptr) || !add("gps", d->gps_.get(), nullptr) ||
       !add("imu", d->imu_.get(), nullptr) || !add("can", d->can_.get(), nullptr) ||
       !add("gpio", d->gpio_.get(), nullptr) || !add("pose", d->pose_.get(), nullptr) ||
-      !add("obstacles", d->obstacles_.get(), &d->revolution_event_)) {
+      !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr)) {
     return result;
   }
   d->last_runs_.assign(d->scheduler_->task_count(), 0);
@@ -284,6 +312,19 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
             c.skipped > 0 ? "revolutions skipped (too slow)" : "ok", "");
     m.value("revolutions", c.revolutions);
     m.value("skipped", c.skipped);
+    m.value("poses", c.poses);
+    m.value("terrain_maps", c.terrain_maps);
+  }
+  if (terrain_) {
+    const perception::TerrainTaskCounters c = terrain_->status();
+    const bool idle = c.published == 0;
+    m.begin(idle ? L::warn : L::ok, "trailnavd: terrain", idle ? "no class map yet (the robot must move d metres)" : "ok", "");
+    m.value("revolutions", c.revolutions);
+    m.value("skipped", c.skipped);
+    m.value("steps", c.mapper.steps);
+    m.value("features", c.mapper.features);
+    m.value("known_cells", c.mapper.known_cells);
+    m.value("classified_cells", c.mapper.classified_cells);
     m.value("poses", c.poses);
   }
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {

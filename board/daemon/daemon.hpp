@@ -20,6 +20,9 @@
 #include "robot_config.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_task.hpp"
+#include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 
@@ -75,6 +78,11 @@ class Daemon {
   std::unique_ptr<perception::ObstaclePipeline> pipeline_;
   std::unique_ptr<Mailbox<perception::ObstacleSnapshot>> obstacle_out_;
   std::unique_ptr<perception::ObstacleTask> obstacles_;
+  std::optional<perception::RandomForest> forest_;
+  std::unique_ptr<perception::TerrainMapper> terrain_mapper_;
+  std::unique_ptr<perception::PoseQueue> terrain_pose_queue_;
+  std::unique_ptr<Broadcast<perception::TerrainClassMap>> terrain_out_;
+  std::unique_ptr<perception::TerrainTask> terrain_;
   std::unique_ptr<dds::Domain> domain_;
   std::unique_ptr<dds::DdsPublisher> publisher_;
   std::vector<std::uint64_t> last_runs_;

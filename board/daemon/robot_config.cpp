@@ -6,6 +6,7 @@
 
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/drivers/velodyne/calibration.hpp"
+#include "trailnav/perception/random_forest.hpp"
 
 namespace trailnav::daemon {
 
@@ -135,12 +136,13 @@ gpio::GpioDriverOptions parse_gpio(const ConfigNode& n) {
   return o;
 }
 
-pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles) {
+pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles, bool& feed_terrain) {
   pose::PoseEstimatorOptions o;
   o.utm.antenna = vec3(n, "antenna", o.utm.antenna);
   o.utm.zone = static_cast<int>(n.integer("utm_zone", 0, 60, 0));
   o.utm.min_baseline = n.number("min_baseline_m", 0.5, 1000.0, o.utm.min_baseline);
   feed_obstacles = n.boolean("feed_obstacles", true);
+  feed_terrain = n.boolean("feed_terrain", true);
   n.reject_unknown_keys();
   return o;
 }
@@ -200,13 +202,20 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   if (auto n = root.optional_map("imu")) c.imu = parse_imu(*n);
   if (auto n = root.optional_map("can")) c.can = parse_can(*n);
   if (auto n = root.optional_map("gpio")) c.gpio = parse_gpio(*n);
-  if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose);
+  if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose, c.terrain_use_pose);
   if (auto n = root.optional_map("obstacles")) {
     c.obstacles = perception::parse_obstacle_config(*n);
     if (!c.lidar) root.fail("obstacles", "the obstacle map needs a lidar: add a 'lidar' section");
     const std::string problem = perception::check_obstacle_config(*c.obstacles);
     if (!problem.empty()) root.fail("obstacles", problem);
   }
+  if (auto n = root.optional_map("terrain")) {
+    c.terrain = perception::parse_terrain_config(*n);
+    if (!c.lidar) root.fail("terrain", "the terrain map needs a lidar: add a 'lidar' section");
+    if (c.terrain->model.empty()) n->fail("model", "the terrain classifier needs its model file (trailnav terrain-train)");
+    if (auto m = perception::RandomForest::load(c.terrain->model); !m.forest) n->fail("model", m.error);
+  }
+  if (c.lidar) c.lidar->driver.revolution_readers = std::max(1, (c.obstacles ? 1 : 0) + (c.terrain ? 1 : 0));
   if (c.pose && !c.imu && !c.can) root.fail("pose", "the pose needs wheel odometry ('can') or an IMU ('imu')");
   c.dds = parse_dds(root.map("dds"));
 
@@ -224,7 +233,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"can", c.can.has_value(), TaskKind::periodic},
                         {"gpio", c.gpio.has_value(), TaskKind::periodic},
                         {"pose", c.pose.has_value(), TaskKind::periodic},
-                        {"obstacles", c.obstacles.has_value(), TaskKind::event}};
+                        {"obstacles", c.obstacles.has_value(), TaskKind::event},
+                        {"terrain", c.terrain.has_value(), TaskKind::periodic}};
   for (const Part& part : parts) {
     if (!part.configured) continue;
     const TaskSpec& t = require_task(c.tasks, part.name, root, "tasks");
@@ -239,7 +249,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                                   [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
-                         "lidar, gps, imu, can, gpio, pose, obstacles");
+                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain");
     }
   }
   root.reject_unknown_keys();

@@ -18,6 +18,7 @@
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/terrain_config.hpp"
 #include "trailnav/runtime/runtime_config.hpp"
 
 namespace trailnav::daemon {
@@ -53,6 +54,8 @@ struct RobotConfig {
   std::optional<pose::PoseEstimatorOptions> pose;
   std::optional<perception::ObstacleConfig> obstacles;
   bool obstacles_use_pose = true;
+  std::optional<perception::TerrainConfig> terrain;
+  bool terrain_use_pose = true;
   DdsSection dds;
 };
 

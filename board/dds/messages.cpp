@@ -74,6 +74,31 @@ void OccupancyGridMessage::fill(const perception::ObstacleSnapshot& s, bool stal
   }
 }
 
+void OccupancyGridMessage::fill_cost(const perception::TerrainClassMap& map,
+                                     const std::array<float, perception::kTerrainClasses>& cost, float unknown_cost) noexcept {
+  const auto& g = map.grid();
+  msg_.header.stamp = to_time(map.time_ns);
+  msg_.info.map_load_time = msg_.header.stamp;
+  msg_.info.resolution = static_cast<float>(g.resolution());
+  msg_.info.origin.position.x = g.origin().x * g.resolution();
+  msg_.info.origin.position.y = g.origin().y * g.resolution();
+  msg_.info.origin.position.z = 0.0;
+  const CellIndex o = g.origin();
+  const auto w = static_cast<std::int32_t>(msg_.info.width), h = static_cast<std::int32_t>(msg_.info.height);
+  for (std::int32_t y = 0; y < std::min(h, g.size_y()); ++y) {
+    for (std::int32_t x = 0; x < std::min(w, g.size_x()); ++x) {
+      const perception::TerrainCell& c = g.at({o.x + x, o.y + y});
+      float v = unknown_cost;
+      if (c.known) {
+        v = 0.0f;
+        for (std::size_t t = 0; t < cost.size(); ++t) v += c.p[t] * cost[t];
+      }
+      data_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
+          c.known ? static_cast<std::int8_t>(std::lround(100.0f * std::clamp(v, 0.0f, 1.0f))) : std::int8_t{-1};
+    }
+  }
+}
+
 // --- PoseStamped ---
 
 PoseStampedMessage::PoseStampedMessage(std::string_view frame_id) {
@@ -206,6 +231,12 @@ void TerrainClassMapMessage::set_header(std::int64_t utc_ns, double resolution, 
   msg_.info.map_load_time = msg_.header.stamp;
   msg_.info.resolution = static_cast<float>(resolution);
   msg_.info.origin.position = {origin_x, origin_y, 0.0};
+}
+
+void TerrainClassMapMessage::fill(const perception::TerrainClassMap& map) noexcept {
+  const auto& g = map.grid();
+  set_header(map.time_ns, g.resolution(), g.origin().x * g.resolution(), g.origin().y * g.resolution());
+  map.export_classes(class_id_, confidence_);
 }
 
 // --- DiagnosticArray ---

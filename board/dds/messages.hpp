@@ -54,6 +54,10 @@ class OccupancyGridMessage {
   // free become unknown (-1), obstacles stay.
   // `occupied_percent`: values above it are obstacles.
   void fill(const perception::ObstacleSnapshot& snapshot, bool stale, int occupied_percent = 50) noexcept;
+  // The terrain cost layer (§8.1.2): each cell's expected class cost as 0..100,
+  // -1 where no class is known. The map must have this message's size.
+  void fill_cost(const perception::TerrainClassMap& map, const std::array<float, perception::kTerrainClasses>& cost,
+                 float unknown_cost) noexcept;
   nav_msgs_msg_dds__OccupancyGrid_& sample() noexcept { return msg_; }
   std::uint32_t width() const noexcept { return msg_.info.width; }
   std::uint32_t height() const noexcept { return msg_.info.height; }
@@ -125,6 +129,8 @@ class TerrainClassMapMessage {
   std::uint8_t* class_id() noexcept { return class_id_.data(); }
   std::uint8_t* confidence() noexcept { return confidence_.data(); }
   void set_header(std::int64_t utc_ns, double resolution, double origin_x, double origin_y) noexcept;
+  // Copies a class map of this message's size (no allocation).
+  void fill(const perception::TerrainClassMap& map) noexcept;
 
  private:
   FixedString<64> frame_;

@@ -30,6 +30,14 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     p->grid_.emplace(shape.size_x, shape.size_y, options.odom_frame);
     make(p->map_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.obstacle_map, {true, 1});
   }
+  if (p->inputs_.terrain != nullptr) {
+    const perception::TerrainClassMap& shape = p->inputs_.terrain->last_read();
+    const auto w = shape.grid().size_x(), h = shape.grid().size_y();
+    p->terrain_msg_.emplace(w, h, options.odom_frame);
+    p->cost_msg_.emplace(w, h, options.odom_frame);
+    make(p->terrain_writer_, trailnav_msgs_msg_dds__TerrainClassMap__desc, options.topics.terrain_map, {true, 1, Durability::transient_local});
+    make(p->cost_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.terrain_cost, {true, 1, Durability::transient_local});
+  }
   if (p->inputs_.poses != nullptr) {
     make(p->pose_writer_, geometry_msgs_msg_dds__PoseStamped__desc, options.topics.pose, {true, 1});
     make(p->utm_writer_, geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, options.topics.utm_pose, {true, 1});
@@ -58,6 +66,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
   PublisherStats s;
   s.maps = maps_.load(std::memory_order_relaxed);
   s.stale_maps = stale_maps_.load(std::memory_order_relaxed);
+  s.terrain_maps = terrain_maps_.load(std::memory_order_relaxed);
   s.poses = poses_.load(std::memory_order_relaxed);
   s.fixes = fixes_.load(std::memory_order_relaxed);
   s.health = health_.load(std::memory_order_relaxed);
@@ -75,6 +84,7 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
                     stale ? "obstacle map stale: free cells sent as unknown" : "publishing", "trailnavd");
   health_msg_.value("obstacle_maps", s.maps);
   health_msg_.value("stale_maps", s.stale_maps);
+  if (terrain_writer_) health_msg_.value("terrain_maps", s.terrain_maps);
   health_msg_.value("poses", s.poses);
   health_msg_.value("fixes", s.fixes);
   health_msg_.value("write_failures", s.write_failures);
@@ -118,6 +128,19 @@ void DdsPublisher::loop() noexcept {
         if (map_writer_->write(&grid_->sample())) stale_maps_.fetch_add(1, std::memory_order_relaxed);
         last_stale = now;
         lidar_stale_.store(true, std::memory_order_relaxed);
+      }
+    }
+    if (terrain_writer_) {
+      if (const perception::TerrainClassMap* t = inputs_.terrain->try_read()) {
+        terrain_msg_->fill(*t);
+        cost_msg_->fill_cost(*t, inputs_.terrain_cost, inputs_.unknown_cost);
+        const bool a = terrain_writer_->write(&terrain_msg_->sample());
+        const bool b = cost_writer_->write(&cost_msg_->sample());
+        if (a && b) {
+          terrain_maps_.fetch_add(1, std::memory_order_relaxed);
+        } else {
+          failures_.fetch_add(1, std::memory_order_relaxed);
+        }
       }
     }
     if (pose_writer_ && now >= next_pose) {

@@ -6,7 +6,9 @@
 // Obstacle maps go out as soon as they are made, stamped (source time) with
 // the receive time of the lidar packet that completed their revolution, so a
 // subscriber measures the whole latency. Poses go out at `pose_rate_hz`,
-// health every `health_period`. When the lidar falls silent for
+// terrain-class maps and their cost layer after each terrain step (reliable,
+// transient-local: a late joiner gets the newest), health every
+// `health_period`. When the lidar falls silent for
 // `stale_after`, the last map is sent again once a second with its free cells
 // turned unknown: a planner never keeps driving on old free space.
 #pragma once
@@ -23,6 +25,8 @@
 #include "messages.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/perception/terrain_class_map.hpp"
+#include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/wakeup.hpp"
@@ -54,12 +58,17 @@ struct PublisherOptions {
 struct PublisherInputs {
   Mailbox<perception::ObstacleSnapshot>* obstacles = nullptr;  // its slots give the map's size
   Mailbox<pose::PoseSnapshot>* poses = nullptr;
+  // The terrain thread's class maps (its slots give the map's size) and the
+  // class costs of the cost layer.
+  Broadcast<perception::TerrainClassMap>::Reader* terrain = nullptr;
+  std::array<float, perception::kTerrainClasses> terrain_cost{0.1f, 0.2f, 0.4f, 0.8f, 1.0f};
+  float unknown_cost = 1.0f;
   // Fills the health statuses (called on the publisher thread before each health sample).
   std::function<void(DiagnosticsMessage&, Nanos now)> health;
 };
 
 struct PublisherStats {
-  std::uint64_t maps = 0, stale_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
+  std::uint64_t maps = 0, stale_maps = 0, terrain_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
   bool lidar_stale = false;
 };
 
@@ -85,15 +94,17 @@ class DdsPublisher {
   PublisherOptions options_;
   PublisherInputs inputs_;
   Wakeup wakeup_;
-  std::unique_ptr<Writer> map_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
+  std::unique_ptr<Writer> map_writer_, terrain_writer_, cost_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
   std::optional<OccupancyGridMessage> grid_;
+  std::optional<TerrainClassMapMessage> terrain_msg_;
+  std::optional<OccupancyGridMessage> cost_msg_;
   PoseStampedMessage pose_msg_;
   UtmFixMessages utm_msg_;
   DiagnosticsMessage health_msg_;
   std::atomic<bool> running_{false};
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.
-  std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
+  std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
   std::atomic<bool> lidar_stale_{false};
 };
 
