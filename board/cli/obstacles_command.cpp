@@ -2,11 +2,14 @@
 // or KITTI scans: map pictures, raw probabilities, scores against a
 // simulated recording's truth and the KL comparison of the fusion models.
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "commands.hpp"
 #include "obstacle_run.hpp"
+#include "trailnav/perception/terrain_config.hpp"
+#include "trailnav/runtime/config.hpp"
 #include "terminal.hpp"
 
 namespace trailnav::cli {
@@ -17,6 +20,8 @@ struct ObstaclesCliOptions {
   std::string config_file;
   std::string model;
   std::string terrain;
+  std::string terrain_model;
+  std::optional<perception::RandomForest> forest;
   bool quiet = false;
 };
 
@@ -67,13 +72,38 @@ int run(ObstaclesCliOptions& o) {
     if (o.terrain == "truth") {
       o.run.terrain = eval::TerrainMode::truth;
       o.run.config.fixed_class.reset();
+    } else if (o.terrain == "estimated") {
+      o.run.terrain = eval::TerrainMode::estimated;
+      o.run.config.fixed_class.reset();
+      if (!o.config_file.empty()) {
+        try {
+          const ConfigNode root = ConfigNode::load_file(o.config_file);
+          if (auto t = root.optional_map("terrain")) o.run.terrain_config = perception::parse_terrain_config(*t);
+        } catch (const ConfigError& e) {
+          std::fprintf(stderr, "trailnav obstacles: %s\n", e.what());
+          return 2;
+        }
+      }
+      if (!o.terrain_model.empty()) o.run.terrain_config.model = o.terrain_model;
+      if (o.run.terrain_config.model.empty()) {
+        std::fprintf(stderr, "trailnav obstacles: --terrain estimated needs --terrain-model FILE (trailnav terrain-train)\n");
+        return 2;
+      }
+      auto loaded = perception::RandomForest::load(o.run.terrain_config.model);
+      if (!loaded.forest) {
+        std::fprintf(stderr, "trailnav obstacles: %s\n", loaded.error.c_str());
+        return 2;
+      }
+      o.forest = std::move(loaded.forest);
+      o.run.terrain_forest = &*o.forest;
     } else if (o.terrain == "adaptive") {
       o.run.config.fixed_class.reset();
     } else if (const auto c = perception::parse_terrain_class(o.terrain)) {
       o.run.config.fixed_class = *c;
     } else {
       std::fprintf(stderr,
-                   "trailnav obstacles: --terrain %s: allowed are truth, adaptive, street, dirt, grass, vegetation, other\n",
+                   "trailnav obstacles: --terrain %s: allowed are truth, estimated, adaptive, street, dirt, grass, "
+                   "vegetation, other\n",
                    o.terrain.c_str());
       return 2;
     }
@@ -87,7 +117,8 @@ int run(ObstaclesCliOptions& o) {
     return 2;
   }
   const auto& c = r.counters;
-  const char* terrain = o.run.terrain == eval::TerrainMode::truth ? "true classes (adaptive)"
+  const char* terrain = o.run.terrain == eval::TerrainMode::truth       ? "true classes (adaptive)"
+                        : o.run.terrain == eval::TerrainMode::estimated ? "estimated classes (adaptive, terrain analysis)"
                         : o.run.config.fixed_class
                             ? perception::terrain_class_name(*o.run.config.fixed_class).data()
                             : "adaptive (no terrain map: unknown class)";
@@ -102,6 +133,10 @@ int run(ObstaclesCliOptions& o) {
               static_cast<unsigned long long>(r.malformed_packets));
   std::printf("  time per revolution: align %.3f ms, smoothing + features %.3f ms, map update%s %.3f ms\n", r.align_ms,
               r.features_ms, r.kl ? " (PW + PS + PC)" : "", r.map_ms);
+  if (o.run.terrain == eval::TerrainMode::estimated) {
+    std::printf("  terrain analysis: %llu steps, %.3f ms per revolution\n", static_cast<unsigned long long>(r.terrain_steps),
+                r.terrain_ms);
+  }
   if (r.scored) {
     std::printf("  scores against truth within %.0f m (tolerance %d cell):\n", o.run.score_radius, o.run.tolerance_cells);
     for (int m = 0; m < perception::kFusionModels; ++m) {
@@ -132,6 +167,7 @@ void add_obstacles_command(CLI::App& app) {
       "Examples:\n"
       "  trailnav obstacles build/sim/meadow --terrain truth --out build/obstacles\n"
       "  trailnav obstacles build/sim/meadow --terrain street     # the basic approach with street parameters\n"
+      "  trailnav obstacles build/sim/meadow --terrain estimated --terrain-model board/models/terrain-sim.tnrf\n"
       "  trailnav obstacles ../shared/data/kitti/*.bin --out build/kitti");
   static ObstaclesCliOptions o;
   cmd->add_option("inputs", o.run.inputs, "A recording directory, a pcap file, or KITTI .bin files")->required();
@@ -139,8 +175,11 @@ void add_obstacles_command(CLI::App& app) {
   cmd->add_option("--model", o.model, "Fusion model of the main map: PW (Dirac, most likely class), PS (smooth, most "
                                       "likely class) or PC (smooth, full class distribution; default)");
   cmd->add_option("--terrain", o.terrain,
-                  "Terrain classes: truth (a simulated recording's true classes), adaptive (the configured terrain "
-                  "map), or one class for every cell: street, dirt, grass, vegetation, other");
+                  "Terrain classes: truth (a simulated recording's true classes), estimated (the terrain analysis "
+                  "with --terrain-model), adaptive (no terrain map: unknown class), or one class for every cell: "
+                  "street, dirt, grass, vegetation, other");
+  cmd->add_option("--terrain-model", o.terrain_model,
+                  "Terrain model for --terrain estimated (trailnav terrain-train; e.g. board/models/terrain-sim.tnrf)");
   cmd->add_option("--out", o.run.out_dir, "Directory for the map pictures and raw probabilities");
   cmd->add_option("--png-every", o.run.png_every, "Also write the maps every N revolutions (0: only the last)")
       ->capture_default_str();

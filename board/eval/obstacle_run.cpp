@@ -8,6 +8,7 @@
 
 #include "png.hpp"
 #include "revolution_source.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
 #include "sim_truth.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
 #include "world.hpp"
@@ -360,6 +361,22 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   }
   std::optional<perception::TerrainClassMap> terrain;
   if (options.terrain == TerrainMode::truth) terrain.emplace();
+  // Estimated classes: the terrain analysis runs on the same revolutions, in
+  // step with the obstacle pipeline (offline there is no second thread, so
+  // the result does not depend on timing).
+  std::unique_ptr<perception::TerrainMapper> mapper;
+  if (options.terrain == TerrainMode::estimated) {
+    if (options.terrain_forest == nullptr) {
+      report.error = "estimated terrain classes need a terrain model";
+      return report;
+    }
+    auto made_mapper = perception::TerrainMapper::create(options.terrain_config, config.mount, shape, options.terrain_forest);
+    if (!made_mapper.mapper) {
+      report.error = "terrain: " + made_mapper.error;
+      return report;
+    }
+    mapper = std::move(made_mapper.mapper);
+  }
   std::optional<Scorer> scorer;
   if (truth) {
     scorer.emplace(*truth, options, config.map.resolution);
@@ -374,7 +391,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   const bool compare = pipeline.map(FusionModel::pw) && pipeline.map(FusionModel::ps) && pipeline.map(FusionModel::pc);
   if (compare) report.kl.emplace();
 
-  double align_ms = 0.0, features_ms = 0.0, map_ms = 0.0;
+  double align_ms = 0.0, features_ms = 0.0, map_ms = 0.0, terrain_ms = 0.0;
   auto write_pngs = [&](const std::string& suffix) {
     if (options.out_dir.empty()) return;
     for (int m = 0; m < perception::kFusionModels; ++m) {
@@ -399,8 +416,15 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       terrain->grid().move_to(pipeline.cloud().robot_x, pipeline.cloud().robot_y);
       fill_truth_terrain(*truth, *terrain);
     }
+    const perception::TerrainClassMap* classes = terrain ? &*terrain : nullptr;
+    if (mapper) {
+      t0 = SteadyClock::now();
+      mapper->process(image, poses ? &*poses : nullptr);
+      terrain_ms += ms_since(t0);
+      if (mapper->map().sequence > 0) classes = &mapper->map();
+    }
     t0 = SteadyClock::now();
-    pipeline.update_maps(terrain ? &*terrain : nullptr);
+    pipeline.update_maps(classes);
     map_ms += ms_since(t0);
     if (options.on_processed) options.on_processed(pipeline);
     const auto rev = report.revolutions;
@@ -479,11 +503,13 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     report.kl->mean_ps /= static_cast<double>(report.kl->snapshots);
   }
   report.counters = pipeline.counters();
+  if (mapper) report.terrain_steps = mapper->counters().steps;
   if (report.revolutions > 0) {
     const auto n = static_cast<double>(report.revolutions);
     report.align_ms = align_ms / n;
     report.features_ms = features_ms / n;
     report.map_ms = map_ms / n;
+    report.terrain_ms = terrain_ms / n;
   }
   return report;
 }

@@ -13,6 +13,8 @@
 
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
+#include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_config.hpp"
 
 namespace trailnav::eval {
 
@@ -20,12 +22,16 @@ namespace trailnav::eval {
 enum class TerrainMode : std::uint8_t {
   config,  // as configured: a fixed class, or adaptive (with no terrain map yet: the unknown class)
   truth,   // adaptive, from the simulated recording's true classes
+  estimated,  // adaptive, from the terrain analysis (§7.2) run alongside on the same recording
 };
 
 struct ObstacleRunOptions {
   std::vector<std::string> inputs;  // one recording directory or capture file, or KITTI .bin files
   perception::ObstacleConfig config;
   TerrainMode terrain = TerrainMode::config;
+  // TerrainMode::estimated: the terrain analysis' settings and its model.
+  perception::TerrainConfig terrain_config;
+  const perception::RandomForest* terrain_forest = nullptr;
   std::string calibration;   // empty: the recording's scenario or the model's default; "builtin": the model's built-in one
   std::string out_dir;       // empty: no files
   int png_every = 0;         // revolutions between map pictures (0: only the last)
@@ -92,6 +98,8 @@ struct ObstacleRunReport {
   double align_ms = 0.0;     // mean per revolution
   double features_ms = 0.0;
   double map_ms = 0.0;       // all maps kept
+  double terrain_ms = 0.0;   // terrain analysis (estimated classes), mean per revolution
+  std::uint64_t terrain_steps = 0;
   std::uint64_t malformed_packets = 0;
   std::vector<std::string> files;  // written
 };

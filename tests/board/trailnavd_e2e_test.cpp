@@ -7,9 +7,16 @@
 // same recording; that pose and health arrive; that the daemon stops cleanly
 // on SIGTERM with zero heap operations on its real-time threads.
 //
-// The daemon's pose does not move this map (pose.feed_obstacles: false):
-// its pose comes from host receive times, which no two runs share, while the
-// lidar's time comes from the recording's GPS time (position packets).
+// The terrain thread runs beside the obstacle thread and its class maps,
+// too, arrive bit for bit as the offline terrain analysis makes them. The
+// obstacle fusion here uses one fixed class (`other`, the class it gives
+// unknown terrain), because which class map a revolution meets depends on
+// how two threads happen to interleave; offline (`trailnav obstacles
+// --terrain estimated`) the two run in lockstep.
+//
+// The daemon's pose moves neither map (pose.feed_obstacles / feed_terrain:
+// false): its pose comes from host receive times, which no two runs share,
+// while the lidar's time comes from the recording's GPS time (position packets).
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -24,6 +31,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <span>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -34,11 +42,14 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "obstacle_run.hpp"
+#include "revolution_source.hpp"
 #include "replayer.hpp"
 #include "robot_config.hpp"
 #include "simulator.hpp"
 #include "subscriber.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/runtime/histogram.hpp"
+#include "trailnav_msgs.h"
 
 extern char** environ;
 
@@ -50,6 +61,7 @@ namespace {
 struct DaemonRun {
   std::size_t maps = 0, matched = 0, identical = 0, offline = 0, poses = 0, health = 0;
   std::size_t stale = 0, stale_correct = 0;  // maps resent after the lidar fell silent
+  std::size_t terrain = 0, terrain_offline = 0, terrain_matched = 0, terrain_identical = 0, terrain_known = 0;
   DurationSummary latency;  // last packet of a revolution -> subscriber
   long rss_start_kb = 0, rss_end_kb = 0;
   int exit_code = -1;
@@ -101,8 +113,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
       << "can: {transport: tunnel, tunnel: 127.0.0.1:" << base + 2 << ", dbc: " << fs::absolute("board/sim/trailnav-robot.dbc").string()
       << ", left: WHEEL_SPEEDS.SpeedLeft, right: WHEEL_SPEEDS.SpeedRight, track: 0.6}\n"
       << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
-      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: false}\n"
-      << "obstacles: {model: PC, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
+      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: false, feed_terrain: false}\n"
+      << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
+      << "terrain: {model: " << fs::absolute("board/models/terrain-sim.tnrf").string() << ", max_step_interval: 1.0}\n"
       << "dds: {domain: " << domain << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5}\n"
       << "tasks:\n"
       << "  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 1.0}\n"
@@ -111,7 +124,8 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
       << "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1.0}\n"
       << "  - {name: gpio, kind: periodic, rate_hz: 200, budget_ms: 1.0}\n"
       << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1.0}\n"
-      << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n";
+      << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n"
+      << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
   }
   auto robot = daemon::load_robot_config(config.string());
   EXPECT_TRUE(robot.config) << robot.error;
@@ -124,7 +138,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   auto maps = dds::Subscriber::create(*dds_domain.domain, "trailnav/obstacle_map", &nav_msgs_msg_dds__OccupancyGrid__desc, 0);
   auto poses = dds::Subscriber::create(*dds_domain.domain, "trailnav/pose", &geometry_msgs_msg_dds__PoseStamped__desc, 0);
   auto health = dds::Subscriber::create(*dds_domain.domain, "diagnostics", &diagnostic_msgs_msg_dds__DiagnosticArray__desc, 0);
-  EXPECT_TRUE(maps.subscriber && poses.subscriber && health.subscriber);
+  auto terrain = dds::Subscriber::create(*dds_domain.domain, "trailnav/terrain_map",
+                                        &trailnav_msgs_msg_dds__TerrainClassMap__desc, 0);
+  EXPECT_TRUE(maps.subscriber && poses.subscriber && health.subscriber && terrain.subscriber);
 
   // trailnavd itself, as systemd would run it (stderr to a file).
   const std::string err_path = (dir / "trailnavd.err").string();
@@ -157,6 +173,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   }
 
   std::map<std::int64_t, std::vector<std::int8_t>> received;
+  std::map<std::int64_t, std::vector<std::uint8_t>> terrain_received;  // class ids then confidences
   DurationHistogram latency;
   std::atomic<bool> replaying{true};
   std::thread player([&] {
@@ -183,6 +200,13 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
       }
       received[stamp].assign(g.data._buffer, g.data._buffer + g.data._length);
       latency.record(r.receive_ns - r.source_ns);
+    });
+    terrain.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& t = *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample);
+      const std::int64_t stamp = static_cast<std::int64_t>(t.header.stamp.sec) * 1'000'000'000 + t.header.stamp.nanosec;
+      std::vector<std::uint8_t>& v = terrain_received[stamp];
+      v.assign(t.class_id._buffer, t.class_id._buffer + t.class_id._length);
+      v.insert(v.end(), t.confidence._buffer, t.confidence._buffer + t.confidence._length);
     });
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.poses; });
     health.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.health; });
@@ -236,6 +260,41 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
                   static_cast<long long>(stamp), cells);
     }
   }
+
+  // The offline terrain analysis on the same revolutions, same config, no pose stream.
+  auto source = eval::RevolutionSource::open({so.out}, "builtin");
+  EXPECT_TRUE(source.source) << source.error;
+  auto forest = perception::RandomForest::load(robot.config->terrain->model);
+  EXPECT_TRUE(forest.forest) << forest.error;
+  if (source.source && forest.forest) {
+    auto mapper = perception::TerrainMapper::create(*robot.config->terrain, robot.config->obstacles->mount,
+                                                    source.source->shape(), &*forest.forest);
+    EXPECT_TRUE(mapper.mapper) << mapper.error;
+    std::map<std::int64_t, std::vector<std::uint8_t>> terrain_offline;
+    const std::size_t cells = static_cast<std::size_t>(robot.config->terrain->map.size_x) *
+                              static_cast<std::size_t>(robot.config->terrain->map.size_y);
+    EXPECT_EQ(source.source->run([&](const velodyne::RangeImage& image) {
+      if (mapper.mapper->process(image, nullptr) && mapper.mapper->map().sequence > 0) {
+        std::vector<std::uint8_t> v(2 * cells);
+        mapper.mapper->map().export_classes(std::span(v).first(cells), std::span(v).subspan(cells));
+        terrain_offline[mapper.mapper->map().time_ns] = std::move(v);
+      }
+      return true;
+    }), "");
+    out.terrain = terrain_received.size();
+    out.terrain_offline = terrain_offline.size();
+    for (const auto& [stamp, data] : terrain_received) {
+      const auto it = terrain_offline.find(stamp);
+      if (it == terrain_offline.end()) continue;
+      ++out.terrain_matched;
+      if (it->second == data) ++out.terrain_identical;
+    }
+    if (!terrain_received.empty()) {
+      const auto& last = terrain_received.rbegin()->second;
+      out.terrain_known = static_cast<std::size_t>(std::count_if(last.begin(), last.begin() + static_cast<std::ptrdiff_t>(cells),
+                                                                 [](std::uint8_t c) { return c < perception::kTerrainClasses; }));
+    }
+  }
   fs::remove_all(dir);
   return out;
 }
@@ -243,9 +302,11 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
 void report(const DaemonRun& r, const char* what) {
   const auto ms = [](Nanos v) { return nanos_to_seconds(v) * 1e3; };
   std::printf("[ trailnavd %s ] maps %zu (offline %zu, same stamp %zu, identical %zu), stale resent %zu, poses %zu, health %zu; "
-              "latency last packet -> subscriber p50 %.2f ms p99 %.2f ms max %.2f ms; RSS %ld -> %ld kB\n%s",
+              "latency last packet -> subscriber p50 %.2f ms p99 %.2f ms max %.2f ms; RSS %ld -> %ld kB; "
+              "terrain maps %zu (offline %zu, same stamp %zu, identical %zu, known cells %zu)\n%s",
               what, r.maps, r.offline, r.matched, r.identical, r.stale, r.poses, r.health, ms(r.latency.p50), ms(r.latency.p99),
-              ms(r.latency.max), r.rss_start_kb, r.rss_end_kb, r.stderr_text.c_str());
+              ms(r.latency.max), r.rss_start_kb, r.rss_end_kb, r.terrain, r.terrain_offline, r.terrain_matched,
+              r.terrain_identical, r.terrain_known, r.stderr_text.c_str());
 }
 
 std::uint64_t number_before(const std::string& text, const std::string& label) {
@@ -273,6 +334,12 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   EXPECT_GE(r.stale, 1u);
   EXPECT_EQ(r.stale_correct, r.stale);
   EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
+  // The terrain thread: a class map every max_step_interval (1 s of sensor
+  // time; the robot's pose is not fed to it here), each as offline.
+  EXPECT_GE(r.terrain_offline, 5u);
+  EXPECT_GE(r.terrain_matched, r.terrain_offline - 1);
+  EXPECT_EQ(r.terrain_identical, r.terrain_matched);
+  EXPECT_GT(r.terrain_known, 1000u);
 }
 
 // The 60 s measurement of the issue: latency percentiles, RSS, overruns.

@@ -1,0 +1,356 @@
+// Terrain analysis (thesis §7.2): the five features from running sums, the
+// random forest's file format and its checks, training (separable data is
+// learnt; the same seed gives the same bytes), the Bayes update of Eq. 7.15
+// with frozen and re-opened cells, and the features of a real KITTI scan.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <numbers>
+#include <random>
+
+#include "test_data.hpp"
+#include "trailnav/perception/forest_training.hpp"
+#include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
+
+namespace trailnav::perception {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kMaxR = static_cast<int>(TerrainFeature::max_remission);
+constexpr int kMeanR = static_cast<int>(TerrainFeature::mean_remission);
+constexpr int kStdR = static_cast<int>(TerrainFeature::std_remission);
+constexpr int kRough = static_cast<int>(TerrainFeature::roughness);
+constexpr int kSlope = static_cast<int>(TerrainFeature::slope);
+
+TEST(TerrainFeatures, FlatCellHasNoRoughnessNoSlopeAndItsRemission) {
+  CellStats s;
+  for (int i = 0; i < 10; ++i) {
+    for (int j = 0; j < 10; ++j) s.add(-0.1f + 0.02f * static_cast<float>(i), -0.1f + 0.02f * static_cast<float>(j), 312.5f, i % 2 ? 30.0f : 40.0f);
+  }
+  const FeatureVector f = compute_terrain_feature(s);
+  EXPECT_FLOAT_EQ(f[kMaxR], 40.0f);
+  EXPECT_NEAR(f[kMeanR], 35.0f, 1e-4);
+  EXPECT_NEAR(f[kStdR], 5.0f, 1e-3);
+  EXPECT_NEAR(f[kRough], 0.0f, 1e-9);
+  EXPECT_NEAR(f[kSlope], 0.0f, 0.05);
+}
+
+TEST(TerrainFeatures, TiltedPlaneGivesItsSlopeAndNoiseGivesRoughness) {
+  for (double deg : {10.0, 25.0, 45.0}) {
+    CellStats s;
+    const double t = std::tan(deg * std::numbers::pi / 180.0);
+    for (int i = 0; i < 8; ++i) {
+      for (int j = 0; j < 8; ++j) {
+        const double x = -0.1 + 0.025 * i, y = -0.1 + 0.025 * j;
+        s.add(static_cast<float>(x), static_cast<float>(y), static_cast<float>(100.0 + t * (0.6 * x + 0.8 * y)), 20.0f);
+      }
+    }
+    EXPECT_NEAR(compute_terrain_feature(s)[kSlope], deg, 0.05) << deg;
+  }
+  // Height noise of sigma 2 cm: the smallest eigenvalue is sigma^2.
+  std::mt19937 rng(3);
+  std::normal_distribution<float> noise(0.0f, 0.02f);
+  std::uniform_real_distribution<float> pos(-0.1f, 0.1f);
+  CellStats s;
+  for (int i = 0; i < 4000; ++i) s.add(pos(rng), pos(rng), 5.0f + noise(rng), 10.0f);
+  EXPECT_NEAR(compute_terrain_feature(s)[kRough], 0.0004f, 0.00003f);
+}
+
+TEST(TerrainFeatures, PointsAlongOneRingTakeTheLinesRise) {
+  // A single scan line crossing the cell, rising 1 in 5: the plane across it
+  // is undetermined, the slope is the line's own.
+  CellStats s;
+  for (int i = 0; i < 20; ++i) {
+    const float x = -0.1f + 0.01f * static_cast<float>(i);
+    s.add(x, 0.001f * static_cast<float>(i % 2), 0.2f * x, 25.0f);
+  }
+  EXPECT_NEAR(compute_terrain_feature(s)[kSlope], std::atan(0.2) * 180.0 / std::numbers::pi, 0.3);
+}
+
+// One stump of a tree: f[0] <= 0.5 ? leaf 0 : leaf 1.
+RandomForest stump(ClassDistribution left, ClassDistribution right) {
+  std::vector<ForestNode> nodes(3);
+  nodes[0] = {0, 0, 0.5f, 2};
+  nodes[1] = {-1, 0, 0.0f, 0};
+  nodes[2] = {-1, 0, 0.0f, 1};
+  std::vector<float> leaves(left.begin(), left.end());
+  leaves.insert(leaves.end(), right.begin(), right.end());
+  auto made = RandomForest::from_parts({0}, std::move(nodes), std::move(leaves));
+  EXPECT_TRUE(made.forest) << made.error;
+  return std::move(*made.forest);
+}
+
+TEST(RandomForest, PredictsTheMeanOfItsTreesAndRejectsBrokenParts) {
+  const RandomForest f = stump({1, 0, 0, 0, 0}, {0, 0, 1, 0, 0});
+  ClassDistribution p;
+  f.predict({0.2f, 0, 0, 0, 0}, p);
+  EXPECT_EQ(p[0], 1.0f);
+  f.predict({0.7f, 0, 0, 0, 0}, p);
+  EXPECT_EQ(p[2], 1.0f);
+
+  auto broken = [](std::vector<ForestNode> nodes, std::vector<float> leaves) {
+    return RandomForest::from_parts({0}, std::move(nodes), std::move(leaves)).error;
+  };
+  const std::vector<float> two_leaves = {1, 0, 0, 0, 0, 0, 1, 0, 0, 0};
+  EXPECT_NE(broken({{7, 0, 0.5f, 2}, {-1, 0, 0, 0}, {-1, 0, 0, 1}}, two_leaves).find("feature 7 out of range"), std::string::npos);
+  EXPECT_NE(broken({{0, 0, 0.5f, 0}, {-1, 0, 0, 0}, {-1, 0, 0, 1}}, two_leaves).find("child index"), std::string::npos);
+  EXPECT_NE(broken({{0, 0, 0.5f, 2}, {-1, 0, 0, 0}, {-1, 0, 0, 5}}, two_leaves).find("leaf row 5"), std::string::npos);
+  EXPECT_NE(broken({{0, 0, NAN, 2}, {-1, 0, 0, 0}, {-1, 0, 0, 1}}, two_leaves).find("not a number"), std::string::npos);
+  EXPECT_NE(broken({{0, 0, 0.5f, 2}, {-1, 0, 0, 0}, {-1, 0, 0, 1}}, {1, 0, 0, 0, 0, 0.5f, 0, 0, 0, 0}).find("sum to 1"),
+            std::string::npos);
+  EXPECT_NE(broken({{0, 0, 0.5f, 2}, {-1, 0, 0, 0}, {-1, 0, 0, 1}, {-1, 0, 0, 1}}, two_leaves).find("no path reaches"),
+            std::string::npos);
+}
+
+std::vector<std::uint8_t> file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+void write_bytes(const std::string& path, const std::vector<std::uint8_t>& b) {
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+
+TEST(RandomForest, ModelFileRoundTripsAndEveryCorruptionIsNamed) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-forest-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string path = (dir / "m.tnrf").string();
+  const RandomForest f = stump({0.7f, 0.3f, 0, 0, 0}, {0, 0, 0.25f, 0.75f, 0});
+  ASSERT_TRUE(f.save(path));
+  auto back = RandomForest::load(path);
+  ASSERT_TRUE(back.forest) << back.error;
+  ClassDistribution a, b;
+  for (float x : {0.1f, 0.5f, 0.9f}) {
+    f.predict({x, 0, 0, 0, 0}, a);
+    back.forest->predict({x, 0, 0, 0, 0}, b);
+    EXPECT_EQ(a, b);
+  }
+  const auto good = file_bytes(path);
+  auto expect_error = [&](std::vector<std::uint8_t> bytes, const std::string& words) {
+    write_bytes(path, bytes);
+    const auto r = RandomForest::load(path);
+    EXPECT_FALSE(r.forest);
+    EXPECT_NE(r.error.find(words), std::string::npos) << r.error;
+    EXPECT_EQ(r.error.rfind(path, 0), 0u) << r.error;  // names the file
+  };
+  auto flipped = good;
+  flipped[40] ^= 0x10;
+  expect_error(flipped, "checksum mismatch");
+  expect_error(std::vector<std::uint8_t>(good.begin(), good.end() - 7), "truncated or corrupt");
+  auto magic = good;
+  magic[0] = 'X';
+  expect_error(magic, "not a trailnav terrain model");
+  auto version = good;
+  version[8] = 9;
+  expect_error(version, "version 9");
+  expect_error({}, "not a trailnav terrain model");
+  EXPECT_NE(RandomForest::load((dir / "missing.tnrf").string()).error.find("cannot open"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+LabelledFeatures separable(int n, std::uint32_t seed) {
+  // Street: bright and flat; grass: dark and rough; other: steep. Noise in
+  // the remaining features.
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  LabelledFeatures d;
+  for (int i = 0; i < n; ++i) {
+    const int c = i % 3;
+    FeatureVector f{u(rng) * 60.0f, 0.0f, u(rng) * 10.0f, 0.0f, u(rng) * 5.0f};
+    if (c == 0) f[kMeanR] = 40.0f + u(rng) * 10.0f, f[kRough] = u(rng) * 1e-4f;
+    if (c == 1) f[kMeanR] = 15.0f + u(rng) * 10.0f, f[kRough] = 1e-3f + u(rng) * 1e-3f;
+    if (c == 2) f[kMeanR] = 15.0f + u(rng) * 35.0f, f[kSlope] = 50.0f + u(rng) * 40.0f;
+    d.add(f, c == 0 ? TerrainClass::street : c == 1 ? TerrainClass::grass : TerrainClass::other);
+  }
+  return d;
+}
+
+TEST(ForestTraining, LearnsSeparableClassesAndIsReproducible) {
+  const LabelledFeatures d = separable(3000, 7);
+  ForestParams p;  // the thesis' defaults
+  EXPECT_EQ(p.trees, 6);
+  EXPECT_EQ(p.features_per_split, 2);
+  EXPECT_EQ(p.min_samples_split, 100);
+  p.threads = 2;
+  const TrainedForest a = train_forest(d, p);
+  ASSERT_TRUE(a.forest) << a.error;
+  EXPECT_GT(a.out_of_bag.accuracy(), 0.99);
+  const LabelledFeatures test = separable(600, 8);
+  ConfusionMatrix m;
+  for (std::size_t i = 0; i < test.size(); ++i) {
+    ClassDistribution q;
+    a.forest->predict(test.features[i], q);
+    m.add(test.labels[i], static_cast<int>(std::max_element(q.begin(), q.end()) - q.begin()));
+  }
+  EXPECT_GT(m.accuracy(), 0.99) << format_confusion(m);
+  // One thread or two, the same seed grows the same forest.
+  p.threads = 1;
+  const TrainedForest b = train_forest(d, p);
+  ASSERT_TRUE(b.forest);
+  ASSERT_EQ(a.forest->nodes(), b.forest->nodes());
+  EXPECT_EQ(std::memcmp(a.forest->node_table().data(), b.forest->node_table().data(), a.forest->nodes() * sizeof(ForestNode)), 0);
+  p.seed = 2;
+  const TrainedForest c = train_forest(d, p);
+  ASSERT_TRUE(c.forest);
+  EXPECT_FALSE(c.forest->nodes() == a.forest->nodes() &&
+               std::memcmp(a.forest->node_table().data(), c.forest->node_table().data(), a.forest->nodes() * sizeof(ForestNode)) == 0);
+  // Bad input is refused with a reason.
+  EXPECT_NE(train_forest(LabelledFeatures{}, p).error, "");
+  p.features_per_split = 9;
+  EXPECT_NE(train_forest(d, p).error.find("features per split"), std::string::npos);
+}
+
+// A mapper over a tiny grid whose cells are fed directly; the forest is a
+// single leaf saying `likelihood` whatever the feature.
+struct FixedMapper {
+  explicit FixedMapper(ClassDistribution likelihood, TerrainConfig config = small_config()) {
+    std::vector<ForestNode> nodes(1);
+    nodes[0] = {-1, 0, 0.0f, 0};
+    forest = std::move(*RandomForest::from_parts({0}, nodes, std::vector<float>(likelihood.begin(), likelihood.end())).forest);
+    auto made = TerrainMapper::create(config, MountParams{}, {4, 64, 1}, &*forest);
+    EXPECT_TRUE(made.mapper) << made.error;
+    mapper = std::move(made.mapper);
+    mapper->step(0);  // opens the first interval
+  }
+  static TerrainConfig small_config() {
+    TerrainConfig c;
+    c.map = {20, 20, 0.2};
+    c.max_range = 2.5f;
+    c.step_distance = 0.5;
+    c.min_points = 5;
+    c.reopen_after = 10.0;
+    return c;
+  }
+  void feed(double x, double y, int points) {
+    TerrainWorkCell& w = mapper->work().at(mapper->work().world_to_index(x, y));
+    for (int i = 0; i < points; ++i) w.stats.add(0.01f * static_cast<float>(i % 7), 0.013f * static_cast<float>(i % 5), 0.0f, 30.0f);
+  }
+  const TerrainCell& cell(double x, double y) { return *mapper->map().grid().find(x, y); }
+  std::optional<RandomForest> forest;
+  std::unique_ptr<TerrainMapper> mapper;
+};
+
+TEST(TerrainMapper, BayesUpdateFreezesAfterTenConfidentObservationsAndReopens) {
+  FixedMapper m({0.6f, 0.1f, 0.1f, 0.1f, 0.1f});
+  m.feed(0.3, 0.3, 4);  // below minPoints: no feature yet, the points wait
+  m.mapper->step(1'000'000'000);
+  EXPECT_FALSE(m.cell(0.3, 0.3).known);
+  m.feed(0.3, 0.3, 1);
+  m.mapper->step(2'000'000'000);
+  ASSERT_TRUE(m.cell(0.3, 0.3).known);
+  EXPECT_NEAR(m.cell(0.3, 0.3).p[0], 0.6f, 1e-6);  // uniform prior: the first posterior is P(t | f)
+  // Eq. 7.15: after n observations P(street) = 0.6^n / (0.6^n + 4 * 0.1^n),
+  // with every class kept at least at min_probability.
+  std::array<double, kTerrainClasses> ref{0.6, 0.1, 0.1, 0.1, 0.1};
+  const double lik[] = {0.6, 0.1, 0.1, 0.1, 0.1};
+  for (int n = 2; n <= 11; ++n) {
+    m.feed(0.3, 0.3, 5);
+    m.mapper->step(std::int64_t{n + 1} * 1'000'000'000);
+    double sum = 0.0;
+    for (int t = 0; t < kTerrainClasses; ++t) sum += ref[static_cast<std::size_t>(t)] *= lik[t];
+    for (double& v : ref) v = std::max(v / sum, 1e-4);
+    sum = 0.0;
+    for (double v : ref) sum += v;
+    EXPECT_NEAR(m.cell(0.3, 0.3).p[0], ref[0] / sum, 1e-5) << n;
+    if (n <= 4) {
+      EXPECT_NEAR(ref[0] / sum, std::pow(0.6, n) / (std::pow(0.6, n) + 4.0 * std::pow(0.1, n)), 1e-6);
+    }
+  }
+  EXPECT_EQ(m.mapper->counters().frozen, 1u);  // more than ten observations, above 0.9
+  EXPECT_EQ(m.mapper->counters().features, 11u);
+  // Frozen: further features leave it alone ...
+  m.feed(0.3, 0.3, 5);
+  m.mapper->step(13'000'000'000);
+  EXPECT_EQ(m.mapper->counters().features, 11u);
+  EXPECT_EQ(m.mapper->counters().frozen_skipped, 1u);
+  // ... until reopen_after (10 s) has passed.
+  m.feed(0.3, 0.3, 5);
+  m.mapper->step(23'000'000'000);
+  EXPECT_EQ(m.mapper->counters().reopened, 1u);
+  EXPECT_EQ(m.mapper->counters().features, 12u);
+  EXPECT_EQ(m.cell(0.3, 0.3).best, TerrainClass::street);
+  // A cell nobody saw is unknown, not classified.
+  EXPECT_FALSE(m.cell(2.5, 2.5).known);
+}
+
+TEST(TerrainMapper, ProbabilitiesStayAboveTheFloorSoEvidenceCanTurnACell) {
+  TerrainConfig c = FixedMapper::small_config();
+  c.freeze_observations = 60000;
+  FixedMapper m({0.0f, 0.0f, 1.0f, 0.0f, 0.0f}, c);  // the forest is certain: grass
+  for (int n = 1; n <= 30; ++n) {
+    m.feed(0.5, 0.5, 5);
+    m.mapper->step(std::int64_t{n} * 1'000'000'000);
+  }
+  const TerrainCell& cell = m.cell(0.5, 0.5);
+  EXPECT_EQ(cell.best, TerrainClass::grass);
+  for (float p : cell.p) EXPECT_GE(p, c.min_probability * 0.99f);
+}
+
+TEST(TerrainMapper, RealKittiRoadCellsAreFlatAndSmooth) {
+  velodyne::RangeImage image(kitti_shape());
+  std::vector<float> buffer;
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, image));
+  TerrainConfig config;
+  config.max_step_interval = 0.0;
+  MountParams mount;
+  mount.translation = {0.0, 0.0, 1.73};  // KITTI's Velodyne above the road
+  auto made = TerrainMapper::create(config, mount, image.shape(), nullptr);
+  ASSERT_TRUE(made.mapper) << made.error;
+  struct Collect final : TerrainObserver {
+    void observe(const TerrainObservation& o) override {
+      // The lane ahead of the car: 4 to 12 m forward, within 1.5 m of the centre line.
+      if (o.x > 4.0 && o.x < 12.0 && std::abs(o.y) < 1.5) road.push_back(o.feature);
+      ++cells;
+    }
+    std::vector<FeatureVector> road;
+    int cells = 0;
+  } collect;
+  made.mapper->set_observer(&collect);
+  made.mapper->process(image, nullptr);  // opens the interval
+  made.mapper->step(1);                  // computes the features
+  EXPECT_GT(collect.cells, 1000);
+  ASSERT_GT(collect.road.size(), 20u);
+  // Asphalt: smooth to a few millimetres, and level; over a 0.2 m cell the
+  // lidar's noise tilts a fitted plane by a few degrees at most.
+  std::vector<float> slopes;
+  int smooth = 0;
+  for (const FeatureVector& f : collect.road) {
+    smooth += f[kRough] < 1e-4f ? 1 : 0;
+    slopes.push_back(f[kSlope]);
+    EXPECT_LT(f[kSlope], 15.0f);
+  }
+  EXPECT_GE(smooth, static_cast<int>(0.95 * static_cast<double>(collect.road.size())));
+  std::nth_element(slopes.begin(), slopes.begin() + static_cast<std::ptrdiff_t>(slopes.size() / 2), slopes.end());
+  EXPECT_LT(slopes[slopes.size() / 2], 6.0f);
+}
+
+TEST(TerrainConfig, DefaultsAreTheThesisAndMistakesNameFileAndLine) {
+  const TerrainConfig d;
+  EXPECT_EQ(d.map.size_x, 300);
+  EXPECT_DOUBLE_EQ(d.map.resolution, 0.2);
+  EXPECT_DOUBLE_EQ(d.step_distance, 0.5);
+  EXPECT_EQ(d.freeze_observations, 10);
+  EXPECT_FLOAT_EQ(d.freeze_probability, 0.9f);
+  EXPECT_FLOAT_EQ(d.cost[static_cast<int>(TerrainClass::grass)], 0.4f);
+  const ConfigNode ok = ConfigNode::parse("terrain:\n  model: m.tnrf\n  cost: {grass: 0.5}\n", "/etc/robot.yaml");
+  const TerrainConfig c = parse_terrain_config(ok.map("terrain"));
+  EXPECT_EQ(c.model, "/etc/m.tnrf");
+  EXPECT_FLOAT_EQ(c.cost[static_cast<int>(TerrainClass::grass)], 0.5f);
+  try {
+    const ConfigNode bad = ConfigNode::parse("terrain:\n  min_points: 1\n", "robot.yaml");
+    (void)parse_terrain_config(bad.map("terrain"));
+    FAIL() << "accepted min_points 1";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("robot.yaml:2"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("min_points"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace trailnav::perception
