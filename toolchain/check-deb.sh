@@ -36,8 +36,11 @@ sed "s|/usr/bin/trailnavd|$root/usr/bin/trailnavd|g" "$root/usr/lib/systemd/syst
 systemd-analyze verify "$unitdir/trailnavd.service"
 systemd-analyze security --offline=true "$unitdir/trailnavd.service" | tail -n1
 rm -rf "$unitdir"
-# The installed binary validates the installed config.
-"$root/usr/bin/trailnavd" --config "$root/etc/trailnav/robot.yaml" --check
+# The installed binary validates the installed config (its absolute paths,
+# the terrain model's, moved under the temporary root).
+sed "s|/usr/share/trailnav/|$root/usr/share/trailnav/|g" "$root/etc/trailnav/robot.yaml" >"$root/etc/trailnav/robot-check.yaml"
+"$root/usr/bin/trailnavd" --config "$root/etc/trailnav/robot-check.yaml" --check
+rm -f "$root/etc/trailnav/robot-check.yaml"
 files=$(dpkg --root="$root" -L trailnav | wc -l)
 echo "check-deb: installed $files paths"
 

@@ -42,7 +42,10 @@ TEST(RobotConfig, ShippedExamplesAreValid) {
     EXPECT_TRUE(r.config->lidar.has_value()) << f;
     EXPECT_TRUE(r.config->obstacles.has_value()) << f;
     EXPECT_TRUE(r.config->pose.has_value()) << f;
-    EXPECT_EQ(r.config->tasks.size(), 7u) << f;
+    EXPECT_TRUE(r.config->terrain.has_value()) << f;
+    EXPECT_TRUE(fs::exists(r.config->terrain->model)) << f;
+    EXPECT_EQ(r.config->lidar->driver.revolution_readers, 2) << f;  // obstacles and terrain
+    EXPECT_EQ(r.config->tasks.size(), 8u) << f;
   }
   const auto bench = daemon::load_robot_config("board/robots/bench.yaml");
   EXPECT_NE(bench.config->dds.cyclone_xml.find("<AllowMulticast>false</AllowMulticast>"), std::string::npos);
@@ -52,6 +55,18 @@ TEST(RobotConfig, ShippedExamplesAreValid) {
 
 TEST(RobotConfig, MinimalLidarAndObstacleConfigIsValid) {
   EXPECT_EQ(load_error(kMinimal), "");
+}
+
+TEST(RobotConfig, TerrainNeedsAModelThatLoadsAndItsTask) {
+  const std::string task = "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 30}\n";
+  EXPECT_EQ(load_error(std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf}\n"), "");
+  std::string e = load_error(std::string(kMinimal) + task + "terrain: {min_points: 20}\n");
+  EXPECT_NE(e.find("model"), std::string::npos) << e;
+  e = load_error(std::string(kMinimal) + task + "terrain: {model: ../sim/trailnav-robot.dbc}\n");
+  EXPECT_NE(e.find(":9:"), std::string::npos) << e;  // the line of the terrain section
+  EXPECT_NE(e.find("not a trailnav terrain model"), std::string::npos) << e;
+  e = load_error(std::string(kMinimal) + "terrain: {model: ../models/terrain-sim.tnrf}\n");
+  EXPECT_NE(e.find("terrain"), std::string::npos) << e;  // no task for it
 }
 
 TEST(RobotConfig, MistakesNameFileLineAndKey) {

@@ -28,7 +28,7 @@ void put_f32(std::vector<std::uint8_t>& out, float f) {
 
 class Cursor {
  public:
-  explicit Cursor(const std::vector<std::uint8_t>& data) : data_(data) {}
+  explicit Cursor(std::span<const std::uint8_t> data) : data_(data) {}
   bool u32(std::uint32_t& v) {
     if (pos_ + 4 > data_.size()) return false;
     v = 0;
@@ -45,7 +45,7 @@ class Cursor {
   std::size_t pos() const noexcept { return pos_; }
 
  private:
-  const std::vector<std::uint8_t>& data_;
+  std::span<const std::uint8_t> data_;
   std::size_t pos_ = 0;
 };
 
@@ -151,7 +151,11 @@ Status RandomForest::save(const std::string& path) const {
 RandomForest::Loaded RandomForest::load(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return {std::nullopt, path + ": cannot open: " + std::strerror(errno)};
-  const std::vector<std::uint8_t> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return parse(bytes, path);
+}
+
+RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, const std::string& path) {
   auto fail = [&](const std::string& what) { return Loaded{std::nullopt, path + ": " + what}; };
   if (data.size() < sizeof kMagic || std::memcmp(data.data(), kMagic, sizeof kMagic) != 0) {
     return fail("not a trailnav terrain model (trailnav terrain-train writes them)");

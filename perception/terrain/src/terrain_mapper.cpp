@@ -39,6 +39,16 @@ TerrainCounters TerrainMapper::counters() const noexcept {
   return c;
 }
 
+void TerrainMapper::copy_state_from(const TerrainMapper& other) noexcept {
+  work_.assign_from(other.work_);
+  map_.copy_from(other.map_);
+  counters_ = other.counters_;
+  have_step_ = other.have_step_;
+  step_x_ = other.step_x_;
+  step_y_ = other.step_y_;
+  step_ns_ = other.step_ns_;
+}
+
 bool TerrainMapper::process(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept {
   align(image, poses);
   register_cloud();

@@ -46,6 +46,8 @@ class RandomForest {
   struct Loaded;
   // Reads and validates a model file.
   static Loaded load(const std::string& path);
+  // Validates a model file's bytes; `name` prefixes the error (a path).
+  static Loaded parse(std::span<const std::uint8_t> data, const std::string& name);
   // Validates parts (as training produces them); the error names the first problem.
   static Loaded from_parts(std::vector<std::uint32_t> roots, std::vector<ForestNode> nodes, std::vector<float> leaves);
 

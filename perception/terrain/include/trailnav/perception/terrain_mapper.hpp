@@ -75,6 +75,10 @@ class TerrainMapper {
   bool step_due() const noexcept;
   void step(std::int64_t now_ns) noexcept;
 
+  // Takes over another mapper's grids and step state (same config; no
+  // allocation): benchmarks repeat one step from the same state.
+  void copy_state_from(const TerrainMapper& other) noexcept;
+
   // Offline only: told about every cell at every step.
   void set_observer(TerrainObserver* observer) noexcept { observer_ = observer; }
 

@@ -1,0 +1,151 @@
+// The terrain thread's hot paths (thesis §7.2) on real HDL-64E data (the
+// KITTI scans): registering a revolution into the 300 x 300 grid, one
+// classification step (features + forest + Bayes update of every cell with
+// enough points) over a map filled by several revolutions, and the forest
+// alone per cell with the shipped model.
+#include <benchmark/benchmark.h>
+
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
+
+namespace {
+
+using namespace trailnav;
+using namespace trailnav::perception;
+
+const RandomForest& model() {
+  static const RandomForest forest = [] {
+    auto m = RandomForest::load("board/models/terrain-sim.tnrf");
+    if (!m.forest) throw std::runtime_error(m.error);
+    return std::move(*m.forest);
+  }();
+  return forest;
+}
+
+std::vector<std::unique_ptr<velodyne::RangeImage>> kitti() {
+  std::vector<std::unique_ptr<velodyne::RangeImage>> images;
+  std::vector<float> buffer;
+  for (int i = 0; i < 2; ++i) {
+    images.push_back(std::make_unique<velodyne::RangeImage>(kitti_shape()));
+    const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
+    if (!load_kitti_scan(path, buffer, *images.back())) throw std::runtime_error("cannot read " + path);
+  }
+  return images;
+}
+
+MountParams kitti_mount() {
+  MountParams m;
+  m.translation = {0.0, 0.0, 1.73};
+  return m;
+}
+
+void BM_TerrainRegisterRevolution(benchmark::State& state) {
+  const auto images = kitti();
+  auto mapper = std::move(TerrainMapper::create(TerrainConfig{}, kitti_mount(), kitti_shape(), &model()).mapper);
+  std::size_t i = 0;
+  for (auto _ : state) {
+    mapper->align(*images[i++ % 2], nullptr);
+    mapper->register_cloud();
+  }
+  state.counters["points"] = static_cast<double>(mapper->counters().points) / static_cast<double>(state.iterations());
+}
+BENCHMARK(BM_TerrainRegisterRevolution)->Unit(benchmark::kMillisecond);
+
+// One step after `revolutions` KITTI revolutions were registered (0.5 m
+// apart at the thesis' 1.2 m/s that is about four).
+void BM_TerrainStep(benchmark::State& state) {
+  const auto images = kitti();
+  TerrainConfig config;
+  auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  filled->align(*images[0], nullptr);
+  filled->register_cloud();
+  filled->step(0);  // opens the interval
+  for (int r = 0; r < state.range(0); ++r) {
+    filled->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
+    filled->register_cloud();
+  }
+  std::uint64_t features = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    mapper->copy_state_from(*filled);
+    const std::uint64_t before = mapper->counters().features;
+    state.ResumeTiming();
+    mapper->step(1'000'000'000);
+    benchmark::DoNotOptimize(mapper->map().grid().at(mapper->map().grid().origin()));
+    features = mapper->counters().features - before;
+  }
+  state.counters["cells_classified"] = static_cast<double>(features);
+}
+BENCHMARK(BM_TerrainStep)->Arg(1)->Arg(4)->Unit(benchmark::kMillisecond);
+
+// The worst case: every one of the 90 000 cells has enough points (20 each,
+// random surfaces and remissions).
+void BM_TerrainStepEveryCell(benchmark::State& state) {
+  TerrainConfig config;
+  auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  filled->step(0);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> u(-0.1f, 0.1f);
+  auto& g = filled->work();
+  for (std::int32_t y = 0; y < g.size_y(); ++y) {
+    for (std::int32_t x = 0; x < g.size_x(); ++x) {
+      CellStats& s = g.at({g.origin().x + x, g.origin().y + y}).stats;
+      const float tilt = u(rng) * 5.0f, base = 100.0f + 200.0f * (u(rng) + 0.1f);
+      for (int k = 0; k < 20; ++k) {
+        const float px = u(rng), py = u(rng);
+        s.add(px, py, tilt * px + 0.05f * u(rng), base + 60.0f * u(rng));
+      }
+    }
+  }
+  std::uint64_t features = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    mapper->copy_state_from(*filled);
+    const std::uint64_t before = mapper->counters().features;
+    state.ResumeTiming();
+    mapper->step(1'000'000'000);
+    features = mapper->counters().features - before;
+  }
+  state.counters["cells_classified"] = static_cast<double>(features);
+}
+BENCHMARK(BM_TerrainStepEveryCell)->Unit(benchmark::kMillisecond);
+
+void BM_ForestPerCell(benchmark::State& state) {
+  const RandomForest& forest = model();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<FeatureVector> cells(4096);
+  for (FeatureVector& f : cells) f = {20.0f + 40.0f * u(rng), 15.0f + 30.0f * u(rng), 2.0f + 8.0f * u(rng), 2e-3f * u(rng) * u(rng), 90.0f * u(rng) * u(rng)};
+  ClassDistribution out;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    forest.predict(cells[i++ & 4095], out);
+    benchmark::DoNotOptimize(out);
+  }
+  state.counters["trees"] = static_cast<double>(forest.trees());
+}
+BENCHMARK(BM_ForestPerCell);
+
+void BM_TerrainFeaturePerCell(benchmark::State& state) {
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<float> u(-0.1f, 0.1f);
+  std::vector<CellStats> cells(1024);
+  for (CellStats& c : cells) {
+    for (int k = 0; k < 20; ++k) c.add(u(rng), u(rng), 0.3f * u(rng), 30.0f + 100.0f * u(rng));
+  }
+  std::size_t i = 0;
+  for (auto _ : state) benchmark::DoNotOptimize(compute_terrain_feature(cells[i++ & 1023]));
+}
+BENCHMARK(BM_TerrainFeaturePerCell);
+
+}  // namespace
+
+BENCHMARK_MAIN();
