@@ -40,6 +40,18 @@ void print_counts(const perception::LabelledFeatures& d) {
   }
 }
 
+// One recording through the terrain analysis, with a progress bar; prints
+// the error and returns false when it fails.
+bool run_recording(eval::TerrainRunOptions& run, const std::string& label, bool quiet, const char* who,
+                   eval::TerrainRunReport& report) {
+  ProgressBar bar(label + " " + fs::path(run.input).filename().string(), 100.0, "%");
+  if (!quiet) run.progress = [&](double f) { bar.update(100.0 * f); };
+  report = eval::run_terrain(run);
+  if (!quiet) bar.finish();
+  if (!report.error.empty()) std::fprintf(stderr, "%s: %s\n", who, report.error.c_str());
+  return report.error.empty();
+}
+
 struct TrainOptions {
   std::vector<std::string> inputs;
   std::string out;
@@ -73,14 +85,8 @@ int train(TrainOptions& o) {
     run.input = input;
     run.config = config;
     run.collect_samples = true;
-    ProgressBar bar("features " + fs::path(input).filename().string(), 100.0, "%");
-    if (!o.quiet) run.progress = [&](double f) { bar.update(100.0 * f); };
-    eval::TerrainRunReport r = eval::run_terrain(run);
-    if (!o.quiet) bar.finish();
-    if (!r.error.empty()) {
-      std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
-      return 2;
-    }
+    eval::TerrainRunReport r;
+    if (!run_recording(run, "features", o.quiet, who, r)) return 2;
     std::printf("%s: %llu revolutions, %llu steps, %zu labelled cell features (%llu mixed cells left out):", input.c_str(),
                 static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(r.counters.steps),
                 r.samples.size(), static_cast<unsigned long long>(r.unlabelled));
@@ -163,14 +169,8 @@ int evaluate(EvalOptions& o) {
     run.input = input;
     run.config = config;
     run.forest = &*loaded.forest;
-    ProgressBar bar("terrain " + fs::path(input).filename().string(), 100.0, "%");
-    if (!o.quiet) run.progress = [&](double f) { bar.update(100.0 * f); };
-    eval::TerrainRunReport r = eval::run_terrain(run);
-    if (!o.quiet) bar.finish();
-    if (!r.error.empty()) {
-      std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
-      return 2;
-    }
+    eval::TerrainRunReport r;
+    if (!run_recording(run, "terrain", o.quiet, who, r)) return 2;
     std::printf("\n%s: %llu revolutions, %llu steps, %llu cell features; align %.2f ms + register %.2f ms per revolution, "
                 "step %.2f ms\n",
                 input.c_str(), static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(r.counters.steps),

@@ -45,6 +45,21 @@ MountParams kitti_mount() {
   return m;
 }
 
+// Times one step of `mapper`, each time from `filled`'s state.
+void time_steps(benchmark::State& state, const TerrainMapper& filled, TerrainMapper& mapper) {
+  std::uint64_t features = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    mapper.copy_state_from(filled);
+    const std::uint64_t before = mapper.counters().features;
+    state.ResumeTiming();
+    mapper.step(1'000'000'000);
+    benchmark::DoNotOptimize(mapper.map().grid().at(mapper.map().grid().origin()));
+    features = mapper.counters().features - before;
+  }
+  state.counters["cells_classified"] = static_cast<double>(features);
+}
+
 void BM_TerrainRegisterRevolution(benchmark::State& state) {
   const auto images = kitti();
   auto mapper = std::move(TerrainMapper::create(TerrainConfig{}, kitti_mount(), kitti_shape(), &model()).mapper);
@@ -71,17 +86,7 @@ void BM_TerrainStep(benchmark::State& state) {
     filled->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
     filled->register_cloud();
   }
-  std::uint64_t features = 0;
-  for (auto _ : state) {
-    state.PauseTiming();
-    mapper->copy_state_from(*filled);
-    const std::uint64_t before = mapper->counters().features;
-    state.ResumeTiming();
-    mapper->step(1'000'000'000);
-    benchmark::DoNotOptimize(mapper->map().grid().at(mapper->map().grid().origin()));
-    features = mapper->counters().features - before;
-  }
-  state.counters["cells_classified"] = static_cast<double>(features);
+  time_steps(state, *filled, *mapper);
 }
 BENCHMARK(BM_TerrainStep)->Arg(1)->Arg(4)->Unit(benchmark::kMillisecond);
 
@@ -105,16 +110,7 @@ void BM_TerrainStepEveryCell(benchmark::State& state) {
       }
     }
   }
-  std::uint64_t features = 0;
-  for (auto _ : state) {
-    state.PauseTiming();
-    mapper->copy_state_from(*filled);
-    const std::uint64_t before = mapper->counters().features;
-    state.ResumeTiming();
-    mapper->step(1'000'000'000);
-    features = mapper->counters().features - before;
-  }
-  state.counters["cells_classified"] = static_cast<double>(features);
+  time_steps(state, *filled, *mapper);
 }
 BENCHMARK(BM_TerrainStepEveryCell)->Unit(benchmark::kMillisecond);
 

@@ -22,13 +22,7 @@ void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, Obstacl
 
 void ObstacleTask::run(const TaskTick&) {
   ++counters_.runs;
-  if (poses_ != nullptr) {
-    Pose p;
-    while (poses_->try_pop(p)) {
-      track_.push(p);
-      ++counters_.poses;
-    }
-  }
+  if (poses_ != nullptr) counters_.poses += track_.drain(*poses_);
   if (terrain_ != nullptr) {
     if (const TerrainClassMap* t = terrain_->try_read()) {
       terrain_map_ = t;

@@ -8,13 +8,7 @@ TerrainTask::TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>:
 
 void TerrainTask::run(const TaskTick&) {
   ++counters_.runs;
-  if (poses_ != nullptr) {
-    Pose p;
-    while (poses_->try_pop(p)) {
-      track_.push(p);
-      ++counters_.poses;
-    }
-  }
+  if (poses_ != nullptr) counters_.poses += track_.drain(*poses_);
   const velodyne::RangeImage* image = revolutions_.try_read();
   if (image != nullptr && image->sequence != last_sequence_) {
     if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;

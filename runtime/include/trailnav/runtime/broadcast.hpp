@@ -3,11 +3,12 @@
 // obstacle thread and by the terrain thread).
 //
 // Like Mailbox, nobody waits, copies or allocates after construction; unlike
-// Mailbox, each of the R readers holds its own slot, so there are R + 2 slots:
-// one per reader, the latest one, and the one the writer fills. A reader takes
-// the latest slot by announcing itself on it and then checking that it is
-// still the latest; the writer only ever fills a slot that is neither the
-// latest nor announced by a reader. Both sides use sequentially consistent
+// Mailbox, each of the R readers holds its own slot. A reader takes the latest
+// slot by announcing itself on it and then checking that it is still the
+// latest; the writer only ever fills a slot that is neither the latest nor
+// announced by a reader. A reader may be announced on two slots at a moment
+// (the one it holds and the one it is trying), so 2R + 2 slots always leave
+// the writer a free one. Both sides use sequentially consistent
 // atomics, which is what makes "announce, then re-check" safe against "publish,
 // then look for a free slot".
 #pragma once
@@ -71,8 +72,8 @@ class Broadcast {
   template <typename... Args>
   explicit Broadcast(std::size_t readers, const Args&... args) : readers_(readers) {
     assert(readers >= 1);
-    slots_.reserve(readers + 2);
-    for (std::size_t i = 0; i < readers + 2; ++i) slots_.push_back(std::make_unique<Slot>(args...));
+    slots_.reserve(2 * readers + 2);
+    for (std::size_t i = 0; i < 2 * readers + 2; ++i) slots_.push_back(std::make_unique<Slot>(args...));
     for (Reader& r : readers_) r.owner_ = this;
   }
   Broadcast(const Broadcast&) = delete;
@@ -98,7 +99,7 @@ class Broadcast {
         return;
       }
     }
-    // Unreachable: R readers hold at most R slots, the latest is one more.
+    // Unreachable: R readers are announced on at most 2R slots, the latest is one more.
     assert(false);
   }
 

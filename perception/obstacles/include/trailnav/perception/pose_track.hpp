@@ -43,6 +43,16 @@ class PoseTrack {
 
   // Appends a sample; false (and counted) when it is not later than the newest.
   bool push(const Pose& pose) noexcept;
+  // Moves every queued sample into the track; returns how many were queued.
+  std::uint64_t drain(PoseQueue& queue) noexcept {
+    std::uint64_t n = 0;
+    Pose p;
+    while (queue.try_pop(p)) {
+      push(p);
+      ++n;
+    }
+    return n;
+  }
   void clear() noexcept { count_ = 0; }
 
   std::size_t size() const noexcept { return count_; }
