@@ -92,8 +92,7 @@ int train(TrainOptions& o) {
                 r.samples.size(), static_cast<unsigned long long>(r.unlabelled));
     print_counts(r.samples);
     std::printf("\n");
-    data.features.insert(data.features.end(), r.samples.features.begin(), r.samples.features.end());
-    data.labels.insert(data.labels.end(), r.samples.labels.begin(), r.samples.labels.end());
+    data.append(r.samples);
   }
   if (!o.save_features.empty()) {
     if (Status st = eval::save_labelled_csv(o.save_features, data); !st) {
@@ -177,12 +176,8 @@ int evaluate(EvalOptions& o) {
                 static_cast<unsigned long long>(r.counters.features), r.align_ms, r.register_ms, r.step_ms);
     std::printf("integrated map, Eq. 7.15 (single features in brackets):\n%s",
                 perception::format_confusion(r.integrated, &r.single).c_str());
-    for (int t = 0; t < perception::kTerrainClasses; ++t) {
-      for (int p = 0; p < perception::kTerrainClasses; ++p) {
-        integrated.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)] += r.integrated.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)];
-        single.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)] += r.single.counts[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)];
-      }
-    }
+    integrated += r.integrated;
+    single += r.single;
     step_ms += r.step_ms * static_cast<double>(r.counters.steps);
     register_ms += r.register_ms * static_cast<double>(r.revolutions);
     steps += r.counters.steps;

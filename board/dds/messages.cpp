@@ -88,11 +88,7 @@ void OccupancyGridMessage::fill_cost(const perception::TerrainClassMap& map,
   for (std::int32_t y = 0; y < std::min(h, g.size_y()); ++y) {
     for (std::int32_t x = 0; x < std::min(w, g.size_x()); ++x) {
       const perception::TerrainCell& c = g.at({o.x + x, o.y + y});
-      float v = unknown_cost;
-      if (c.known) {
-        v = 0.0f;
-        for (std::size_t t = 0; t < cost.size(); ++t) v += c.p[t] * cost[t];
-      }
+      const float v = perception::terrain_cost(c, cost, unknown_cost);
       data_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
           c.known ? static_cast<std::int8_t>(std::lround(100.0f * std::clamp(v, 0.0f, 1.0f))) : std::int8_t{-1};
     }

@@ -12,6 +12,7 @@
 
 #include "obstacle_run.hpp"
 #include "simulator.hpp"
+#include "kitti_scans.hpp"
 #include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 
@@ -22,16 +23,6 @@ using namespace trailnav::perception;
 
 using Images = std::vector<std::unique_ptr<velodyne::RangeImage>>;
 
-Images kitti_images() {
-  Images images;
-  std::vector<float> buffer;
-  for (int i = 0; i < 2; ++i) {
-    images.push_back(std::make_unique<velodyne::RangeImage>(kitti_shape()));
-    const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
-    if (!load_kitti_scan(path, buffer, *images.back())) throw std::runtime_error("cannot read " + path);
-  }
-  return images;
-}
 
 // Two revolutions of a simulated HDL-64E in meadow-block, made once.
 const Images& sim_images() {
@@ -63,7 +54,7 @@ const Images& sim_images() {
 struct Fixture {
   Fixture(int source, FusionModel model) {
     if (source == 0) {
-      owned = kitti_images();
+      owned = bench::kitti_scans();
       for (auto& i : owned) images.push_back(i.get());
     } else {
       for (const auto& i : sim_images()) images.push_back(i.get());

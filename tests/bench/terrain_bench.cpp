@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "kitti_scans.hpp"
 #include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
@@ -28,16 +29,6 @@ const RandomForest& model() {
   return forest;
 }
 
-std::vector<std::unique_ptr<velodyne::RangeImage>> kitti() {
-  std::vector<std::unique_ptr<velodyne::RangeImage>> images;
-  std::vector<float> buffer;
-  for (int i = 0; i < 2; ++i) {
-    images.push_back(std::make_unique<velodyne::RangeImage>(kitti_shape()));
-    const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
-    if (!load_kitti_scan(path, buffer, *images.back())) throw std::runtime_error("cannot read " + path);
-  }
-  return images;
-}
 
 MountParams kitti_mount() {
   MountParams m;
@@ -61,7 +52,7 @@ void time_steps(benchmark::State& state, const TerrainMapper& filled, TerrainMap
 }
 
 void BM_TerrainRegisterRevolution(benchmark::State& state) {
-  const auto images = kitti();
+  const auto images = bench::kitti_scans();
   auto mapper = std::move(TerrainMapper::create(TerrainConfig{}, kitti_mount(), kitti_shape(), &model()).mapper);
   std::size_t i = 0;
   for (auto _ : state) {
@@ -75,7 +66,7 @@ BENCHMARK(BM_TerrainRegisterRevolution)->Unit(benchmark::kMillisecond);
 // One step after `revolutions` KITTI revolutions were registered (0.5 m
 // apart at the thesis' 1.2 m/s that is about four).
 void BM_TerrainStep(benchmark::State& state) {
-  const auto images = kitti();
+  const auto images = bench::kitti_scans();
   TerrainConfig config;
   auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
   auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);

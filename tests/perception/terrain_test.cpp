@@ -330,6 +330,16 @@ TEST(TerrainMapper, RealKittiRoadCellsAreFlatAndSmooth) {
   EXPECT_LT(slopes[slopes.size() / 2], 6.0f);
 }
 
+TEST(TerrainCost, ExpectedClassCostOfACellAndUnknownCells) {
+  const TerrainConfig c;  // §8.1.2: street 0.1, dirt 0.2, grass 0.4, vegetation 0.8, other 1.0
+  TerrainCell cell;
+  EXPECT_FLOAT_EQ(terrain_cost(cell, c.cost, 0.7f), 0.7f);  // not classified yet
+  cell.set({0.0f, 0.0f, 1.0f, 0.0f, 0.0f});
+  EXPECT_FLOAT_EQ(terrain_cost(cell, c.cost, c.unknown_cost), 0.4f);
+  cell.set({0.5f, 0.0f, 0.5f, 0.0f, 0.0f});
+  EXPECT_FLOAT_EQ(terrain_cost(cell, c.cost, c.unknown_cost), 0.25f);
+}
+
 TEST(TerrainConfig, DefaultsAreTheThesisAndMistakesNameFileAndLine) {
   const TerrainConfig d;
   EXPECT_EQ(d.map.size_x, 300);

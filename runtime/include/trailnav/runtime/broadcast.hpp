@@ -55,8 +55,9 @@ class Broadcast {
         return &s.value;
       }
     }
-    // The snapshot most recently returned by try_read() (the first slot's
-    // initial value before any).
+    // The snapshot most recently returned by try_read(). Before the first
+    // one: the first slot's initial value, to be looked at only before the
+    // writer starts (its slots' shape, at start-up).
     const T& last_read() const noexcept { return owner_->slots_[held_ == kNone ? 0 : held_]->value; }
     // Publication number of last_read(): 0 before the first snapshot.
     std::uint64_t last_read_sequence() const noexcept { return sequence_; }

@@ -35,6 +35,16 @@ struct TerrainCell {
   void set(const std::array<float, kTerrainClasses>& distribution) noexcept;
 };
 
+// The cost layer of §8.1.2 for one cell: the class costs (indexed by
+// TerrainClass) weighted by the cell's distribution; `unknown_cost` for a
+// cell not classified yet.
+inline float terrain_cost(const TerrainCell& c, const std::array<float, kTerrainClasses>& cost, float unknown_cost) noexcept {
+  if (!c.known) return unknown_cost;
+  float sum = 0.0f;
+  for (std::size_t t = 0; t < cost.size(); ++t) sum += c.p[t] * cost[t];
+  return sum;
+}
+
 struct TerrainMapShape {
   std::int32_t size_x = 300;
   std::int32_t size_y = 300;

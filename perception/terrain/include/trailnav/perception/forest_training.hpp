@@ -34,6 +34,10 @@ struct LabelledFeatures {
     labels.push_back(static_cast<std::uint8_t>(t));
   }
   std::size_t size() const noexcept { return labels.size(); }
+  void append(const LabelledFeatures& more) {
+    features.insert(features.end(), more.features.begin(), more.features.end());
+    labels.insert(labels.end(), more.labels.begin(), more.labels.end());
+  }
   std::array<std::uint64_t, kTerrainClasses> class_counts() const noexcept;
   // Keeps at most `per_class` samples of each class, chosen at random with `seed`.
   void limit_per_class(std::size_t per_class, std::uint64_t seed);
@@ -43,6 +47,12 @@ struct LabelledFeatures {
 struct ConfusionMatrix {
   std::array<std::array<std::uint64_t, kTerrainClasses>, kTerrainClasses> counts{};
   void add(int truth, int predicted) noexcept { ++counts[static_cast<std::size_t>(truth)][static_cast<std::size_t>(predicted)]; }
+  ConfusionMatrix& operator+=(const ConfusionMatrix& other) noexcept {
+    for (std::size_t t = 0; t < counts.size(); ++t) {
+      for (std::size_t p = 0; p < counts[t].size(); ++p) counts[t][p] += other.counts[t][p];
+    }
+    return *this;
+  }
   std::uint64_t row_total(int truth) const noexcept;
   std::uint64_t total() const noexcept;
   double rate(int truth, int predicted) const noexcept;  // of the row

@@ -58,6 +58,8 @@ struct CellStats {
   }
 };
 
+static_assert(sizeof(CellStats) == 68, "docs/terrain.md gives the cell's size");
+
 // The feature of a cell with at least three points.
 FeatureVector compute_terrain_feature(const CellStats& s) noexcept;
 

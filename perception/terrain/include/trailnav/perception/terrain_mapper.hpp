@@ -112,13 +112,4 @@ struct TerrainMapper::Created {
   std::string error;
 };
 
-// The cost layer of §8.1.2 for one cell: the class costs weighted by the
-// cell's distribution; unknown cells cost `unknown_cost`.
-inline float terrain_cost(const TerrainCell& c, const TerrainConfig& config) noexcept {
-  if (!c.known) return config.unknown_cost;
-  float cost = 0.0f;
-  for (int t = 0; t < kTerrainClasses; ++t) cost += c.p[static_cast<std::size_t>(t)] * config.cost[static_cast<std::size_t>(t)];
-  return cost;
-}
-
 }  // namespace trailnav::perception
