@@ -18,5 +18,6 @@ void add_can_decode_command(CLI::App& app);
 void add_pose_eval_command(CLI::App& app);
 void add_echo_command(CLI::App& app);
 void add_terrain_commands(CLI::App& app);
+void add_route_command(CLI::App& app);
 
 }  // namespace trailnav::cli
