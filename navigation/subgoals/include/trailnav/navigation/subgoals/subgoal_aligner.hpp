@@ -1,0 +1,158 @@
+// Subgoal alignment (thesis §8.2-8.3): moves the subgoals planned on
+// OpenStreetMap onto the trail the terrain-class map shows, by sequential
+// Monte-Carlo sampling over sequences of the K most recent subgoals.
+//
+// The subgoals arrive in the local odometry frame (their UTM positions
+// transformed through the pose estimate), g^L_0..g^L_n. Between consecutive
+// ones the relative step u_k = (theta_k, d_k) is taken from those raw
+// positions. A sample j holds a sequence hypothesis G_j: positions for the
+// window of the K newest subgoals, drawn one after another from the process
+// model of Eq. 8.6,
+//
+//   g_k = g_{k-1} + (d_k + dd) / cos(dth) * (cos(theta_k + dth), sin(theta_k + dth)),
+//
+// with (dd, dth) ~ N(0, diag(sigma_d^2, sigma_theta^2)) (Eq. 8.7); that is a
+// step of d_k + dd along theta_k and (d_k + dd) tan(dth) across it, so the
+// spread is perpendicular to the street (Fig. 8.3). The first subgoal is
+// drawn from N(g^L_0, Sigma_0), Sigma_0 rotated to the street direction
+// (Eq. 8.8); later windows start from the sample's anchor, its position of
+// the subgoal that last left the window.
+//
+// Weights (Eq. 8.9-8.11, 8.14): the cost of a cell is the expected class
+// cost f^E(C) = sum_t f(t) P(t|C) (unknown cells: `unknown_cost`); a subgoal's
+// cost f^N(g) is the mean over the (2N+1)^2 cells around it; its likelihood
+// lambda exp(-lambda f^N(g)); a sequence's weight the anchor's weight times
+// the product over the window. The estimate of each window subgoal is the
+// weighted mean (the expectation).
+//
+// Each update() re-draws every window from its anchor against the current
+// map, so the window always sees the newest terrain. When a new subgoal is
+// pushed, the oldest leaves the window: its estimate is frozen, every
+// sample's position of it becomes the sample's anchor, weighted by the
+// sequence's weight, and when the effective sample size 1 / sum w^2 falls
+// below half the samples the anchors are resampled by stochastic universal
+// sampling (Baker). Windows are thus re-proposed, anchors carry the history.
+//
+// Costs: a summed-area table of f^E over the box the samples cover makes
+// f^N four reads. The Gaussian draws come from inverse-CDF tables built at
+// construction (the angle table holds tan(dth) directly), so a sample step
+// needs no transcendental function. Everything is allocated by the
+// constructor; update() and push() never allocate. Deterministic for a seed.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "trailnav/perception/terrain_class_map.hpp"
+
+namespace trailnav::subgoals {
+
+struct Vec2 {
+  double x = 0.0, y = 0.0;
+};
+
+struct AlignerConfig {
+  std::size_t samples = 1000;        // 1 .. 50000
+  int sequence = 4;                  // K, subgoals sampled together, 1 .. 8
+  int neighbourhood = 2;             // N: (2N+1)^2 cells per subgoal
+  double lambda = 4.0;               // Eq. 8.11
+  double sigma_d = 0.3;              // m, Eq. 8.7
+  double sigma_theta = 0.2;          // rad, Eq. 8.7 (at most 0.4)
+  double sigma_along = 1.5;          // m, Sigma_0 along the street (Eq. 8.8)
+  double sigma_across = 3.0;         // m, Sigma_0 across it
+  std::array<float, perception::kTerrainClasses> cost{0.1f, 0.2f, 0.4f, 0.8f, 1.0f};  // §8.4.1
+  float unknown_cost = 1.0f;         // cells without observations: as `other`
+  double resample_below = 0.5;       // resample when n_eff < this x samples
+  std::size_t max_subgoals = 65536;  // longest route, in subgoals
+  std::uint64_t seed = 1;
+};
+
+// Empty when the configuration is usable, else what is wrong.
+std::string check_aligner_config(const AlignerConfig& config);
+
+struct AlignerCounters {
+  std::uint64_t updates = 0;
+  std::uint64_t pushes = 0;
+  std::uint64_t resamples = 0;
+  double last_neff = 0.0;           // effective sample size after the last update
+  std::uint64_t cells_summed = 0;   // cells of the last update's cost table
+};
+
+class SubgoalAligner {
+ public:
+  // Allocates the samples, tables and the cost box for `map_shape`.
+  // Precondition: check_aligner_config(config) is empty.
+  SubgoalAligner(const AlignerConfig& config, const perception::TerrainMapShape& map_shape);
+
+  const AlignerConfig& config() const noexcept { return config_; }
+
+  // Forgets every subgoal (a new route). Re-seeds the generator with
+  // `seed` + the number of resets, so a run is reproducible.
+  void reset() noexcept;
+  // Appends the next subgoal; false beyond max_subgoals. `raw` as for
+  // update() (it is read only when subgoals were pushed without an update
+  // in between, to draw the one leaving the window).
+  bool push(std::span<const Vec2> raw) noexcept;
+  std::size_t count() const noexcept { return count_; }
+  // First subgoal in the window.
+  std::size_t window_begin() const noexcept { return count_ > static_cast<std::size_t>(k_) ? count_ - static_cast<std::size_t>(k_) : 0; }
+
+  // Re-samples the window against `map`. `raw` holds the raw local positions
+  // of subgoals 0..count()-1 (only window_begin()-1 .. count()-1 are read).
+  void update(const perception::TerrainClassMap& map, std::span<const Vec2> raw) noexcept;
+
+  // The corrected position of subgoal i < count(): the window's current
+  // estimate, or the estimate frozen when it left the window. Before the
+  // first update of a subgoal, its raw position.
+  Vec2 estimate(std::size_t i) const noexcept { return estimates_[i]; }
+  bool estimated(std::size_t i) const noexcept { return estimated_[i] != 0; }
+
+  const AlignerCounters& counters() const noexcept { return counters_; }
+  // Sample j's position of window subgoal i (for plots and tests).
+  Vec2 sample(std::size_t j, std::size_t i) const noexcept { return window_[j * kk_ + i % kk_]; }
+  double weight(std::size_t j) const noexcept { return weight_[j]; }
+
+ private:
+  std::uint64_t next_random() noexcept;
+  void draw_window(std::span<const Vec2> raw) noexcept;
+  void build_cost_table(const perception::TerrainClassMap& map) noexcept;
+  double patch_cost(double x, double y) const noexcept;
+  void resample_anchors() noexcept;
+
+  AlignerConfig config_;
+  int k_;
+  std::size_t kk_;
+  std::size_t n_;
+  double resolution_;
+  std::size_t count_ = 0;
+  std::size_t drawn_ = 0;  // count() at the last draw
+  std::uint64_t resets_ = 0;
+  std::array<std::uint64_t, 4> rng_{};
+
+  static constexpr std::size_t kTable = 4096;
+  std::vector<double> normal_;    // standard normal quantiles
+  std::vector<double> tan_theta_;  // tan(sigma_theta * quantile)
+
+  std::vector<Vec2> window_;     // n x K ring, slot = subgoal % K
+  std::vector<Vec2> anchor_;     // n
+  std::vector<double> log_alpha_;  // n, anchors' log weights
+  std::vector<double> weight_;   // n, normalised
+  std::vector<double> cost_;     // n, summed f^N over the window
+  std::vector<Vec2> anchor_tmp_;
+  std::vector<double> log_alpha_tmp_;
+  std::vector<Vec2> estimates_;  // max_subgoals
+  std::vector<std::uint8_t> estimated_;
+
+  // Summed-area table of f^E over a box of world cells.
+  std::vector<double> sat_;
+  std::int32_t box_x0_ = 0, box_y0_ = 0, box_w_ = 0, box_h_ = 0;
+  std::size_t box_capacity_ = 0;
+  double min_x_ = 0, min_y_ = 0, max_x_ = 0, max_y_ = 0;
+
+  AlignerCounters counters_;
+};
+
+}  // namespace trailnav::subgoals

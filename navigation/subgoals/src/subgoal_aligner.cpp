@@ -1,0 +1,288 @@
+#include "trailnav/navigation/subgoals/subgoal_aligner.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace trailnav::subgoals {
+namespace {
+
+// Standard normal quantile by bisection on the CDF (construction only).
+double normal_quantile(double p) {
+  double lo = -10.0, hi = 10.0;
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (0.5 * std::erfc(-mid / std::sqrt(2.0)) < p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+std::uint64_t rotl(std::uint64_t x, int k) noexcept { return (x << k) | (x >> (64 - k)); }
+
+std::uint64_t splitmix(std::uint64_t& s) noexcept {
+  std::uint64_t z = (s += 0x9e3779b97f4a7c15ULL);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+}  // namespace
+
+std::string check_aligner_config(const AlignerConfig& c) {
+  if (c.samples < 1 || c.samples > 50000) return "samples must be 1..50000 (is " + std::to_string(c.samples) + ")";
+  if (c.sequence < 1 || c.sequence > 8) return "sequence (K) must be 1..8 (is " + std::to_string(c.sequence) + ")";
+  if (c.neighbourhood < 0 || c.neighbourhood > 10) return "neighbourhood (N) must be 0..10";
+  if (!(c.lambda > 0.0 && c.lambda <= 100.0)) return "lambda must be in (0, 100]";
+  if (!(c.sigma_d >= 0.0 && c.sigma_d <= 5.0)) return "sigma_d must be 0..5 m";
+  if (!(c.sigma_theta >= 0.0 && c.sigma_theta <= 0.4)) return "sigma_theta must be 0..0.4 rad";
+  if (!(c.sigma_along >= 0.0 && c.sigma_along <= 50.0) || !(c.sigma_across >= 0.0 && c.sigma_across <= 50.0))
+    return "sigma_along and sigma_across must be 0..50 m";
+  for (float v : c.cost)
+    if (!(v >= 0.0f && v <= 100.0f)) return "class costs must be 0..100";
+  if (!(c.unknown_cost >= 0.0f && c.unknown_cost <= 100.0f)) return "unknown_cost must be 0..100";
+  if (!(c.resample_below >= 0.0 && c.resample_below <= 1.0)) return "resample_below must be 0..1";
+  if (c.max_subgoals < 2 || c.max_subgoals > 10000000) return "max_subgoals must be 2..10000000";
+  return {};
+}
+
+SubgoalAligner::SubgoalAligner(const AlignerConfig& config, const perception::TerrainMapShape& shape)
+    : config_(config),
+      k_(config.sequence),
+      kk_(static_cast<std::size_t>(config.sequence)),
+      n_(config.samples),
+      resolution_(shape.resolution) {
+  normal_.resize(kTable);
+  tan_theta_.resize(kTable);
+  for (std::size_t i = 0; i < kTable; ++i) {
+    const double z = normal_quantile((static_cast<double>(i) + 0.5) / static_cast<double>(kTable));
+    normal_[i] = z;
+    tan_theta_[i] = std::tan(config.sigma_theta * z);
+  }
+  window_.resize(n_ * kk_);
+  anchor_.resize(n_);
+  log_alpha_.assign(n_, 0.0);
+  weight_.assign(n_, 1.0 / static_cast<double>(n_));
+  cost_.resize(n_);
+  anchor_tmp_.resize(n_);
+  log_alpha_tmp_.resize(n_);
+  estimates_.resize(config.max_subgoals);
+  estimated_.assign(config.max_subgoals, 0);
+  box_capacity_ = static_cast<std::size_t>(shape.size_x + 1) * static_cast<std::size_t>(shape.size_y + 1);
+  sat_.resize(box_capacity_);
+  reset();
+}
+
+void SubgoalAligner::reset() noexcept {
+  count_ = 0;
+  drawn_ = 0;
+  std::uint64_t s = config_.seed + 0x51ed2701ULL * ++resets_;
+  for (auto& r : rng_) r = splitmix(s);
+  std::fill(log_alpha_.begin(), log_alpha_.end(), 0.0);
+  std::fill(weight_.begin(), weight_.end(), 1.0 / static_cast<double>(n_));
+  std::fill(estimated_.begin(), estimated_.end(), std::uint8_t{0});
+  counters_.last_neff = static_cast<double>(n_);
+}
+
+std::uint64_t SubgoalAligner::next_random() noexcept {  // xoshiro256**
+  const std::uint64_t result = rotl(rng_[1] * 5, 7) * 9;
+  const std::uint64_t t = rng_[1] << 17;
+  rng_[2] ^= rng_[0];
+  rng_[3] ^= rng_[1];
+  rng_[1] ^= rng_[2];
+  rng_[0] ^= rng_[3];
+  rng_[2] ^= t;
+  rng_[3] = rotl(rng_[3], 45);
+  return result;
+}
+
+void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
+  const std::size_t begin = window_begin();
+  const std::size_t len = count_ - begin;
+  // The raw steps of the window: unit direction and length.
+  std::array<Vec2, 8> dir{};
+  std::array<double, 8> dist{};
+  for (std::size_t i = 0; i < len; ++i) {
+    const std::size_t g = begin + i;
+    if (g == 0) continue;
+    const double dx = raw[g].x - raw[g - 1].x, dy = raw[g].y - raw[g - 1].y;
+    const double d = std::hypot(dx, dy);
+    dist[i] = d;
+    dir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : Vec2{1.0, 0.0};
+  }
+  // Eq. 8.8: the street direction at g_0.
+  Vec2 e0{1.0, 0.0};
+  double along = std::max(config_.sigma_along, config_.sigma_across), across = along;
+  if (begin == 0 && count_ >= 2) {
+    const double dx = raw[1].x - raw[0].x, dy = raw[1].y - raw[0].y, d = std::hypot(dx, dy);
+    if (d > 1e-9) {
+      e0 = {dx / d, dy / d};
+      along = config_.sigma_along;
+      across = config_.sigma_across;
+    }
+  }
+  constexpr std::uint64_t kMask = kTable - 1;
+  double min_x = std::numeric_limits<double>::max(), min_y = min_x, max_x = -min_x, max_y = -min_x;
+  for (std::size_t j = 0; j < n_; ++j) {
+    Vec2* w = &window_[j * kk_];
+    Vec2 prev = anchor_[j];
+    for (std::size_t i = 0; i < len; ++i) {
+      const std::size_t g = begin + i;
+      const std::uint64_t r = next_random();
+      Vec2 p;
+      if (g == 0) {
+        const double a = along * normal_[r & kMask], c = across * normal_[(r >> 12) & kMask];
+        p = {raw[0].x + a * e0.x - c * e0.y, raw[0].y + a * e0.y + c * e0.x};
+      } else {
+        // Eq. 8.6: (d + dd) along the step, (d + dd) tan(dth) across it.
+        const double l = dist[i] + config_.sigma_d * normal_[r & kMask];
+        const double lt = l * tan_theta_[(r >> 12) & kMask];
+        p = {prev.x + l * dir[i].x - lt * dir[i].y, prev.y + l * dir[i].y + lt * dir[i].x};
+      }
+      w[g % kk_] = p;
+      prev = p;
+      min_x = std::min(min_x, p.x);
+      max_x = std::max(max_x, p.x);
+      min_y = std::min(min_y, p.y);
+      max_y = std::max(max_y, p.y);
+    }
+  }
+  min_x_ = min_x;
+  min_y_ = min_y;
+  max_x_ = max_x;
+  max_y_ = max_y;
+  drawn_ = count_;
+}
+
+void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) noexcept {
+  const auto& grid = map.grid();
+  const auto nb = static_cast<std::int32_t>(config_.neighbourhood);
+  const CellIndex lo = grid.world_to_index(min_x_, min_y_);
+  const CellIndex hi = grid.world_to_index(max_x_, max_y_);
+  const CellIndex o = grid.origin();
+  // The samples' box plus the neighbourhood, clipped to the map.
+  const std::int32_t x0 = std::max(lo.x - nb, o.x), y0 = std::max(lo.y - nb, o.y);
+  const std::int32_t x1 = std::min(hi.x + nb, o.x + grid.size_x() - 1), y1 = std::min(hi.y + nb, o.y + grid.size_y() - 1);
+  box_x0_ = x0;
+  box_y0_ = y0;
+  box_w_ = std::max(0, x1 - x0 + 1);
+  box_h_ = std::max(0, y1 - y0 + 1);
+  if (box_w_ == 0 || box_h_ == 0) {
+    counters_.cells_summed = 0;
+    return;
+  }
+  // sat_[(y + 1) * (w + 1) + (x + 1)] = sum of f^E over [0, x] x [0, y].
+  const auto stride = static_cast<std::size_t>(box_w_ + 1);
+  std::fill(sat_.begin(), sat_.begin() + static_cast<std::ptrdiff_t>(stride), 0.0);
+  for (std::int32_t y = 0; y < box_h_; ++y) {
+    double row = 0.0;
+    const std::size_t base = static_cast<std::size_t>(y + 1) * stride;
+    sat_[base] = 0.0;
+    for (std::int32_t x = 0; x < box_w_; ++x) {
+      const perception::TerrainCell& c = grid.at({x0 + x, y0 + y});
+      row += static_cast<double>(perception::terrain_cost(c, config_.cost, config_.unknown_cost));
+      sat_[base + static_cast<std::size_t>(x) + 1] = sat_[base - stride + static_cast<std::size_t>(x) + 1] + row;
+    }
+  }
+  counters_.cells_summed = static_cast<std::uint64_t>(box_w_) * static_cast<std::uint64_t>(box_h_);
+}
+
+double SubgoalAligner::patch_cost(double x, double y) const noexcept {
+  const auto nb = static_cast<std::int32_t>(config_.neighbourhood);
+  const auto cx = static_cast<std::int32_t>(std::floor(x / resolution_)) - box_x0_;
+  const auto cy = static_cast<std::int32_t>(std::floor(y / resolution_)) - box_y0_;
+  const std::int32_t ax = std::max(cx - nb, 0), bx = std::min(cx + nb, box_w_ - 1);
+  const std::int32_t ay = std::max(cy - nb, 0), by = std::min(cy + nb, box_h_ - 1);
+  const double side = 2.0 * nb + 1.0;
+  const double cells = side * side;
+  double inside = 0.0, sum = 0.0;
+  if (ax <= bx && ay <= by) {
+    const auto stride = static_cast<std::size_t>(box_w_ + 1);
+    const auto ux0 = static_cast<std::size_t>(ax), ux1 = static_cast<std::size_t>(bx) + 1;
+    const auto uy0 = static_cast<std::size_t>(ay), uy1 = static_cast<std::size_t>(by) + 1;
+    sum = sat_[uy1 * stride + ux1] - sat_[uy0 * stride + ux1] - sat_[uy1 * stride + ux0] + sat_[uy0 * stride + ux0];
+    inside = static_cast<double>((bx - ax + 1) * (by - ay + 1));
+  }
+  // Cells beyond the map are unknown.
+  return (sum + (cells - inside) * static_cast<double>(config_.unknown_cost)) / cells;
+}
+
+void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<const Vec2> raw) noexcept {
+  if (count_ == 0) return;
+  draw_window(raw);
+  build_cost_table(map);
+  const std::size_t begin = window_begin();
+  double best = -std::numeric_limits<double>::infinity();
+  for (std::size_t j = 0; j < n_; ++j) {
+    const Vec2* w = &window_[j * kk_];
+    double c = 0.0;
+    for (std::size_t g = begin; g < count_; ++g) c += patch_cost(w[g % kk_].x, w[g % kk_].y);
+    const double lw = log_alpha_[j] - config_.lambda * c;  // Eq. 8.11, 8.14 (lambda^K cancels)
+    cost_[j] = lw;
+    best = std::max(best, lw);
+  }
+  double sum = 0.0;
+  for (std::size_t j = 0; j < n_; ++j) {
+    weight_[j] = std::exp(cost_[j] - best);
+    sum += weight_[j];
+  }
+  double sq = 0.0;
+  for (std::size_t j = 0; j < n_; ++j) {
+    weight_[j] /= sum;
+    sq += weight_[j] * weight_[j];
+  }
+  counters_.last_neff = 1.0 / sq;
+  // The expectation of each window subgoal.
+  for (std::size_t g = begin; g < count_; ++g) {
+    double ex = 0.0, ey = 0.0;
+    for (std::size_t j = 0; j < n_; ++j) {
+      const Vec2& p = window_[j * kk_ + g % kk_];
+      ex += weight_[j] * p.x;
+      ey += weight_[j] * p.y;
+    }
+    estimates_[g] = {ex, ey};
+    estimated_[g] = 1;
+  }
+  ++counters_.updates;
+}
+
+void SubgoalAligner::resample_anchors() noexcept {
+  // Stochastic universal sampling: n equally spaced pointers, one random offset.
+  const double step = 1.0 / static_cast<double>(n_);
+  double u = step * static_cast<double>(next_random() >> 11) * 0x1.0p-53;
+  double c = weight_[0];
+  std::size_t i = 0;
+  for (std::size_t j = 0; j < n_; ++j) {
+    while (u > c && i + 1 < n_) c += weight_[++i];
+    anchor_tmp_[j] = anchor_[i];
+    u += step;
+  }
+  std::swap(anchor_, anchor_tmp_);
+  std::fill(log_alpha_.begin(), log_alpha_.end(), 0.0);
+  ++counters_.resamples;
+}
+
+bool SubgoalAligner::push(std::span<const Vec2> raw) noexcept {
+  if (count_ >= config_.max_subgoals) return false;
+  if (count_ >= kk_) {
+    const std::size_t leaving = count_ - kk_;
+    if (drawn_ != count_) {  // pushed without an update: draw the window now
+      draw_window(raw);
+    }
+    if (!estimated_[leaving]) {
+      estimates_[leaving] = raw[leaving];
+    }
+    // The leaving subgoal's positions become the anchors, weighted by their sequences.
+    double sq = 0.0;
+    for (std::size_t j = 0; j < n_; ++j) {
+      anchor_[j] = window_[j * kk_ + leaving % kk_];
+      log_alpha_[j] = std::log(std::max(weight_[j], 1e-300));
+      sq += weight_[j] * weight_[j];
+    }
+    if (1.0 / sq < config_.resample_below * static_cast<double>(n_)) resample_anchors();
+  }
+  ++count_;
+  ++counters_.pushes;
+  return true;
+}
+
+}  // namespace trailnav::subgoals

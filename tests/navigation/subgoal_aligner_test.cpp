@@ -1,0 +1,163 @@
+// The subgoal aligner on terrain maps whose trail is known: subgoals mapped
+// beside the trail are pulled onto it, a junction mapped too far along the
+// road is found where the map shows it, an empty map leaves the subgoals
+// where they were, runs reproduce per seed, and updates never allocate.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+
+#include "trailnav/navigation/subgoals/subgoal_aligner.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+namespace trailnav::subgoals {
+namespace {
+
+using perception::TerrainCell;
+using perception::TerrainClass;
+using perception::TerrainClassMap;
+
+// Sets every cell of the map centred on (cx, cy): street where on_street(x, y), else grass.
+void paint(TerrainClassMap& map, double cx, double cy, const std::function<bool(double, double)>& on_street) {
+  auto& grid = map.grid();
+  grid.move_to(cx, cy);
+  const CellIndex o = grid.origin();
+  for (std::int32_t y = o.y; y < o.y + grid.size_y(); ++y) {
+    for (std::int32_t x = o.x; x < o.x + grid.size_x(); ++x) {
+      const auto c = grid.cell_center({x, y});
+      std::array<float, perception::kTerrainClasses> p{};
+      const bool street = on_street(c.x, c.y);
+      p[static_cast<std::size_t>(street ? TerrainClass::street : TerrainClass::grass)] = 0.9f;
+      for (auto& v : p) v += 0.025f;
+      grid.at({x, y}).set(p);
+    }
+  }
+}
+
+// Raw subgoals every 4 m from (x0, y0) along the polyline; aligns them one
+// after the other as the robot would (push, then update), and returns the
+// estimates of all of them.
+std::vector<Vec2> run(SubgoalAligner& aligner, const TerrainClassMap& map, const std::vector<Vec2>& raw) {
+  aligner.reset();
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    EXPECT_TRUE(aligner.push(raw));
+    aligner.update(map, raw);
+    aligner.update(map, raw);  // several updates per subgoal, as the map changes
+  }
+  std::vector<Vec2> out;
+  for (std::size_t i = 0; i < raw.size(); ++i) out.push_back(aligner.estimate(i));
+  return out;
+}
+
+std::vector<Vec2> straight(double y, int n, double x0 = 0.0) {
+  std::vector<Vec2> v;
+  for (int i = 0; i < n; ++i) v.push_back({x0 + 4.0 * i, y});
+  return v;
+}
+
+TEST(SubgoalAligner, ChecksItsConfiguration) {
+  AlignerConfig c;
+  EXPECT_EQ(check_aligner_config(c), "");
+  c.samples = 60000;
+  EXPECT_NE(check_aligner_config(c).find("samples"), std::string::npos);
+  c = {};
+  c.sequence = 0;
+  EXPECT_NE(check_aligner_config(c).find("sequence"), std::string::npos);
+  c = {};
+  c.sigma_theta = 0.6;
+  EXPECT_NE(check_aligner_config(c).find("sigma_theta"), std::string::npos);
+  c = {};
+  c.lambda = 0.0;
+  EXPECT_NE(check_aligner_config(c).find("lambda"), std::string::npos);
+}
+
+TEST(SubgoalAligner, PullsSubgoalsMappedBesideTheTrailOntoIt) {
+  TerrainClassMap map;
+  // The true street: 3 m wide along y = 2.5; the map puts it along y = 0.
+  paint(map, 25.0, 0.0, [](double, double y) { return std::abs(y - 2.5) < 1.5; });
+  SubgoalAligner aligner({}, map.shape());
+  const auto raw = straight(0.0, 14);
+  const auto est = run(aligner, map, raw);
+  double sq = 0.0;
+  for (std::size_t i = 2; i < est.size(); ++i) sq += (est[i].y - 2.5) * (est[i].y - 2.5);
+  const double rmse = std::sqrt(sq / static_cast<double>(est.size() - 2));
+  EXPECT_LT(rmse, 0.35);  // raw: 2.5 m
+  for (std::size_t i = 1; i < est.size(); ++i) EXPECT_NEAR(est[i].x - est[i - 1].x, 4.0, 1.0) << i;
+  EXPECT_EQ(aligner.counters().pushes, 14u);
+  EXPECT_GT(aligner.counters().resamples, 0u);
+}
+
+TEST(SubgoalAligner, EmptyMapLeavesSubgoalsAroundTheirMappedPlace) {
+  TerrainClassMap map;  // nothing observed: every cell costs as `other`
+  AlignerConfig c;
+  c.samples = 5000;
+  SubgoalAligner aligner(c, map.shape());
+  const auto raw = straight(0.0, 10);
+  const auto est = run(aligner, map, raw);
+  for (std::size_t i = 0; i < est.size(); ++i) {
+    EXPECT_NEAR(est[i].y, 0.0, 0.6) << i;
+    EXPECT_NEAR(est[i].x, raw[i].x, 1.2) << i;
+  }
+}
+
+TEST(SubgoalAligner, FindsAJunctionMappedTooFarAlong) {
+  // True road: east along y = 0 to x = 20, then north along x = 20. The map
+  // turns 6 m too late, at x = 26.
+  TerrainClassMap map;
+  paint(map, 20.0, 10.0, [](double x, double y) {
+    return (std::abs(y) < 1.5 && x < 21.5) || (std::abs(x - 20.0) < 1.5 && y > -1.5);
+  });
+  std::vector<Vec2> raw = straight(0.0, 7);  // 0..24
+  raw.push_back({26.0, 0.0});
+  for (int i = 1; i <= 7; ++i) raw.push_back({26.0, 4.0 * i - 2.0});
+  // Points every 4 m would be closer to the road's; the corner makes one step 2 m.
+  SubgoalAligner aligner({}, map.shape());
+  const auto est = run(aligner, map, raw);
+  // After the corner, the subgoals run up the true road (x = 20), not the mapped one (x = 26).
+  for (std::size_t i = 10; i < est.size(); ++i) EXPECT_NEAR(est[i].x, 20.0, 1.0) << i;
+}
+
+TEST(SubgoalAligner, ReproducesPerSeed) {
+  TerrainClassMap map;
+  paint(map, 25.0, 0.0, [](double, double y) { return std::abs(y - 1.5) < 1.5; });
+  AlignerConfig c;
+  SubgoalAligner a(c, map.shape()), b(c, map.shape());
+  c.seed = 2;
+  SubgoalAligner other(c, map.shape());
+  const auto raw = straight(0.0, 8);
+  const auto ea = run(a, map, raw), eb = run(b, map, raw), eo = run(other, map, raw);
+  bool differs = false;
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    EXPECT_EQ(ea[i].x, eb[i].x);
+    EXPECT_EQ(ea[i].y, eb[i].y);
+    differs = differs || ea[i].x != eo[i].x;
+  }
+  EXPECT_TRUE(differs);
+}
+
+TEST(SubgoalAligner, UpdatesAndPushesNeverAllocate) {
+  ASSERT_TRUE(alloc_guard::hook_installed());
+  TerrainClassMap map;
+  paint(map, 25.0, 0.0, [](double, double y) { return std::abs(y - 1.0) < 1.5; });
+  AlignerConfig c;
+  c.samples = 2000;
+  c.sequence = 6;
+  SubgoalAligner aligner(c, map.shape());
+  const auto raw = straight(0.0, 20);
+  alloc_guard::set_fatal(false);
+  alloc_guard::reset_counters();
+  alloc_guard::mark_realtime_thread("aligner-test");
+  ASSERT_TRUE(alloc_guard::arm());
+  aligner.reset();
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    aligner.push(raw);
+    if (i % 3 != 1) aligner.update(map, raw);  // some pushes without an update
+  }
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  EXPECT_GT(aligner.counters().updates, 10u);
+}
+
+}  // namespace
+}  // namespace trailnav::subgoals
