@@ -19,5 +19,6 @@ void add_pose_eval_command(CLI::App& app);
 void add_echo_command(CLI::App& app);
 void add_terrain_commands(CLI::App& app);
 void add_route_command(CLI::App& app);
+void add_subgoal_eval_command(CLI::App& app);
 
 }  // namespace trailnav::cli

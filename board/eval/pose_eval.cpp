@@ -27,27 +27,6 @@ using pose::wrap_angle;
 constexpr double kRad2Deg = 180.0 / kPi;
 
 // The true pose at time t, interpolated.
-struct TruthAt {
-  double x = 0, y = 0, yaw = 0, arc = 0, lat = 0, lon = 0;
-};
-
-bool truth_at(const std::vector<TruthPose>& traj, std::int64_t t, TruthAt& out) {
-  if (traj.empty() || t < traj.front().utc_ns || t > traj.back().utc_ns) return false;
-  auto it = std::lower_bound(traj.begin(), traj.end(), t,
-                             [](const TruthPose& p, std::int64_t v) { return p.utc_ns < v; });
-  if (it == traj.begin()) ++it;
-  const TruthPose& b = *it;
-  const TruthPose& a = *(it - 1);
-  const double f = b.utc_ns == a.utc_ns ? 0.0 : static_cast<double>(t - a.utc_ns) / static_cast<double>(b.utc_ns - a.utc_ns);
-  out.x = a.x + f * (b.x - a.x);
-  out.y = a.y + f * (b.y - a.y);
-  out.yaw = wrap_angle(a.yaw + f * wrap_angle(b.yaw - a.yaw));
-  out.arc = a.arc + f * (b.arc - a.arc);
-  out.lat = a.lat + f * (b.lat - a.lat);
-  out.lon = a.lon + f * (b.lon - a.lon);
-  return true;
-}
-
 struct Sample {
   std::int64_t t = 0;
   double ex = 0, ey = 0, eyaw = 0;  // estimate, odometry frame
@@ -153,6 +132,7 @@ PoseEvalResult evaluate_pose(const std::string& recording, const PoseEvalOptions
         if (!truth_at(truth.trajectory, smp.t, smp.truth)) return;
         const pose::UtmPose u = estimator.alignment().utm(p);
         if (u.heading_valid) {
+          if (options.on_utm) options.on_utm(u);
           smp.utm = true;
           smp.ue = u.easting;
           smp.un = u.northing;

@@ -27,6 +27,9 @@ struct PoseEvalOptions {
   double segment = 100.0;                // m, drift stretch and UTM table row
   std::string csv;                       // optional: write the per-sample comparison here
   std::function<void(double fraction)> progress;
+  // Called with the estimate at every IMU sample once the heading is known
+  // (the subgoal evaluation takes the robot's UTM pose from it).
+  std::function<void(const pose::UtmPose&)> on_utm;
 };
 
 struct PoseSegmentRow {

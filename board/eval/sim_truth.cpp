@@ -1,6 +1,8 @@
 #include "sim_truth.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -155,6 +157,25 @@ void fill_truth_terrain(const SimTruth& truth, perception::TerrainClassMap& map,
       cell.set(count);
     }
   }
+}
+
+bool truth_at(const std::vector<TruthPose>& traj, std::int64_t t, TruthAt& out) {
+  if (traj.empty() || t < traj.front().utc_ns || t > traj.back().utc_ns) return false;
+  auto it = std::lower_bound(traj.begin(), traj.end(), t,
+                             [](const TruthPose& p, std::int64_t v) { return p.utc_ns < v; });
+  if (it == traj.begin()) ++it;
+  if (it == traj.end()) --it;
+  const TruthPose& b = *it;
+  const TruthPose& a = *(it - 1);
+  const double f = b.utc_ns == a.utc_ns ? 0.0 : static_cast<double>(t - a.utc_ns) / static_cast<double>(b.utc_ns - a.utc_ns);
+  auto wrap = [](double v) { return std::remainder(v, 2.0 * std::numbers::pi); };
+  out.x = a.x + f * (b.x - a.x);
+  out.y = a.y + f * (b.y - a.y);
+  out.yaw = wrap(a.yaw + f * wrap(b.yaw - a.yaw));
+  out.arc = a.arc + f * (b.arc - a.arc);
+  out.lat = a.lat + f * (b.lat - a.lat);
+  out.lon = a.lon + f * (b.lon - a.lon);
+  return true;
 }
 
 }  // namespace trailnav::eval

@@ -56,6 +56,12 @@ struct SimTruthResult {
 // `dir`: a recording's truth/ directory.
 SimTruthResult load_sim_truth(const std::string& dir);
 
+// The true pose at UTC time t, interpolated; false outside the trajectory.
+struct TruthAt {
+  double x = 0, y = 0, yaw = 0, arc = 0, lat = 0, lon = 0;
+};
+bool truth_at(const std::vector<TruthPose>& trajectory, std::int64_t t, TruthAt& out);
+
 // The true trajectory as the obstacle pipeline's pose history (UTC times).
 void fill_pose_track(const SimTruth& truth, perception::PoseTrack& track);
 

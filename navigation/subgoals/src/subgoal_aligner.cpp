@@ -69,6 +69,7 @@ SubgoalAligner::SubgoalAligner(const AlignerConfig& config, const perception::Te
   estimated_.assign(config.max_subgoals, 0);
   box_capacity_ = static_cast<std::size_t>(shape.size_x + 1) * static_cast<std::size_t>(shape.size_y + 1);
   sat_.resize(box_capacity_);
+  sat_known_.resize(box_capacity_);
   reset();
 }
 
@@ -173,14 +174,23 @@ void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) no
   // sat_[(y + 1) * (w + 1) + (x + 1)] = sum of f^E over [0, x] x [0, y].
   const auto stride = static_cast<std::size_t>(box_w_ + 1);
   std::fill(sat_.begin(), sat_.begin() + static_cast<std::ptrdiff_t>(stride), 0.0);
+  std::fill(sat_known_.begin(), sat_known_.begin() + static_cast<std::ptrdiff_t>(stride), 0u);
+  const bool known_only = config_.known_cells_only;
   for (std::int32_t y = 0; y < box_h_; ++y) {
     double row = 0.0;
+    std::uint32_t row_known = 0;
     const std::size_t base = static_cast<std::size_t>(y + 1) * stride;
     sat_[base] = 0.0;
+    sat_known_[base] = 0;
     for (std::int32_t x = 0; x < box_w_; ++x) {
       const perception::TerrainCell& c = grid.at({x0 + x, y0 + y});
-      row += static_cast<double>(perception::terrain_cost(c, config_.cost, config_.unknown_cost));
-      sat_[base + static_cast<std::size_t>(x) + 1] = sat_[base - stride + static_cast<std::size_t>(x) + 1] + row;
+      if (c.known || !known_only) {
+        row += static_cast<double>(perception::terrain_cost(c, config_.cost, config_.unknown_cost));
+        ++row_known;
+      }
+      const std::size_t at = base + static_cast<std::size_t>(x) + 1;
+      sat_[at] = sat_[at - stride] + row;
+      sat_known_[at] = sat_known_[at - stride] + row_known;
     }
   }
   counters_.cells_summed = static_cast<std::uint64_t>(box_w_) * static_cast<std::uint64_t>(box_h_);
@@ -200,8 +210,10 @@ double SubgoalAligner::patch_cost(double x, double y) const noexcept {
     const auto ux0 = static_cast<std::size_t>(ax), ux1 = static_cast<std::size_t>(bx) + 1;
     const auto uy0 = static_cast<std::size_t>(ay), uy1 = static_cast<std::size_t>(by) + 1;
     sum = sat_[uy1 * stride + ux1] - sat_[uy0 * stride + ux1] - sat_[uy1 * stride + ux0] + sat_[uy0 * stride + ux0];
-    inside = static_cast<double>((bx - ax + 1) * (by - ay + 1));
+    inside = static_cast<double>(sat_known_[uy1 * stride + ux1] - sat_known_[uy0 * stride + ux1] -
+                                 sat_known_[uy1 * stride + ux0] + sat_known_[uy0 * stride + ux0]);
   }
+  if (config_.known_cells_only) return inside > 0.0 ? sum / inside : static_cast<double>(config_.unknown_cost);
   // Cells beyond the map are unknown.
   return (sum + (cells - inside) * static_cast<double>(config_.unknown_cost)) / cells;
 }

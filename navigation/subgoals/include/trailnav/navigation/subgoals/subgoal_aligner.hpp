@@ -59,12 +59,17 @@ struct AlignerConfig {
   int sequence = 4;                  // K, subgoals sampled together, 1 .. 8
   int neighbourhood = 2;             // N: (2N+1)^2 cells per subgoal
   double lambda = 4.0;               // Eq. 8.11
-  double sigma_d = 0.3;              // m, Eq. 8.7
-  double sigma_theta = 0.2;          // rad, Eq. 8.7 (at most 0.4)
+  double sigma_d = 0.5;              // m, Eq. 8.7
+  double sigma_theta = 0.3;          // rad, Eq. 8.7 (at most 0.4)
   double sigma_along = 1.5;          // m, Sigma_0 along the street (Eq. 8.8)
-  double sigma_across = 3.0;         // m, Sigma_0 across it
+  double sigma_across = 4.0;         // m, Sigma_0 across it
   std::array<float, perception::kTerrainClasses> cost{0.1f, 0.2f, 0.4f, 0.8f, 1.0f};  // §8.4.1
   float unknown_cost = 1.0f;         // cells without observations: as `other`
+  // true: a patch's cost is the mean over its known cells (unknown_cost only
+  // when none is known), so gaps between lidar rings ahead do not pull the
+  // subgoals back towards the robot; false: unknown cells count as
+  // unknown_cost (the thesis' §8.4.1 reading).
+  bool known_cells_only = false;
   double resample_below = 0.5;       // resample when n_eff < this x samples
   std::size_t max_subgoals = 65536;  // longest route, in subgoals
   std::uint64_t seed = 1;
@@ -148,6 +153,7 @@ class SubgoalAligner {
 
   // Summed-area table of f^E over a box of world cells.
   std::vector<double> sat_;
+  std::vector<std::uint32_t> sat_known_;  // the same for the count of known cells
   std::int32_t box_x0_ = 0, box_y0_ = 0, box_w_ = 0, box_h_ = 0;
   std::size_t box_capacity_ = 0;
   double min_x_ = 0, min_y_ = 0, max_x_ = 0, max_y_ = 0;

@@ -1,0 +1,80 @@
+// The subgoal evaluation of thesis §8.4 on simulated recordings: the robot
+// plans on the recording's world.osm (with its mapping errors) from its GPS
+// pose to the route's end, and every aligner configuration (samples x K x
+// seeds) runs in lockstep on the same terrain-class map, which the terrain
+// analysis estimates from the lidar with a trained forest, as on the robot.
+//
+// Frames: the terrain map is registered with the true trajectory (the local
+// frame is the simulated world); the OSM subgoals come into it through the
+// pose estimator's UTM pose, run on the recording's GPS, IMU and wheels (so
+// GPS errors enter as on the robot): q_world = P(t) U(t)^-1 q_utm.
+//
+// Subgoals join the aligner when they come within `lookahead` metres of the
+// robot along the route (its GPS position projected onto the route), and a
+// subgoal is sent when the one before it is almost reached (`reach` metres
+// along). The error of a sent subgoal is Eq. 8.15: its distance to the true
+// path minus half a 3 m street width, floored at 0. Per configuration the
+// RMSE over all sent subgoals of all recordings is taken per seed, then
+// averaged over the seeds, as in Fig. 8.5. At the junctions a recording's
+// truth lists (the `junctions` scenario: the cases of Fig. 8.7), a seed
+// succeeds when every subgoal sent while the robot is within the junction's
+// window has an error of at most `junction_tolerance`.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "trailnav/navigation/osm/road_graph.hpp"
+#include "trailnav/navigation/subgoals/subgoal_aligner.hpp"
+#include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_config.hpp"
+
+namespace trailnav::eval {
+
+struct SubgoalEvalOptions {
+  std::vector<std::string> recordings;
+  std::vector<std::size_t> samples{1000, 10000, 50000};
+  std::vector<int> sequences{1, 2, 3, 4, 5, 6};
+  int seeds = 10;
+  subgoals::AlignerConfig aligner;  // samples, sequence and seed are set per configuration
+  perception::TerrainConfig terrain;
+  const perception::RandomForest* forest = nullptr;
+  osm::RoutingProfile profile;
+  double spacing = 4.0;       // m between subgoals
+  double lookahead = 12.0;    // m ahead of the robot a subgoal joins the aligner
+  double reach = 2.0;         // m before a subgoal the next one is sent
+  double street_width = 3.0;  // s of Eq. 8.15
+  double junction_before = 8.0, junction_after = 12.0;  // m of route around a junction
+  double junction_tolerance = 0.5;  // m of Eq. 8.15 error a feasible subgoal may have
+  std::function<void(const std::string& stage, double fraction)> progress;
+  // Optional: one row per sent subgoal (raw and every configuration's first seed).
+  std::string csv;
+};
+
+struct SubgoalConfigResult {
+  std::size_t samples = 0;
+  int sequence = 0;
+  std::vector<double> rmse;  // per seed
+  double mean_rmse = 0.0;
+  // Per junction (in the order of SubgoalEvalReport::junctions): seeds that succeeded.
+  std::vector<int> junction_successes;
+};
+
+struct SubgoalEvalReport {
+  std::string error;
+  std::size_t subgoals_sent = 0;   // per configuration and seed, all recordings
+  double raw_rmse = 0.0;           // the uncorrected OSM subgoals
+  double raw_max = 0.0;
+  std::vector<std::string> junctions;   // "recording: a (t1/t2, shifted 7 m)"
+  std::vector<int> raw_junction_ok;     // raw subgoals feasible at each junction (0 or 1)
+  std::vector<SubgoalConfigResult> configs;
+  double route_length = 0.0;       // m, planned, all recordings
+  double seconds_aligning = 0.0;   // total time in aligner updates
+  std::uint64_t updates = 0;
+};
+
+SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& options);
+
+}  // namespace trailnav::eval
