@@ -134,7 +134,6 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
   double raw_sq = 0.0;
   std::size_t raw_sent = 0;
   std::vector<double> config_sq(report.configs.size() * static_cast<std::size_t>(o.seeds), 0.0);
-  std::size_t sent_per_run = 0;
   std::FILE* csv = nullptr;
   if (!o.csv.empty()) {
     csv = std::fopen(o.csv.c_str(), "w");
@@ -281,7 +280,6 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
         raw_sq += re * re;
         report.raw_max = std::max(report.raw_max, re);
         ++raw_sent;
-        ++sent_per_run;
         for (std::size_t j = 0; j < junctions.size(); ++j) {
           if (p.arc >= junctions[j].arc - o.junction_before && p.arc <= junctions[j].arc + o.junction_after && re > o.junction_tolerance)
             report.raw_junction_ok[junction_base + j] = 0;
@@ -326,7 +324,6 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     }
     cr.mean_rmse = sum / o.seeds;
   }
-  (void)sent_per_run;
   return report;
 }
 
