@@ -91,7 +91,10 @@ TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) {
   // The publisher's side: reads snapshots of both maps (not real-time).
   std::uint64_t class_maps = 0, obstacle_maps = 0, known_cells = 0;
   const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(90);
-  while ((obstacles.status().terrain_maps < 3 || terrain.status().published < 5) && std::chrono::steady_clock::now() < give_up) {
+  // Until everything asserted below has happened (a slow sanitizer build on a loaded machine takes longer).
+  while ((obstacles.status().terrain_maps < 3 || terrain.status().published < 5 || obstacles.status().revolutions <= 10 ||
+          terrain.status().mapper.features <= 1000) &&
+         std::chrono::steady_clock::now() < give_up) {
     if (const TerrainClassMap* m = classes.reader(1).try_read()) {
       ++class_maps;
       known_cells = 0;
