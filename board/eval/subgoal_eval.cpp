@@ -22,7 +22,9 @@ namespace {
 namespace fs = std::filesystem;
 using osm::Point2;
 
-// A polyline with arc lengths, and the nearest point on it.
+// The planned route in UTM with arc lengths; the robot's progress is its
+// nearest point within an arc window (so a route that passes a place twice
+// is not jumped along), which sim::Polyline::project does not offer.
 struct Path {
   std::vector<Point2> p;
   std::vector<double> s;
@@ -48,18 +50,20 @@ struct Path {
   }
 };
 
-std::string read_route(const std::string& file, Path& out) {
+std::string read_route(const std::string& file, sim::Polyline& out) {
   std::ifstream in(file);
   if (!in) return "cannot read " + file;
   std::string line;
   std::getline(in, line);
+  std::vector<sim::Vec2> points;
   while (std::getline(in, line)) {
     std::istringstream ls(line);
     std::string arc, x, y;
-    if (std::getline(ls, arc, ',') && std::getline(ls, x, ',') && std::getline(ls, y, ',')) out.p.push_back({std::stod(x), std::stod(y)});
+    if (std::getline(ls, arc, ',') && std::getline(ls, x, ',') && std::getline(ls, y, ','))
+      points.emplace_back(std::stod(x), std::stod(y));
   }
-  if (out.p.size() < 2) return file + ": fewer than two route points";
-  out.finish();
+  if (points.size() < 2) return file + ": fewer than two route points";
+  out = sim::Polyline(std::move(points));
   return {};
 }
 
@@ -69,7 +73,7 @@ struct Junction {
   double arc = 0;  // along the true route
 };
 
-std::vector<Junction> read_junctions(const std::string& file, const Path& route) {
+std::vector<Junction> read_junctions(const std::string& file, const sim::Polyline& route) {
   std::vector<Junction> out;
   std::ifstream in(file);
   std::string line;
@@ -86,9 +90,9 @@ std::vector<Junction> read_junctions(const std::string& file, const Path& route)
     char buf[96];
     std::snprintf(buf, sizeof buf, "%s/%s, OSM node %.1f m off", f[0].c_str(), f[1].c_str(), shift);
     j.label = buf;
-    double arc = 0;
-    if (route.nearest(j.x, j.y, arc) > 3.0) continue;  // not on the driven route
-    j.arc = arc;
+    const auto on_route = route.project({j.x, j.y});
+    if (on_route.distance > 3.0) continue;  // not on the driven route
+    j.arc = on_route.arc;
     out.push_back(j);
   }
   return out;
@@ -152,7 +156,7 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     auto loaded = load_sim_truth((fs::path(rec) / "truth").string());
     if (!loaded.truth) return fail(rec + ": needs a simulated recording's truth: " + loaded.error);
     const SimTruth& truth = *loaded.truth;
-    Path true_route;
+    sim::Polyline true_route;
     if (std::string e = read_route((fs::path(rec) / "truth" / "route.csv").string(), true_route); !e.empty()) return fail(e);
     std::vector<Junction> junctions;
     if (truth.scenario.name == "junctions") junctions = read_junctions((fs::path(rec) / "truth" / "junctions.csv").string(), true_route);
@@ -272,8 +276,7 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
       ++report.updates;
       pushed = want;
       auto error_of = [&](const subgoals::Vec2& g) {
-        double a = 0;
-        return std::max(0.0, true_route.nearest(g.x, g.y, a) - 0.5 * o.street_width);
+        return std::max(0.0, true_route.project({g.x, g.y}).distance - 0.5 * o.street_width);
       };
       for (; active < send_to; ++active) {
         const double re = error_of(raw[active]);

@@ -166,7 +166,7 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
   }
 
   // Vertices in first-seen order of the pieces (deterministic for a file).
-  RoadGraph shell = RoadGraph::build(zone, clat >= 0.0, {}, {}, {}, {});
+  const bool north = clat >= 0.0;
   std::unordered_map<std::int64_t, std::uint32_t> vertex_of;
   vertex_of.reserve(handler.geo.size());
   std::vector<RoadVertex> vertices;
@@ -183,7 +183,7 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
         const NodeGeo& g = handler.geo.at(id);
         RoadVertex v;
         v.osm_id = id;
-        shell.to_utm(g.lat, g.lon, v.x, v.y);
+        utm_in_zone(zone, north, g.lat, g.lon, v.x, v.y);
         vertices.push_back(v);
       }
       vs.push_back(it->second);
@@ -192,7 +192,7 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
     ways.push_back(handler.ways[p.way]);
     oneway.push_back(p.oneway);
   }
-  result.graph = RoadGraph::build(zone, clat >= 0.0, std::move(vertices), std::move(ways), way_vertices, oneway);
+  result.graph = RoadGraph::build(zone, north, std::move(vertices), std::move(ways), way_vertices, oneway);
   return result;
 }
 

@@ -46,13 +46,17 @@ double RoadGraph::segment_length(std::uint32_t s) const noexcept {
   return std::hypot(b.x - a.x, b.y - a.y);
 }
 
-bool RoadGraph::to_utm(double lat, double lon, double& x, double& y) const noexcept {
+bool utm_in_zone(int zone, bool north, double lat, double lon, double& x, double& y) noexcept {
   if (!(std::abs(lat) <= 84.0) || !std::isfinite(lon)) return false;
   double e = 0.0, n = 0.0;
-  GeographicLib::TransverseMercator::UTM().Forward(central_meridian(zone_), lat, lon, e, n);
+  GeographicLib::TransverseMercator::UTM().Forward(central_meridian(zone), lat, lon, e, n);
   x = e + kFalseEasting;
-  y = n + (north_ ? 0.0 : kFalseNorthingSouth);
+  y = n + (north ? 0.0 : kFalseNorthingSouth);
   return std::isfinite(x) && std::isfinite(y);
+}
+
+bool RoadGraph::to_utm(double lat, double lon, double& x, double& y) const noexcept {
+  return utm_in_zone(zone_, north_, lat, lon, x, y);
 }
 
 bool RoadGraph::to_latlon(double x, double y, double& lat, double& lon) const noexcept {
@@ -152,8 +156,8 @@ std::optional<RoadProjection> RoadGraph::project(double x, double y) const noexc
     const auto cx = static_cast<std::int32_t>(fx), cy = static_cast<std::int32_t>(fy);
     const std::int32_t max_ring = std::max(grid_nx_, grid_ny_);
     for (std::int32_t r = 0; r <= max_ring; ++r) {
-      // Everything outside ring r-1 is at least (r-1) cells away... and
-      // everything not yet seen lies outside ring r - 1.
+      // A segment not seen yet lies wholly outside rings 0..r-1, so at least
+      // (r - 1) cells from the query: stop once the best is nearer than that.
       if (r > 0 && best_d2 <= std::pow((r - 1) * cell_, 2)) break;
       for (std::int32_t yy = cy - r; yy <= cy + r; ++yy) {
         if (yy < 0 || yy >= grid_ny_) continue;

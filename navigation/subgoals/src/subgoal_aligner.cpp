@@ -62,9 +62,8 @@ SubgoalAligner::SubgoalAligner(const AlignerConfig& config, const perception::Te
   anchor_.resize(n_);
   log_alpha_.assign(n_, 0.0);
   weight_.assign(n_, 1.0 / static_cast<double>(n_));
-  cost_.resize(n_);
+  log_weight_.resize(n_);
   anchor_tmp_.resize(n_);
-  log_alpha_tmp_.resize(n_);
   estimates_.resize(config.max_subgoals);
   estimated_.assign(config.max_subgoals, 0);
   box_capacity_ = static_cast<std::size_t>(shape.size_x + 1) * static_cast<std::size_t>(shape.size_y + 1);
@@ -229,12 +228,12 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
     double c = 0.0;
     for (std::size_t g = begin; g < count_; ++g) c += patch_cost(w[g % kk_].x, w[g % kk_].y);
     const double lw = log_alpha_[j] - config_.lambda * c;  // Eq. 8.11, 8.14 (lambda^K cancels)
-    cost_[j] = lw;
+    log_weight_[j] = lw;
     best = std::max(best, lw);
   }
   double sum = 0.0;
   for (std::size_t j = 0; j < n_; ++j) {
-    weight_[j] = std::exp(cost_[j] - best);
+    weight_[j] = std::exp(log_weight_[j] - best);
     sum += weight_[j];
   }
   double sq = 0.0;

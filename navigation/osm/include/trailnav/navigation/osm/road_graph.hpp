@@ -139,6 +139,10 @@ struct RoadGraphResult {
 RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& profile = {},
                                 const std::function<void(double)>& progress = {}, int zone = 0);
 
+// WGS84 to UTM in the given zone and hemisphere, for points inside or
+// beyond the zone (transverse Mercator about its central meridian).
+bool utm_in_zone(int zone, bool north, double lat, double lon, double& x, double& y) noexcept;
+
 // The oneway direction of a way's tags: +1, -1 or 0 (the values of the OSM
 // wiki: yes/true/1, -1/reverse; a roundabout is one way).
 int oneway_direction(std::string_view oneway, std::string_view junction) noexcept;

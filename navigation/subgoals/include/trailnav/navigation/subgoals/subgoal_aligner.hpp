@@ -145,9 +145,8 @@ class SubgoalAligner {
   std::vector<Vec2> anchor_;     // n
   std::vector<double> log_alpha_;  // n, anchors' log weights
   std::vector<double> weight_;   // n, normalised
-  std::vector<double> cost_;     // n, summed f^N over the window
+  std::vector<double> log_weight_;  // n, log alpha - lambda * sum f^N over the window
   std::vector<Vec2> anchor_tmp_;
-  std::vector<double> log_alpha_tmp_;
   std::vector<Vec2> estimates_;  // max_subgoals
   std::vector<std::uint8_t> estimated_;
 
