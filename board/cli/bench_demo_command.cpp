@@ -2,8 +2,11 @@
 // recording, starts trailnavd on the bench robot config (loopback only),
 // replays the recording into it in real time — lidar and e-stop over UDP,
 // GPS and IMU through pseudo-terminals, wheel speeds through the CAN tunnel —
-// and listens on DDS like a planner: obstacle maps (saved as PNG), poses and
-// health. It ends with what arrived, the latency, and trailnavd's own report.
+// and listens on DDS like a planner: obstacle maps (saved as PNG), terrain
+// maps, poses, health, and the corrected subgoals of the navigation task
+// (planned on the recording's world.osm to where the drive ends), each
+// checked against the simulated trail. It ends with what arrived, the
+// latency, and trailnavd's own report.
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -30,6 +33,7 @@
 #include "nav_msgs.h"
 #include "map_png.hpp"
 #include "replayer.hpp"
+#include "sim_truth.hpp"
 #include "simulator.hpp"
 #include "subscriber.hpp"
 #include "terminal.hpp"
@@ -48,7 +52,7 @@ namespace fs = std::filesystem;
 
 struct BenchDemoOptions {
   std::string scenario = "urban";
-  double seconds = 20.0;
+  double seconds = 30.0;
   std::string out = "build/demo";
   std::string png;
   int png_every = 20;
@@ -104,6 +108,28 @@ int run_bench_demo(const BenchDemoOptions& o) {
   }
   replace_all(config, "  domain: 0", "  domain: " + std::to_string(o.domain));
   replace_all(config, "  log_sink: auto ", "  log_sink: stderr");
+  // Navigation: plan on the recording's OpenStreetMap to where the drive ends.
+  auto truth = eval::load_sim_truth(so.out + "/truth");
+  sim::Polyline trail;
+  std::string trail_error = truth.truth ? eval::load_true_route(so.out + "/truth", trail) : truth.error;
+  if (!trail_error.empty() || truth.truth->trajectory.empty() || std::isnan(truth.truth->trajectory.back().lat)) {
+    std::fprintf(stderr, "trailnav demo: the recording's truth: %s\n", trail_error.empty() ? "no trajectory" : trail_error.c_str());
+    return 1;
+  }
+  const eval::TruthPose& start = truth.truth->trajectory.front();
+  const eval::TruthPose& end = truth.truth->trajectory.back();
+  {
+    char section[600];
+    std::snprintf(section, sizeof section,
+                  "\nnavigation:\n"
+                  "  osm: %s\n"
+                  "  goal: [%.8f, %.8f]\n",
+                  (fs::path(so.out) / "world.osm").c_str(), end.lat, end.lon);
+    const auto tasks = config.find("\ntasks:\n");
+    config.insert(tasks, section);
+    const auto rows = config.find("\ntasks:\n") + 8;
+    config.insert(rows, "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20.0, priority: 45}\n");
+  }
   std::ofstream(out / "trailnav-robot.dbc") << sim::robot_dbc_text();
   std::ofstream(out / "bench.yaml") << config;
   const std::string daemon_log = (out / "trailnavd.log").string();
@@ -144,7 +170,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
   auto poses = dds::Subscriber::create(*domain.domain, "trailnav/pose", &geometry_msgs_msg_dds__PoseStamped__desc, 0);
   auto health = dds::Subscriber::create(*domain.domain, "diagnostics", &diagnostic_msgs_msg_dds__DiagnosticArray__desc, 0);
   auto terrain = dds::Subscriber::create(*domain.domain, "trailnav/terrain_map", &trailnav_msgs_msg_dds__TerrainClassMap__desc, 0);
-  if (!maps.subscriber || !poses.subscriber || !health.subscriber || !terrain.subscriber) {
+  auto subgoal = dds::Subscriber::create(*domain.domain, "trailnav/subgoal", &geometry_msgs_msg_dds__PoseStamped__desc, 0, true);
+  auto subgoal_path = dds::Subscriber::create(*domain.domain, "trailnav/subgoal_path", &nav_msgs_msg_dds__Path__desc, 0);
+  if (!maps.subscriber || !poses.subscriber || !health.subscriber || !terrain.subscriber || !subgoal.subscriber ||
+      !subgoal_path.subscriber) {
     std::fprintf(stderr, "trailnav demo: cannot subscribe\n%s", stop_daemon().c_str());
     return 1;
   }
@@ -168,7 +197,9 @@ int run_bench_demo(const BenchDemoOptions& o) {
   }
   std::printf("3. replaying into trailnavd in real time; listening on DDS (loopback) like a planner\n");
   std::atomic<bool> playing{true};
+  std::atomic<std::int64_t> replay_start_ns{0};  // wall clock when the replay began
   std::thread player([&] {
+    replay_start_ns = wall_clock_ns();
     replayer.replayer->run();
     playing = false;
   });
@@ -180,6 +211,20 @@ int run_bench_demo(const BenchDemoOptions& o) {
   std::vector<std::int8_t> last_map;
   nav_msgs_msg_dds__OccupancyGrid_ last_header{};
   std::string last_pose, last_health;
+  // Subgoals arrive in the odometry frame: they are checked against the
+  // simulated trail through the robot's odometry and true poses of their
+  // instant, once everything has arrived.
+  struct Stamped {
+    std::int64_t t;
+    double x, y;
+  };
+  std::vector<Stamped> subgoals_received;
+  eval::TrailCheck trail_check(*truth.truth, trail, 0);
+  std::uint64_t n_paths = 0;
+  std::size_t last_path_poses = 0;
+  auto stamp_ns = [](const auto& header) {
+    return static_cast<std::int64_t>(header.stamp.sec) * 1'000'000'000 + static_cast<std::int64_t>(header.stamp.nanosec);
+  };
   const auto t0 = std::chrono::steady_clock::now();
   auto listen = [&](double wait) {
     maps.subscriber->take(wait, [&](const dds::ReceivedSample& r) {
@@ -213,9 +258,19 @@ int run_bench_demo(const BenchDemoOptions& o) {
       terrain_summary = text;
       if (write_terrain_png((out / "maps" / "terrain_map.png").string(), t)) ++pngs;
     });
+    subgoal.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
+      subgoals_received.push_back({stamp_ns(p.header), p.pose.position.x, p.pose.position.y});
+    });
+    subgoal_path.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      ++n_paths;
+      last_path_poses = static_cast<const nav_msgs_msg_dds__Path_*>(r.sample)->poses._length;
+    });
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
       ++n_poses;
+      trail_check.add_odometry_pose(stamp_ns(p.header), p.pose.position.x, p.pose.position.y,
+                                    2.0 * std::atan2(p.pose.orientation.z, p.pose.orientation.w));
       char text[128];
       std::snprintf(text, sizeof text, "x %.2f m, y %.2f m in %s", p.pose.position.x, p.pose.position.y, p.header.frame_id);
       last_pose = text;
@@ -249,6 +304,35 @@ int run_bench_demo(const BenchDemoOptions& o) {
               last_pose.c_str(), static_cast<unsigned long long>(n_health));
   std::printf("   %llu terrain-class maps (last: %s; picture %s)\n", static_cast<unsigned long long>(n_terrain),
               terrain_summary.c_str(), (out / "maps" / "terrain_map.png").c_str());
+  std::vector<double> subgoal_errors;
+  {
+    // Distance of each active subgoal from the trail's centre (3 m wide: on it within 1.5 m).
+    trail_check.set_offset(replay_start_ns - start.utc_ns);
+    std::ofstream csv(out / "subgoals.csv");
+    csv << "stamp_s,odom_x,odom_y,trail_distance\n";
+    for (const Stamped& g : subgoals_received) {
+      const double d = trail_check.distance(g.t, g.x, g.y);
+      char row[120];
+      std::snprintf(row, sizeof row, "%.3f,%.3f,%.3f,%.3f\n", static_cast<double>(g.t) * 1e-9, g.x, g.y, d);
+      csv << row;
+      if (!std::isnan(d)) subgoal_errors.push_back(d);
+    }
+    const std::size_t n = subgoal_errors.size(), half = n / 2;
+    double first = 0.0, second = 0.0, second_max = 0.0;
+    std::size_t on_trail = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      (i < half ? first : second) += subgoal_errors[i];
+      if (i >= half) second_max = std::max(second_max, subgoal_errors[i]);
+      if (subgoal_errors[i] <= 1.5) ++on_trail;
+    }
+    std::printf("   %zu active subgoals (corrected, odometry frame) over %.0f m of simulated trail, %zu of them on it; "
+                "distance from its centre: first %.2f m (OpenStreetMap, before any terrain map), first half mean %.2f m, "
+                "second half mean %.2f m, max %.2f m (each in %s); %llu corrected paths (last: %zu poses)\n",
+                n, end.arc - start.arc, on_trail, n ? subgoal_errors.front() : 0.0, half ? first / static_cast<double>(half) : 0.0,
+                n > half ? second / static_cast<double>(n - half) : 0.0, second_max, (out / "subgoals.csv").c_str(),
+                static_cast<unsigned long long>(n_paths),
+                last_path_poses);
+  }
   std::printf("   health while driving:\n%s", driving_health.c_str());
   std::printf("   after the recording ended: the last map resent %llu time(s) as stale (free cells unknown); health then:\n%s",
               static_cast<unsigned long long>(n_stale), last_health.c_str());
@@ -267,7 +351,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
   for (std::string line; std::getline(lines, line);) {
     if (line.find("info") == std::string::npos || line.find("stopped") != std::string::npos) std::printf("   %s\n", line.c_str());
   }
-  return n_maps > 0 && n_poses > 0 && n_health > 0 ? 0 : 1;
+  return n_maps > 0 && n_poses > 0 && n_health > 0 && !subgoals_received.empty() ? 0 : 1;
 }
 
 }  // namespace
@@ -278,7 +362,9 @@ void add_bench_demo_command(CLI::App& app) {
       "demo",
       "The bench demo: simulate a recording, start trailnavd on the bench config (board/robots/bench.yaml, all on\n"
       "loopback), replay the recording into it in real time and receive its DDS topics like a planner: obstacle\n"
-      "maps (saved as PNG), poses, health. Prints what arrived, the latency and trailnavd's report.");
+      "maps (saved as PNG), terrain maps, poses, health, and the corrected subgoals of the navigation task, planned on\n"
+      "the recording's OpenStreetMap to where the drive ends and checked against the simulated trail. Prints what\n"
+      "arrived, the latency and trailnavd's report.");
   cmd->add_option("--scenario", o->scenario, "Simulator scenario (docs/simulator.md)")->capture_default_str();
   cmd->add_option("--seconds", o->seconds, "Seconds to drive (and replay)")->capture_default_str()->check(CLI::Range(2.0, 600.0));
   cmd->add_option("--out", o->out, "Directory for the recording, the config, trailnavd's log and the map PNGs")->capture_default_str();

@@ -40,7 +40,7 @@ int run_eval(SubgoalEvalCli& c) {
   o.samples = c.samples;
   o.sequences = c.sequences;
   o.seeds = c.seeds;
-  o.aligner.known_cells_only = c.unknown_cells == "known-only";
+  o.navigator.aligner.known_cells_only = c.unknown_cells == "known-only";
   if (!c.config_file.empty()) {
     try {
       const ConfigNode root = ConfigNode::load_file(c.config_file);
@@ -146,14 +146,14 @@ void add_subgoal_eval_command(CLI::App& app) {
   cmd->add_option("--seeds", c.seeds, "Seeds per setting")->capture_default_str();
   cmd->add_option("--model", c.model, "Terrain model file (default: the built-in simulation model)");
   cmd->add_option("--config", c.config_file, "YAML file with a `terrain:` section (docs/terrain.md)");
-  cmd->add_option("--spacing", c.options.spacing, "m between subgoals")->capture_default_str();
-  cmd->add_option("--lookahead", c.options.lookahead, "m ahead of the robot a subgoal joins the alignment")->capture_default_str();
-  cmd->add_option("--reach", c.options.reach, "m before a subgoal the next one is sent")->capture_default_str();
-  cmd->add_option("--sigma-d", c.options.aligner.sigma_d, "Eq. 8.7 step-length sigma, m")->capture_default_str();
-  cmd->add_option("--sigma-theta", c.options.aligner.sigma_theta, "Eq. 8.7 angle sigma, rad")->capture_default_str();
-  cmd->add_option("--sigma-along", c.options.aligner.sigma_along, "Eq. 8.8 sigma along the street, m")->capture_default_str();
-  cmd->add_option("--sigma-across", c.options.aligner.sigma_across, "Eq. 8.8 sigma across the street, m")->capture_default_str();
-  cmd->add_option("--lambda", c.options.aligner.lambda, "Eq. 8.11 lambda")->capture_default_str();
+  cmd->add_option("--spacing", c.options.navigator.spacing, "m between subgoals")->capture_default_str();
+  cmd->add_option("--lookahead", c.options.navigator.lookahead, "m ahead of the robot a subgoal joins the alignment")->capture_default_str();
+  cmd->add_option("--reach", c.options.navigator.reach, "m before a subgoal the next one is sent")->capture_default_str();
+  cmd->add_option("--sigma-d", c.options.navigator.aligner.sigma_d, "Eq. 8.7 step-length sigma, m")->capture_default_str();
+  cmd->add_option("--sigma-theta", c.options.navigator.aligner.sigma_theta, "Eq. 8.7 angle sigma, rad")->capture_default_str();
+  cmd->add_option("--sigma-along", c.options.navigator.aligner.sigma_along, "Eq. 8.8 sigma along the street, m")->capture_default_str();
+  cmd->add_option("--sigma-across", c.options.navigator.aligner.sigma_across, "Eq. 8.8 sigma across the street, m")->capture_default_str();
+  cmd->add_option("--lambda", c.options.navigator.aligner.lambda, "Eq. 8.11 lambda")->capture_default_str();
   cmd->add_option("--unknown-cells", c.unknown_cells,
                   "How a patch treats cells without observations: known-only (mean over the known cells) or other\n"
                   "(each costs unknown_cost, the thesis' reading)")

@@ -5,6 +5,7 @@
 
 #include "trailnav/drivers/velodyne/calibration.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/log.hpp"
 
 namespace trailnav::daemon {
 
@@ -73,8 +74,25 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     if (!g.driver) return fail("gpio: " + g.error);
     d->gpio_ = std::move(g.driver);
   }
+  // The road network first: the pose's UTM frame must be the network's zone.
+  std::optional<pose::PoseEstimatorOptions> pose_options = config.pose;
+  if (config.navigation) {
+    const nav::NavigationSection& n = *config.navigation;
+    auto loaded = osm::load_road_graph(n.osm, n.profile, {}, pose_options->utm.zone);
+    if (!loaded.graph) return fail("navigation: " + loaded.error);
+    d->graph_ = std::move(loaded.graph);
+    pose_options->utm.zone = d->graph_->zone();
+    const perception::TerrainMapShape shape = config.terrain ? config.terrain->map : perception::TerrainMapShape{};
+    auto made = nav::Navigator::create(*d->graph_, n.navigator, shape);
+    if (!made.navigator) return fail("navigation: " + made.error);
+    d->navigator_ = std::move(made.navigator);
+    d->navigation_out_ = std::make_unique<Mailbox<nav::NavigationSnapshot>>(n.navigator.path_poses);
+    TN_LOG_INFO("navigation: %s: %zu vertices, %zu segments, UTM zone %d%c; goal %.6f, %.6f", n.osm.c_str(),
+                d->graph_->vertex_count(), d->graph_->segments().size(), d->graph_->zone(), d->graph_->north() ? 'N' : 'S',
+                n.navigator.goal_lat, n.navigator.goal_lon);
+  }
   if (config.pose) {
-    d->pose_ = std::make_unique<pose::PoseTask>(*config.pose, d->imu_ ? &d->imu_->readings() : nullptr,
+    d->pose_ = std::make_unique<pose::PoseTask>(*pose_options, d->imu_ ? &d->imu_->readings() : nullptr,
                                                 d->can_ ? &d->can_->readings() : nullptr,
                                                 d->gps_ ? &d->gps_->fixes() : nullptr);
   }
@@ -91,8 +109,8 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     }
   }
   // The terrain thread: its own reader of the revolutions and its own pose
-  // queue; its class maps go to the obstacle fusion (reader 0) and the
-  // publisher (reader 1).
+  // queue; its class maps go to the obstacle fusion (reader 0), the
+  // publisher (reader 1) and navigation (reader 2).
   if (config.terrain) {
     auto model = perception::RandomForest::load(config.terrain->model);
     if (!model.forest) return fail("terrain: " + model.error);
@@ -101,7 +119,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     auto made = perception::TerrainMapper::create(*config.terrain, mount, d->lidar_->revolution_shape(), &*d->forest_);
     if (!made.mapper) return fail("terrain: " + made.error);
     d->terrain_mapper_ = std::move(made.mapper);
-    d->terrain_out_ = std::make_unique<Broadcast<perception::TerrainClassMap>>(2, config.terrain->map);
+    d->terrain_out_ = std::make_unique<Broadcast<perception::TerrainClassMap>>(config.navigation ? 3 : 2, config.terrain->map);
     if (d->pose_ && config.terrain_use_pose) {
       d->terrain_pose_queue_ = std::make_unique<perception::PoseQueue>();
       d->pose_->add_pose_output(d->terrain_pose_queue_.get());
@@ -114,6 +132,12 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
         *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
         d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_);
     d->lidar_->set_revolution_event(&d->revolution_event_);
+  }
+
+  if (d->navigator_) {
+    d->navigation_ = std::make_unique<nav::NavigationTask>(*d->navigator_, d->pose_->navigation_poses(),
+                                                           d->terrain_out_ ? &d->terrain_out_->reader(2) : nullptr,
+                                                           *d->navigation_out_);
   }
 
   auto domain = dds::Domain::create(config.dds.domain, config.dds.cyclone_xml);
@@ -129,6 +153,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     inputs.terrain_cost = config.terrain->cost;
     inputs.unknown_cost = config.terrain->unknown_cost;
   }
+  inputs.navigation = d->navigation_out_.get();
   Daemon* self = d.get();
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
   dds::PublisherOptions popt = config.dds.publisher;
@@ -138,6 +163,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   d->publisher_ = std::move(pub.publisher);
   if (d->obstacles_) d->obstacles_->set_notify(&d->publisher_->wakeup());
   if (d->terrain_) d->terrain_->set_notify(&d->publisher_->wakeup());
+  if (d->navigation_) d->navigation_->set_notify(&d->publisher_->wakeup());
 
   // The task table, in a fixed order.
   auto add = [&](const char* name, Task* task, TaskEvent* event) -> bool {
@@ -152,7 +178,8 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (!add("lidar", d->lidar_.get(), nullptr) || !add("gps", d->gps_.get(), nullptr) ||
       !add("imu", d->imu_.get(), nullptr) || !add("can", d->can_.get(), nullptr) ||
       !add("gpio", d->gpio_.get(), nullptr) || !add("pose", d->pose_.get(), nullptr) ||
-      !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr)) {
+      !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr) ||
+      !add("navigation", d->navigation_.get(), nullptr)) {
     return result;
   }
   d->last_runs_.assign(d->scheduler_->task_count(), 0);
@@ -326,6 +353,24 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("known_cells", c.mapper.known_cells);
     m.value("classified_cells", c.mapper.classified_cells);
     m.value("poses", c.poses);
+  }
+  if (navigation_) {
+    const nav::NavigationTaskStatus s = navigation_->status();
+    const bool bad = s.state == nav::NavState::no_route;
+    m.begin(bad ? L::error : (s.state == nav::NavState::waiting_for_pose ? L::warn : L::ok), "trailnavd: navigation",
+            bad && s.message[0] != '\0' ? s.message : nav::nav_state_name(s.state), config_.navigation->osm);
+    m.value("state", nav::nav_state_name(s.state));
+    m.value("subgoals", static_cast<std::uint64_t>(s.subgoals));
+    m.value("active", static_cast<std::uint64_t>(s.active));
+    m.value("route_m", s.route_length, 1);
+    m.value("progress_m", s.progress, 1);
+    m.value("cross_track_m", s.cross_track, 2);
+    m.value("plans", s.navigator.plans);
+    m.value("replans", s.navigator.replans);
+    m.value("plan_failures", s.navigator.plan_failures);
+    m.value("plan_ms", s.navigator.last_plan_ms, 2);
+    m.value("aligner_updates", s.navigator.updates);
+    m.value("terrain_maps", s.terrain_maps);
   }
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
     const TaskStats st = scheduler_->stats(i);

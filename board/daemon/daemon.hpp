@@ -4,6 +4,8 @@
 //   drivers (lidar, gps, imu, can, gpio)  -- real-time tasks
 //   pose                                  -- real-time task: IMU + wheels + GPS
 //   obstacles                             -- real-time task, woken per revolution
+//   terrain                               -- real-time task: the terrain-class map
+//   navigation                            -- real-time task: route, subgoals, alignment
 //   publisher                             -- plain thread, the only one that calls DDS
 //
 // Real-time tasks hand snapshots through mailboxes and queues and never
@@ -18,6 +20,8 @@
 #include "dds.hpp"
 #include "publisher.hpp"
 #include "robot_config.hpp"
+#include "trailnav/navigation/navigator/navigation_task.hpp"
+#include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/random_forest.hpp"
@@ -83,6 +87,10 @@ class Daemon {
   std::unique_ptr<perception::PoseQueue> terrain_pose_queue_;
   std::unique_ptr<Broadcast<perception::TerrainClassMap>> terrain_out_;
   std::unique_ptr<perception::TerrainTask> terrain_;
+  std::optional<osm::RoadGraph> graph_;
+  std::unique_ptr<nav::Navigator> navigator_;
+  std::unique_ptr<Mailbox<nav::NavigationSnapshot>> navigation_out_;
+  std::unique_ptr<nav::NavigationTask> navigation_;
   std::unique_ptr<dds::Domain> domain_;
   std::unique_ptr<dds::DdsPublisher> publisher_;
   std::vector<std::uint64_t> last_runs_;

@@ -215,6 +215,20 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     if (c.terrain->model.empty()) n->fail("model", "the terrain classifier needs its model file (trailnav terrain-train)");
     if (auto m = perception::RandomForest::load(c.terrain->model); !m.forest) n->fail("model", m.error);
   }
+  if (auto n = root.optional_map("navigation")) {
+    c.navigation = nav::parse_navigation_section(*n);
+    if (!c.pose || !c.gps) {
+      root.fail("navigation", "navigation needs the robot's UTM pose: add 'pose' and 'gps' sections");
+    }
+    if (c.terrain && !c.terrain_use_pose) {
+      root.fail("navigation", "the subgoals are aligned in the odometry frame: set pose.feed_terrain to true so the "
+                              "terrain map is registered there");
+    }
+    if (c.terrain) {
+      c.navigation->navigator.aligner.cost = c.terrain->cost;
+      c.navigation->navigator.aligner.unknown_cost = c.terrain->unknown_cost;
+    }
+  }
   if (c.lidar) c.lidar->driver.revolution_readers = std::max(1, (c.obstacles ? 1 : 0) + (c.terrain ? 1 : 0));
   if (c.pose && !c.imu && !c.can) root.fail("pose", "the pose needs wheel odometry ('can') or an IMU ('imu')");
   c.dds = parse_dds(root.map("dds"));
@@ -234,7 +248,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"gpio", c.gpio.has_value(), TaskKind::periodic},
                         {"pose", c.pose.has_value(), TaskKind::periodic},
                         {"obstacles", c.obstacles.has_value(), TaskKind::event},
-                        {"terrain", c.terrain.has_value(), TaskKind::periodic}};
+                        {"terrain", c.terrain.has_value(), TaskKind::periodic},
+                        {"navigation", c.navigation.has_value(), TaskKind::periodic}};
   for (const Part& part : parts) {
     if (!part.configured) continue;
     const TaskSpec& t = require_task(c.tasks, part.name, root, "tasks");
@@ -249,7 +264,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                                   [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
-                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain");
+                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation");
     }
   }
   root.reject_unknown_keys();

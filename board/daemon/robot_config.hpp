@@ -16,6 +16,7 @@
 #include "trailnav/drivers/imu/imu_driver.hpp"
 #include "trailnav/drivers/velodyne/driver.hpp"
 #include "trailnav/drivers/velodyne/model.hpp"
+#include "trailnav/navigation/navigator/navigation_config.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/terrain_config.hpp"
@@ -56,6 +57,7 @@ struct RobotConfig {
   bool obstacles_use_pose = true;
   std::optional<perception::TerrainConfig> terrain;
   bool terrain_use_pose = true;
+  std::optional<nav::NavigationSection> navigation;
   DdsSection dds;
 };
 

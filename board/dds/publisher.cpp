@@ -7,7 +7,7 @@ namespace trailnav::dds {
 
 DdsPublisher::DdsPublisher(Clock& clock, const PublisherOptions& options, PublisherInputs inputs)
     : clock_(clock), options_(options), inputs_(std::move(inputs)), pose_msg_(options.odom_frame),
-      utm_msg_(options.fix_frame) {}
+      subgoal_msg_(options.odom_frame), utm_msg_(options.fix_frame) {}
 
 DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, const PublisherOptions& options,
                                            PublisherInputs inputs) {
@@ -43,6 +43,11 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     make(p->utm_writer_, geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, options.topics.utm_pose, {true, 1});
     make(p->fix_writer_, sensor_msgs_msg_dds__NavSatFix__desc, options.topics.fix, {true, 1});
   }
+  if (p->inputs_.navigation != nullptr) {
+    p->path_msg_.emplace(p->inputs_.navigation->last_read().path.size(), options.odom_frame);
+    make(p->subgoal_writer_, geometry_msgs_msg_dds__PoseStamped__desc, options.topics.subgoal, {true, 1, Durability::transient_local});
+    make(p->path_writer_, nav_msgs_msg_dds__Path__desc, options.topics.subgoal_path, {true, 1, Durability::transient_local});
+  }
   make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
   if (!result.error.empty()) return result;
   result.publisher = std::move(p);
@@ -71,6 +76,8 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.fixes = fixes_.load(std::memory_order_relaxed);
   s.health = health_.load(std::memory_order_relaxed);
   s.write_failures = failures_.load(std::memory_order_relaxed);
+  s.subgoals = subgoals_.load(std::memory_order_relaxed);
+  s.paths = paths_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
   return s;
 }
@@ -87,11 +94,38 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
   if (terrain_writer_) health_msg_.value("terrain_maps", s.terrain_maps);
   health_msg_.value("poses", s.poses);
   health_msg_.value("fixes", s.fixes);
+  if (subgoal_writer_) {
+    health_msg_.value("subgoals", s.subgoals);
+    health_msg_.value("paths", s.paths);
+  }
   health_msg_.value("write_failures", s.write_failures);
   if (health_writer_->write(&health_msg_.sample())) {
     health_.fetch_add(1, std::memory_order_relaxed);
   } else {
     failures_.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void DdsPublisher::publish_navigation(const nav::NavigationSnapshot& n) noexcept {
+  // Stamped with the pose's time, like the pose topic.
+  if (n.has_active && n.active_revision != last_active_revision_) {
+    last_active_revision_ = n.active_revision;
+    subgoal_msg_.fill(n.time_ns, n.active_pose.x, n.active_pose.y, 0.0, 0.0, 0.0, n.active_pose.yaw);
+    if (subgoal_writer_->write(&subgoal_msg_.sample())) {
+      subgoals_.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      failures_.fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+  if (n.path_revision != last_path_revision_) {
+    last_path_revision_ = n.path_revision;
+    path_msg_->clear(n.time_ns);
+    for (std::size_t i = 0; i < n.path_count; ++i) path_msg_->add(n.time_ns, n.path[i].x, n.path[i].y, n.path[i].yaw);
+    if (path_writer_->write(&path_msg_->sample())) {
+      paths_.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      failures_.fetch_add(1, std::memory_order_relaxed);
+    }
   }
 }
 
@@ -142,6 +176,9 @@ void DdsPublisher::loop() noexcept {
           failures_.fetch_add(1, std::memory_order_relaxed);
         }
       }
+    }
+    if (subgoal_writer_) {
+      if (const nav::NavigationSnapshot* n = inputs_.navigation->try_read()) publish_navigation(*n);
     }
     if (pose_writer_ && now >= next_pose) {
       next_pose = std::max(next_pose + pose_period, now);

@@ -7,7 +7,9 @@
 // the receive time of the lidar packet that completed their revolution, so a
 // subscriber measures the whole latency. Poses go out at `pose_rate_hz`,
 // terrain-class maps and their cost layer after each terrain step (reliable,
-// transient-local: a late joiner gets the newest), health every
+// transient-local: a late joiner gets the newest), the active subgoal when it
+// changes and the corrected path when it changes (both reliable,
+// transient-local, odometry frame), health every
 // `health_period`. When the lidar falls silent for
 // `stale_after`, the last map is sent again once a second with its free cells
 // turned unknown: a planner never keeps driving on old free space.
@@ -23,6 +25,7 @@
 
 #include "dds.hpp"
 #include "messages.hpp"
+#include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
@@ -63,12 +66,15 @@ struct PublisherInputs {
   Broadcast<perception::TerrainClassMap>::Reader* terrain = nullptr;
   std::array<float, perception::kTerrainClasses> terrain_cost{0.1f, 0.2f, 0.4f, 0.8f, 1.0f};
   float unknown_cost = 1.0f;
+  // The navigation thread's snapshots (their path capacity gives the Path's).
+  Mailbox<nav::NavigationSnapshot>* navigation = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
   std::function<void(DiagnosticsMessage&, Nanos now)> health;
 };
 
 struct PublisherStats {
   std::uint64_t maps = 0, stale_maps = 0, terrain_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
+  std::uint64_t subgoals = 0, paths = 0;
   bool lidar_stale = false;
 };
 
@@ -89,22 +95,28 @@ class DdsPublisher {
   DdsPublisher(Clock& clock, const PublisherOptions& options, PublisherInputs inputs);
   void loop() noexcept;
   void publish_health(Nanos now) noexcept;
+  void publish_navigation(const nav::NavigationSnapshot& snapshot) noexcept;
 
   Clock& clock_;
   PublisherOptions options_;
   PublisherInputs inputs_;
   Wakeup wakeup_;
   std::unique_ptr<Writer> map_writer_, terrain_writer_, cost_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
+  std::unique_ptr<Writer> subgoal_writer_, path_writer_;
   std::optional<OccupancyGridMessage> grid_;
   std::optional<TerrainClassMapMessage> terrain_msg_;
   std::optional<OccupancyGridMessage> cost_msg_;
   PoseStampedMessage pose_msg_;
+  PoseStampedMessage subgoal_msg_;
+  std::optional<PathMessage> path_msg_;
+  std::uint64_t last_active_revision_ = 0, last_path_revision_ = 0;
   UtmFixMessages utm_msg_;
   DiagnosticsMessage health_msg_;
   std::atomic<bool> running_{false};
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
+  std::atomic<std::uint64_t> subgoals_{0}, paths_{0};
   std::atomic<bool> lidar_stale_{false};
 };
 

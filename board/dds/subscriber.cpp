@@ -17,8 +17,9 @@
 namespace trailnav::dds {
 
 namespace {
-// The type name of the first writer of `topic` that discovery reports.
-std::string discover_type(const Domain& domain, const std::string& topic, double timeout_s) {
+// The type name of the first writer of `topic` that discovery reports, and
+// whether that writer keeps samples for late joiners (transient-local).
+std::string discover_type(const Domain& domain, const std::string& topic, double timeout_s, bool& transient_local) {
   const dds_entity_t reader = dds_create_reader(domain.participant(), DDS_BUILTIN_TOPIC_DCPSPUBLICATION, nullptr, nullptr);
   if (reader < 0) return {};
   std::string type;
@@ -30,7 +31,11 @@ std::string discover_type(const Domain& domain, const std::string& topic, double
     for (dds_return_t i = 0; i < n; ++i) {
       if (!infos[i].valid_data) continue;
       const auto* e = static_cast<const dds_builtintopic_endpoint_t*>(samples[i]);
-      if (type.empty() && e->topic_name != nullptr && topic == e->topic_name && e->type_name != nullptr) type = e->type_name;
+      if (type.empty() && e->topic_name != nullptr && topic == e->topic_name && e->type_name != nullptr) {
+        type = e->type_name;
+        dds_durability_kind_t kind = DDS_DURABILITY_VOLATILE;
+        transient_local = e->qos != nullptr && dds_qget_durability(e->qos, &kind) && kind != DDS_DURABILITY_VOLATILE;
+      }
     }
     if (n > 0) dds_return_loan(reader, samples, n);
     if (type.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -53,12 +58,13 @@ const dds_topic_descriptor_t* known_type(const std::string& name) noexcept {
 }
 
 Subscriber::Created Subscriber::create(const Domain& domain, const std::string& topic_name,
-                                       const dds_topic_descriptor_t* type, double discover_timeout_s) {
+                                       const dds_topic_descriptor_t* type, double discover_timeout_s,
+                                       bool transient_local) {
   Created result;
   std::unique_ptr<Subscriber> s(new Subscriber());
   s->topic_ = ros_topic(topic_name);
   if (type == nullptr) {
-    const std::string name = discover_type(domain, s->topic_, discover_timeout_s);
+    const std::string name = discover_type(domain, s->topic_, discover_timeout_s, transient_local);
     if (name.empty()) {
       result.error = "no writer of " + s->topic_ + " found within " + std::to_string(static_cast<int>(discover_timeout_s)) +
                      " s (is trailnavd running, on the same DDS domain and Cyclone configuration?)";
@@ -80,7 +86,7 @@ Subscriber::Created Subscriber::create(const Domain& domain, const std::string& 
   dds_qos_t* q = dds_create_qos();
   dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
   dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 32);
-  if (type == &nav_msgs_msg_dds__Path__desc) dds_qset_durability(q, DDS_DURABILITY_TRANSIENT_LOCAL);
+  if (transient_local || type == &nav_msgs_msg_dds__Path__desc) dds_qset_durability(q, DDS_DURABILITY_TRANSIENT_LOCAL);
   s->reader_ = dds_create_reader(domain.participant(), s->topic_entity_, q, nullptr);
   dds_delete_qos(q);
   if (s->reader_ < 0) {

@@ -28,10 +28,13 @@ class Subscriber {
  public:
   struct Created;
   // `type` null: wait up to `discover_timeout_s` for a writer of the topic
-  // and take its type. Readers of nav_msgs/Path are transient-local (late
-  // joiners get the current path); all are reliable.
+  // and take its type and durability. `transient_local` (or a discovered
+  // transient-local writer, or the type nav_msgs/Path) makes the reader
+  // transient-local: a late joiner gets the writer's current sample (the
+  // active subgoal, the corrected path, the terrain map). A transient-local
+  // reader does not match a volatile writer. All readers are reliable.
   static Created create(const Domain& domain, const std::string& topic_name, const dds_topic_descriptor_t* type,
-                        double discover_timeout_s);
+                        double discover_timeout_s, bool transient_local = false);
   ~Subscriber();
   Subscriber(const Subscriber&) = delete;
   Subscriber& operator=(const Subscriber&) = delete;

@@ -1,6 +1,7 @@
 #include "sim_truth.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <numbers>
 #include <cstdio>
@@ -176,6 +177,47 @@ bool truth_at(const std::vector<TruthPose>& traj, std::int64_t t, TruthAt& out) 
   out.lat = a.lat + f * (b.lat - a.lat);
   out.lon = a.lon + f * (b.lon - a.lon);
   return true;
+}
+
+std::string load_true_route(const std::string& dir, sim::Polyline& out) {
+  const std::string file = dir + "/route.csv";
+  std::ifstream in(file);
+  if (!in) return "cannot read " + file;
+  std::string line;
+  std::getline(in, line);  // header: arc,x,y,...
+  std::vector<sim::Vec2> points;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string arc, x, y;
+    if (std::getline(ls, arc, ',') && std::getline(ls, x, ',') && std::getline(ls, y, ',')) {
+      points.emplace_back(std::stod(x), std::stod(y));
+    }
+  }
+  if (points.size() < 2) return file + ": fewer than two route points";
+  out = sim::Polyline(std::move(points));
+  return {};
+}
+
+void TrailCheck::add_odometry_pose(std::int64_t t_ns, double x, double y, double yaw) {
+  if (!odometry_.empty() && t_ns <= odometry_.back().t) return;
+  odometry_.push_back({t_ns, x, y, yaw});
+}
+
+double TrailCheck::distance(std::int64_t t_ns, double x, double y) const {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  auto it = std::lower_bound(odometry_.begin(), odometry_.end(), t_ns, [](const Sample& s, std::int64_t t) { return s.t < t; });
+  const Sample* best = nullptr;
+  if (it != odometry_.end()) best = &*it;
+  if (it != odometry_.begin() && (best == nullptr || t_ns - (it - 1)->t < best->t - t_ns)) best = &*(it - 1);
+  if (best == nullptr || std::abs(best->t - t_ns) > 200'000'000) return nan;
+  TruthAt p;
+  if (!truth_at(truth_.trajectory, best->t - offset_ns_, p)) return nan;
+  // Into the robot's frame through the odometry pose, out through the true pose.
+  const double dx = x - best->x, dy = y - best->y;
+  const double c0 = std::cos(best->yaw), s0 = std::sin(best->yaw);
+  const double rx = c0 * dx + s0 * dy, ry = -s0 * dx + c0 * dy;
+  const double c1 = std::cos(p.yaw), s1 = std::sin(p.yaw);
+  return trail_.project({p.x + c1 * rx - s1 * ry, p.y + s1 * rx + c1 * ry}).distance;
 }
 
 }  // namespace trailnav::eval

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "roads.hpp"
 #include "scenario.hpp"
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
@@ -55,6 +56,37 @@ struct SimTruthResult {
 
 // `dir`: a recording's truth/ directory.
 SimTruthResult load_sim_truth(const std::string& dir);
+
+// The route the robot drove (truth/route.csv: the true centrelines of the
+// route's legs, world frame); an error when missing or shorter than two points.
+std::string load_true_route(const std::string& dir, sim::Polyline& out);
+
+// Checks points a subscriber receives in trailnavd's odometry frame against
+// the simulated trail. The odometry frame drifts away from the simulator's
+// world, so each point goes through the robot's odometry pose and its true
+// pose at the same instant: world = T_true(t) T_odom(t)^-1 p. Odometry poses
+// come from the pose topic; `offset_ns` maps trailnavd's clock to the
+// recording's (the replay's start in wall time minus the recording's start).
+class TrailCheck {
+ public:
+  TrailCheck(const SimTruth& truth, const sim::Polyline& trail, std::int64_t offset_ns)
+      : truth_(truth), trail_(trail), offset_ns_(offset_ns) {}
+  void set_offset(std::int64_t offset_ns) noexcept { offset_ns_ = offset_ns; }
+  void add_odometry_pose(std::int64_t t_ns, double x, double y, double yaw);
+  // Distance of (x, y), stamped t_ns (trailnavd's clock), to the trail's
+  // centre; NaN without an odometry pose within 0.2 s or a true pose then.
+  double distance(std::int64_t t_ns, double x, double y) const;
+
+ private:
+  struct Sample {
+    std::int64_t t;
+    double x, y, yaw;
+  };
+  const SimTruth& truth_;
+  const sim::Polyline& trail_;
+  std::int64_t offset_ns_;
+  std::vector<Sample> odometry_;
+};
 
 // The true pose at UTC time t, interpolated; false outside the trajectory.
 struct TruthAt {

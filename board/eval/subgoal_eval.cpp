@@ -14,58 +14,12 @@
 #include "roads.hpp"
 #include "sim_truth.hpp"
 #include "terrain_run.hpp"
-#include "trailnav/navigation/osm/router.hpp"
+#include "trailnav/navigation/navigator/navigator.hpp"
 
 namespace trailnav::eval {
 namespace {
 
 namespace fs = std::filesystem;
-using osm::Point2;
-
-// The planned route in UTM with arc lengths; the robot's progress is its
-// nearest point within an arc window (so a route that passes a place twice
-// is not jumped along), which sim::Polyline::project does not offer.
-struct Path {
-  std::vector<Point2> p;
-  std::vector<double> s;
-  void finish() {
-    s.assign(p.size(), 0.0);
-    for (std::size_t i = 1; i < p.size(); ++i) s[i] = s[i - 1] + std::hypot(p[i].x - p[i - 1].x, p[i].y - p[i - 1].y);
-  }
-  // Distance from (x, y) and the arc of the nearest point, over segments whose arc lies in [lo, hi].
-  double nearest(double x, double y, double& arc, double lo = -1e300, double hi = 1e300) const {
-    double best = std::numeric_limits<double>::max();
-    arc = 0.0;
-    for (std::size_t i = 1; i < p.size(); ++i) {
-      if (s[i] < lo || s[i - 1] > hi) continue;
-      const double dx = p[i].x - p[i - 1].x, dy = p[i].y - p[i - 1].y, l2 = dx * dx + dy * dy;
-      const double t = l2 > 0 ? std::clamp(((x - p[i - 1].x) * dx + (y - p[i - 1].y) * dy) / l2, 0.0, 1.0) : 0.0;
-      const double d = std::hypot(x - p[i - 1].x - t * dx, y - p[i - 1].y - t * dy);
-      if (d < best) {
-        best = d;
-        arc = s[i - 1] + t * (s[i] - s[i - 1]);
-      }
-    }
-    return best;
-  }
-};
-
-std::string read_route(const std::string& file, sim::Polyline& out) {
-  std::ifstream in(file);
-  if (!in) return "cannot read " + file;
-  std::string line;
-  std::getline(in, line);
-  std::vector<sim::Vec2> points;
-  while (std::getline(in, line)) {
-    std::istringstream ls(line);
-    std::string arc, x, y;
-    if (std::getline(ls, arc, ',') && std::getline(ls, x, ',') && std::getline(ls, y, ','))
-      points.emplace_back(std::stod(x), std::stod(y));
-  }
-  if (points.size() < 2) return file + ": fewer than two route points";
-  out = sim::Polyline(std::move(points));
-  return {};
-}
 
 struct Junction {
   std::string label;
@@ -98,13 +52,8 @@ std::vector<Junction> read_junctions(const std::string& file, const sim::Polylin
   return out;
 }
 
-struct UtmSample {
-  std::int64_t t;
-  double e, n, yaw;
-};
-
 struct Run {
-  std::unique_ptr<subgoals::SubgoalAligner> aligner;
+  std::unique_ptr<nav::Navigator> navigator;
   std::size_t config = 0;
   int seed = 0;
   double sq = 0.0;
@@ -125,7 +74,7 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
   if (o.seeds < 1) return fail("at least one seed is needed");
   for (std::size_t s : o.samples) {
     for (int k : o.sequences) {
-      subgoals::AlignerConfig c = o.aligner;
+      subgoals::AlignerConfig c = o.navigator.aligner;
       c.samples = s;
       c.sequence = k;
       if (std::string e = subgoals::check_aligner_config(c); !e.empty()) return fail("aligner: " + e);
@@ -157,7 +106,7 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     if (!loaded.truth) return fail(rec + ": needs a simulated recording's truth: " + loaded.error);
     const SimTruth& truth = *loaded.truth;
     sim::Polyline true_route;
-    if (std::string e = read_route((fs::path(rec) / "truth" / "route.csv").string(), true_route); !e.empty()) return fail(e);
+    if (std::string e = load_true_route((fs::path(rec) / "truth").string(), true_route); !e.empty()) return fail(e);
     std::vector<Junction> junctions;
     if (truth.scenario.name == "junctions") junctions = read_junctions((fs::path(rec) / "truth" / "junctions.csv").string(), true_route);
     const std::size_t junction_base = report.junctions.size();
@@ -175,31 +124,36 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     const osm::RoadGraph& graph = *graph_loaded.graph;
 
     // The robot's UTM pose as the pose estimator has it.
-    std::vector<UtmSample> utm;
+    std::vector<pose::UtmPose> utm;
     PoseEvalOptions po;
     po.progress = [&](double f) { if (o.progress) o.progress(name + " pose", f); };
-    po.on_utm = [&](const pose::UtmPose& u) { utm.push_back({u.time_ns, u.easting, u.northing, u.yaw}); };
+    po.on_utm = [&](const pose::UtmPose& u) { utm.push_back(u); };
     const PoseEvalResult pr = evaluate_pose(rec, po);
     if (!pr.error.empty()) return fail(pr.error);
     if (utm.empty()) return fail(rec + ": the pose estimate never found its heading");
-    auto utm_at = [&](std::int64_t t) -> const UtmSample* {
-      auto it = std::upper_bound(utm.begin(), utm.end(), t, [](std::int64_t v, const UtmSample& s) { return v < s.t; });
+    auto utm_at = [&](std::int64_t t) -> const pose::UtmPose* {
+      auto it = std::upper_bound(utm.begin(), utm.end(), t, [](std::int64_t v, const pose::UtmPose& s) { return v < s.time_ns; });
       if (it == utm.begin()) return nullptr;
       return &*(it - 1);
     };
 
-    // Aligners: every configuration and seed.
+    // Navigators: every configuration and seed, each as trailnavd runs it.
+    const TruthPose& end = truth.trajectory.back();
     std::vector<Run> runs;
     for (std::size_t c = 0; c < report.configs.size(); ++c) {
       for (int seed = 1; seed <= o.seeds; ++seed) {
-        subgoals::AlignerConfig ac = o.aligner;
-        ac.samples = report.configs[c].samples;
-        ac.sequence = report.configs[c].sequence;
-        ac.seed = static_cast<std::uint64_t>(seed);
+        nav::NavigatorConfig nc = o.navigator;
+        nc.goal_lat = end.lat;
+        nc.goal_lon = end.lon;
+        nc.aligner.samples = report.configs[c].samples;
+        nc.aligner.sequence = report.configs[c].sequence;
+        nc.aligner.seed = static_cast<std::uint64_t>(seed);
+        nc.aligner.cost = o.terrain.cost;
+        nc.aligner.unknown_cost = o.terrain.unknown_cost;
+        auto made = nav::Navigator::create(graph, nc, o.terrain.map);
+        if (!made.navigator) return fail(rec + ": " + made.error);
         Run r;
-        ac.cost = o.terrain.cost;
-        ac.unknown_cost = o.terrain.unknown_cost;
-        r.aligner = std::make_unique<subgoals::SubgoalAligner>(ac, o.terrain.map);
+        r.navigator = std::move(made.navigator);
         r.config = c;
         r.seed = seed;
         r.junction_ok.assign(junctions.size(), 1);
@@ -207,16 +161,14 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
       }
     }
 
-    // The plan, made at the first step with a UTM pose.
     bool planned = false;
-    std::vector<Point2> route_utm, goals_utm;
-    Path route_path;
-    std::vector<double> goal_arc;
-    std::vector<subgoals::Vec2> raw;
-    std::size_t pushed = 0, active = 0;
-    double robot_arc = 0.0;
     std::string plan_error;
-    const TruthPose& end = truth.trajectory.back();
+    auto error_of = [&](const subgoals::Vec2& g) {
+      return std::max(0.0, true_route.project({g.x, g.y}).distance - 0.5 * o.street_width);
+    };
+    auto in_junction = [&](double arc, std::size_t j) {
+      return arc >= junctions[j].arc - o.junction_before && arc <= junctions[j].arc + o.junction_after;
+    };
 
     TerrainRunOptions tr;
     tr.input = rec;
@@ -226,79 +178,52 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     tr.on_revolution = [&](const perception::TerrainMapper& mapper, bool stepped) {
       if (!stepped || !plan_error.empty()) return;
       const std::int64_t t = mapper.cloud().time_ns;
-      const UtmSample* u = utm_at(t);
+      const pose::UtmPose* u = utm_at(t);
       TruthAt p;
       if (u == nullptr || !truth_at(truth.trajectory, t, p)) return;
-      if (!planned) {
-        double gx = 0, gy = 0;
-        graph.to_utm(end.lat, end.lon, gx, gy);
-        const auto from = graph.project(u->e, u->n);
-        const auto to = graph.project(gx, gy);
-        osm::Router router(graph);
-        const osm::RouteStats st = router.route(*from, *to, route_utm);
-        if (!st.found) {
-          plan_error = rec + ": no route on world.osm from the robot's GPS position to the route's end";
-          return;
-        }
-        osm::subsample_path(route_utm, o.spacing, goals_utm);
-        route_path.p = route_utm;
-        route_path.finish();
-        for (const Point2& g : goals_utm) {
-          double a = 0;
-          route_path.nearest(g.x, g.y, a);
-          goal_arc.push_back(a);
-        }
-        raw.resize(goals_utm.size());
-        report.route_length += st.length;
-        planned = true;
-      }
-      // UTM -> world through the estimate: world = P * U^-1 * q.
-      const double rot = p.yaw - u->yaw, cr = std::cos(rot), sr = std::sin(rot);
-      auto to_world = [&](const Point2& q) {
-        const double dx = q.x - u->e, dy = q.y - u->n;
-        return subgoals::Vec2{p.x + cr * dx - sr * dy, p.y + sr * dx + cr * dy};
-      };
-      route_path.nearest(u->e, u->n, robot_arc, robot_arc - 5.0, robot_arc + 30.0);
-      std::size_t want = pushed;
-      while (want < goals_utm.size() && goal_arc[want] <= robot_arc + o.lookahead) ++want;
-      if (want == 0) want = 1;
-      const std::size_t first = want > 9 ? want - 9 : 0;
-      for (std::size_t i = first; i < want; ++i) raw[i] = to_world(goals_utm[i]);
-      // Subgoals to send: the next one when the active one is almost reached.
-      std::size_t send_to = active;
-      while (send_to < want && goal_arc[send_to] <= robot_arc + o.reach) ++send_to;
+      // The local frame is the simulated world here (the map is registered with the true trajectory).
+      pose::LocalPose local;
+      local.time_ns = t;
+      local.x = p.x;
+      local.y = p.y;
+      local.yaw = p.yaw;
       const auto t0 = std::chrono::steady_clock::now();
+      std::size_t reached_begin = 0, reached_end = 0;
       for (Run& r : runs) {
-        for (std::size_t i = r.aligner->count(); i < want; ++i) r.aligner->push(raw);
-        r.aligner->update(mapper.map(), raw);
+        const nav::StepResult sr = r.navigator->step(local, *u, &mapper.map());
+        reached_begin = sr.reached_begin;
+        reached_end = sr.reached_end;
       }
       report.seconds_aligning += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       ++report.updates;
-      pushed = want;
-      auto error_of = [&](const subgoals::Vec2& g) {
-        return std::max(0.0, true_route.project({g.x, g.y}).distance - 0.5 * o.street_width);
-      };
-      for (; active < send_to; ++active) {
-        const double re = error_of(raw[active]);
+      const nav::Navigator& first = *runs.front().navigator;
+      if (first.state() == nav::NavState::no_route) {
+        plan_error = rec + ": no route on world.osm from the robot's GPS position to the route's end";
+        return;
+      }
+      if (!planned && first.state() != nav::NavState::waiting_for_pose) {
+        planned = true;
+        report.route_length += first.route_length();
+      }
+      // Subgoals reached in this step: their final estimates are what the robot drove to.
+      for (std::size_t i = reached_begin; i < reached_end; ++i) {
+        const subgoals::Vec2 raw = first.raw_local(i);
+        const double re = error_of(raw);
         raw_sq += re * re;
         report.raw_max = std::max(report.raw_max, re);
         ++raw_sent;
         for (std::size_t j = 0; j < junctions.size(); ++j) {
-          if (p.arc >= junctions[j].arc - o.junction_before && p.arc <= junctions[j].arc + o.junction_after && re > o.junction_tolerance)
-            report.raw_junction_ok[junction_base + j] = 0;
+          if (in_junction(p.arc, j) && re > o.junction_tolerance) report.raw_junction_ok[junction_base + j] = 0;
         }
-        if (csv != nullptr)
-          std::fprintf(csv, "%s,%zu,%.2f,%.3f,%.3f,%.3f", name.c_str(), active, p.arc, raw[active].x, raw[active].y, re);
+        if (csv != nullptr) std::fprintf(csv, "%s,%zu,%.2f,%.3f,%.3f,%.3f", name.c_str(), i, p.arc, raw.x, raw.y, re);
         for (Run& r : runs) {
-          const subgoals::Vec2 g = r.aligner->estimated(active) ? r.aligner->estimate(active) : raw[active];
+          const subgoals::Vec2 g = r.navigator->corrected(i);
           const double e = error_of(g);
           if (csv != nullptr && r.seed == 1) std::fprintf(csv, ",%.3f,%.3f,%.3f", g.x, g.y, e);
           r.sq += e * e;
           ++r.sent;
           for (std::size_t j = 0; j < junctions.size(); ++j) {
-            if (p.arc >= junctions[j].arc - o.junction_before && p.arc <= junctions[j].arc + o.junction_after &&
-                e > o.junction_tolerance)
-              r.junction_ok[j] = 0;
+            if (in_junction(p.arc, j) && e > o.junction_tolerance) r.junction_ok[j] = 0;
           }
         }
         if (csv != nullptr) std::fprintf(csv, "\n");

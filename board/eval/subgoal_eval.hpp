@@ -9,10 +9,12 @@
 // pose estimator's UTM pose, run on the recording's GPS, IMU and wheels (so
 // GPS errors enter as on the robot): q_world = P(t) U(t)^-1 q_utm.
 //
-// Subgoals join the aligner when they come within `lookahead` metres of the
-// robot along the route (its GPS position projected onto the route), and a
-// subgoal is sent when the one before it is almost reached (`reach` metres
-// along). The error of a sent subgoal is Eq. 8.15: its distance to the true
+// Each configuration and seed runs the navigation task's own logic
+// (nav::Navigator, as in trailnavd): subgoals join the aligner when they come
+// within `lookahead` metres of the robot along the route (its GPS position
+// projected onto the route), and the robot drives to a subgoal until it is
+// almost reached (`reach` metres along). A subgoal counts as sent with its
+// estimate when it is reached. The error of a sent subgoal is Eq. 8.15: its distance to the true
 // path minus half a 3 m street width, floored at 0. Per configuration the
 // RMSE over all sent subgoals of all recordings is taken per seed, then
 // averaged over the seeds, as in Fig. 8.5. At the junctions a recording's
@@ -27,7 +29,7 @@
 #include <vector>
 
 #include "trailnav/navigation/osm/road_graph.hpp"
-#include "trailnav/navigation/subgoals/subgoal_aligner.hpp"
+#include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_config.hpp"
 
@@ -38,13 +40,12 @@ struct SubgoalEvalOptions {
   std::vector<std::size_t> samples{1000, 10000, 50000};
   std::vector<int> sequences{1, 2, 3, 4, 5, 6};
   int seeds = 10;
-  subgoals::AlignerConfig aligner;  // samples, sequence and seed are set per configuration
+  // The navigation task's settings (spacing, lookahead, reach, the aligner);
+  // the goal, samples, sequence and seed are set per recording and configuration.
+  nav::NavigatorConfig navigator;
   perception::TerrainConfig terrain;
   const perception::RandomForest* forest = nullptr;
   osm::RoutingProfile profile;
-  double spacing = 4.0;       // m between subgoals
-  double lookahead = 12.0;    // m ahead of the robot a subgoal joins the aligner
-  double reach = 2.0;         // m before a subgoal the next one is sent
   double street_width = 3.0;  // s of Eq. 8.15
   double junction_before = 8.0, junction_after = 12.0;  // m of route around a junction
   double junction_tolerance = 0.5;  // m of Eq. 8.15 error a feasible subgoal may have

@@ -230,6 +230,22 @@ std::string ConfigNode::choice(std::string_view key, std::initializer_list<std::
   return has(key) ? choice(key, choices) : fallback;
 }
 
+std::vector<std::string> ConfigNode::string_list(std::string_view key) const {
+  const YAML::Node value = value_of(key);
+  if (!value.IsDefined() || value.IsNull()) fail("", "missing required key '" + key_path(key) + "' (a list of strings)");
+  if (!value.IsSequence()) fail(key, "expected a list of strings, e.g. [track, path]");
+  std::vector<std::string> out;
+  std::size_t index = 0;
+  for (const auto& item : value) {
+    const std::string item_key = std::string(key) + "[" + std::to_string(index++) + "]";
+    if (!item.IsScalar() || item.Scalar().empty()) {
+      throw ConfigError(file_, line_of(item), key_path(item_key), "expected a non-empty string");
+    }
+    out.push_back(item.Scalar());
+  }
+  return out;
+}
+
 std::vector<double> ConfigNode::number_list(std::string_view key, double min, double max) const {
   const YAML::Node value = value_of(key);
   if (!value.IsDefined() || value.IsNull()) fail("", "missing required key '" + key_path(key) + "' (a list of numbers)");

@@ -45,6 +45,7 @@
 #include "revolution_source.hpp"
 #include "replayer.hpp"
 #include "robot_config.hpp"
+#include "sim_truth.hpp"
 #include "simulator.hpp"
 #include "subscriber.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
@@ -62,6 +63,11 @@ struct DaemonRun {
   std::size_t maps = 0, matched = 0, identical = 0, offline = 0, poses = 0, health = 0;
   std::size_t stale = 0, stale_correct = 0;  // maps resent after the lidar fell silent
   std::size_t terrain = 0, terrain_offline = 0, terrain_matched = 0, terrain_identical = 0, terrain_known = 0;
+  // Navigation: active subgoals and corrected paths received, how many
+  // subgoals lay on the simulated trail, and what a late joiner got.
+  std::vector<double> subgoal_errors;  // m from the trail's centre, in the order received
+  std::size_t paths = 0, last_path_poses = 0, late_subgoals = 0, late_paths = 0;
+  std::size_t subgoals_unmatched = 0;  // no odometry pose near its stamp: not checked
   DurationSummary latency;  // last packet of a revolution -> subscriber
   long rss_start_kb = 0, rss_end_kb = 0;
   int exit_code = -1;
@@ -85,7 +91,10 @@ std::string read_file(const fs::path& p) {
 }
 
 // Everything of one run; `seconds` of simulated driving.
-DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
+// With `navigation`, trailnavd also plans on the recording's world.osm to
+// where the drive ends and publishes corrected subgoals; the terrain map is
+// then registered with the pose (so the offline comparisons are skipped).
+DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool navigation = false) {
   DaemonRun out;
   const fs::path dir = fs::temp_directory_path() / ("trailnav-e2e-" + tag + "-" + std::to_string(::getpid()));
   fs::remove_all(dir);
@@ -113,7 +122,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
       << "can: {transport: tunnel, tunnel: 127.0.0.1:" << base + 2 << ", dbc: " << fs::absolute("board/sim/trailnav-robot.dbc").string()
       << ", left: WHEEL_SPEEDS.SpeedLeft, right: WHEEL_SPEEDS.SpeedRight, track: 0.6}\n"
       << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
-      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: false, feed_terrain: false}\n"
+      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: false, feed_terrain: " << (navigation ? "true" : "false") << "}\n"
       << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
       << "terrain: {model: " << fs::absolute("board/models/terrain-sim.tnrf").string() << ", max_step_interval: 1.0}\n"
       << "dds: {domain: " << domain << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5}\n"
@@ -126,7 +135,35 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
       << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1.0}\n"
       << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n"
       << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
+    if (navigation) {
+      auto truth = eval::load_sim_truth(so.out + "/truth");
+      EXPECT_TRUE(truth.truth) << truth.error;
+      if (!truth.truth) return out;
+      char goal[120];
+      std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", truth.truth->trajectory.back().lat, truth.truth->trajectory.back().lon);
+      c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n"
+        << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
+    }
   }
+  // The true trail: subgoals come in the odometry frame and are checked
+  // through the robot's odometry and true poses of their instant.
+  sim::Polyline trail;
+  eval::SimTruth truth;
+  if (navigation) {
+    auto loaded = eval::load_sim_truth(so.out + "/truth");
+    EXPECT_EQ(eval::load_true_route(so.out + "/truth", trail), "");
+    if (loaded.truth) truth = std::move(*loaded.truth);
+  }
+  eval::TrailCheck trail_check(truth, trail, 0);
+  struct Stamped {
+    std::int64_t t;
+    double x, y;
+  };
+  std::vector<Stamped> subgoals_received;
+  std::atomic<std::int64_t> replay_start_ns{0};
+  auto stamp_ns = [](const auto& header) {
+    return static_cast<std::int64_t>(header.stamp.sec) * 1'000'000'000 + static_cast<std::int64_t>(header.stamp.nanosec);
+  };
   auto robot = daemon::load_robot_config(config.string());
   EXPECT_TRUE(robot.config) << robot.error;
   if (!robot.config) return out;
@@ -141,6 +178,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   auto terrain = dds::Subscriber::create(*dds_domain.domain, "trailnav/terrain_map",
                                         &trailnav_msgs_msg_dds__TerrainClassMap__desc, 0);
   EXPECT_TRUE(maps.subscriber && poses.subscriber && health.subscriber && terrain.subscriber);
+  auto subgoal = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal", &geometry_msgs_msg_dds__PoseStamped__desc, 0, true);
+  auto subgoal_path = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal_path", &nav_msgs_msg_dds__Path__desc, 0);
+  EXPECT_TRUE(subgoal.subscriber && subgoal_path.subscriber);
 
   // trailnavd itself, as systemd would run it (stderr to a file).
   const std::string err_path = (dir / "trailnavd.err").string();
@@ -178,6 +218,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   std::atomic<bool> replaying{true};
   std::thread player([&] {
     std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the daemon opens its links and discovery settles
+    replay_start_ns = wall_clock_ns();
     replayer.replayer->run();
     replaying = false;
   });
@@ -208,7 +249,20 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
       v.assign(t.class_id._buffer, t.class_id._buffer + t.class_id._length);
       v.insert(v.end(), t.confidence._buffer, t.confidence._buffer + t.confidence._length);
     });
-    poses.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.poses; });
+    poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
+      ++out.poses;
+      trail_check.add_odometry_pose(stamp_ns(p.header), p.pose.position.x, p.pose.position.y,
+                                    2.0 * std::atan2(p.pose.orientation.z, p.pose.orientation.w));
+    });
+    subgoal.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
+      subgoals_received.push_back({stamp_ns(p.header), p.pose.position.x, p.pose.position.y});
+    });
+    subgoal_path.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      ++out.paths;
+      out.last_path_poses = static_cast<const nav_msgs_msg_dds__Path_*>(r.sample)->poses._length;
+    });
     health.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.health; });
   };
   bool rss_taken = false;
@@ -222,6 +276,16 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   }
   player.join();
   for (int i = 0; i < 15; ++i) take_all(0.1);  // and 1.5 s of silence
+  if (navigation) {
+    // A planner that joins late still gets the active subgoal and the path (transient-local).
+    auto late = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal", nullptr, 5.0);
+    auto late_path = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal_path", nullptr, 5.0);
+    EXPECT_TRUE(late.subscriber && late_path.subscriber) << late.error << late_path.error;
+    for (int i = 0; i < 20 && late.subscriber && late_path.subscriber && (out.late_subgoals == 0 || out.late_paths == 0); ++i) {
+      late.subscriber->take(0.1, [&](const dds::ReceivedSample&) { ++out.late_subgoals; });
+      late_path.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.late_paths; });
+    }
+  }
   out.rss_end_kb = rss_kb(pid);
   ::kill(pid, SIGTERM);
   int status = 0;
@@ -230,6 +294,20 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime) {
   out.stderr_text = read_file(err_path);
   out.maps = received.size();
   out.latency = latency.summary();
+  if (navigation) {
+    if (!truth.trajectory.empty()) trail_check.set_offset(replay_start_ns - truth.trajectory.front().utc_ns);
+    for (const Stamped& g : subgoals_received) {
+      const double d = trail_check.distance(g.t, g.x, g.y);
+      if (std::isnan(d)) {
+        ++out.subgoals_unmatched;
+        std::printf("[ trailnavd navigation ] no odometry pose within 0.2 s of the subgoal stamped %lld\n", static_cast<long long>(g.t));
+      } else {
+        out.subgoal_errors.push_back(d);
+      }
+    }
+    fs::remove_all(dir);
+    return out;
+  }
 
   // The offline pipeline on the same recording, same obstacle config, no pose stream.
   eval::ObstacleRunOptions oo;
@@ -340,6 +418,41 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   EXPECT_GE(r.terrain_matched, r.terrain_offline - 1);
   EXPECT_EQ(r.terrain_identical, r.terrain_matched);
   EXPECT_GT(r.terrain_known, 1000u);
+}
+
+// The navigation task in the daemon: planned on the recording's OpenStreetMap
+// (whose roads lie metres off the simulated ones), aligned with the terrain
+// thread's estimated class map; a planner sees corrected subgoals on the trail.
+TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
+  const DaemonRun r = run_daemon(30.0, "nav", false, true);
+  const std::vector<double>& e = r.subgoal_errors;
+  const std::size_t half = e.size() / 2;
+  double first = 0.0, second = 0.0, second_max = 0.0;
+  for (std::size_t i = 0; i < e.size(); ++i) {
+    (i < half ? first : second) += e[i];
+    if (i >= half) second_max = std::max(second_max, e[i]);
+  }
+  first /= static_cast<double>(std::max<std::size_t>(half, 1));
+  second /= static_cast<double>(std::max<std::size_t>(e.size() - half, 1));
+  std::printf("[ trailnavd navigation ] %zu active subgoals; distance from the trail's centre: first %.2f m, first half "
+              "mean %.2f m, second half mean %.2f m max %.2f m; %zu paths (last %zu poses); late joiner got %zu subgoal(s) "
+              "and %zu path(s)\n%s",
+              e.size(), e.empty() ? 0.0 : e.front(), first, second, second_max, r.paths, r.last_path_poses, r.late_subgoals,
+              r.late_paths, r.stderr_text.c_str());
+  EXPECT_EQ(r.exit_code, 0);
+  ASSERT_GE(e.size(), 20u);
+  // world.osm puts the street metres off (the first subgoal is raw: no
+  // terrain map yet); once the terrain map shows the street, the subgoals
+  // move onto it and stay there (the trail is 3 m wide).
+  EXPECT_GT(e.front(), 3.0);
+  EXPECT_LT(second, first);
+  EXPECT_LE(second_max, 1.5);
+  EXPECT_LE(r.subgoals_unmatched, 2u);
+  EXPECT_GE(r.paths, e.size());
+  EXPECT_GE(r.last_path_poses, 1u);
+  EXPECT_GE(r.late_subgoals, 1u);
+  EXPECT_GE(r.late_paths, 1u);
+  EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
 }
 
 // The 60 s measurement of the issue: latency percentiles, RSS, overruns.

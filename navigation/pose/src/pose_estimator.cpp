@@ -64,6 +64,8 @@ void PoseTask::run(const TaskTick& tick) {
     PoseSnapshot& slot = poses_.write_slot();
     estimator_.snapshot(slot);
     slot.sequence = ++local_.published;
+    navigation_poses_.write_slot() = slot;
+    navigation_poses_.publish();
     poses_.publish();
     local_.local = slot.local;
     local_.utm = slot.utm;

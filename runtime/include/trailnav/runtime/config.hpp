@@ -69,6 +69,7 @@ class ConfigNode {
   std::string choice(std::string_view key, std::initializer_list<std::string_view> choices,
                      const std::string& fallback) const;
   std::vector<double> number_list(std::string_view key, double min, double max) const;
+  std::vector<std::string> string_list(std::string_view key) const;
   // A list of rows of exactly `columns` numbers each, e.g. points [[x, y], ...].
   std::vector<std::vector<double>> number_rows(std::string_view key, std::size_t columns, double min,
                                                double max) const;

@@ -90,7 +90,10 @@ class PoseTask final : public Task {
 
   void run(const TaskTick& tick) override;
 
+  // The newest pose in both frames: for the DDS publisher, and a second
+  // mailbox for the navigation thread (each mailbox has one reader).
   Mailbox<PoseSnapshot>& poses() noexcept { return poses_; }
+  Mailbox<PoseSnapshot>& navigation_poses() noexcept { return navigation_poses_; }
   PoseTaskStatus status() const noexcept { return shared_.read(); }
   const PoseEstimator& estimator() const noexcept { return estimator_; }
 
@@ -102,6 +105,7 @@ class PoseTask final : public Task {
   std::array<imu::Attitude, imu::kImuQueueCapacity> imu_batch_{};
   std::array<can::OdometryState, can::kOdometryQueueCapacity> wheel_batch_{};
   Mailbox<PoseSnapshot> poses_;
+  Mailbox<PoseSnapshot> navigation_poses_;
   std::array<perception::PoseQueue*, kMaxPoseOutputs> pose_out_{};
   std::size_t pose_outputs_ = 0;
   std::int64_t last_out_ns_ = 0;

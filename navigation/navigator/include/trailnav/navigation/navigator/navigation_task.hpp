@@ -1,0 +1,57 @@
+// The navigation thread: a thin scheduler task around Navigator. Each run
+// takes the newest pose snapshot (its own mailbox from the pose task, both
+// frames of one instant) and, when the terrain thread published one, the
+// newest terrain-class map (its own Broadcast reader); steps the navigator;
+// and hands a NavigationSnapshot to the DDS publisher through a mailbox. It
+// never allocates after construction and never waits.
+#pragma once
+
+#include <cstdint>
+
+#include "trailnav/navigation/navigator/navigator.hpp"
+#include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/runtime/broadcast.hpp"
+#include "trailnav/runtime/mailbox.hpp"
+#include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
+#include "trailnav/runtime/wakeup.hpp"
+
+namespace trailnav::nav {
+
+struct NavigationTaskStatus {
+  std::uint64_t runs = 0;
+  std::uint64_t poses = 0;         // new pose snapshots seen
+  std::uint64_t terrain_maps = 0;  // new class maps seen
+  std::uint64_t published = 0;     // snapshots handed to the publisher
+  NavState state = NavState::waiting_for_pose;
+  std::size_t subgoals = 0, active = 0;
+  double route_length = 0.0, progress = 0.0, cross_track = 0.0;
+  NavigationCounters navigator;
+  const char* message = "";
+};
+
+class NavigationTask final : public Task {
+ public:
+  // `terrain` may be null (no terrain thread: the subgoals stay raw).
+  NavigationTask(Navigator& navigator, Mailbox<pose::PoseSnapshot>& poses,
+                 Broadcast<perception::TerrainClassMap>::Reader* terrain, Mailbox<NavigationSnapshot>& out);
+
+  // Woken after each published snapshot (the DDS publisher). Before the scheduler starts.
+  void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
+
+  void run(const TaskTick& tick) override;
+  NavigationTaskStatus status() const noexcept { return shared_.read(); }
+
+ private:
+  Navigator& navigator_;
+  Mailbox<pose::PoseSnapshot>& poses_;
+  Broadcast<perception::TerrainClassMap>::Reader* terrain_;
+  Mailbox<NavigationSnapshot>& out_;
+  Wakeup* notify_ = nullptr;
+  std::uint64_t last_active_revision_ = 0, last_path_revision_ = 0;
+  NavState last_state_ = NavState::waiting_for_pose;
+  NavigationTaskStatus local_;
+  StatusBoard<NavigationTaskStatus> shared_;
+};
+
+}  // namespace trailnav::nav

@@ -1,0 +1,48 @@
+#include "trailnav/navigation/navigator/navigation_task.hpp"
+
+namespace trailnav::nav {
+
+NavigationTask::NavigationTask(Navigator& navigator, Mailbox<pose::PoseSnapshot>& poses,
+                               Broadcast<perception::TerrainClassMap>::Reader* terrain, Mailbox<NavigationSnapshot>& out)
+    : navigator_(navigator), poses_(poses), terrain_(terrain), out_(out) {}
+
+void NavigationTask::run(const TaskTick&) {
+  ++local_.runs;
+  const pose::PoseSnapshot* pose = poses_.try_read();
+  const perception::TerrainClassMap* map = terrain_ != nullptr ? terrain_->try_read() : nullptr;
+  if (pose != nullptr) ++local_.poses;
+  if (map != nullptr) ++local_.terrain_maps;
+  // A map waits for the next pose (the subgoals need both frames of one instant).
+  if (pose == nullptr && map == nullptr) {
+    shared_.post(local_);
+    return;
+  }
+  if (poses_.last_read_sequence() == 0) {
+    shared_.post(local_);
+    return;
+  }
+  const pose::PoseSnapshot& p = poses_.last_read();
+  navigator_.step(p.local, p.utm, map);
+  NavigationSnapshot& slot = out_.write_slot();
+  navigator_.snapshot(slot);
+  if (slot.active_revision != last_active_revision_ || slot.path_revision != last_path_revision_ ||
+      slot.state != last_state_) {
+    last_active_revision_ = slot.active_revision;
+    last_path_revision_ = slot.path_revision;
+    last_state_ = slot.state;
+    out_.publish();
+    ++local_.published;
+    if (notify_ != nullptr) notify_->notify();
+  }
+  local_.state = slot.state;
+  local_.subgoals = slot.subgoals;
+  local_.active = slot.active;
+  local_.route_length = slot.route_length;
+  local_.progress = slot.progress;
+  local_.cross_track = slot.cross_track;
+  local_.navigator = slot.counters;
+  local_.message = slot.message;
+  shared_.post(local_);
+}
+
+}  // namespace trailnav::nav

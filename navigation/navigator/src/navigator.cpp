@@ -1,0 +1,291 @@
+#include "trailnav/navigation/navigator/navigator.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace trailnav::nav {
+
+namespace {
+
+constexpr double kBehind = 5.0;   // m: the tracking window reaches this far back ...
+constexpr double kAhead = 30.0;   // m ... and this far ahead of the last arc
+
+bool finite(double v) noexcept { return std::isfinite(v); }
+
+}  // namespace
+
+std::string check_navigator_config(const NavigatorConfig& c) {
+  if (!finite(c.goal_lat) || !finite(c.goal_lon) || std::abs(c.goal_lat) > 84.0 || std::abs(c.goal_lon) > 180.0) {
+    return "goal: needs [latitude, longitude] in degrees (latitude within +-84)";
+  }
+  if (!(c.spacing >= 0.5 && c.spacing <= 100.0)) return "spacing: must be 0.5 .. 100 m";
+  if (!(c.reach > 0.0 && c.reach < c.spacing)) return "reach: must be above 0 and below the spacing";
+  if (!(c.lookahead >= c.reach + c.spacing && c.lookahead <= 500.0)) {
+    return "lookahead: must be at least reach + spacing (so the active subgoal is always aligned) and at most 500 m";
+  }
+  if (!(c.goal_tolerance > 0.0 && c.goal_tolerance <= 100.0)) return "goal_tolerance: must be above 0 and at most 100 m";
+  if (!(c.max_snap > 0.0)) return "max_snap: must be above 0 m";
+  if (!(c.leave_distance > 0.0)) return "leave_distance: must be above 0 m";
+  if (!(c.leave_time >= 0.0) || !(c.replan_interval >= 0.0)) return "leave_time and replan_interval must not be negative";
+  if (!(c.max_position_sigma > 0.0)) return "max_position_sigma: must be above 0 m";
+  if (c.path_poses < 1 || c.path_poses > 100000) return "path_poses: must be 1 .. 100000";
+  return subgoals::check_aligner_config(c.aligner);
+}
+
+const char* nav_state_name(NavState state) noexcept {
+  switch (state) {
+    case NavState::waiting_for_pose: return "waiting for a UTM pose";
+    case NavState::no_route: return "no route";
+    case NavState::following: return "following the route";
+    case NavState::reached: return "goal reached";
+  }
+  return "?";
+}
+
+Navigator::Created Navigator::create(const osm::RoadGraph& graph, const NavigatorConfig& config,
+                                     const perception::TerrainMapShape& map_shape) {
+  Created out;
+  if (std::string problem = check_navigator_config(config); !problem.empty()) {
+    out.error = problem;
+    return out;
+  }
+  if (graph.segments().empty()) {
+    out.error = "the road network is empty";
+    return out;
+  }
+  double gx = 0.0, gy = 0.0;
+  if (!graph.to_utm(config.goal_lat, config.goal_lon, gx, gy)) {
+    out.error = "goal: cannot be projected to UTM";
+    return out;
+  }
+  const auto goal = graph.project(gx, gy);
+  if (!goal || goal->distance > config.max_snap) {
+    char text[200];
+    std::snprintf(text, sizeof text, "goal: %.6f, %.6f lies %.0f m from the nearest routable way (max_snap %.0f m)",
+                  config.goal_lat, config.goal_lon, goal ? goal->distance : 0.0, config.max_snap);
+    out.error = text;
+    return out;
+  }
+  // The longest simple path uses every segment once at most.
+  double total = 0.0;
+  for (std::uint32_t s = 0; s < graph.segments().size(); ++s) total += graph.segment_length(s);
+  const std::size_t capacity = static_cast<std::size_t>(std::ceil(total / config.spacing)) + 8;
+  std::unique_ptr<Navigator> n(new Navigator(graph, config, map_shape, capacity));
+  n->goal_ = *goal;
+  n->goal_x_ = gx;
+  n->goal_y_ = gy;
+  out.navigator = std::move(n);
+  return out;
+}
+
+Navigator::Navigator(const osm::RoadGraph& graph, const NavigatorConfig& config, const perception::TerrainMapShape& shape,
+                     std::size_t subgoal_capacity)
+    : graph_(graph), config_(config), router_(graph) {
+  config_.aligner.max_subgoals = subgoal_capacity;
+  aligner_ = std::make_unique<subgoals::SubgoalAligner>(config_.aligner, shape);
+  router_.reserve_path(route_);
+  route_arc_.reserve(route_.capacity());
+  subgoals_.reserve(subgoal_capacity);
+  subgoal_arc_.reserve(subgoal_capacity);
+  raw_.resize(subgoal_capacity);
+}
+
+double Navigator::nearest_on_route(double x, double y, double lo, double hi, double& arc) const noexcept {
+  double best = std::numeric_limits<double>::max();
+  arc = lo;
+  // First segment whose end lies at or beyond lo.
+  std::size_t i = static_cast<std::size_t>(std::lower_bound(route_arc_.begin(), route_arc_.end(), lo) - route_arc_.begin());
+  i = std::max<std::size_t>(i, 1);
+  for (; i < route_.size() && route_arc_[i - 1] <= hi; ++i) {
+    const osm::Point2& a = route_[i - 1];
+    const osm::Point2& b = route_[i];
+    const double dx = b.x - a.x, dy = b.y - a.y, l2 = dx * dx + dy * dy;
+    const double t = l2 > 0.0 ? std::clamp(((x - a.x) * dx + (y - a.y) * dy) / l2, 0.0, 1.0) : 0.0;
+    const double d = std::hypot(x - a.x - t * dx, y - a.y - t * dy);
+    if (d < best) {
+      best = d;
+      arc = route_arc_[i - 1] + t * (route_arc_[i] - route_arc_[i - 1]);
+    }
+  }
+  return best;
+}
+
+bool Navigator::plan(const pose::UtmPose& utm, std::int64_t now) noexcept {
+  last_plan_ns_ = now;
+  off_route_since_ = -1;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto from = graph_.project(utm.easting, utm.northing);
+  if (!from || from->distance > config_.max_snap) {
+    message_ = "the robot is farther than max_snap from every routable way";
+    ++counters_.plan_failures;
+    state_ = NavState::no_route;
+    return false;
+  }
+  const osm::RouteStats st = router_.route(*from, goal_, route_);
+  counters_.last_plan_expanded = st.expanded;
+  counters_.last_plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  if (!st.found || route_.empty()) {
+    message_ = "no route from the robot's position to the goal (disconnected network or one-way streets)";
+    ++counters_.plan_failures;
+    state_ = NavState::no_route;
+    route_.clear();
+    route_arc_.clear();
+    subgoals_.clear();
+    subgoal_arc_.clear();
+    return false;
+  }
+  route_arc_.clear();
+  route_arc_.push_back(0.0);
+  for (std::size_t i = 1; i < route_.size(); ++i) {
+    route_arc_.push_back(route_arc_.back() + std::hypot(route_[i].x - route_[i - 1].x, route_[i].y - route_[i - 1].y));
+  }
+  const double length = route_arc_.back();
+  // subsample_path keeps within the reserved capacity: at most length / spacing + 2 points.
+  osm::subsample_path(route_, config_.spacing, subgoals_);
+  subgoal_arc_.clear();
+  for (std::size_t i = 0; i < subgoals_.size(); ++i) {
+    subgoal_arc_.push_back(std::min(static_cast<double>(i) * config_.spacing, length));
+  }
+  subgoal_arc_.back() = length;
+  aligner_->reset();
+  active_ = 0;
+  robot_arc_ = 0.0;
+  cross_track_ = from->distance;
+  message_ = "";
+  ++counters_.plans;
+  ++active_revision_;
+  ++path_revision_;
+  state_ = NavState::following;
+  return true;
+}
+
+subgoals::Vec2 Navigator::raw_local(std::size_t i) const noexcept {
+  const double dx = subgoals_[i].x - utm_e_, dy = subgoals_[i].y - utm_n_;
+  return {local_x_ + cos_ * dx - sin_ * dy, local_y_ + sin_ * dx + cos_ * dy};
+}
+
+subgoals::Vec2 Navigator::corrected(std::size_t i) const noexcept {
+  return is_corrected(i) ? aligner_->estimate(i) : raw_local(i);
+}
+
+StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& utm,
+                           const perception::TerrainClassMap* map) noexcept {
+  StepResult result;
+  ++counters_.steps;
+  if (!utm.position_valid || !utm.heading_valid || utm.sigma_position() > config_.max_position_sigma) return result;
+  time_ns_ = local.time_ns;
+  rot_ = local.yaw - utm.yaw;
+  cos_ = std::cos(rot_);
+  sin_ = std::sin(rot_);
+  local_x_ = local.x;
+  local_y_ = local.y;
+  local_yaw_ = local.yaw;
+  utm_e_ = utm.easting;
+  utm_n_ = utm.northing;
+  const std::int64_t now = local.time_ns;
+  const auto interval_ns = static_cast<std::int64_t>(config_.replan_interval * 1e9);
+
+  if (state_ == NavState::waiting_for_pose || (state_ == NavState::no_route && now - last_plan_ns_ >= interval_ns)) {
+    result.planned = plan(utm, now);
+    if (!result.planned) return result;
+  }
+  if (state_ == NavState::no_route) return result;
+
+  // Where the robot is along the route.
+  double arc = robot_arc_;
+  cross_track_ = nearest_on_route(utm.easting, utm.northing, robot_arc_ - kBehind, robot_arc_ + kAhead, arc);
+  if (cross_track_ > config_.leave_distance) {
+    if (off_route_since_ < 0) off_route_since_ = now;
+    if (static_cast<double>(now - off_route_since_) * 1e-9 >= config_.leave_time && now - last_plan_ns_ >= interval_ns &&
+        state_ != NavState::reached) {
+      ++counters_.replans;
+      result.planned = plan(utm, now);
+      if (!result.planned) return result;
+      cross_track_ = nearest_on_route(utm.easting, utm.northing, 0.0, kAhead, arc);
+    }
+  } else {
+    off_route_since_ = -1;
+    robot_arc_ = std::max(robot_arc_, arc);  // progress along a route never goes back
+  }
+  if (state_ == NavState::following && robot_arc_ >= route_length() - config_.goal_tolerance) {
+    state_ = NavState::reached;
+    ++active_revision_;
+    ++path_revision_;
+  }
+
+  // Subgoals known to the aligner: those up to `lookahead` ahead. Their raw
+  // odometry-frame positions through this step's pose.
+  const std::size_t n = subgoals_.size();
+  std::size_t want = aligner_->count();
+  while (want < n && subgoal_arc_[want] <= robot_arc_ + config_.lookahead) ++want;
+  want = std::max<std::size_t>(want, 1);
+  if (map != nullptr) {
+    const std::size_t back = static_cast<std::size_t>(config_.aligner.sequence) + 1;
+    const std::size_t from = std::min(aligner_->count(), want) > back ? std::min(aligner_->count(), want) - back : 0;
+    for (std::size_t i = from; i < want; ++i) raw_[i] = raw_local(i);
+    const std::span<const subgoals::Vec2> raw(raw_.data(), want);
+    while (aligner_->count() < want && aligner_->push(raw)) {
+    }
+    aligner_->update(*map, raw);
+    ++counters_.updates;
+    ++path_revision_;
+    ++active_revision_;
+    result.updated = true;
+  }
+
+  // The active subgoal: the first one more than `reach` ahead.
+  std::size_t next = active_;
+  while (next + 1 < n && subgoal_arc_[next] <= robot_arc_ + config_.reach) ++next;
+  if (state_ == NavState::reached) next = n - 1;
+  if (next != active_) {
+    result.reached_begin = active_;
+    result.reached_end = next;
+    counters_.subgoals_reached += next - active_;
+    active_ = next;
+    ++active_revision_;
+    ++path_revision_;
+  }
+  return result;
+}
+
+void Navigator::snapshot(NavigationSnapshot& out) const noexcept {
+  out.state = state_;
+  out.time_ns = time_ns_;
+  out.plan = counters_.plans;
+  out.active_revision = active_revision_;
+  out.path_revision = path_revision_;
+  out.subgoals = subgoals_.size();
+  out.active = active_;
+  out.zone = graph_.zone();
+  out.north = graph_.north();
+  out.route_length = route_length();
+  out.progress = robot_arc_;
+  out.cross_track = cross_track_;
+  out.counters = counters_;
+  out.message = message_;
+  out.has_active = (state_ == NavState::following || state_ == NavState::reached) && active_ < subgoals_.size();
+  out.path_count = 0;
+  if (!out.has_active) return;
+  const std::size_t n = subgoals_.size();
+  auto pose_of = [&](std::size_t i) {
+    PathPose p;
+    const subgoals::Vec2 v = corrected(i);
+    p.x = v.x;
+    p.y = v.y;
+    p.corrected = is_corrected(i);
+    // Heading: towards the next subgoal (from the previous one at the end).
+    const subgoals::Vec2 a = i + 1 < n ? v : (i > 0 ? corrected(i - 1) : v);
+    const subgoals::Vec2 b = i + 1 < n ? corrected(i + 1) : v;
+    p.yaw = (a.x == b.x && a.y == b.y) ? local_yaw_ : std::atan2(b.y - a.y, b.x - a.x);
+    return p;
+  };
+  out.active_pose = pose_of(active_);
+  out.active_easting = subgoals_[active_].x;
+  out.active_northing = subgoals_[active_].y;
+  const std::size_t count = std::min({out.path.size(), config_.path_poses, n - active_});
+  for (std::size_t k = 0; k < count; ++k) out.path[k] = pose_of(active_ + k);
+  out.path_count = count;
+}
+
+}  // namespace trailnav::nav

@@ -1,0 +1,434 @@
+// The navigation task's logic on hand-built road networks whose geometry is
+// known, and on the real Liechtenstein extract: it plans once the UTM pose is
+// there, follows the robot along the route, activates each subgoal in turn
+// and reaches the goal; re-plans when the robot takes another road; reports a
+// goal it cannot reach; pulls subgoals onto the street the terrain map shows;
+// and neither the navigator nor its task allocates after arm.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <functional>
+
+#include "../drivers/test_data.hpp"
+#include "trailnav/navigation/navigator/navigation_config.hpp"
+#include "trailnav/navigation/navigator/navigation_task.hpp"
+#include "trailnav/navigation/navigator/navigator.hpp"
+#include "trailnav/navigation/osm/router.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+namespace trailnav::nav {
+namespace {
+
+using perception::TerrainClass;
+using perception::TerrainClassMap;
+
+constexpr double kE0 = 500000.0, kN0 = 5200000.0;  // zone 32N, near 46.95 N 9 E
+
+// The network, in metres from (kE0, kN0):
+//   A(0,0) -- B(100,0) -- C(200,0) -- D(200,200)   the main road
+//             B -- S(100,-150)                     a side road
+//   E(1000,1000) -- F(1100,1000)                   an island nobody can reach
+osm::RoadGraph test_graph() {
+  std::vector<osm::RoadVertex> v = {{kE0, kN0, 1},         {kE0 + 100, kN0, 2},        {kE0 + 200, kN0, 3},
+                                    {kE0 + 200, kN0 + 200, 4}, {kE0 + 100, kN0 - 150, 5}, {kE0 + 1000, kN0 + 1000, 6},
+                                    {kE0 + 1100, kN0 + 1000, 7}};
+  std::vector<osm::RoadWay> ways = {{10, "track", "main"}, {11, "track", "side"}, {12, "track", "island"}};
+  return osm::RoadGraph::build(32, true, v, ways, {{0, 1, 2, 3}, {1, 4}, {5, 6}}, {0, 0, 0});
+}
+
+// The odometry frame: local = R(phi) (utm - utm0) + t.
+struct Frames {
+  double phi = 0.7, tx = 5.0, ty = -3.0;
+  void to_local(double e, double n, double& x, double& y) const {
+    const double dx = e - kE0, dy = n - kN0;
+    x = tx + std::cos(phi) * dx - std::sin(phi) * dy;
+    y = ty + std::sin(phi) * dx + std::cos(phi) * dy;
+  }
+  void to_utm(double x, double y, double& e, double& n) const {
+    const double dx = x - tx, dy = y - ty;
+    e = kE0 + std::cos(phi) * dx + std::sin(phi) * dy;
+    n = kN0 - std::sin(phi) * dx + std::cos(phi) * dy;
+  }
+};
+
+// The robot at (e, n) heading `yaw` (grid), at time t seconds.
+void poses(const Frames& f, double e, double n, double yaw, double t, pose::LocalPose& local, pose::UtmPose& utm) {
+  utm = {};
+  utm.position_valid = utm.heading_valid = true;
+  utm.zone = 32;
+  utm.easting = e;
+  utm.northing = n;
+  utm.yaw = yaw;
+  utm.covariance = Eigen::Matrix3d::Identity() * 0.25;
+  local = {};
+  local.time_ns = static_cast<std::int64_t>(t * 1e9);
+  f.to_local(e, n, local.x, local.y);
+  local.yaw = yaw + f.phi;
+  local.source = pose::PoseSource::gyro_odometry;
+}
+
+NavigatorConfig config_to(const osm::RoadGraph& g, double de, double dn) {
+  NavigatorConfig c;
+  EXPECT_TRUE(g.to_latlon(kE0 + de, kN0 + dn, c.goal_lat, c.goal_lon));
+  return c;
+}
+
+// The robot's path: a polyline in metres from (kE0, kN0), walked `step` m at a time.
+std::vector<std::array<double, 3>> walk(const std::vector<std::array<double, 2>>& points, double step) {
+  std::vector<std::array<double, 3>> out;
+  for (std::size_t i = 1; i < points.size(); ++i) {
+    const double dx = points[i][0] - points[i - 1][0], dy = points[i][1] - points[i - 1][1];
+    const double len = std::hypot(dx, dy), yaw = std::atan2(dy, dx);
+    for (double s = 0.0; s < len; s += step) out.push_back({points[i - 1][0] + s * dx / len, points[i - 1][1] + s * dy / len, yaw});
+  }
+  const auto& last = points.back();
+  out.push_back({last[0], last[1], out.back()[2]});
+  return out;
+}
+
+TEST(Navigator, ChecksItsConfiguration) {
+  NavigatorConfig c;
+  EXPECT_NE(check_navigator_config(c).find("goal"), std::string::npos);
+  c.goal_lat = 47.0;
+  c.goal_lon = 9.0;
+  EXPECT_EQ(check_navigator_config(c), "");
+  c.reach = 5.0;  // beyond the spacing
+  EXPECT_NE(check_navigator_config(c).find("reach"), std::string::npos);
+  c = {};
+  c.goal_lat = 47.0;
+  c.goal_lon = 9.0;
+  c.lookahead = 3.0;
+  EXPECT_NE(check_navigator_config(c).find("lookahead"), std::string::npos);
+  c = {};
+  c.goal_lat = 47.0;
+  c.goal_lon = 9.0;
+  c.aligner.samples = 0;
+  EXPECT_NE(check_navigator_config(c).find("samples"), std::string::npos);
+  // A goal far from every road.
+  const osm::RoadGraph g = test_graph();
+  const auto made = Navigator::create(g, config_to(g, 500.0, 500.0), {});
+  EXPECT_FALSE(made.navigator);
+  EXPECT_NE(made.error.find("max_snap"), std::string::npos) << made.error;
+}
+
+TEST(Navigator, FollowsTheRouteActivatesEachSubgoalAndReachesTheGoal) {
+  const osm::RoadGraph g = test_graph();
+  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  const Frames f;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+  // No UTM heading yet: nothing is planned.
+  poses(f, kE0, kN0, 0.0, 0.0, local, utm);
+  utm.heading_valid = false;
+  nav.step(local, utm, nullptr);
+  EXPECT_EQ(nav.state(), NavState::waiting_for_pose);
+
+  const auto path = walk({{0, 0}, {200, 0}, {200, 200}}, 0.5);
+  std::size_t reached = 0, last_active = 0;
+  double t = 0.0;
+  NavigationSnapshot snap(128);
+  for (const auto& p : path) {
+    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    const StepResult r = nav.step(local, utm, nullptr);
+    if (r.reached_end > r.reached_begin) {
+      EXPECT_EQ(r.reached_begin, last_active);
+    }
+    reached += r.reached_end - r.reached_begin;
+    ASSERT_GE(nav.active(), last_active);
+    last_active = nav.active();
+    if (nav.state() == NavState::following) {
+      // The active subgoal lies just ahead: more than `reach`, at most a spacing more.
+      const double ahead = nav.subgoal_arc(nav.active()) - nav.progress();
+      EXPECT_GT(ahead, nav.config().reach - 1e-9);
+      EXPECT_LE(ahead, nav.config().reach + nav.config().spacing + 0.5 + 1e-9);
+    }
+  }
+  EXPECT_EQ(nav.state(), NavState::reached);
+  EXPECT_EQ(nav.counters().plans, 1u);
+  EXPECT_EQ(nav.counters().replans, 0u);
+  EXPECT_NEAR(nav.route_length(), 400.0, 1e-6);
+  ASSERT_EQ(nav.subgoal_count(), 101u);  // every 4 m, both ends
+  for (std::size_t i = 0; i < nav.subgoal_count(); ++i) {
+    EXPECT_NEAR(nav.subgoal_arc(i), 4.0 * static_cast<double>(i), 1e-9);
+    // Raw subgoals in the odometry frame through the pose pair.
+    double x = 0, y = 0;
+    f.to_local(nav.subgoal_utm(i).x, nav.subgoal_utm(i).y, x, y);
+    EXPECT_NEAR(nav.raw_local(i).x, x, 1e-6);
+    EXPECT_NEAR(nav.raw_local(i).y, y, 1e-6);
+  }
+  EXPECT_EQ(reached, 100u);
+  EXPECT_EQ(nav.active(), 100u);
+  nav.snapshot(snap);
+  EXPECT_EQ(snap.state, NavState::reached);
+  EXPECT_TRUE(snap.has_active);
+  EXPECT_EQ(snap.path_count, 1u);
+  EXPECT_NEAR(snap.active_easting, kE0 + 200.0, 1e-6);
+  EXPECT_NEAR(snap.active_northing, kN0 + 200.0, 1e-6);
+}
+
+TEST(Navigator, PublishesThePathFromTheActiveSubgoal) {
+  const osm::RoadGraph g = test_graph();
+  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  const Frames f;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+  poses(f, kE0 + 150.0, kN0, 0.0, 1.0, local, utm);
+  nav.step(local, utm, nullptr);
+  NavigationSnapshot snap(20);
+  nav.snapshot(snap);
+  ASSERT_TRUE(snap.has_active);
+  EXPECT_EQ(snap.path_count, 20u);
+  EXPECT_NEAR(snap.route_length, 250.0, 1e-6);
+  // The robot is at the route's start; the active subgoal is the first beyond reach (4 m).
+  EXPECT_EQ(snap.active, 1u);
+  double x = 0, y = 0;
+  f.to_local(kE0 + 154.0, kN0, x, y);
+  EXPECT_NEAR(snap.active_pose.x, x, 1e-6);
+  EXPECT_NEAR(snap.active_pose.y, y, 1e-6);
+  EXPECT_NEAR(snap.active_pose.yaw, f.phi, 1e-9);  // along the road (grid east) in the odometry frame
+  for (std::size_t k = 0; k < snap.path_count; ++k) {
+    const double a = 154.0 + 4.0 * static_cast<double>(k);  // along the road: east to C, then north
+    f.to_local(kE0 + std::min(a, 200.0), kN0 + std::max(a - 200.0, 0.0), x, y);
+    EXPECT_NEAR(snap.path[k].x, x, 1e-6);
+    EXPECT_NEAR(snap.path[k].y, y, 1e-6);
+    EXPECT_FALSE(snap.path[k].corrected);  // no terrain map yet
+  }
+}
+
+TEST(Navigator, ReplansWhenTheRobotTakesAnotherRoad) {
+  const osm::RoadGraph g = test_graph();
+  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  const Frames f;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+  // Along the main road to B, then down the side road.
+  const auto path = walk({{0, 0}, {100, 0}, {100, -120}}, 0.5);
+  double t = 0.0;
+  double off_at = -1.0;
+  for (const auto& p : path) {
+    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    nav.step(local, utm, nullptr);
+    if (off_at < 0.0 && p[1] < -nav.config().leave_distance) off_at = t;
+    if (nav.counters().replans > 0) break;
+  }
+  ASSERT_EQ(nav.counters().replans, 1u);
+  EXPECT_EQ(nav.counters().plans, 2u);
+  // Re-planned `leave_time` after it left (and not before).
+  EXPECT_NEAR(t - off_at, nav.config().leave_time, 0.3);
+  // The new route starts where the robot is and leads back up to B, then on to D.
+  EXPECT_NEAR(nav.route().front().x, utm.easting, 1e-6);
+  EXPECT_NEAR(nav.route().front().y, utm.northing, 1e-6);
+  EXPECT_NEAR(nav.route_length(), -(utm.northing - kN0) + 100.0 + 200.0, 1e-6);
+  EXPECT_EQ(nav.state(), NavState::following);
+  EXPECT_EQ(nav.active(), 1u);  // subgoal 0 is where the robot is
+}
+
+TEST(Navigator, SaysWhenTheGoalCannotBeReachedAndRetries) {
+  const osm::RoadGraph g = test_graph();
+  NavigatorConfig c = config_to(g, 1050.0, 1000.0);  // on the island
+  c.replan_interval = 5.0;
+  auto made = Navigator::create(g, c, {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  const Frames f;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+  for (int i = 0; i <= 40; ++i) {  // 10 s
+    poses(f, kE0 + 10.0, kN0, 0.0, 0.25 * i, local, utm);
+    nav.step(local, utm, nullptr);
+  }
+  EXPECT_EQ(nav.state(), NavState::no_route);
+  EXPECT_EQ(nav.counters().plan_failures, 3u);  // at 0, 5 and 10 s
+  EXPECT_NE(std::string(nav.message()).find("no route"), std::string::npos);
+  NavigationSnapshot snap(8);
+  nav.snapshot(snap);
+  EXPECT_FALSE(snap.has_active);
+  EXPECT_EQ(snap.path_count, 0u);
+}
+
+// Street cells where `street(e, n)` (UTM), grass elsewhere, over the map
+// centred on the robot (odometry frame).
+void paint(TerrainClassMap& map, const Frames& f, double cx, double cy, const std::function<bool(double, double)>& street) {
+  auto& grid = map.grid();
+  grid.move_to(cx, cy);
+  const CellIndex o = grid.origin();
+  for (std::int32_t y = o.y; y < o.y + grid.size_y(); ++y) {
+    for (std::int32_t x = o.x; x < o.x + grid.size_x(); ++x) {
+      const auto c = grid.cell_center({x, y});
+      double e = 0, n = 0;
+      f.to_utm(c.x, c.y, e, n);
+      std::array<float, perception::kTerrainClasses> p{};
+      p[static_cast<std::size_t>(street(e, n) ? TerrainClass::street : TerrainClass::grass)] = 0.9f;
+      for (auto& v : p) v += 0.025f;
+      grid.at({x, y}).set(p);
+    }
+  }
+  ++map.sequence;
+}
+
+TEST(Navigator, AlignsTheSubgoalsToTheStreetTheTerrainMapShows) {
+  const osm::RoadGraph g = test_graph();
+  auto made = Navigator::create(g, config_to(g, 200.0, 0.0), {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  const Frames f;
+  // The real street runs 2.5 m north of where OpenStreetMap has it; the
+  // robot drives on it.
+  auto street = [](double, double n) { return std::abs(n - kN0 - 2.5) < 1.5; };
+  TerrainClassMap map;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+  double t = 0.0, raw_sq = 0.0, corrected_sq = 0.0;
+  std::size_t n_reached = 0;
+  std::size_t k = 0;
+  for (const auto& p : walk({{0, 2.5}, {190, 2.5}}, 0.5)) {
+    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    const bool new_map = k++ % 2 == 0;  // a terrain map every metre
+    if (new_map) paint(map, f, local.x, local.y, street);
+    const StepResult r = nav.step(local, utm, new_map ? &map : nullptr);
+    for (std::size_t i = r.reached_begin; i < r.reached_end; ++i) {
+      if (nav.subgoal_arc(i) < 20.0) continue;  // the first window settles
+      double e = 0, n = 0;
+      const subgoals::Vec2 c = nav.corrected(i);
+      f.to_utm(c.x, c.y, e, n);
+      corrected_sq += (n - kN0 - 2.5) * (n - kN0 - 2.5);
+      raw_sq += (nav.subgoal_utm(i).y - kN0 - 2.5) * (nav.subgoal_utm(i).y - kN0 - 2.5);
+      EXPECT_TRUE(nav.is_corrected(i));
+      ++n_reached;
+    }
+  }
+  ASSERT_GT(n_reached, 35u);
+  const double raw = std::sqrt(raw_sq / static_cast<double>(n_reached));
+  const double corrected = std::sqrt(corrected_sq / static_cast<double>(n_reached));
+  EXPECT_NEAR(raw, 2.5, 1e-6);
+  EXPECT_LT(corrected, 0.6) << "raw " << raw;
+  EXPECT_GT(nav.counters().updates, 180u);
+}
+
+TEST(NavigationTask, PlansAlignsAndPublishesWithoutAllocating) {
+  ASSERT_TRUE(alloc_guard::hook_installed());
+  const osm::RoadGraph g = test_graph();
+  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Mailbox<pose::PoseSnapshot> poses_in;
+  Broadcast<TerrainClassMap> maps(1, perception::TerrainMapShape{});
+  Mailbox<NavigationSnapshot> out(made.navigator->config().path_poses);
+  NavigationTask task(*made.navigator, poses_in, &maps.reader(0), out);
+  const Frames f;
+  auto street = [](double e, double n) {
+    return (std::abs(n - kN0 - 1.0) < 1.5 && e < kE0 + 201.5) || (std::abs(e - kE0 - 201.0) < 1.5 && n > kN0 - 0.5);
+  };
+  TerrainClassMap map;
+  const auto path = walk({{0, 1}, {201, 1}, {201, 200}}, 0.5);
+
+  alloc_guard::set_fatal(false);
+  alloc_guard::reset_counters();
+  alloc_guard::mark_realtime_thread("navigation-test");
+  ASSERT_TRUE(alloc_guard::arm());
+  double t = 0.0;
+  std::uint64_t published = 0, last_plan = 0;
+  std::size_t last_active = 0;
+  for (std::size_t k = 0; k < path.size(); ++k) {
+    const auto& p = path[k];
+    pose::PoseSnapshot& s = poses_in.write_slot();
+    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, s.local, s.utm);
+    const double lx = s.local.x, ly = s.local.y;
+    poses_in.publish();
+    if (k % 2 == 0) {  // a terrain map every metre, as the terrain thread would publish it
+      paint(map, f, lx, ly, street);
+      maps.write_slot().copy_from(map);
+      maps.publish();
+    }
+    task.run({});
+    if (const NavigationSnapshot* n = out.try_read()) {
+      ++published;
+      last_plan = n->plan;
+      EXPECT_GE(n->active, last_active);
+      last_active = n->active;
+    }
+  }
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  const NavigationTaskStatus st = task.status();
+  EXPECT_EQ(st.state, NavState::reached);
+  EXPECT_EQ(last_plan, 1u);
+  EXPECT_EQ(last_active, 100u);
+  EXPECT_GT(published, 100u);
+  EXPECT_GT(st.navigator.updates, 350u);
+  EXPECT_EQ(st.poses, path.size());
+}
+
+TEST(Navigator, PlansOnLiechtensteinLikeTheRouter) {
+  auto loaded = osm::load_road_graph(test::shared_data("osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf"));
+  ASSERT_TRUE(loaded.graph) << loaded.error;
+  const osm::RoadGraph& g = *loaded.graph;
+  NavigatorConfig c;
+  c.goal_lat = 47.1660;
+  c.goal_lon = 9.5100;
+  auto made = Navigator::create(g, c, {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  double e = 0, n = 0;
+  ASSERT_TRUE(g.to_utm(47.1410, 9.5209, e, n));
+  pose::LocalPose local;
+  local.time_ns = 1;
+  pose::UtmPose utm;
+  utm.position_valid = utm.heading_valid = true;
+  utm.easting = e;
+  utm.northing = n;
+  made.navigator->step(local, utm, nullptr);
+  ASSERT_EQ(made.navigator->state(), NavState::following);
+  // The same route and subgoals as the router and subsample_path give.
+  osm::Router router(g);
+  std::vector<osm::Point2> route, goals;
+  double ge = 0, gn = 0;
+  ASSERT_TRUE(g.to_utm(c.goal_lat, c.goal_lon, ge, gn));
+  const osm::RouteStats st = router.route(*g.project(e, n), *g.project(ge, gn), route);
+  ASSERT_TRUE(st.found);
+  osm::subsample_path(route, 4.0, goals);
+  EXPECT_NEAR(made.navigator->route_length(), st.length, 1e-6);
+  ASSERT_EQ(made.navigator->subgoal_count(), goals.size());
+  for (std::size_t i = 0; i < goals.size(); ++i) {
+    EXPECT_EQ(made.navigator->subgoal_utm(i).x, goals[i].x);
+    EXPECT_EQ(made.navigator->subgoal_utm(i).y, goals[i].y);
+  }
+  EXPECT_NEAR(st.length, 3787.2, 0.1);
+}
+
+TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
+  const std::string osm = std::filesystem::absolute(test::shared_data("osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf")).string();
+  const ConfigNode ok = ConfigNode::parse("osm: " + osm + "\ngoal: [47.166, 9.51]\nhighways: [track, path]\nspacing: 3\n"
+                                          "aligner: {samples: 5000, sequence: 3, unknown_cells: known-only}\n",
+                                          "nav.yaml");
+  const NavigationSection s = parse_navigation_section(ok);
+  EXPECT_EQ(s.osm, osm);
+  EXPECT_EQ(s.profile.highways, (std::vector<std::string>{"track", "path"}));
+  EXPECT_EQ(s.navigator.spacing, 3.0);
+  EXPECT_EQ(s.navigator.aligner.samples, 5000u);
+  EXPECT_EQ(s.navigator.aligner.sequence, 3);
+  EXPECT_TRUE(s.navigator.aligner.known_cells_only);
+  auto error_of = [&](const std::string& text) -> std::string {
+    try {
+      parse_navigation_section(ConfigNode::parse(text, "nav.yaml"));
+    } catch (const ConfigError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_NE(error_of("osm: /nonexistent.osm.pbf\ngoal: [47, 9]\n").find("no such file"), std::string::npos);
+  const std::string bad_goal = error_of("osm: " + osm + "\ngoal: [47]\n");
+  EXPECT_NE(bad_goal.find("nav.yaml:2"), std::string::npos) << bad_goal;
+  EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nreach: 9\n").find("reach"), std::string::npos);
+  EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {samples: 60000}\n").find("samples"), std::string::npos);
+  EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nlookahed: 3\n").find("lookahed"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace trailnav::nav
