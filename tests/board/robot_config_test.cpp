@@ -69,6 +69,33 @@ TEST(RobotConfig, TerrainNeedsAModelThatLoadsAndItsTask) {
   EXPECT_NE(e.find("terrain"), std::string::npos) << e;  // no task for it
 }
 
+TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {
+  const std::string osm = fs::absolute("../shared/data/osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf").string();
+  const std::string nav = "navigation: {osm: " + osm + ", goal: [47.166, 9.51]}\n";
+  const std::string task = "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20}\n";
+  const std::string pose_tasks =
+      "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n"
+      "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
+      "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n";
+  const std::string pose =
+      "gps: {link: 'udp:127.0.0.1:10110'}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {antenna: [0, 0, 1]}\n";
+  EXPECT_EQ(load_error(std::string(kMinimal) + task + pose_tasks + pose + nav), "");
+  // Its task is required.
+  std::string e = load_error(std::string(kMinimal) + pose_tasks + pose + nav);
+  EXPECT_NE(e.find("navigation"), std::string::npos) << e;
+  // Without GPS and pose: one error naming the navigation section.
+  e = load_error(std::string(kMinimal) + task + nav);
+  EXPECT_NE(e.find("navigation"), std::string::npos) << e;
+  EXPECT_NE(e.find("'pose' and 'gps'"), std::string::npos) << e;
+  // A goal that is not [lat, lon], with its line.
+  e = load_error(std::string(kMinimal) + task + "navigation: {osm: " + osm + ", goal: [47.166]}\n");
+  EXPECT_NE(e.find(":9:"), std::string::npos) << e;
+  EXPECT_NE(e.find("latitude"), std::string::npos) << e;
+  // A missing map file.
+  e = load_error(std::string(kMinimal) + task + "navigation: {osm: nowhere.osm.pbf, goal: [47.166, 9.51]}\n");
+  EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+}
+
 TEST(RobotConfig, MistakesNameFileLineAndKey) {
   std::string e = load_error(std::string(kMinimal) + "lidr: {model: VLP-16}\n");
   EXPECT_NE(e.find("test-"), std::string::npos) << e;
