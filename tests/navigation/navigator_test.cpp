@@ -87,6 +87,29 @@ std::vector<std::array<double, 3>> walk(const std::vector<std::array<double, 2>>
   return out;
 }
 
+// A navigator on the test network, its frames and the pose pair it is fed.
+class OnTestGraph : public ::testing::Test {
+ protected:
+  // Heads for (de, dn) metres from (kE0, kN0).
+  Navigator& make(double de, double dn, NavigatorConfig c = {}) {
+    const NavigatorConfig goal = config_to(g, de, dn);
+    c.goal_lat = goal.goal_lat;
+    c.goal_lon = goal.goal_lon;
+    auto made = Navigator::create(g, c, {});
+    EXPECT_TRUE(made.navigator) << made.error;
+    navigator = std::move(made.navigator);
+    return *navigator;
+  }
+  // The robot at (de, dn) m heading `yaw` (grid), at time t s.
+  void at(double de, double dn, double yaw, double t) { poses(f, kE0 + de, kN0 + dn, yaw, t, local, utm); }
+
+  const osm::RoadGraph g = test_graph();
+  const Frames f;
+  std::unique_ptr<Navigator> navigator;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+};
+
 TEST(Navigator, ChecksItsConfiguration) {
   NavigatorConfig c;
   EXPECT_NE(check_navigator_config(c).find("goal"), std::string::npos);
@@ -112,16 +135,11 @@ TEST(Navigator, ChecksItsConfiguration) {
   EXPECT_NE(made.error.find("max_snap"), std::string::npos) << made.error;
 }
 
-TEST(Navigator, FollowsTheRouteActivatesEachSubgoalAndReachesTheGoal) {
-  const osm::RoadGraph g = test_graph();
-  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
-  ASSERT_TRUE(made.navigator) << made.error;
-  Navigator& nav = *made.navigator;
-  const Frames f;
-  pose::LocalPose local;
-  pose::UtmPose utm;
+TEST_F(OnTestGraph, FollowsTheRouteActivatesEachSubgoalAndReachesTheGoal) {
+  Navigator& nav = make(200.0, 200.0);
+  ASSERT_TRUE(navigator);
   // No UTM heading yet: nothing is planned.
-  poses(f, kE0, kN0, 0.0, 0.0, local, utm);
+  at(0.0, 0.0, 0.0, 0.0);
   utm.heading_valid = false;
   nav.step(local, utm, nullptr);
   EXPECT_EQ(nav.state(), NavState::waiting_for_pose);
@@ -131,7 +149,7 @@ TEST(Navigator, FollowsTheRouteActivatesEachSubgoalAndReachesTheGoal) {
   double t = 0.0;
   NavigationSnapshot snap(128);
   for (const auto& p : path) {
-    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    at(p[0], p[1], p[2], t += 0.25);
     const StepResult r = nav.step(local, utm, nullptr);
     if (r.reached_end > r.reached_begin) {
       EXPECT_EQ(r.reached_begin, last_active);
@@ -169,15 +187,10 @@ TEST(Navigator, FollowsTheRouteActivatesEachSubgoalAndReachesTheGoal) {
   EXPECT_NEAR(snap.active_northing, kN0 + 200.0, 1e-6);
 }
 
-TEST(Navigator, PublishesThePathFromTheActiveSubgoal) {
-  const osm::RoadGraph g = test_graph();
-  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
-  ASSERT_TRUE(made.navigator) << made.error;
-  Navigator& nav = *made.navigator;
-  const Frames f;
-  pose::LocalPose local;
-  pose::UtmPose utm;
-  poses(f, kE0 + 150.0, kN0, 0.0, 1.0, local, utm);
+TEST_F(OnTestGraph, PublishesThePathFromTheActiveSubgoal) {
+  Navigator& nav = make(200.0, 200.0);
+  ASSERT_TRUE(navigator);
+  at(150.0, 0.0, 0.0, 1.0);
   nav.step(local, utm, nullptr);
   NavigationSnapshot snap(20);
   nav.snapshot(snap);
@@ -200,20 +213,15 @@ TEST(Navigator, PublishesThePathFromTheActiveSubgoal) {
   }
 }
 
-TEST(Navigator, ReplansWhenTheRobotTakesAnotherRoad) {
-  const osm::RoadGraph g = test_graph();
-  auto made = Navigator::create(g, config_to(g, 200.0, 200.0), {});
-  ASSERT_TRUE(made.navigator) << made.error;
-  Navigator& nav = *made.navigator;
-  const Frames f;
-  pose::LocalPose local;
-  pose::UtmPose utm;
+TEST_F(OnTestGraph, ReplansWhenTheRobotTakesAnotherRoad) {
+  Navigator& nav = make(200.0, 200.0);
+  ASSERT_TRUE(navigator);
   // Along the main road to B, then down the side road.
   const auto path = walk({{0, 0}, {100, 0}, {100, -120}}, 0.5);
   double t = 0.0;
   double off_at = -1.0;
   for (const auto& p : path) {
-    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    at(p[0], p[1], p[2], t += 0.25);
     nav.step(local, utm, nullptr);
     if (off_at < 0.0 && p[1] < -nav.config().leave_distance) off_at = t;
     if (nav.counters().replans > 0) break;
@@ -230,18 +238,13 @@ TEST(Navigator, ReplansWhenTheRobotTakesAnotherRoad) {
   EXPECT_EQ(nav.active(), 1u);  // subgoal 0 is where the robot is
 }
 
-TEST(Navigator, SaysWhenTheGoalCannotBeReachedAndRetries) {
-  const osm::RoadGraph g = test_graph();
-  NavigatorConfig c = config_to(g, 1050.0, 1000.0);  // on the island
+TEST_F(OnTestGraph, SaysWhenTheGoalCannotBeReachedAndRetries) {
+  NavigatorConfig c;
   c.replan_interval = 5.0;
-  auto made = Navigator::create(g, c, {});
-  ASSERT_TRUE(made.navigator) << made.error;
-  Navigator& nav = *made.navigator;
-  const Frames f;
-  pose::LocalPose local;
-  pose::UtmPose utm;
+  Navigator& nav = make(1050.0, 1000.0, c);  // on the island
+  ASSERT_TRUE(navigator);
   for (int i = 0; i <= 40; ++i) {  // 10 s
-    poses(f, kE0 + 10.0, kN0, 0.0, 0.25 * i, local, utm);
+    at(10.0, 0.0, 0.0, 0.25 * i);
     nav.step(local, utm, nullptr);
   }
   EXPECT_EQ(nav.state(), NavState::no_route);
@@ -273,23 +276,18 @@ void paint(TerrainClassMap& map, const Frames& f, double cx, double cy, const st
   ++map.sequence;
 }
 
-TEST(Navigator, AlignsTheSubgoalsToTheStreetTheTerrainMapShows) {
-  const osm::RoadGraph g = test_graph();
-  auto made = Navigator::create(g, config_to(g, 200.0, 0.0), {});
-  ASSERT_TRUE(made.navigator) << made.error;
-  Navigator& nav = *made.navigator;
-  const Frames f;
+TEST_F(OnTestGraph, AlignsTheSubgoalsToTheStreetTheTerrainMapShows) {
+  Navigator& nav = make(200.0, 0.0);
+  ASSERT_TRUE(navigator);
   // The real street runs 2.5 m north of where OpenStreetMap has it; the
   // robot drives on it.
   auto street = [](double, double n) { return std::abs(n - kN0 - 2.5) < 1.5; };
   TerrainClassMap map;
-  pose::LocalPose local;
-  pose::UtmPose utm;
   double t = 0.0, raw_sq = 0.0, corrected_sq = 0.0;
   std::size_t n_reached = 0;
   std::size_t k = 0;
   for (const auto& p : walk({{0, 2.5}, {190, 2.5}}, 0.5)) {
-    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    at(p[0], p[1], p[2], t += 0.25);
     const bool new_map = k++ % 2 == 0;  // a terrain map every metre
     if (new_map) paint(map, f, local.x, local.y, street);
     const StepResult r = nav.step(local, utm, new_map ? &map : nullptr);
