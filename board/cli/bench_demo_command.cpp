@@ -125,10 +125,14 @@ int run_bench_demo(const BenchDemoOptions& o) {
                   "  osm: %s\n"
                   "  goal: [%.8f, %.8f]\n",
                   (fs::path(so.out) / "world.osm").c_str(), end.lat, end.lon);
+    // The task row goes first in the task table, the section before the table.
     const auto tasks = config.find("\ntasks:\n");
+    if (tasks == std::string::npos) {
+      std::fprintf(stderr, "trailnav demo: the built-in bench config (board/robots/bench.yaml) has no task table\n");
+      return 1;
+    }
+    config.insert(tasks + 8, "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20.0, priority: 45}\n");
     config.insert(tasks, section);
-    const auto rows = config.find("\ntasks:\n") + 8;
-    config.insert(rows, "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20.0, priority: 45}\n");
   }
   std::ofstream(out / "trailnav-robot.dbc") << sim::robot_dbc_text();
   std::ofstream(out / "bench.yaml") << config;

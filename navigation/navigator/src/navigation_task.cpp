@@ -12,12 +12,8 @@ void NavigationTask::run(const TaskTick&) {
   const perception::TerrainClassMap* map = terrain_ != nullptr ? terrain_->try_read() : nullptr;
   if (pose != nullptr) ++local_.poses;
   if (map != nullptr) ++local_.terrain_maps;
-  // A map waits for the next pose (the subgoals need both frames of one instant).
-  if (pose == nullptr && map == nullptr) {
-    shared_.post(local_);
-    return;
-  }
-  if (poses_.last_read_sequence() == 0) {
+  // Nothing new, or no pose yet (the subgoals need both frames of one instant).
+  if ((pose == nullptr && map == nullptr) || poses_.last_read_sequence() == 0) {
     shared_.post(local_);
     return;
   }
