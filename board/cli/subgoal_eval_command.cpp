@@ -154,6 +154,12 @@ void add_subgoal_eval_command(CLI::App& app) {
   cmd->add_option("--sigma-along", c.options.navigator.aligner.sigma_along, "Eq. 8.8 sigma along the street, m")->capture_default_str();
   cmd->add_option("--sigma-across", c.options.navigator.aligner.sigma_across, "Eq. 8.8 sigma across the street, m")->capture_default_str();
   cmd->add_option("--lambda", c.options.navigator.aligner.lambda, "Eq. 8.11 lambda")->capture_default_str();
+  cmd->add_option("--along-prior", c.options.navigator.aligner.along_prior,
+                  "Sigma of the prior on a subgoal's offset along the street from its raw position, m (0: off, the thesis)")
+      ->capture_default_str();
+  cmd->add_option("--corner-sigma", c.options.navigator.aligner.corner_sigma,
+                  "Sigma of a corner's shift along the street, m (0: off, the thesis)")
+      ->capture_default_str();
   cmd->add_option("--unknown-cells", c.unknown_cells,
                   "How a patch treats cells without observations: known-only (mean over the known cells) or other\n"
                   "(each costs unknown_cost, the thesis' reading)")

@@ -1,6 +1,7 @@
 // The subgoal aligner on terrain maps whose trail is known: subgoals mapped
 // beside the trail are pulled onto it, a junction mapped too far along the
-// road is found where the map shows it, an empty map leaves the subgoals
+// road or too early is found where the map shows it, subgoals do not fall
+// behind where the cells ahead are unseen, an empty map leaves the subgoals
 // where they were, runs reproduce per seed, and updates never allocate.
 #include <gtest/gtest.h>
 
@@ -115,6 +116,71 @@ TEST(SubgoalAligner, FindsAJunctionMappedTooFarAlong) {
   const auto est = run(aligner, map, raw);
   // After the corner, the subgoals run up the true road (x = 20), not the mapped one (x = 26).
   for (std::size_t i = 10; i < est.size(); ++i) EXPECT_NEAR(est[i].x, 20.0, 1.0) << i;
+}
+
+// The map the robot has when subgoal i joins: the street seen up to `seen`
+// metres ahead of the subgoal before it, nothing beyond.
+void paint_seen(TerrainClassMap& map, double cx, double cy, double seen_x, const std::function<bool(double, double)>& on_street) {
+  paint(map, cx, cy, on_street);
+  auto& grid = map.grid();
+  const CellIndex o = grid.origin();
+  for (std::int32_t y = o.y; y < o.y + grid.size_y(); ++y)
+    for (std::int32_t x = o.x; x < o.x + grid.size_x(); ++x)
+      if (grid.cell_center({x, y}).x > seen_x) grid.at({x, y}) = TerrainCell{};
+}
+
+// Along a straight street whose far end the lidar has not seen yet, the
+// subgoals stay where the map puts them along it: the along-street prior
+// keeps the sequences that stop short of the unseen cells from winning
+// every update (without it, the thesis' model, they fall behind).
+TEST(SubgoalAligner, KeepsSubgoalsAlongTheStreetWhenTheCellsAheadAreUnseen) {
+  const auto street = [](double, double y) { return std::abs(y) < 1.5; };
+  const auto lag_of_last = [&](double along_prior) {
+    AlignerConfig c;
+    c.along_prior = along_prior;
+    TerrainClassMap map;
+    SubgoalAligner aligner(c, map.shape());
+    const auto raw = straight(0.0, 16);
+    double lag = 0.0;
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      EXPECT_TRUE(aligner.push(raw));
+      // The robot is 12 m behind the newest subgoal and has seen 15 m ahead.
+      const double robot = std::max(0.0, raw[i].x - 12.0);
+      paint_seen(map, robot, 0.0, robot + 15.0, street);
+      for (int k = 0; k < 3; ++k) aligner.update(map, raw);
+      if (i >= 4) lag = std::max(lag, raw[i - 4].x - aligner.estimate(i - 4).x);
+    }
+    return lag;
+  };
+  const double with_prior = lag_of_last(6.0), thesis = lag_of_last(0.0);
+  std::printf("largest lag behind the raw subgoal: %.2f m with the prior, %.2f m without\n", with_prior, thesis);
+  EXPECT_LT(with_prior, 1.0);
+  EXPECT_GT(thesis, with_prior + 0.5);
+}
+
+// A junction node mapped 8 m before the real junction: the raw route turns
+// north at x = 20, the road at x = 28. The corner shift moves the turn;
+// Eq. 8.6's small steps alone leave the subgoals beside the road.
+TEST(SubgoalAligner, MovesATurnMappedTooEarlyToWhereTheMapShowsIt) {
+  const double jx = 28.0;
+  const auto road = [&](double x, double y) { return (std::abs(y) < 1.5 && x < jx + 1.5) || (std::abs(x - jx) < 1.5 && y > -1.5); };
+  std::vector<Vec2> raw = straight(0.0, 6);  // 0..20
+  for (int i = 1; i <= 8; ++i) raw.push_back({20.0, 4.0 * i});
+  const auto error_after_turn = [&](double corner_sigma) {
+    AlignerConfig c;
+    c.corner_sigma = corner_sigma;
+    TerrainClassMap map;
+    paint(map, 20.0, 10.0, road);
+    SubgoalAligner aligner(c, map.shape());
+    const auto est = run(aligner, map, raw);
+    double worst = 0.0;
+    for (std::size_t i = 8; i < est.size(); ++i) worst = std::max(worst, std::abs(est[i].x - jx));
+    return worst;
+  };
+  const double shifted = error_after_turn(3.0), thesis = error_after_turn(0.0);
+  std::printf("farthest subgoal from the road after the turn: %.2f m with the corner shift, %.2f m without\n", shifted, thesis);
+  EXPECT_LT(shifted, 1.0);
+  EXPECT_GT(thesis, shifted);
 }
 
 TEST(SubgoalAligner, ReproducesPerSeed) {

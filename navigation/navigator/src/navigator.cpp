@@ -221,7 +221,7 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
   while (want < n && subgoal_arc_[want] <= robot_arc_ + config_.lookahead) ++want;
   want = std::max<std::size_t>(want, 1);
   if (map != nullptr) {
-    const std::size_t back = static_cast<std::size_t>(config_.aligner.sequence) + 1;
+    const std::size_t back = static_cast<std::size_t>(config_.aligner.sequence) + 2;
     const std::size_t from = std::min(aligner_->count(), want) > back ? std::min(aligner_->count(), want) - back : 0;
     for (std::size_t i = from; i < want; ++i) raw_[i] = raw_local(i);
     const std::span<const subgoals::Vec2> raw(raw_.data(), want);

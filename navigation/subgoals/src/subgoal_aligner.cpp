@@ -40,6 +40,9 @@ std::string check_aligner_config(const AlignerConfig& c) {
   for (float v : c.cost)
     if (!(v >= 0.0f && v <= 100.0f)) return "class costs must be 0..100";
   if (!(c.unknown_cost >= 0.0f && c.unknown_cost <= 100.0f)) return "unknown_cost must be 0..100";
+  if (!(c.along_prior >= 0.0 && c.along_prior <= 1000.0)) return "along_prior must be 0..1000 m (0: off)";
+  if (!(c.corner_sigma >= 0.0 && c.corner_sigma <= 50.0)) return "corner_sigma must be 0..50 m (0: off)";
+  if (!(c.corner_angle > 0.0 && c.corner_angle < 3.1416)) return "corner_angle must be in (0, pi) rad";
   if (!(c.resample_below >= 0.0 && c.resample_below <= 1.0)) return "resample_below must be 0..1";
   if (c.max_subgoals < 2 || c.max_subgoals > 10000000) return "max_subgoals must be 2..10000000";
   return {};
@@ -109,6 +112,25 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
     dist[i] = d;
     dir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : Vec2{1.0, 0.0};
   }
+  // Corners: steps that turn away from the previous raw step.
+  std::array<Vec2, 8> corner{};
+  std::array<std::uint8_t, 8> is_corner{};
+  const double cos_corner = std::cos(config_.corner_angle);
+  for (std::size_t i = 0; i < len && config_.corner_sigma > 0.0; ++i) {
+    const std::size_t g = begin + i;
+    if (g < 2) continue;
+    const double dx = raw[g - 1].x - raw[g - 2].x, dy = raw[g - 1].y - raw[g - 2].y, d = std::hypot(dx, dy);
+    if (d < 1e-9) continue;
+    const Vec2 in{dx / d, dy / d};
+    if (in.x * dir[i].x + in.y * dir[i].y < cos_corner) {
+      corner[i] = in;
+      is_corner[i] = 1;
+    }
+  }
+  for (std::size_t i = 0; i < len; ++i) {
+    raw_w_[i] = raw[begin + i];
+    dir_[i] = (begin + i == 0 && len > 1) ? dir[1] : dir[i];
+  }
   // Eq. 8.8: the street direction at g_0.
   Vec2 e0{1.0, 0.0};
   double along = std::max(config_.sigma_along, config_.sigma_across), across = along;
@@ -137,6 +159,11 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
         const double l = dist[i] + config_.sigma_d * normal_[r & kMask];
         const double lt = l * tan_theta_[(r >> 12) & kMask];
         p = {prev.x + l * dir[i].x - lt * dir[i].y, prev.y + l * dir[i].y + lt * dir[i].x};
+        if (is_corner[i]) {
+          const double s = config_.corner_sigma * normal_[(r >> 24) & kMask];
+          p.x += s * corner[i].x;
+          p.y += s * corner[i].y;
+        }
       }
       w[g % kk_] = p;
       prev = p;
@@ -222,12 +249,20 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
   draw_window(raw);
   build_cost_table(map);
   const std::size_t begin = window_begin();
+  const double inv2s2 = config_.along_prior > 0.0 ? 0.5 / (config_.along_prior * config_.along_prior) : 0.0;
   double best = -std::numeric_limits<double>::infinity();
   for (std::size_t j = 0; j < n_; ++j) {
     const Vec2* w = &window_[j * kk_];
-    double c = 0.0;
-    for (std::size_t g = begin; g < count_; ++g) c += patch_cost(w[g % kk_].x, w[g % kk_].y);
-    const double lw = log_alpha_[j] - config_.lambda * c;  // Eq. 8.11, 8.14 (lambda^K cancels)
+    double c = 0.0, a2 = 0.0;
+    for (std::size_t g = begin; g < count_; ++g) {
+      const Vec2& q = w[g % kk_];
+      c += patch_cost(q.x, q.y);
+      const Vec2& r = raw_w_[g - begin];
+      const Vec2& t = dir_[g - begin];
+      const double a = (q.x - r.x) * t.x + (q.y - r.y) * t.y;
+      a2 += a * a;
+    }
+    const double lw = log_alpha_[j] - config_.lambda * c - a2 * inv2s2;  // Eq. 8.11, 8.14 (lambda^K cancels)
     log_weight_[j] = lw;
     best = std::max(best, lw);
   }

@@ -22,7 +22,8 @@
 // cost f^E(C) = sum_t f(t) P(t|C) (unknown cells: `unknown_cost`); a subgoal's
 // cost f^N(g) is the mean over the (2N+1)^2 cells around it; its likelihood
 // lambda exp(-lambda f^N(g)); a sequence's weight the anchor's weight times
-// the product over the window. The estimate of each window subgoal is the
+// the product over the window (times the along-street prior, see
+// AlignerConfig::along_prior). The estimate of each window subgoal is the
 // weighted mean (the expectation).
 //
 // Each update() re-draws every window from its anchor against the current
@@ -70,6 +71,19 @@ struct AlignerConfig {
   // subgoals back towards the robot; false: unknown cells count as
   // unknown_cost (the thesis' §8.4.1 reading).
   bool known_cells_only = false;
+  // Beyond the thesis (both 0 give its model exactly):
+  // along_prior: sigma of a Gaussian prior on each window subgoal's offset
+  // from its raw position along the raw street direction (the thesis' own
+  // assumption that OSM errs mainly across the street). Without it, the
+  // sequences that end short of the unseen cells ahead win every update and
+  // the subgoals drift metres behind the raw ones, so they turn early.
+  double along_prior = 6.0;          // m, 0: off
+  // corner_sigma: a step that turns by at least corner_angle against the
+  // previous raw step also moves, with N(0, corner_sigma^2), along that
+  // previous step: a junction node mapped too early or too far shifts the
+  // turn, which Eq. 8.6's small step noise cannot do.
+  double corner_sigma = 3.0;         // m, 0: off
+  double corner_angle = 0.45;        // rad
   double resample_below = 0.5;       // resample when n_eff < this x samples
   std::size_t max_subgoals = 65536;  // longest route, in subgoals
   std::uint64_t seed = 1;
@@ -106,7 +120,7 @@ class SubgoalAligner {
   std::size_t window_begin() const noexcept { return count_ > static_cast<std::size_t>(k_) ? count_ - static_cast<std::size_t>(k_) : 0; }
 
   // Re-samples the window against `map`. `raw` holds the raw local positions
-  // of subgoals 0..count()-1 (only window_begin()-1 .. count()-1 are read).
+  // of subgoals 0..count()-1 (only window_begin()-2 .. count()-1 are read).
   void update(const perception::TerrainClassMap& map, std::span<const Vec2> raw) noexcept;
 
   // The corrected position of subgoal i < count(): the window's current
@@ -123,6 +137,8 @@ class SubgoalAligner {
  private:
   std::uint64_t next_random() noexcept;
   void draw_window(std::span<const Vec2> raw) noexcept;
+  std::array<Vec2, 8> dir_{};    // the raw street direction at each window subgoal
+  std::array<Vec2, 8> raw_w_{};  // the window subgoals' raw positions
   void build_cost_table(const perception::TerrainClassMap& map) noexcept;
   double patch_cost(double x, double y) const noexcept;
   void resample_anchors() noexcept;
