@@ -20,6 +20,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -310,7 +311,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
               terrain_summary.c_str(), (out / "maps" / "terrain_map.png").c_str());
   std::vector<double> subgoal_errors;
   {
-    // Distance of each active subgoal from the trail's centre (3 m wide: on it within 1.5 m).
+    // Distance of each active subgoal from the trail's centre: on it within
+    // half the width of the scenario's narrowest street or track.
+    double half_width = std::numeric_limits<double>::max();
+    for (const auto& t : truth.truth->scenario.trails) half_width = std::min(half_width, 0.5 * t.width);
     trail_check.set_offset(replay_start_ns - start.utc_ns);
     std::ofstream csv(out / "subgoals.csv");
     csv << "stamp_s,odom_x,odom_y,trail_distance\n";
@@ -327,12 +331,12 @@ int run_bench_demo(const BenchDemoOptions& o) {
     for (std::size_t i = 0; i < n; ++i) {
       (i < half ? first : second) += subgoal_errors[i];
       if (i >= half) second_max = std::max(second_max, subgoal_errors[i]);
-      if (subgoal_errors[i] <= 1.5) ++on_trail;
+      if (subgoal_errors[i] <= half_width) ++on_trail;
     }
-    std::printf("   %zu active subgoals (corrected, odometry frame) over %.0f m of simulated trail, %zu of them on it; "
-                "distance from its centre: first %.2f m (OpenStreetMap, before any terrain map), first half mean %.2f m, "
+    std::printf("   %zu active subgoals (corrected, odometry frame) over %.0f m of simulated trail, %zu of them on it "
+                "(within %.1f m of its centre); distance from its centre: first %.2f m (OpenStreetMap, before any terrain map), first half mean %.2f m, "
                 "second half mean %.2f m, max %.2f m (each in %s); %llu corrected paths (last: %zu poses)\n",
-                n, end.arc - start.arc, on_trail, n ? subgoal_errors.front() : 0.0, half ? first / static_cast<double>(half) : 0.0,
+                n, end.arc - start.arc, on_trail, half_width, n ? subgoal_errors.front() : 0.0, half ? first / static_cast<double>(half) : 0.0,
                 n > half ? second / static_cast<double>(n - half) : 0.0, second_max, (out / "subgoals.csv").c_str(),
                 static_cast<unsigned long long>(n_paths),
                 last_path_poses);

@@ -30,6 +30,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <span>
 #include <sstream>
@@ -66,6 +67,7 @@ struct DaemonRun {
   // Navigation: active subgoals and corrected paths received, how many
   // subgoals lay on the simulated trail, and what a late joiner got.
   std::vector<double> subgoal_errors;  // m from the trail's centre, in the order received
+  double narrowest_trail = 0.0;        // m, the scenario's narrowest trail
   std::size_t paths = 0, last_path_poses = 0, late_subgoals = 0, late_paths = 0;
   std::size_t subgoals_unmatched = 0;  // no odometry pose near its stamp: not checked
   DurationSummary latency;  // last packet of a revolution -> subscriber
@@ -117,6 +119,8 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     EXPECT_TRUE(loaded.truth) << loaded.error;
     if (!loaded.truth || loaded.truth->trajectory.empty()) return out;
     truth = std::move(*loaded.truth);
+    out.narrowest_trail = std::numeric_limits<double>::max();
+    for (const auto& t : truth.scenario.trails) out.narrowest_trail = std::min(out.narrowest_trail, t.width);
     EXPECT_EQ(eval::load_true_route(so.out + "/truth", trail), "");
   }
 
@@ -428,31 +432,34 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   const DaemonRun r = run_daemon(30.0, "nav", false, true);
   const std::vector<double>& e = r.subgoal_errors;
   const std::size_t half = e.size() / 2;
-  double first = 0.0, second = 0.0, second_max = 0.0, last_third_max = 0.0;
+  double first = 0.0, second = 0.0, second_max = 0.0;
   for (std::size_t i = 0; i < e.size(); ++i) {
     (i < half ? first : second) += e[i];
     if (i >= half) second_max = std::max(second_max, e[i]);
-    if (3 * i >= 2 * e.size()) last_third_max = std::max(last_third_max, e[i]);
   }
   first /= static_cast<double>(std::max<std::size_t>(half, 1));
   second /= static_cast<double>(std::max<std::size_t>(e.size() - half, 1));
   std::printf("[ trailnavd navigation ] %zu active subgoals; distance from the trail's centre: first %.2f m, first half "
-              "mean %.2f m, second half mean %.2f m max %.2f m, last third max %.2f m; %zu paths (last %zu poses); late joiner got %zu subgoal(s) "
+              "mean %.2f m, second half mean %.2f m max %.2f m (narrowest street %.1f m wide); %zu paths (last %zu poses); late joiner got %zu subgoal(s) "
               "and %zu path(s)\n%s",
-              e.size(), e.empty() ? 0.0 : e.front(), first, second, second_max, last_third_max, r.paths, r.last_path_poses, r.late_subgoals,
+              e.size(), e.empty() ? 0.0 : e.front(), first, second, second_max, r.narrowest_trail, r.paths, r.last_path_poses, r.late_subgoals,
               r.late_paths, r.stderr_text.c_str());
+  std::printf("[ trailnavd navigation ] each subgoal's distance [m]:");
+  for (double v : e) std::printf(" %.2f", v);
+  std::printf("\n");
   EXPECT_EQ(r.exit_code, 0);
   ASSERT_GE(e.size(), 20u);
   // world.osm puts the street metres off (the first subgoal is raw: no
   // terrain map yet); once the terrain map shows the street, the subgoals
-  // move onto it and stay there (the trail is 3 m wide).
+  // move onto it and stay there: every one of the second half on the street
+  // with half a metre to its edge, and on average in its middle half (the
+  // scenario's streets are 6 and 7 m wide; runs measured second-half means
+  // of 0.6-1.0 m and maxima of 1.3-1.8 m from the centre).
+  const double half_width = 0.5 * r.narrowest_trail;
   EXPECT_GT(e.front(), 3.0);
   EXPECT_LT(second, first);
-  // On the 3 m trail: the second half on average well inside it (the
-  // runs measured 0.63-0.79 m), every subgoal of the last third on it (the
-  // second half's maximum measured 1.28-1.46 m: too close to 1.5 m to assert).
-  EXPECT_LE(second, 1.0);
-  EXPECT_LE(last_third_max, 1.5);
+  EXPECT_LE(second, 0.5 * half_width);
+  EXPECT_LE(second_max, half_width - 0.5);
   EXPECT_LE(r.subgoals_unmatched, 2u);
   EXPECT_GE(r.paths, e.size());
   EXPECT_GE(r.last_path_poses, 1u);
