@@ -70,6 +70,12 @@ TEST(SubgoalAligner, ChecksItsConfiguration) {
   c = {};
   c.lambda = 0.0;
   EXPECT_NE(check_aligner_config(c).find("lambda"), std::string::npos);
+  c = {};
+  c.along_prior = -1.0;
+  EXPECT_NE(check_aligner_config(c).find("along_prior"), std::string::npos);
+  c = {};
+  c.corner_angle = 0.0;
+  EXPECT_NE(check_aligner_config(c).find("corner_angle"), std::string::npos);
 }
 
 TEST(SubgoalAligner, PullsSubgoalsMappedBesideTheTrailOntoIt) {
