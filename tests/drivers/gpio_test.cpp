@@ -17,6 +17,7 @@
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_sender.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "../support/no_allocations.hpp"
 
 using namespace trailnav;
 using namespace trailnav::gpio;
@@ -314,10 +315,5 @@ TEST(GpioDriver, ArmedDriverNeverTouchesTheHeap) {
   EXPECT_EQ(s.tunnel_levels, 40u);
   EXPECT_EQ(s.estop, EstopState::released);
   EXPECT_GT(s.heartbeat_toggles, 10u);
-  std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
-  const std::size_t n = alloc_guard::report(rows);
-  for (std::size_t k = 0; k < n; ++k) {
-    ADD_FAILURE() << "thread '" << rows[k].name << "' made " << rows[k].allocations << " heap operations after arm()";
-  }
-  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  test::expect_no_realtime_allocations();
 }

@@ -29,6 +29,7 @@
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "../support/no_allocations.hpp"
 
 using namespace trailnav;
 namespace fs = std::filesystem;
@@ -517,11 +518,6 @@ TEST(SerialDrivers, ArmedDriversNeverTouchTheHeapEvenAcrossReconnection) {
   EXPECT_GE(gs.link.closes, 1u);
   EXPECT_GT(gs.published, 50u);
   EXPECT_GE(is.stream.samples, 390u);
-  std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
-  const std::size_t n = alloc_guard::report(rows);
-  for (std::size_t k = 0; k < n; ++k) {
-    ADD_FAILURE() << "thread '" << rows[k].name << "' made " << rows[k].allocations << " heap operations after arm()";
-  }
-  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  test::expect_no_realtime_allocations();
   fs::remove_all(dir);
 }

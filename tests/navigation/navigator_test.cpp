@@ -16,6 +16,7 @@
 #include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "terrain_paint.hpp"
 
 namespace trailnav::nav {
 namespace {
@@ -259,21 +260,11 @@ TEST_F(OnTestGraph, SaysWhenTheGoalCannotBeReachedAndRetries) {
 // Street cells where `street(e, n)` (UTM), grass elsewhere, over the map
 // centred on the robot (odometry frame).
 void paint(TerrainClassMap& map, const Frames& f, double cx, double cy, const std::function<bool(double, double)>& street) {
-  auto& grid = map.grid();
-  grid.move_to(cx, cy);
-  const CellIndex o = grid.origin();
-  for (std::int32_t y = o.y; y < o.y + grid.size_y(); ++y) {
-    for (std::int32_t x = o.x; x < o.x + grid.size_x(); ++x) {
-      const auto c = grid.cell_center({x, y});
-      double e = 0, n = 0;
-      f.to_utm(c.x, c.y, e, n);
-      std::array<float, perception::kTerrainClasses> p{};
-      p[static_cast<std::size_t>(street(e, n) ? TerrainClass::street : TerrainClass::grass)] = 0.9f;
-      for (auto& v : p) v += 0.025f;
-      grid.at({x, y}).set(p);
-    }
-  }
-  ++map.sequence;
+  test::paint_terrain(map, cx, cy, [&](double x, double y) {
+    double e = 0, n = 0;
+    f.to_utm(x, y, e, n);
+    return street(e, n);
+  });
 }
 
 TEST_F(OnTestGraph, AlignsTheSubgoalsToTheStreetTheTerrainMapShows) {

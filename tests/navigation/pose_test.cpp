@@ -13,6 +13,7 @@
 
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "../support/no_allocations.hpp"
 
 using namespace trailnav;
 using namespace trailnav::pose;
@@ -241,10 +242,5 @@ TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
   EXPECT_TRUE(s.utm.heading_valid);
   EXPECT_NEAR(s.local.x, 2.0 * 14.99, 0.05);
   EXPECT_NEAR(s.utm.yaw, 0.0, 0.05);  // driving grid east
-  std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
-  const std::size_t n = alloc_guard::report(rows);
-  for (std::size_t k = 0; k < n; ++k) {
-    ADD_FAILURE() << "thread '" << rows[k].name << "' made " << rows[k].allocations << " heap operations after arm()";
-  }
-  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  test::expect_no_realtime_allocations();
 }

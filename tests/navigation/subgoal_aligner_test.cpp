@@ -10,6 +10,7 @@
 
 #include "trailnav/navigation/subgoals/subgoal_aligner.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "terrain_paint.hpp"
 
 namespace trailnav::subgoals {
 namespace {
@@ -18,21 +19,8 @@ using perception::TerrainCell;
 using perception::TerrainClass;
 using perception::TerrainClassMap;
 
-// Sets every cell of the map centred on (cx, cy): street where on_street(x, y), else grass.
 void paint(TerrainClassMap& map, double cx, double cy, const std::function<bool(double, double)>& on_street) {
-  auto& grid = map.grid();
-  grid.move_to(cx, cy);
-  const CellIndex o = grid.origin();
-  for (std::int32_t y = o.y; y < o.y + grid.size_y(); ++y) {
-    for (std::int32_t x = o.x; x < o.x + grid.size_x(); ++x) {
-      const auto c = grid.cell_center({x, y});
-      std::array<float, perception::kTerrainClasses> p{};
-      const bool street = on_street(c.x, c.y);
-      p[static_cast<std::size_t>(street ? TerrainClass::street : TerrainClass::grass)] = 0.9f;
-      for (auto& v : p) v += 0.025f;
-      grid.at({x, y}).set(p);
-    }
-  }
+  test::paint_terrain(map, cx, cy, on_street);
 }
 
 // Raw subgoals every 4 m from (x0, y0) along the polyline; aligns them one

@@ -15,6 +15,7 @@
 #include "trailnav/perception/terrain_task.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "../support/no_allocations.hpp"
 
 namespace trailnav::perception {
 namespace {
@@ -119,12 +120,7 @@ TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) {
   EXPECT_GT(class_maps, 0u);
   EXPECT_GT(known_cells, 50u);
   EXPECT_GT(obstacle_maps, 0u);
-  std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
-  const std::size_t n = alloc_guard::report(rows);
-  for (std::size_t i = 0; i < n; ++i) {
-    ADD_FAILURE() << "thread '" << rows[i].name << "' made " << rows[i].allocations << " heap operations after arm()";
-  }
-  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  test::expect_no_realtime_allocations();
 }
 
 }  // namespace

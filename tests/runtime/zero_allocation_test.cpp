@@ -17,6 +17,7 @@
 #include "trailnav/runtime/rolling_grid.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/spsc_queue.hpp"
+#include "../support/no_allocations.hpp"
 
 namespace trailnav {
 namespace {
@@ -157,12 +158,7 @@ TEST(ZeroAllocation, ArmedSchedulerWithRollingGridsRunsThousandsOfCyclesWithoutT
   EXPECT_GT(consumer.consumed, 2500u);
   EXPECT_GT(snapshots, 10u);
 
-  std::array<alloc_guard::ThreadAllocations, alloc_guard::kMaxThreadNames> rows{};
-  const std::size_t n = alloc_guard::report(rows);
-  for (std::size_t i = 0; i < n; ++i) {
-    ADD_FAILURE() << "thread '" << rows[i].name << "' made " << rows[i].allocations << " heap operations after arm()";
-  }
-  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  test::expect_no_realtime_allocations();
 }
 
 }  // namespace

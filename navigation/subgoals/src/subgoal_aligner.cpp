@@ -127,10 +127,8 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
       is_corner[i] = 1;
     }
   }
-  for (std::size_t i = 0; i < len; ++i) {
-    raw_w_[i] = raw[begin + i];
-    dir_[i] = (begin + i == 0 && len > 1) ? dir[1] : dir[i];
-  }
+  // The street direction at each window subgoal (the along-street prior's axis).
+  for (std::size_t i = 0; i < len; ++i) dir_[i] = (begin + i == 0 && len > 1) ? dir[1] : dir[i];
   // Eq. 8.8: the street direction at g_0.
   Vec2 e0{1.0, 0.0};
   double along = std::max(config_.sigma_along, config_.sigma_across), across = along;
@@ -257,7 +255,7 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
     for (std::size_t g = begin; g < count_; ++g) {
       const Vec2& q = w[g % kk_];
       c += patch_cost(q.x, q.y);
-      const Vec2& r = raw_w_[g - begin];
+      const Vec2& r = raw[g];
       const Vec2& t = dir_[g - begin];
       const double a = (q.x - r.x) * t.x + (q.y - r.y) * t.y;
       a2 += a * a;

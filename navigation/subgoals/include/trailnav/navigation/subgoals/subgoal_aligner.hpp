@@ -137,8 +137,7 @@ class SubgoalAligner {
  private:
   std::uint64_t next_random() noexcept;
   void draw_window(std::span<const Vec2> raw) noexcept;
-  std::array<Vec2, 8> dir_{};    // the raw street direction at each window subgoal
-  std::array<Vec2, 8> raw_w_{};  // the window subgoals' raw positions
+  std::array<Vec2, 8> dir_{};  // the raw street direction at each window subgoal
   void build_cost_table(const perception::TerrainClassMap& map) noexcept;
   double patch_cost(double x, double y) const noexcept;
   void resample_anchors() noexcept;
