@@ -111,6 +111,50 @@ void BM_Features(benchmark::State& state) {
 }
 BENCHMARK(BM_Features)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
+// The two stages of features() apart, on one aligned revolution: the
+// smoothing, and the neighbour search with each kernel (second argument: 0
+// the four-wide search, 1 the portable one-at-a-time search).
+struct CloudFixture {
+  explicit CloudFixture(int source) : fixture(source, FusionModel::pc) {
+    const velodyne::RangeImage& image = *fixture.images[0];
+    cloud = std::make_unique<RevolutionCloud>(CloudShape{image.rings(), image.shape().max_columns});
+    CloudAligner aligner(config.mount, config.features);
+    aligner.align(image, nullptr, *cloud);
+  }
+  Fixture fixture;
+  ObstacleConfig config;
+  std::unique_ptr<RevolutionCloud> cloud;
+};
+
+void BM_Smoothing(benchmark::State& state) {
+  CloudFixture f(static_cast<int>(state.range(0)));
+  const RevolutionCloud aligned = *f.cloud;
+  for (auto _ : state) {
+    state.PauseTiming();
+    f.cloud->x = aligned.x;
+    f.cloud->y = aligned.y;
+    f.cloud->z = aligned.z;
+    state.ResumeTiming();
+    smooth_rings(*f.cloud, f.config.features);
+  }
+  state.SetLabel(source_name(state.range(0)));
+  points_counter(state, f.fixture);
+}
+BENCHMARK(BM_Smoothing)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+void BM_FeatureSearch(benchmark::State& state) {
+  CloudFixture f(static_cast<int>(state.range(0)));
+  smooth_rings(*f.cloud, f.config.features);
+  const auto kernel = state.range(1) == 0 ? FeatureKernel::fastest : FeatureKernel::portable;
+  FeatureCounters counters;
+  // Searching again finds the same: the states stay valid-like (measured, flat).
+  for (auto _ : state) compute_features(*f.cloud, f.config.features, counters, kernel);
+  state.SetLabel(std::string(source_name(state.range(0))) +
+                 (kernel == FeatureKernel::fastest && simd_features_available() ? ", four-wide" : ", portable"));
+  points_counter(state, f.fixture);
+}
+BENCHMARK(BM_FeatureSearch)->ArgsProduct({{0, 1}, {0, 1}})->Unit(benchmark::kMillisecond);
+
 void BM_MapUpdate(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)), static_cast<FusionModel>(state.range(1)));
   f.pipeline->align(*f.images[0], nullptr);
@@ -121,6 +165,23 @@ void BM_MapUpdate(benchmark::State& state) {
   points_counter(state, f);
 }
 BENCHMARK(BM_MapUpdate)->ArgsProduct({{0, 1}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
+
+// The snapshot the obstacle task publishes after every revolution: the whole
+// map as 0-100 / -1 (nav_msgs/OccupancyGrid's data).
+void BM_ExportOccupancy(benchmark::State& state) {
+  Fixture f(0, FusionModel::pc);
+  f.pipeline->align(*f.images[0], nullptr);
+  f.pipeline->features();
+  f.pipeline->update_maps(&f.terrain);
+  const ObstacleMap& map = f.pipeline->map();
+  std::vector<std::int8_t> out(static_cast<std::size_t>(map.grid().size_x()) * static_cast<std::size_t>(map.grid().size_y()));
+  for (auto _ : state) {
+    map.export_occupancy(out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["cells"] = static_cast<double>(out.size());
+}
+BENCHMARK(BM_ExportOccupancy)->Unit(benchmark::kMillisecond);
 
 void BM_Revolution(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)), static_cast<FusionModel>(state.range(1)));

@@ -47,6 +47,7 @@ RevolutionCloud::RevolutionCloud(CloudShape shape) : shape_(shape) {
   sin_incline.assign(n, 0.0f);
   state.assign(n, PointState::none);
   ring_sums.assign(3 * (static_cast<std::size_t>(shape.max_columns) + 1), 0.0);
+  column_transforms.assign(kTransformFloats * static_cast<std::size_t>(shape.max_columns), 0.0f);
 }
 
 void RevolutionCloud::reset(int columns) noexcept {
@@ -100,19 +101,41 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   out.robot_y = end.y;
   out.robot_yaw = end.yaw;
 
-  float rf[9];
-  float tf[3];
-  auto set_transform = [&](const Pose& p, const double r[9]) {
+  // Each column's sensor -> reference transform (rotation row-major, then
+  // translation), computed once per column; the points are then read ring
+  // by ring, the order both the range image and the cloud are stored in.
+  float* const xf = out.column_transforms.data();
+  auto set_transform = [&](const Pose& p, const double r[9], float* t) {
     double rt[9];
     multiply(r, mount_r, rt);
-    for (int i = 0; i < 9; ++i) rf[i] = static_cast<float>(rt[i]);
-    tf[0] = static_cast<float>(p.x + r[0] * mt[0] + r[1] * mt[1] + r[2] * mt[2] - out.ref_x);
-    tf[1] = static_cast<float>(p.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2] - out.ref_y);
-    tf[2] = static_cast<float>(p.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2] - out.ref_z);
+    for (int i = 0; i < 9; ++i) t[i] = static_cast<float>(rt[i]);
+    t[9] = static_cast<float>(p.x + r[0] * mt[0] + r[1] * mt[1] + r[2] * mt[2] - out.ref_x);
+    t[10] = static_cast<float>(p.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2] - out.ref_y);
+    t[11] = static_cast<float>(p.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2] - out.ref_z);
   };
-  set_transform(end, r_end);
+  float fixed[RevolutionCloud::kTransformFloats];
+  set_transform(end, r_end, fixed);
 
   const double span = static_cast<double>(image.end_ns - image.start_ns);
+  for (int c = 0; c < columns; ++c) {
+    float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
+    if (image.column_state(c) != velodyne::ColumnState::received) continue;
+    if (moving) {
+      const auto when = image.start_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns);
+      Pose p{};
+      if (poses->at(when, p) == PoseLookup::interpolated) {
+        ++counters_.pose_interpolated;
+      } else {
+        ++counters_.pose_clamped;
+      }
+      double r[9];
+      rotation(p.roll, p.pitch, p.yaw, r);
+      set_transform(p, r, t);
+    } else {
+      std::copy_n(fixed, RevolutionCloud::kTransformFloats, t);
+    }
+  }
+
   // Each point goes to the column of its own azimuth: lasers with a
   // rotation correction (the HDL-64E's are several degrees) fire in one
   // column but point into another, and the features need the rings'
@@ -121,44 +144,43 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   const auto cut = static_cast<float>(image.cut_azimuth);
   const float min_r = min_range_;
   const float max_r = max_range_;
-  for (int c = 0; c < columns; ++c) {
-    if (image.column_state(c) != velodyne::ColumnState::received) continue;
-    if (moving) {
-      const auto t = image.start_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns);
-      Pose p{};
-      if (poses->at(t, p) == PoseLookup::interpolated) {
-        ++counters_.pose_interpolated;
-      } else {
-        ++counters_.pose_clamped;
-      }
-      double r[9];
-      rotation(p.roll, p.pitch, p.yaw, r);
-      set_transform(p, r);
-    }
-    for (int i = 0; i < rings; ++i) {
-      const velodyne::RangeCell& cell = image.at(0, i, c);
-      if (!cell.valid()) continue;
-      ++counters_.points;
+  std::uint64_t points = 0, out_of_range = 0, collisions = 0;
+  for (int i = 0; i < rings; ++i) {
+    const velodyne::RangeCell* row = image.row(0, i).data();
+    const std::size_t base = out.index(i, 0);
+    PointState* st = out.state.data() + base;
+    float* ox = out.x.data() + base;
+    float* oy = out.y.data() + base;
+    float* oz = out.z.data() + base;
+    float* orange = out.range.data() + base;
+    float* ointensity = out.intensity.data() + base;
+    for (int c = 0; c < columns; ++c) {
+      const velodyne::RangeCell& cell = row[c];
+      if (!cell.valid() || image.column_state(c) != velodyne::ColumnState::received) continue;
+      ++points;
       if (cell.distance < min_r || cell.distance > max_r) {
-        ++counters_.out_of_range;
+        ++out_of_range;
         continue;
       }
       double rel = static_cast<double>(cell.azimuth - cut);
       if (rel < 0.0) rel += 2.0 * std::numbers::pi;
-      const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
-      const std::size_t k = out.index(i, target);
-      if (out.state[k] != PointState::none) {
-        ++counters_.collisions;
+      const auto target = static_cast<std::size_t>(std::min(columns - 1, static_cast<int>(rel * columns_per_rad)));
+      if (st[target] != PointState::none) {
+        ++collisions;
         continue;
       }
-      out.x[k] = rf[0] * cell.x + rf[1] * cell.y + rf[2] * cell.z + tf[0];
-      out.y[k] = rf[3] * cell.x + rf[4] * cell.y + rf[5] * cell.z + tf[1];
-      out.z[k] = rf[6] * cell.x + rf[7] * cell.y + rf[8] * cell.z + tf[2];
-      out.range[k] = cell.distance;
-      out.intensity[k] = cell.intensity;
-      out.state[k] = PointState::valid;
+      const float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
+      ox[target] = t[0] * cell.x + t[1] * cell.y + t[2] * cell.z + t[9];
+      oy[target] = t[3] * cell.x + t[4] * cell.y + t[5] * cell.z + t[10];
+      oz[target] = t[6] * cell.x + t[7] * cell.y + t[8] * cell.z + t[11];
+      orange[target] = cell.distance;
+      ointensity[target] = cell.intensity;
+      st[target] = PointState::valid;
     }
   }
+  counters_.points += points;
+  counters_.out_of_range += out_of_range;
+  counters_.collisions += collisions;
 }
 
 }  // namespace trailnav::perception

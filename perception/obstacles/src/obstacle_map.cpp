@@ -8,7 +8,9 @@ namespace trailnav::perception {
 ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
     : params_(params),
       model_(model),
+      percent_scale_(kPercentSteps / std::max(params.logit_max - params.logit_min, 1e-6f)),
       grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0, 0}),
+      occupancy_(params.size, params.size, params.resolution, std::int8_t{-1}),
       occupied_logit_(logit(params.occupied)) {
   for (int i = 0; i <= kPercentSteps; ++i) {
     const float l = params.logit_min + (params.logit_max - params.logit_min) * static_cast<float>(i) / kPercentSteps;
@@ -25,6 +27,7 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
   hold_revolutions_ =
       static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_hold_s) / std::max(period_s, 1e-3)));
   counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
+  occupancy_.move_to(cloud.robot_x, cloud.robot_y);
   switch (model_) {
     case FusionModel::pw: integrate_points<FusionModel::pw>(cloud, models, terrain); break;
     case FusionModel::ps: integrate_points<FusionModel::ps>(cloud, models, terrain); break;
@@ -115,12 +118,13 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
         const int hi_index = ObstacleModels::step_index(h);
         const int si_index = ObstacleModels::sin_index(s);
         float p = 0.0f;
+        // No branch on zero weights: a class of weight 0 adds exactly 0.
         for (int t = 0; t < kTerrainClasses; ++t) {
-          const float w = tc->p[static_cast<std::size_t>(t)];
-          if (w > 0.0f) p += w * models.step_part(t, hi_index) * models.incline_part(t, si_index);
+          p += tc->p[static_cast<std::size_t>(t)] * models.step_part(t, hi_index) * models.incline_part(t, si_index);
         }
         cell.logit = std::clamp(cell.logit + models.increment(p), lo, hi);
       }
+      occupancy_.at_offset(grid_.offset_of(cell)) = percent(cell.logit);
       ++updates;
     }
   }
@@ -130,19 +134,7 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
 }
 
 void ObstacleMap::export_occupancy(std::span<std::int8_t> out) const noexcept {
-  const CellIndex o = grid_.origin();
-  const std::int32_t w = grid_.size_x();
-  const float lo = params_.logit_min;
-  const float scale = kPercentSteps / std::max(params_.logit_max - params_.logit_min, 1e-6f);
-  for (std::int32_t y = 0; y < grid_.size_y(); ++y) {
-    for (std::int32_t x = 0; x < w; ++x) {
-      const ObstacleCell& c = grid_.at({o.x + x, o.y + y});
-      const auto i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-      if (i >= out.size()) return;
-      const int step = std::clamp(static_cast<int>((c.logit - lo) * scale + 0.5f), 0, kPercentSteps);
-      out[i] = c.seen == 0 ? std::int8_t{-1} : percent_[static_cast<std::size_t>(step)];
-    }
-  }
+  if (out.size() >= occupancy_.cell_count()) occupancy_.copy_to(out);
 }
 
 }  // namespace trailnav::perception

@@ -14,8 +14,8 @@ float ObstacleModels::smooth_exact(const ClassParams& c, float step_height, floa
 }
 
 ObstacleModels::ObstacleModels(const std::array<ClassParams, kTerrainClasses>& classes, const MapParams& map)
-    : step_(static_cast<std::size_t>(kTerrainClasses) * kStepBins),
-      incline_(static_cast<std::size_t>(kTerrainClasses) * kSinBins),
+    : step_(static_cast<std::size_t>(kClassStride) * kStepBins, 0.0f),
+      incline_(static_cast<std::size_t>(kClassStride) * kSinBins, 0.0f),
       increment_(kLogitBins) {
   for (std::size_t t = 0; t < classes.size(); ++t) {
     const ClassParams& c = classes[t];
@@ -23,11 +23,11 @@ ObstacleModels::ObstacleModels(const std::array<ClassParams, kTerrainClasses>& c
     max_sin_[t] = static_cast<float>(std::sin(static_cast<double>(c.max_incline_deg) * std::numbers::pi / 180.0));
     for (int i = 0; i < kStepBins; ++i) {
       const double h = i / static_cast<double>(kStepScale);
-      step_[t * kStepBins + static_cast<std::size_t>(i)] = static_cast<float>(1.0 - std::exp(-static_cast<double>(c.alpha) * h));
+      step_[static_cast<std::size_t>(i) * kClassStride + t] = static_cast<float>(1.0 - std::exp(-static_cast<double>(c.alpha) * h));
     }
     for (int i = 0; i < kSinBins; ++i) {
       const double s = std::min(1.0, i / static_cast<double>(kSinScale));
-      incline_[t * kSinBins + static_cast<std::size_t>(i)] =
+      incline_[static_cast<std::size_t>(i) * kClassStride + t] =
           static_cast<float>(std::sqrt(1.0 - std::exp(-static_cast<double>(c.beta) * s)));
     }
   }

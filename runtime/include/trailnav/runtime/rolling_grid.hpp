@@ -146,6 +146,12 @@ class RollingGrid {
     }
   }
 
+  // A cell's place in the storage. Two grids of the same size moved to the
+  // same origins hold the cells of one world index at the same offset, so a
+  // companion grid (a cache of derived values) can follow a main grid.
+  std::size_t offset_of(const Cell& c) const noexcept { return static_cast<std::size_t>(&c - cells_.get()); }
+  Cell& at_offset(std::size_t offset) noexcept { return cells_[offset]; }
+
   // Copies the map into `out` (size_x * size_y cells) in row-major order
   // starting at the origin: out[(y - origin.y) * size_x + (x - origin.x)].
   void copy_to(std::span<Cell> out) const noexcept {

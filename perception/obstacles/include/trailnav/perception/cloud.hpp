@@ -53,6 +53,10 @@ class RevolutionCloud {
   std::vector<float> sin_incline;    // sin of the incline (Eq. 7.6)
   std::vector<PointState> state;
   std::vector<double> ring_sums;     // smooth_rings(): prefix sums of one ring, 3 * (max_columns + 1)
+  // CloudAligner: per column, the sensor -> reference transform (rotation
+  // row-major, then translation).
+  static constexpr std::size_t kTransformFloats = 12;
+  std::vector<float> column_transforms;
 
   // The revolution.
   double ref_x = 0.0;  // odometry-frame position of the reference point
@@ -113,9 +117,17 @@ struct FeatureCounters {
 // `smoothing_max_jump` (an object's edge), so edges stay sharp.
 void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept;
 
+// How compute_features() searches along the rings: `fastest` compares four
+// neighbours at once where the CPU has SSE2 (x86-64) and falls back to
+// `portable` elsewhere; `portable` looks at one neighbour at a time. Both
+// give bit-identical results (test).
+enum class FeatureKernel : std::uint8_t { fastest, portable };
+bool simd_features_available() noexcept;
+
 // stepHeight (Eq. 7.5) and sin(incline) (Eq. 7.6) for every valid point from
 // the first neighbour farther than x in each of the four directions (Eqs.
 // 7.1-7.4): at most 2 (K + L) comparisons per point.
-void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters) noexcept;
+void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters,
+                      FeatureKernel kernel = FeatureKernel::fastest) noexcept;
 
 }  // namespace trailnav::perception

@@ -9,6 +9,8 @@
 // free once a later revolution sees it without one.
 #pragma once
 
+#include <algorithm>
+
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -50,7 +52,6 @@ class ObstacleMap {
 
   FusionModel model() const noexcept { return model_; }
   const MapParams& params() const noexcept { return params_; }
-  RollingGrid<ObstacleCell>& grid() noexcept { return grid_; }
   const RollingGrid<ObstacleCell>& grid() const noexcept { return grid_; }
 
   // Re-centres on the robot and integrates one revolution's points.
@@ -69,8 +70,9 @@ class ObstacleMap {
 
   // Row-major copy from the map's origin (row 0 = lowest y): 0..100 percent
   // occupancy, -1 unknown (the ROS OccupancyGrid convention). The percentages
-  // come from a table over the clamped log-odds (within 1 of the exact value),
-  // so a snapshot costs no exponentials.
+  // come from a table over the clamped log-odds (within 1 of the exact value)
+  // and are kept up to date, cell by cell, as points arrive, so a snapshot
+  // is a copy (the obstacle task takes one every revolution).
   void export_occupancy(std::span<std::int8_t> out) const noexcept;
 
  private:
@@ -78,11 +80,17 @@ class ObstacleMap {
   void integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept;
 
   static constexpr int kPercentSteps = 1024;
+  std::int8_t percent(float logit) const noexcept {
+    const int step = std::clamp(static_cast<int>((logit - params_.logit_min) * percent_scale_ + 0.5f), 0, kPercentSteps);
+    return percent_[static_cast<std::size_t>(step)];
+  }
 
   MapParams params_;
   FusionModel model_;
   std::array<std::int8_t, kPercentSteps + 1> percent_{};
+  float percent_scale_;
   RollingGrid<ObstacleCell> grid_;
+  RollingGrid<std::int8_t> occupancy_;  // percent() of every cell, -1 unknown; moves with grid_
   float occupied_logit_;
   std::uint32_t revolution_ = 0;
   std::uint32_t hold_revolutions_ = 0;

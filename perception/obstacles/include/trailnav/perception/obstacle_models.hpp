@@ -9,7 +9,9 @@
 // sin(incline), so it is tabulated per class as two 1-D tables (the step
 // every 0.5 mm up to 2 m, sin(incline) every 1/2048): two loads and a
 // multiply per point and class instead of two exponentials and a square
-// root. The tables differ from the formula by less than 0.01 (test).
+// root. The tables differ from the formula by less than 0.01 (test). A bin
+// holds all classes side by side (kClassStride floats), so P_C's sum over
+// the classes reads one cache line from each table.
 #pragma once
 
 #include <array>
@@ -28,6 +30,8 @@ class ObstacleModels {
   static constexpr int kSinBins = 2049;
   static constexpr float kSinScale = 2048.0f;
   static constexpr int kLogitBins = 4097;
+  static constexpr std::size_t kClassStride = 8;
+  static_assert(kTerrainClasses <= static_cast<int>(kClassStride));
 
   // Eq. 7.11.
   bool dirac(int cls, float step_height, float sin_incline) const noexcept {
@@ -49,10 +53,10 @@ class ObstacleModels {
     return s >= static_cast<float>(kSinBins - 1) ? kSinBins - 1 : static_cast<int>(s);
   }
   float step_part(int cls, int index) const noexcept {
-    return step_[static_cast<std::size_t>(cls) * kStepBins + static_cast<std::size_t>(index)];
+    return step_[static_cast<std::size_t>(index) * kClassStride + static_cast<std::size_t>(cls)];
   }
   float incline_part(int cls, int index) const noexcept {
-    return incline_[static_cast<std::size_t>(cls) * kSinBins + static_cast<std::size_t>(index)];
+    return incline_[static_cast<std::size_t>(index) * kClassStride + static_cast<std::size_t>(cls)];
   }
 
   // logit(clamp(p, measurement_min, measurement_max)) - logit(prior): the
