@@ -225,7 +225,11 @@ DaemonSummary Daemon::summary() const {
   DaemonSummary s;
   if (obstacles_) s.revolutions = obstacles_->status().revolutions;
   s.maps_published = publisher_ ? publisher_->stats().maps : 0;
-  for (std::size_t i = 0; i < scheduler_->task_count(); ++i) s.overruns += scheduler_->stats(i).overruns;
+  for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
+    const TaskStats st = scheduler_->stats(i);
+    s.overruns += st.overruns;
+    s.stalls += st.stalls;
+  }
   s.rt_allocations = alloc_guard::total_allocations();
   s.realtime = scheduler_->realtime_active();
   s.memory_locked = scheduler_->memory_locked();
@@ -234,10 +238,12 @@ DaemonSummary Daemon::summary() const {
 
 std::string Daemon::status_line() const {
   const DaemonSummary s = summary();
-  char text[200];
-  std::snprintf(text, sizeof text, "%llu revolutions, %llu maps published, %llu overruns, %llu real-time allocations",
+  char text[240];
+  std::snprintf(text, sizeof text,
+                "%llu revolutions, %llu maps published, %llu overruns, %llu stalls, %llu real-time allocations",
                 static_cast<unsigned long long>(s.revolutions), static_cast<unsigned long long>(s.maps_published),
-                static_cast<unsigned long long>(s.overruns), static_cast<unsigned long long>(s.rt_allocations));
+                static_cast<unsigned long long>(s.overruns), static_cast<unsigned long long>(s.stalls),
+                static_cast<unsigned long long>(s.rt_allocations));
   return text;
 }
 
@@ -245,12 +251,13 @@ std::string Daemon::task_report() const {
   std::string out;
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
     const TaskStats st = scheduler_->stats(i);
-    char line[240];
+    char line[260];
     std::snprintf(line, sizeof line,
-                  "  %-10s runs %8llu  overruns %llu  slips %llu  exec p50 %.3f p99 %.3f max %.3f ms  "
+                  "  %-10s runs %8llu  overruns %llu  stalls %llu  slips %llu  exec p50 %.3f p99 %.3f max %.3f ms  "
                   "latency p99 %.3f ms\n",
                   scheduler_->spec(i).name.c_str(), static_cast<unsigned long long>(st.runs),
-                  static_cast<unsigned long long>(st.overruns), static_cast<unsigned long long>(st.slips),
+                  static_cast<unsigned long long>(st.overruns), static_cast<unsigned long long>(st.stalls),
+                  static_cast<unsigned long long>(st.slips),
                   nanos_to_seconds(st.execution.p50) * 1e3, nanos_to_seconds(st.execution.p99) * 1e3,
                   nanos_to_seconds(st.execution.max) * 1e3, nanos_to_seconds(st.latency.p99) * 1e3);
     out += line;
@@ -379,6 +386,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.begin(st.overruns > 0 ? L::warn : L::ok, name, st.overruns > 0 ? "overruns" : "on time", "");
     m.value("runs", st.runs);
     m.value("overruns", st.overruns);
+    m.value("stalls", st.stalls);
     m.value("slips", st.slips);
     m.value("exec_p99_ms", nanos_to_seconds(st.execution.p99) * 1e3, 3);
     m.value("exec_max_ms", nanos_to_seconds(st.execution.max) * 1e3, 3);

@@ -35,7 +35,8 @@ namespace trailnav::daemon {
 struct DaemonSummary {
   std::uint64_t revolutions = 0;
   std::uint64_t maps_published = 0;
-  std::uint64_t overruns = 0;
+  std::uint64_t overruns = 0;  // runs over their CPU budget, all tasks
+  std::uint64_t stalls = 0;    // runs kept off their core past the budget, all tasks
   std::uint64_t rt_allocations = 0;
   bool realtime = false;
   bool memory_locked = false;

@@ -22,6 +22,12 @@ Nanos MonotonicClock::now() const noexcept {
   return static_cast<Nanos>(ts.tv_sec) * kNanosPerSecond + ts.tv_nsec;
 }
 
+Nanos MonotonicClock::thread_cpu_time() const noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<Nanos>(ts.tv_sec) * kNanosPerSecond + ts.tv_nsec;
+}
+
 bool MonotonicClock::sleep_until(Nanos deadline) noexcept {
   // Long sleeps are cut into absolute steps so that an interrupt is seen
   // within kInterruptCheck; the final step still ends exactly at the deadline.

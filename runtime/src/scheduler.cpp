@@ -181,9 +181,11 @@ void Scheduler::run_periodic(Entry& entry) noexcept {
     if (!clock_.sleep_until(deadline)) break;
     if (!running_.load(std::memory_order_acquire)) break;
     const Nanos started = clock_.now();
+    const Nanos cpu_start = clock_.thread_cpu_time();
     entry.task.run(TaskTick{cycle, deadline, started});
+    const Nanos cpu = clock_.thread_cpu_time() - cpu_start;
     const Nanos finished = clock_.now();
-    entry.accounting.record_run(deadline, started, finished);
+    entry.accounting.record_run(deadline, started, finished, cpu);
     std::uint64_t skipped = 0;
     deadline = next_periodic_deadline(deadline, period, finished, skipped);
     if (skipped > 0) entry.accounting.record_skipped(skipped);
@@ -199,9 +201,11 @@ void Scheduler::run_event(Entry& entry) noexcept {
     if (!running_.load(std::memory_order_acquire)) break;
     const Nanos signalled = entry.event->last_signal();
     const Nanos started = clock_.now();
+    const Nanos cpu_start = clock_.thread_cpu_time();
     entry.task.run(TaskTick{cycle, signalled, started});
+    const Nanos cpu = clock_.thread_cpu_time() - cpu_start;
     const Nanos finished = clock_.now();
-    entry.accounting.record_run(signalled, started, finished);
+    entry.accounting.record_run(signalled, started, finished, cpu);
     ++cycle;
   }
 }

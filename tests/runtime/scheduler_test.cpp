@@ -41,6 +41,18 @@ TEST(TaskAccounting, LateButWithinOnePeriodIsNeither) {
   EXPECT_EQ(s.execution.max, 2 * kMs);
 }
 
+TEST(TaskAccounting, AThreadKeptOffItsCoreStallsButDoesNotOverrun) {
+  TaskAccounting acc(TaskKind::periodic, 10 * kMs, 2 * kMs);
+  acc.record_run(0, 1 * kMs, 4 * kMs, kMs / 10);  // 3 ms by the clock, 0.1 ms of CPU time
+  acc.record_run(0, 1 * kMs, 4 * kMs, 3 * kMs);   // 3 ms of CPU time: an overrun
+  acc.record_run(0, 1 * kMs, 2 * kMs, kMs);       // within budget both ways
+  const TaskStats s = acc.stats();
+  EXPECT_EQ(s.runs, 3u);
+  EXPECT_EQ(s.overruns, 1u);
+  EXPECT_EQ(s.stalls, 1u);
+  EXPECT_EQ(s.execution.max, 3 * kMs);  // the distribution stays by the clock
+}
+
 TEST(TaskAccounting, EventTasksNeverSlip) {
   TaskAccounting acc(TaskKind::event, 0, 2 * kMs);
   acc.record_run(0, 500 * kMs, 501 * kMs);
@@ -207,6 +219,52 @@ TEST(Scheduler, StopsPromptlyEvenForSlowTasks) {
   EXPECT_LT(elapsed, std::chrono::milliseconds(500));
   EXPECT_EQ(slow.runs.load(), 0);
   EXPECT_EQ(waiting.runs.load(), 0);
+}
+
+// A task that waits 5 ms inside its run uses almost no CPU time: over its
+// 1 ms budget by the clock, a stall; one that computes until it has used
+// 5 ms of CPU time overruns.
+class WaitingTask final : public Task {
+ public:
+  explicit WaitingTask(bool spin) : spin_(spin) {}
+  void run(const TaskTick&) override {
+    if (spin_) {
+      MonotonicClock clock;
+      const Nanos end = clock.thread_cpu_time() + 5 * kMs;
+      while (clock.thread_cpu_time() < end) {
+      }
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    runs.fetch_add(1);
+  }
+  std::atomic<int> runs{0};
+
+ private:
+  bool spin_;
+};
+
+TEST(Scheduler, BudgetsAreCpuTimeAndTimeOffTheCoreIsAStall) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  WaitingTask sleeper(false);
+  WaitingTask spinner(true);
+  ASSERT_TRUE(scheduler.add({"sleeper", TaskKind::periodic, 50.0, kMs, 0, -1}, sleeper));
+  ASSERT_TRUE(scheduler.add({"spinner", TaskKind::periodic, 50.0, kMs, 0, -1}, spinner));
+  ASSERT_TRUE(scheduler.start());
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while ((sleeper.runs.load() < 3 || spinner.runs.load() < 3) && std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  scheduler.stop();
+  const TaskStats slept = scheduler.stats(0);
+  const TaskStats spun = scheduler.stats(1);
+  ASSERT_GE(slept.runs, 3u);
+  ASSERT_GE(spun.runs, 3u);
+  EXPECT_EQ(slept.overruns, 0u);
+  EXPECT_EQ(slept.stalls, slept.runs);
+  EXPECT_EQ(spun.overruns, spun.runs);
+  EXPECT_EQ(spun.stalls, 0u);
 }
 
 TEST(Scheduler, CanBeRestarted) {

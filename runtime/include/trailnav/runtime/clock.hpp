@@ -30,6 +30,10 @@ class Clock {
  public:
   virtual ~Clock() = default;
   virtual Nanos now() const noexcept = 0;
+  // CPU time the calling thread has used, on this clock's scale: what a
+  // task's budget is measured in. Only differences between two readings on
+  // one thread mean anything.
+  virtual Nanos thread_cpu_time() const noexcept = 0;
   // Sleeps until the clock reads at least `deadline`. Returns early (false)
   // once interrupt_sleepers() was called; true when the deadline was reached.
   virtual bool sleep_until(Nanos deadline) noexcept = 0;
@@ -44,6 +48,8 @@ class Clock {
 class MonotonicClock final : public Clock {
  public:
   Nanos now() const noexcept override;
+  // CLOCK_THREAD_CPUTIME_ID.
+  Nanos thread_cpu_time() const noexcept override;
   bool sleep_until(Nanos deadline) noexcept override;
   void interrupt_sleepers() noexcept override;
   void resume_sleepers() noexcept override;
@@ -58,6 +64,8 @@ class SimulatedClock final : public Clock {
  public:
   explicit SimulatedClock(Nanos start = 0) noexcept : now_(start) {}
   Nanos now() const noexcept override { return now_.load(std::memory_order_acquire); }
+  // Simulated work is time advanced while a task runs: all of it counts as CPU time.
+  Nanos thread_cpu_time() const noexcept override { return now(); }
   bool sleep_until(Nanos deadline) noexcept override;
   void interrupt_sleepers() noexcept override;
   void resume_sleepers() noexcept override;

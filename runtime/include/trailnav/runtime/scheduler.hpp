@@ -1,9 +1,12 @@
 // The fixed-rate scheduler. One task table states, for every task, its name,
 // kind (periodic at a rate, or event-driven), time budget, priority and CPU;
 // the scheduler runs each task on its own thread and measures it against that
-// table: runs, overruns (execution over budget), slips (start more than one
-// period after the deadline), skipped periods, and execution-time and
-// wake-up-latency distributions, all readable at any time without locks.
+// table: runs, overruns (more CPU time than the budget), stalls (over budget
+// by the clock while the task's own CPU time stayed within it: the thread
+// lost its core mid-run to the kernel, the hypervisor or a higher priority),
+// slips (start more than one period after the deadline), skipped periods, and
+// execution-time (by the clock) and wake-up-latency distributions, all
+// readable at any time without locks.
 #pragma once
 
 #include <atomic>
@@ -25,7 +28,7 @@ struct TaskSpec {
   std::string name;
   TaskKind kind = TaskKind::periodic;
   double rate_hz = 0.0;  // periodic tasks: runs per second
-  Nanos budget = 0;      // execution time allowed per run
+  Nanos budget = 0;      // CPU time allowed per run
   int priority = 0;      // 0: normal scheduling; 1..99: SCHED_FIFO priority
   int cpu = -1;          // CPU to pin the task's thread to; -1: any
 
@@ -74,7 +77,8 @@ class TaskEvent {
 
 struct TaskStats {
   std::uint64_t runs = 0;
-  std::uint64_t overruns = 0;
+  std::uint64_t overruns = 0;  // runs that used more CPU time than the budget
+  std::uint64_t stalls = 0;    // runs over budget by the clock only (the thread was kept off its core)
   std::uint64_t slips = 0;
   std::uint64_t skipped_periods = 0;
   DurationSummary execution;
@@ -88,11 +92,17 @@ class TaskAccounting {
   TaskAccounting(TaskKind kind, Nanos period, Nanos budget) noexcept
       : kind_(kind), period_(period), budget_(budget) {}
 
-  void record_run(Nanos scheduled, Nanos started, Nanos finished) noexcept {
+  // `cpu`: the CPU time the run used (by default all of its clock time).
+  void record_run(Nanos scheduled, Nanos started, Nanos finished, Nanos cpu = -1) noexcept {
     const Nanos latency = started - scheduled;
     const Nanos execution = finished - started;
+    if (cpu < 0) cpu = execution;
     runs_.fetch_add(1, std::memory_order_relaxed);
-    if (execution > budget_) overruns_.fetch_add(1, std::memory_order_relaxed);
+    if (cpu > budget_) {
+      overruns_.fetch_add(1, std::memory_order_relaxed);
+    } else if (execution > budget_) {
+      stalls_.fetch_add(1, std::memory_order_relaxed);
+    }
     if (kind_ == TaskKind::periodic && latency > period_) slips_.fetch_add(1, std::memory_order_relaxed);
     execution_.record(execution);
     latency_.record(latency);
@@ -103,6 +113,7 @@ class TaskAccounting {
     TaskStats s;
     s.runs = runs_.load(std::memory_order_relaxed);
     s.overruns = overruns_.load(std::memory_order_relaxed);
+    s.stalls = stalls_.load(std::memory_order_relaxed);
     s.slips = slips_.load(std::memory_order_relaxed);
     s.skipped_periods = skipped_.load(std::memory_order_relaxed);
     s.execution = execution_.summary();
@@ -116,6 +127,7 @@ class TaskAccounting {
   Nanos budget_;
   std::atomic<std::uint64_t> runs_{0};
   std::atomic<std::uint64_t> overruns_{0};
+  std::atomic<std::uint64_t> stalls_{0};
   std::atomic<std::uint64_t> slips_{0};
   std::atomic<std::uint64_t> skipped_{0};
   DurationHistogram execution_;
