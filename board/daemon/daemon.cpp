@@ -221,6 +221,34 @@ bool Daemon::alive() noexcept {
   return ok;
 }
 
+Daemon::NavigationCheck Daemon::check_navigation(const RobotConfig& config) {
+  NavigationCheck out;
+  if (!config.navigation) return out;
+  const nav::NavigationSection& n = *config.navigation;
+  auto loaded = osm::load_road_graph(n.osm, n.profile, {}, config.pose ? config.pose->utm.zone : 0);
+  if (!loaded.graph) {
+    out.error = "navigation: " + loaded.error;
+    return out;
+  }
+  const perception::TerrainMapShape shape = config.terrain ? config.terrain->map : perception::TerrainMapShape{};
+  auto made = nav::Navigator::create(*loaded.graph, n.navigator, shape);
+  if (!made.navigator) {
+    out.error = "navigation: " + made.error;
+    return out;
+  }
+  const osm::RoadGraph& g = *loaded.graph;
+  double gx = 0.0, gy = 0.0;
+  g.to_utm(n.navigator.goal_lat, n.navigator.goal_lon, gx, gy);
+  const auto goal = g.project(gx, gy);
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "navigation: %s: %zu vertices, %zu segments, UTM zone %d%c; goal %.6f, %.6f lies %.1f m from the nearest routable way",
+                n.osm.c_str(), g.vertex_count(), g.segments().size(), g.zone(), g.north() ? 'N' : 'S', n.navigator.goal_lat,
+                n.navigator.goal_lon, goal ? goal->distance : 0.0);
+  out.summary = text;
+  return out;
+}
+
 DaemonSummary Daemon::summary() const {
   DaemonSummary s;
   if (obstacles_) s.revolutions = obstacles_->status().revolutions;

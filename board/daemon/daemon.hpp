@@ -48,6 +48,14 @@ class Daemon {
   // Opens every port and socket and allocates everything; an error says
   // which part failed and why.
   static Created create(const RobotConfig& config);
+  // For `trailnavd --check`: what start-up would do with the navigation
+  // section short of starting (the map loads, the goal lies near a routable
+  // way). Empty `error` when fine; `summary` says what was found.
+  struct NavigationCheck {
+    std::string error;
+    std::string summary;
+  };
+  static NavigationCheck check_navigation(const RobotConfig& config);
   ~Daemon();
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;

@@ -46,6 +46,13 @@ int main(int argc, char** argv) {
   }
   const daemon::RobotConfig& config = *loaded.config;
   if (check) {
+    // The road network is loaded and the goal placed on it, as at start-up.
+    const auto nav = daemon::Daemon::check_navigation(config);
+    if (!nav.error.empty()) {
+      std::fprintf(stderr, "trailnavd: configuration error: %s\n", nav.error.c_str());
+      return 2;
+    }
+    if (!nav.summary.empty()) std::printf("trailnavd: %s\n", nav.summary.c_str());
     std::printf("trailnavd: %s is valid (%zu tasks)\n", config_path.c_str(), config.tasks.size());
     return 0;
   }

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <string>
 
+#include "daemon.hpp"
 #include "robot_config.hpp"
 
 using namespace trailnav;
@@ -31,6 +32,14 @@ std::string load_error(const std::string& text) {
   const auto r = daemon::load_robot_config(p.string());
   fs::remove(p);
   return r.config ? std::string() : r.error;
+}
+
+daemon::RobotConfigResult load(const std::string& text) {
+  const fs::path p = fs::path("board/robots") / ("test-" + std::to_string(::getpid()) + ".yaml");
+  { std::ofstream(p) << text; }
+  auto r = daemon::load_robot_config(p.string());
+  fs::remove(p);
+  return r;
 }
 
 }  // namespace
@@ -94,6 +103,35 @@ TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {
   // A missing map file.
   e = load_error(std::string(kMinimal) + task + "navigation: {osm: nowhere.osm.pbf, goal: [47.166, 9.51]}\n");
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+}
+
+// trailnavd --check goes as far as start-up with the navigation section: the
+// real Liechtenstein extract loads and the goal is placed on it; a goal far
+// from every routable way is refused with its distance.
+TEST(RobotConfig, CheckLoadsTheMapAndPlacesTheGoal) {
+  const std::string osm = fs::absolute("../shared/data/osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf").string();
+  const std::string rest =
+      "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20}\n"
+      "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n"
+      "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
+      "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n"
+      "gps: {link: 'udp:127.0.0.1:10110'}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {antenna: [0, 0, 1]}\n";
+  auto r = load(std::string(kMinimal) + rest + "navigation: {osm: " + osm + ", goal: [47.166, 9.51]}\n");
+  ASSERT_TRUE(r.config) << r.error;
+  auto check = daemon::Daemon::check_navigation(*r.config);
+  EXPECT_EQ(check.error, "");
+  EXPECT_NE(check.summary.find("UTM zone 32N"), std::string::npos) << check.summary;
+  EXPECT_NE(check.summary.find("vertices"), std::string::npos) << check.summary;
+
+  r = load(std::string(kMinimal) + rest + "navigation: {osm: " + osm + ", goal: [47.5, 9.9]}\n");  // 40 km away
+  ASSERT_TRUE(r.config) << r.error;
+  check = daemon::Daemon::check_navigation(*r.config);
+  EXPECT_NE(check.error.find("from the nearest routable way"), std::string::npos) << check.error;
+
+  // Without a navigation section there is nothing to check.
+  r = load(kMinimal);
+  ASSERT_TRUE(r.config) << r.error;
+  EXPECT_EQ(daemon::Daemon::check_navigation(*r.config).error, "");
 }
 
 TEST(RobotConfig, MistakesNameFileLineAndKey) {

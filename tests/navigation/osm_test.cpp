@@ -160,6 +160,34 @@ TEST(RoadGraph, ReadsEveryShippedFormat) {
   EXPECT_EQ(load_road_graph(test::shared_data("osm/graphhopper_monaco.osm.gz")).graph->zone(), 32);
 }
 
+// The loader's in-memory entry (what the fuzz target drives) reads the same
+// graph as the file loader from the bytes of the real PBF extract and of a
+// small XML map, and rejects what it cannot read with the given name.
+TEST(RoadGraph, BytesInMemoryGiveTheSameGraphAsTheFile) {
+  std::ifstream in(test::shared_data("osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf"), std::ios::binary);
+  const std::vector<char> pbf((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(pbf.size(), 100'000u);
+  const RoadGraphResult r = parse_road_graph(pbf, "liechtenstein.pbf");
+  ASSERT_TRUE(r.graph) << r.error;
+  const RoadGraph& file = liechtenstein(".pbf");
+  ASSERT_EQ(r.graph->vertex_count(), file.vertex_count());
+  ASSERT_EQ(r.graph->edge_count(), file.edge_count());
+  for (std::size_t i = 0; i < file.vertex_count(); i += 97) {
+    EXPECT_EQ(r.graph->vertices()[i].osm_id, file.vertices()[i].osm_id);
+    EXPECT_EQ(r.graph->vertices()[i].x, file.vertices()[i].x);
+  }
+
+  const std::string xml = mini_osm({{1, 47.0, 9.0, ""}, {2, 47.001, 9.0, ""}}, {{10, {1, 2}, tag("highway", "track")}});
+  const RoadGraphResult small = parse_road_graph(xml, "mini.osm");
+  ASSERT_TRUE(small.graph) << small.error;
+  EXPECT_EQ(small.graph->vertex_count(), 2u);
+
+  const RoadGraphResult cut = parse_road_graph(std::span<const char>(pbf.data(), 5000), "cut.pbf");
+  EXPECT_FALSE(cut.graph);
+  EXPECT_EQ(cut.error.rfind("cut.pbf: not readable as OpenStreetMap data", 0), 0u) << cut.error;
+  EXPECT_NE(parse_road_graph({}, "none").error.find("none: no data"), std::string::npos);
+}
+
 TEST(RoadGraph, BadInputGetsAClearError) {
   auto r = load_road_graph("/nonexistent/map.osm.pbf");
   EXPECT_FALSE(r.graph);
@@ -186,6 +214,12 @@ TEST(RoadGraph, BadInputGetsAClearError) {
 
   r = load_road_graph(temp_file("nothing.osm", "<?xml version='1.0'?><osm version='0.6'></osm>"));
   EXPECT_NE(r.error.find("no OpenStreetMap nodes or ways"), std::string::npos) << r.error;
+
+  // Found by the fuzz target: a way whose references all name one node is no road.
+  r = load_road_graph(temp_file("one-node.osm", mini_osm({{1, 47.0, 9.0, ""}}, {{10, {1, 1, 1}, tag("highway", "track")}})));
+  EXPECT_FALSE(r.graph);
+  EXPECT_NE(r.error.find("no routable way"), std::string::npos) << r.error;
+  EXPECT_EQ(r.stats.repeated_nodes, 2u);
 
   RoutingProfile none;
   none.highways.clear();

@@ -83,6 +83,11 @@ class RoadHandler : public osmium::handler::Handler {
         flush();
         continue;
       }
+      // A node repeated right after itself (an OSM data error) is one vertex.
+      if (!piece.nodes.empty() && piece.nodes.back() == ref.ref()) {
+        ++stats_.repeated_nodes;
+        continue;
+      }
       geo.try_emplace(ref.ref(), NodeGeo{ref.location().lat(), ref.location().lon()});
       piece.nodes.push_back(ref.ref());
     }
@@ -101,6 +106,14 @@ class RoadHandler : public osmium::handler::Handler {
 
 }  // namespace
 
+namespace {
+
+// Reads `file` (named `name` in messages) into `result`.
+void read_road_graph(osmium::io::File file, const std::string& name, const RoutingProfile& profile,
+                     const std::function<void(double)>& progress, int zone, RoadGraphResult& result);
+
+}  // namespace
+
 RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& profile,
                                 const std::function<void(double)>& progress, int zone) {
   RoadGraphResult result;
@@ -113,17 +126,47 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
     result.error = path + ": the file is empty";
     return result;
   }
-  if (profile.highways.empty()) {
-    result.error = path + ": the routing profile lists no highway types";
+  try {
+    read_road_graph(osmium::io::File(path), path, profile, progress, zone, result);
+  } catch (const std::exception& e) {
+    result.error = path + ": not readable as OpenStreetMap data: " + e.what();
+  }
+  return result;
+}
+
+RoadGraphResult parse_road_graph(std::span<const char> data, const std::string& name, const RoutingProfile& profile,
+                                 int zone) {
+  RoadGraphResult result;
+  if (data.empty()) {
+    result.error = name + ": no data";
     return result;
   }
-  RoadHandler handler(profile, result.stats);
+  // XML starts with '<' (after any white space); anything else is read as PBF.
+  const auto first = std::find_if(data.begin(), data.end(), [](char c) { return c != ' ' && c != '\t' && c != '\r' && c != '\n'; });
+  const char* format = first != data.end() && *first == '<' ? "osm" : "pbf";
   try {
+    read_road_graph(osmium::io::File(data.data(), data.size(), format), name, profile, {}, zone, result);
+  } catch (const std::exception& e) {
+    result.error = name + ": not readable as OpenStreetMap data: " + e.what();
+  }
+  return result;
+}
+
+namespace {
+
+void read_road_graph(osmium::io::File file, const std::string& name, const RoutingProfile& profile,
+                     const std::function<void(double)>& progress, int zone, RoadGraphResult& result) {
+  const std::string& path = name;
+  if (profile.highways.empty()) {
+    result.error = path + ": the routing profile lists no highway types";
+    return;
+  }
+  RoadHandler handler(profile, result.stats);
+  {
     using Index = osmium::index::map::FlexMem<osmium::unsigned_object_id_type, osmium::Location>;
     Index index;
     osmium::handler::NodeLocationsForWays<Index> locations(index);
     locations.ignore_errors();  // missing nodes are counted by the handler
-    osmium::io::File file(path);
     osmium::io::Reader reader(file, osmium::osm_entity_bits::node | osmium::osm_entity_bits::way);
     const double size = static_cast<double>(std::max<std::size_t>(1, reader.file_size()));
     while (osmium::memory::Buffer buffer = reader.read()) {
@@ -131,21 +174,18 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
       if (progress) progress(std::min(1.0, static_cast<double>(reader.offset()) / size));
     }
     reader.close();
-  } catch (const std::exception& e) {
-    result.error = path + ": not readable as OpenStreetMap data: " + e.what();
-    return result;
   }
   if (progress) progress(1.0);
   if (result.stats.nodes_read == 0 && result.stats.ways_read == 0) {
     result.error = path + ": contains no OpenStreetMap nodes or ways";
-    return result;
+    return;
   }
   if (handler.pieces.empty()) {
     std::string types;
     for (const auto& h : profile.highways) types += (types.empty() ? "" : ", ") + h;
     result.error = path + ": no routable way (" + std::to_string(result.stats.ways_read) + " ways read; none open with highway " +
                    types + " and two known nodes)";
-    return result;
+    return;
   }
 
   // The zone: that of the centre of the routable nodes' bounding box.
@@ -157,12 +197,12 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
   const double clat = 0.5 * (lat0 + lat1), clon = 0.5 * (lon0 + lon1);
   if (std::abs(lat0) > 84.0 || std::abs(lat1) > 84.0) {
     result.error = path + ": the routable network reaches beyond 84 degrees latitude, where UTM is not defined";
-    return result;
+    return;
   }
   if (zone == 0) zone = GeographicLib::UTMUPS::StandardZone(clat, clon);
   if (zone < 1 || zone > 60) {
     result.error = path + ": UTM zone " + std::to_string(zone) + " is not 1..60";
-    return result;
+    return;
   }
 
   // Vertices in first-seen order of the pieces (deterministic for a file).
@@ -193,7 +233,8 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
     oneway.push_back(p.oneway);
   }
   result.graph = RoadGraph::build(zone, north, std::move(vertices), std::move(ways), way_vertices, oneway);
-  return result;
 }
+
+}  // namespace
 
 }  // namespace trailnav::osm

@@ -124,6 +124,7 @@ struct RoadGraphStats {
   std::uint64_t closed_ways = 0;       // highway type matched but access closed
   std::uint64_t blocked_nodes = 0;     // barriers and closed nodes on routable ways
   std::uint64_t missing_nodes = 0;     // way references to nodes not in the file
+  std::uint64_t repeated_nodes = 0;    // way references repeating the node before them (dropped)
   std::uint64_t oneway_ways = 0;
 };
 
@@ -138,6 +139,10 @@ struct RoadGraphResult {
 // read. `zone`: 0 chooses it from the data.
 RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& profile = {},
                                 const std::function<void(double)>& progress = {}, int zone = 0);
+// The same from bytes in memory: OSM XML when they start with '<', PBF
+// otherwise; `name` prefixes the messages (the fuzz target uses it).
+RoadGraphResult parse_road_graph(std::span<const char> data, const std::string& name, const RoutingProfile& profile = {},
+                                 int zone = 0);
 
 // WGS84 to UTM in the given zone and hemisphere, for points inside or
 // beyond the zone (transverse Mercator about its central meridian).
