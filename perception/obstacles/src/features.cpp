@@ -3,6 +3,10 @@
 #include <cmath>
 #include <cstring>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 
 #include "trailnav/perception/cloud.hpp"
 
@@ -140,6 +144,15 @@ inline I4 valid4(const PointState* p) noexcept {
   return __builtin_convertvector(b, I4) != 0;
 }
 
+// Square roots, correctly rounded as std::sqrt's.
+inline F4 sqrt4(F4 v) noexcept {
+#if defined(__SSE2__)
+  return reinterpret_cast<F4>(_mm_sqrt_ps(reinterpret_cast<__m128>(v)));
+#else
+  return F4{std::sqrt(v[0]), std::sqrt(v[1]), std::sqrt(v[2]), std::sqrt(v[3])};
+#endif
+}
+
 struct Best4 {
   F4 dz = {-1.0f, -1.0f, -1.0f, -1.0f};
   F4 d2 = {1.0f, 1.0f, 1.0f, 1.0f};
@@ -205,11 +218,11 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
   const int simd_begin = simd ? k_max : columns;
   const int simd_end = simd ? columns - k_max : columns;
   std::uint64_t measured = 0, flat = 0, isolated = 0;
-  auto finish = [&](std::size_t p, const Best& best) {
-    // stepHeight and the squared distance for now; the sine below, a row at a time.
+  // `sine`: best.dz / sqrt(best.d2) when found (Eq. 7.6).
+  auto finish = [&](std::size_t p, const Best& best, float sine) {
     if (best.found) {
       step[p] = best.dz;
-      sin_incline[p] = best.d2;
+      sin_incline[p] = sine;
       state[p] = PointState::measured;
       ++measured;
     } else if (best.any_valid) {
@@ -235,7 +248,7 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
     for (int l = 1; l <= l_max && i + l < rings; ++l) {
       if (consider(v, p, p + static_cast<std::size_t>(l) * stride, x2, best)) break;
     }
-    finish(p, best);
+    finish(p, best, best.found ? best.dz / std::sqrt(best.d2) : 0.0f);
   };
   for (int i = 0; i < rings; ++i) {
     const std::size_t row = cloud.index(i, 0);
@@ -258,6 +271,8 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
         search4(v, pt, p, 1, k_max, x2v, b);
         search4(v, pt, p, -s, down, x2v, b);
         search4(v, pt, p, s, up, x2v, b);
+        // The four sines at once (lanes without a neighbour hold dz -1, d2 1).
+        const F4 sine = b.dz / sqrt4(b.d2);
         for (int lane = 0; lane < 4; ++lane) {
           const std::size_t q = p + static_cast<std::size_t>(lane);
           if (state[q] == PointState::none) continue;
@@ -266,18 +281,12 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
           one.any_valid = b.any[lane] != 0;
           one.dz = b.dz[lane];
           one.d2 = b.d2[lane];
-          finish(q, one);
+          finish(q, one, sine[lane]);
         }
       }
     }
 #endif
     for (; j < columns; ++j) one_point(i, row, j);
-    // sin(incline) = stepHeight / distance (Eq. 7.6), independent per point,
-    // so the divisions and roots overlap.
-    for (int c = 0; c < columns; ++c) {
-      const std::size_t p = row + static_cast<std::size_t>(c);
-      if (state[p] == PointState::measured) sin_incline[p] = step[p] / std::sqrt(sin_incline[p]);
-    }
   }
   counters.measured += measured;
   counters.flat += flat;
