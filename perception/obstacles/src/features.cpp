@@ -3,7 +3,9 @@
 #include <cmath>
 #include <cstring>
 
-#if defined(__SSE2__)
+#if defined(__x86_64__)
+#include <immintrin.h>
+#elif defined(__SSE2__)
 #include <emmintrin.h>
 #endif
 
@@ -121,84 +123,208 @@ void along_ring_portable(const View& v, std::size_t row, int j, int columns, int
   }
 }
 
-// Four points at a time with the compilers' generic vectors (GCC and Clang
-// turn them into SSE2 on x86-64 and NEON on ARM). For each direction the
-// neighbours are visited from the farthest to the nearest, each farther one
-// replacing the candidate, so what is left is the first farther neighbour,
-// with no branch per point or neighbour.
+// W points at a time with the compilers' generic vectors: four (SSE2 on
+// x86-64, NEON on ARM) and, on x86-64 CPUs that have it, eight (AVX2, chosen
+// at run time). For each direction the neighbours are visited from the
+// farthest to the nearest, each farther one replacing the candidate, so what
+// is left is the first farther neighbour, with no branch per point or
+// neighbour. The same operations in the same order as consider(), no fused
+// multiply-add: the same bits as one point at a time.
 #if defined(__GNUC__)
 constexpr bool kSimd = true;
-using F4 = float __attribute__((vector_size(16)));
-using I4 = std::int32_t __attribute__((vector_size(16)));
-using B4 = std::uint8_t __attribute__((vector_size(4)));
 
-inline F4 load4(const float* p) noexcept {
-  F4 v;
+// (GCC ignores a vector_size that depends on a template parameter: one
+// specialisation per width.)
+template <int W>
+struct Lanes;
+template <>
+struct Lanes<4> {
+  using F = float __attribute__((vector_size(16)));
+  using I = std::int32_t __attribute__((vector_size(16)));
+  using B = std::uint8_t __attribute__((vector_size(4)));
+};
+template <>
+struct Lanes<8> {
+  using F = float __attribute__((vector_size(32)));
+  using I = std::int32_t __attribute__((vector_size(32)));
+  using B = std::uint8_t __attribute__((vector_size(8)));
+};
+
+// The best farther neighbour of W points so far (as Best).
+template <int W>
+struct BestW {
+  using F = typename Lanes<W>::F;
+  using I = typename Lanes<W>::I;
+  F dz = F{} - 1.0f;
+  F d2 = F{} + 1.0f;
+  I found = I{};
+  I any = I{};
+};
+
+// (Through a reference: an eight-wide vector returned by value would have a
+// different ABI with and without AVX.)
+template <int W>
+[[gnu::always_inline]] inline void load_lanes(const float* p, typename Lanes<W>::F& v) noexcept {
   std::memcpy(&v, p, sizeof v);
-  return v;
-}
-// -1 where the point is valid, 0 where there is none.
-inline I4 valid4(const PointState* p) noexcept {
-  B4 b;
-  std::memcpy(&b, p, sizeof b);
-  return __builtin_convertvector(b, I4) != 0;
 }
 
-// Square roots, correctly rounded as std::sqrt's.
-inline F4 sqrt4(F4 v) noexcept {
-#if defined(__SSE2__)
-  return reinterpret_cast<F4>(_mm_sqrt_ps(reinterpret_cast<__m128>(v)));
-#else
-  return F4{std::sqrt(v[0]), std::sqrt(v[1]), std::sqrt(v[2]), std::sqrt(v[3])};
-#endif
-}
-
-struct Best4 {
-  F4 dz = {-1.0f, -1.0f, -1.0f, -1.0f};
-  F4 d2 = {1.0f, 1.0f, 1.0f, 1.0f};
-  I4 found = {0, 0, 0, 0};
-  I4 any = {0, 0, 0, 0};
-};
-
-struct Point4 {
-  F4 x, y, z;
-};
-
-// One direction: the neighbours at p + step * k for k = reach .. 1.
-inline void search4(const View& v, const Point4& p, std::size_t at, std::ptrdiff_t step, int reach, F4 x2,
-                    Best4& best) noexcept {
-  F4 cdz = {0, 0, 0, 0};
-  F4 cd2 = {0, 0, 0, 0};
-  I4 cf = {0, 0, 0, 0};
-  const F4 sign = {-0.0f, -0.0f, -0.0f, -0.0f};
+// One direction for W consecutive points at `at`: the neighbours at
+// at + step * k for k = reach .. 1.
+template <int W>
+[[gnu::always_inline]] inline void search_lanes(const View& v, std::size_t at, std::ptrdiff_t step, int reach, float x2,
+                                                BestW<W>& best) noexcept {
+  using F = typename Lanes<W>::F;
+  using I = typename Lanes<W>::I;
+  using B = typename Lanes<W>::B;
+  F px, py, pz;
+  load_lanes<W>(v.x + at, px);
+  load_lanes<W>(v.y + at, py);
+  load_lanes<W>(v.z + at, pz);
+  F cdz = F{};
+  F cd2 = F{};
+  I cf = I{};
+  const I magnitude = I{} + 0x7fffffff;
   for (int k = reach; k >= 1; --k) {
     const auto q = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(at) + step * k);
-    const I4 valid = valid4(v.st + q);
-    const F4 dx = load4(v.x + q) - p.x;
-    const F4 dy = load4(v.y + q) - p.y;
-    const F4 dz = load4(v.z + q) - p.z;
-    // The same operations in the same order as consider(): identical results.
-    const F4 d2 = dx * dx + dy * dy + dz * dz;
-    const I4 far = valid & (d2 > x2);
-    const F4 adz = reinterpret_cast<F4>(reinterpret_cast<I4>(dz) & ~reinterpret_cast<I4>(sign));
+    B states;
+    std::memcpy(&states, v.st + q, sizeof states);
+    const I valid = __builtin_convertvector(states, I) != 0;
+    F qx, qy, qz;
+    load_lanes<W>(v.x + q, qx);
+    load_lanes<W>(v.y + q, qy);
+    load_lanes<W>(v.z + q, qz);
+    const F dx = qx - px;
+    const F dy = qy - py;
+    const F dz = qz - pz;
+    const F d2 = dx * dx + dy * dy + dz * dz;
+    const I far = valid & (d2 > x2);
+    const F adz = reinterpret_cast<F>(reinterpret_cast<I>(dz) & magnitude);
     cdz = far ? adz : cdz;
     cd2 = far ? d2 : cd2;
     cf |= far;
     best.any |= valid;
   }
   // Offer this direction's first farther neighbour, as Best::offer().
-  const I4 better = cf & (cdz > best.dz);
+  const I better = cf & (cdz > best.dz);
   best.dz = better ? cdz : best.dz;
   best.d2 = better ? cd2 : best.d2;
   best.found |= cf;
+}
+
+// The four directions of W points at p: along the ring (k_max each way) and
+// across it (`down` rings below, `up` above, `stride` apart).
+template <int W>
+[[gnu::always_inline]] inline void search_block(const View& v, std::size_t p, int k_max, std::ptrdiff_t stride, int down,
+                                                int up, float x2, BestW<W>& best) noexcept {
+  search_lanes<W>(v, p, -1, k_max, x2, best);
+  search_lanes<W>(v, p, 1, k_max, x2, best);
+  search_lanes<W>(v, p, -stride, down, x2, best);
+  search_lanes<W>(v, p, stride, up, x2, best);
 }
 #else
 constexpr bool kSimd = false;
 #endif
 
+// Where the features of a point go.
+struct FeatureSink {
+  PointState* state;
+  float* __restrict step;
+  float* __restrict sin_incline;
+  std::uint64_t measured = 0, flat = 0, isolated = 0;
+
+  // `sine`: dz / sqrt(d2) when found (Eq. 7.6).
+  void finish(std::size_t p, bool found, bool any_valid, float dz, float sine) noexcept {
+    if (found) {
+      step[p] = dz;
+      sin_incline[p] = sine;
+      state[p] = PointState::measured;
+      ++measured;
+    } else if (any_valid) {
+      step[p] = 0.0f;
+      sin_incline[p] = 0.0f;
+      state[p] = PointState::flat;
+      ++flat;
+    } else {
+      state[p] = PointState::isolated;
+      ++isolated;
+    }
+  }
+};
+
+// The search geometry of one ring.
+struct RowSearch {
+  std::size_t row;   // index of column 0
+  int k_max;
+  std::ptrdiff_t stride;
+  int down, up;      // rings searched below and above
+  float x2;
+};
+
+#if defined(__GNUC__)
+// Columns [j, end) of a ring, four at a time; returns the first column not done.
+int search_row4(const View& v, const RowSearch& r, int j, int end, FeatureSink& out) noexcept {
+  for (; j + 4 <= end; j += 4) {
+    const std::size_t p = r.row + static_cast<std::size_t>(j);
+    std::uint32_t states;
+    std::memcpy(&states, v.st + p, sizeof states);
+    if (states == 0) continue;  // four missing points
+    BestW<4> b;
+    search_block<4>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, b);
+#if defined(__SSE2__)
+    // The four sines at once (lanes without a neighbour hold dz -1, d2 1).
+    const Lanes<4>::F sine = b.dz / reinterpret_cast<Lanes<4>::F>(_mm_sqrt_ps(reinterpret_cast<__m128>(b.d2)));
+#endif
+    for (int lane = 0; lane < 4; ++lane) {
+      const std::size_t q = p + static_cast<std::size_t>(lane);
+      if (v.st[q] == PointState::none) continue;
+#if defined(__SSE2__)
+      const float s = sine[lane];
+#else
+      const float s = b.dz[lane] / std::sqrt(b.d2[lane]);
+#endif
+      out.finish(q, b.found[lane] != 0, b.any[lane] != 0, b.dz[lane], s);
+    }
+  }
+  return j;
+}
+#endif
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // the eight-wide vectors live only inside this AVX2 function
+// The same eight at a time, compiled for AVX2 (called only when the CPU has it).
+__attribute__((target("avx2"))) int search_row8(const View& v, const RowSearch& r, int j, int end,
+                                                 FeatureSink& out) noexcept {
+  for (; j + 8 <= end; j += 8) {
+    const std::size_t p = r.row + static_cast<std::size_t>(j);
+    std::uint64_t states;
+    std::memcpy(&states, v.st + p, sizeof states);
+    if (states == 0) continue;  // eight missing points
+    BestW<8> b;
+    search_block<8>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, b);
+    const Lanes<8>::F sine = b.dz / reinterpret_cast<Lanes<8>::F>(_mm256_sqrt_ps(reinterpret_cast<__m256>(b.d2)));
+    for (int lane = 0; lane < 8; ++lane) {
+      const std::size_t q = p + static_cast<std::size_t>(lane);
+      if (v.st[q] == PointState::none) continue;
+      out.finish(q, b.found[lane] != 0, b.any[lane] != 0, b.dz[lane], sine[lane]);
+    }
+  }
+  return j;
+}
+#pragma GCC diagnostic pop
+bool cpu_has_avx2() noexcept {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+#else
+int search_row8(const View&, const RowSearch&, int j, int, FeatureSink&) noexcept { return j; }
+bool cpu_has_avx2() noexcept { return false; }
+#endif
+
 }  // namespace
 
 bool simd_features_available() noexcept { return kSimd; }
+bool wide_features_available() noexcept { return kSimd && cpu_has_avx2(); }
 
 void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters,
                       FeatureKernel kernel) noexcept {
@@ -210,34 +336,15 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
   const auto stride = static_cast<std::size_t>(cloud.stride());
   const bool wrap = cloud.full_turn;
   const View v{cloud.x.data(), cloud.y.data(), cloud.z.data(), cloud.state.data()};
-  PointState* state = cloud.state.data();
-  float* __restrict step = cloud.step_height.data();
-  float* __restrict sin_incline = cloud.sin_incline.data();
-  // The columns the four-wide search may use: k_max from both ends.
-  const bool simd = kSimd && kernel == FeatureKernel::fastest;
+  FeatureSink out{cloud.state.data(), cloud.step_height.data(), cloud.sin_incline.data()};
+  // The columns the W-wide search may use: k_max from both ends.
+  const bool simd = kSimd && kernel != FeatureKernel::portable;
+  const bool eight = simd && kernel != FeatureKernel::four_wide && cpu_has_avx2();
   const int simd_begin = simd ? k_max : columns;
   const int simd_end = simd ? columns - k_max : columns;
-  std::uint64_t measured = 0, flat = 0, isolated = 0;
-  // `sine`: best.dz / sqrt(best.d2) when found (Eq. 7.6).
-  auto finish = [&](std::size_t p, const Best& best, float sine) {
-    if (best.found) {
-      step[p] = best.dz;
-      sin_incline[p] = sine;
-      state[p] = PointState::measured;
-      ++measured;
-    } else if (best.any_valid) {
-      step[p] = 0.0f;
-      sin_incline[p] = 0.0f;
-      state[p] = PointState::flat;
-      ++flat;
-    } else {
-      state[p] = PointState::isolated;
-      ++isolated;
-    }
-  };
   auto one_point = [&](int i, std::size_t row, int j) {
     const std::size_t p = row + static_cast<std::size_t>(j);
-    if (state[p] == PointState::none) return;
+    if (v.st[p] == PointState::none) return;
     Best best;
     // Along the ring, each way (Eqs. 7.1, 7.2).
     along_ring_portable(v, row, j, columns, k_max, wrap, x2, best);
@@ -248,7 +355,7 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
     for (int l = 1; l <= l_max && i + l < rings; ++l) {
       if (consider(v, p, p + static_cast<std::size_t>(l) * stride, x2, best)) break;
     }
-    finish(p, best, best.found ? best.dz / std::sqrt(best.d2) : 0.0f);
+    out.finish(p, best.found, best.any_valid, best.dz, best.found ? best.dz / std::sqrt(best.d2) : 0.0f);
   };
   for (int i = 0; i < rings; ++i) {
     const std::size_t row = cloud.index(i, 0);
@@ -256,38 +363,14 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
     for (; j < std::min(simd_begin, columns); ++j) one_point(i, row, j);
 #if defined(__GNUC__)
     if (simd) {
-      const F4 x2v = {x2, x2, x2, x2};
-      const auto s = static_cast<std::ptrdiff_t>(stride);
-      const int down = std::min(l_max, i);
-      const int up = std::min(l_max, rings - 1 - i);
-      for (; j + 4 <= simd_end; j += 4) {
-        const std::size_t p = row + static_cast<std::size_t>(j);
-        std::uint32_t states;
-        std::memcpy(&states, state + p, sizeof states);
-        if (states == 0) continue;  // four missing points
-        const Point4 pt{load4(v.x + p), load4(v.y + p), load4(v.z + p)};
-        Best4 b;
-        search4(v, pt, p, -1, k_max, x2v, b);
-        search4(v, pt, p, 1, k_max, x2v, b);
-        search4(v, pt, p, -s, down, x2v, b);
-        search4(v, pt, p, s, up, x2v, b);
-        // The four sines at once (lanes without a neighbour hold dz -1, d2 1).
-        const F4 sine = b.dz / sqrt4(b.d2);
-        for (int lane = 0; lane < 4; ++lane) {
-          const std::size_t q = p + static_cast<std::size_t>(lane);
-          if (state[q] == PointState::none) continue;
-          Best one;
-          one.found = b.found[lane] != 0;
-          one.any_valid = b.any[lane] != 0;
-          one.dz = b.dz[lane];
-          one.d2 = b.d2[lane];
-          finish(q, one, sine[lane]);
-        }
-      }
+      const RowSearch r{row, k_max, static_cast<std::ptrdiff_t>(stride), std::min(l_max, i), std::min(l_max, rings - 1 - i), x2};
+      if (eight) j = search_row8(v, r, j, simd_end, out);
+      j = search_row4(v, r, j, simd_end, out);
     }
 #endif
     for (; j < columns; ++j) one_point(i, row, j);
   }
+  const std::uint64_t measured = out.measured, flat = out.flat, isolated = out.isolated;
   counters.measured += measured;
   counters.flat += flat;
   counters.isolated += isolated;

@@ -117,12 +117,13 @@ struct FeatureCounters {
 // `smoothing_max_jump` (an object's edge), so edges stay sharp.
 void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept;
 
-// How compute_features() searches along the rings: `fastest` compares four
-// neighbours at once where the CPU has SSE2 (x86-64) and falls back to
-// `portable` elsewhere; `portable` looks at one neighbour at a time. Both
-// give bit-identical results (test).
-enum class FeatureKernel : std::uint8_t { fastest, portable };
-bool simd_features_available() noexcept;
+// How compute_features() searches: `fastest` takes eight points at once on
+// x86-64 CPUs with AVX2 (checked at run time), else four (SSE2 on x86-64,
+// NEON on ARM); `four_wide` always four; `portable` one point and one
+// neighbour at a time. All give bit-identical results (test).
+enum class FeatureKernel : std::uint8_t { fastest, four_wide, portable };
+bool simd_features_available() noexcept;  // four at a time
+bool wide_features_available() noexcept;  // eight at a time (AVX2)
 
 // stepHeight (Eq. 7.5) and sin(incline) (Eq. 7.6) for every valid point from
 // the first neighbour farther than x in each of the four directions (Eqs.
