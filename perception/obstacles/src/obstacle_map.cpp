@@ -9,8 +9,9 @@ ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
     : params_(params),
       model_(model),
       percent_scale_(kPercentSteps / std::max(params.logit_max - params.logit_min, 1e-6f)),
-      grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0, 0}),
+      grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0}),
       occupancy_(params.size, params.size, params.resolution, std::int8_t{-1}),
+      hits_(model == FusionModel::pw ? params.size : 1, model == FusionModel::pw ? params.size : 1, params.resolution, 0u),
       occupied_logit_(logit(params.occupied)) {
   for (int i = 0; i <= kPercentSteps; ++i) {
     const float l = params.logit_min + (params.logit_max - params.logit_min) * static_cast<float>(i) / kPercentSteps;
@@ -28,6 +29,7 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
       static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_hold_s) / std::max(period_s, 1e-3)));
   counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
   occupancy_.move_to(cloud.robot_x, cloud.robot_y);
+  if (model_ == FusionModel::pw) hits_.move_to(cloud.robot_x, cloud.robot_y);
   switch (model_) {
     case FusionModel::pw: integrate_points<FusionModel::pw>(cloud, models, terrain); break;
     case FusionModel::ps: integrate_points<FusionModel::ps>(cloud, models, terrain); break;
@@ -105,10 +107,11 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
       const float s = cloud.sin_incline[k];
       cell.seen = now;
       if constexpr (M == FusionModel::pw) {
+        std::uint32_t& hit = hits_.at_offset(grid_.offset_of(cell));
         if (models.dirac(static_cast<int>(tc->best), h, s)) {
-          cell.hit = now;
+          hit = now;
           cell.logit = hi;
-        } else if (cell.hit == 0 || now - cell.hit > hold) {
+        } else if (hit == 0 || now - hit > hold) {
           cell.logit = lo;
         }
       } else if constexpr (M == FusionModel::ps) {

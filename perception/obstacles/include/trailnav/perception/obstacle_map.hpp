@@ -26,7 +26,6 @@ namespace trailnav::perception {
 struct ObstacleCell {
   float logit = 0.0f;       // log-odds of an obstacle
   std::uint32_t seen = 0;   // revolution (1-based) that last saw this cell; 0: never
-  std::uint32_t hit = 0;    // PW: revolution of the last obstacle point; 0: none
 };
 
 enum class CellState : std::uint8_t { unknown, free, occupied };
@@ -91,6 +90,10 @@ class ObstacleMap {
   float percent_scale_;
   RollingGrid<ObstacleCell> grid_;
   RollingGrid<std::int8_t> occupancy_;  // percent() of every cell, -1 unknown; moves with grid_
+  // PW: the revolution of each cell's last obstacle point (0: none); moves
+  // with grid_. Apart from the cells so that PS and PC maps stay 8 bytes a
+  // cell (one cell per point is a cache miss: the smaller, the fewer).
+  RollingGrid<std::uint32_t> hits_;
   float occupied_logit_;
   std::uint32_t revolution_ = 0;
   std::uint32_t hold_revolutions_ = 0;
