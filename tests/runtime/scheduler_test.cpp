@@ -51,6 +51,7 @@ TEST(TaskAccounting, AThreadKeptOffItsCoreStallsButDoesNotOverrun) {
   EXPECT_EQ(s.overruns, 1u);
   EXPECT_EQ(s.stalls, 1u);
   EXPECT_EQ(s.execution.max, 3 * kMs);  // the distribution stays by the clock
+  EXPECT_EQ(s.cpu_max, 3 * kMs);
 }
 
 TEST(TaskAccounting, EventTasksNeverSlip) {

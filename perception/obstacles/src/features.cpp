@@ -292,7 +292,9 @@ int search_row4(const View& v, const RowSearch& r, int j, int end, FeatureSink& 
 #if defined(__GNUC__) && defined(__x86_64__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // the eight-wide vectors live only inside this AVX2 function
-// The same eight at a time, compiled for AVX2 (called only when the CPU has it).
+// The same eight at a time, compiled for AVX2 (called only when the CPU has
+// it). Not one template with search_row4: the AVX square root can only be
+// inlined into a function compiled for AVX, and a template instance is not.
 __attribute__((target("avx2"))) int search_row8(const View& v, const RowSearch& r, int j, int end,
                                                  FeatureSink& out) noexcept {
   for (; j + 8 <= end; j += 8) {

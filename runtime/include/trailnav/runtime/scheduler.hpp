@@ -83,6 +83,7 @@ struct TaskStats {
   std::uint64_t skipped_periods = 0;
   DurationSummary execution;
   DurationSummary latency;  // start minus deadline (periodic) or minus signal (event)
+  Nanos cpu_max = 0;        // most CPU time one run used
 };
 
 // The bookkeeping for one task, separate from any thread so that it can be
@@ -98,6 +99,7 @@ class TaskAccounting {
     const Nanos execution = finished - started;
     if (cpu < 0) cpu = execution;
     runs_.fetch_add(1, std::memory_order_relaxed);
+    if (cpu > cpu_max_.load(std::memory_order_relaxed)) cpu_max_.store(cpu, std::memory_order_relaxed);
     if (cpu > budget_) {
       overruns_.fetch_add(1, std::memory_order_relaxed);
     } else if (execution > budget_) {
@@ -114,6 +116,7 @@ class TaskAccounting {
     s.runs = runs_.load(std::memory_order_relaxed);
     s.overruns = overruns_.load(std::memory_order_relaxed);
     s.stalls = stalls_.load(std::memory_order_relaxed);
+    s.cpu_max = cpu_max_.load(std::memory_order_relaxed);
     s.slips = slips_.load(std::memory_order_relaxed);
     s.skipped_periods = skipped_.load(std::memory_order_relaxed);
     s.execution = execution_.summary();
@@ -128,6 +131,7 @@ class TaskAccounting {
   std::atomic<std::uint64_t> runs_{0};
   std::atomic<std::uint64_t> overruns_{0};
   std::atomic<std::uint64_t> stalls_{0};
+  std::atomic<Nanos> cpu_max_{0};  // single writer: load and store suffice
   std::atomic<std::uint64_t> slips_{0};
   std::atomic<std::uint64_t> skipped_{0};
   DurationHistogram execution_;
