@@ -7,6 +7,7 @@
 #include <thread>
 #include <vector>
 
+#include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/fixed_vector.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/rolling_grid.hpp"
@@ -16,6 +17,16 @@ namespace trailnav {
 namespace {
 
 // One push and one pop on the same thread: the cost of the operations themselves.
+// What the scheduler adds to every run of a task: two readings of the
+// monotonic clock (vDSO) and two of the thread's CPU time (a system call).
+void BM_ClockReadings(benchmark::State& state) {
+  trailnav::MonotonicClock clock;
+  const bool cpu = state.range(0) != 0;
+  for (auto _ : state) benchmark::DoNotOptimize(cpu ? clock.thread_cpu_time() : clock.now());
+  state.SetLabel(cpu ? "thread CPU time" : "monotonic");
+}
+BENCHMARK(BM_ClockReadings)->Arg(0)->Arg(1);
+
 void BM_SpscQueuePushPop(benchmark::State& state) {
   auto q = std::make_unique<SpscQueue<std::uint64_t, 1024>>();
   std::uint64_t out = 0;
