@@ -18,6 +18,35 @@ const TaskSpec* find_task(const std::vector<TaskSpec>& tasks, std::string_view n
   return nullptr;
 }
 
+// The navigation section as start-up builds it (and `--check` tries it): the
+// road network into `graph` (the navigator keeps a reference to it, so it is
+// loaded where it will live), then the navigator. Empty error when both are made.
+std::string build_navigation(const RobotConfig& config, std::optional<osm::RoadGraph>& graph,
+                             std::unique_ptr<nav::Navigator>& navigator) {
+  const nav::NavigationSection& n = *config.navigation;
+  auto loaded = osm::load_road_graph(n.osm, n.profile, {}, config.pose ? config.pose->utm.zone : 0);
+  if (!loaded.graph) return "navigation: " + loaded.error;
+  graph = std::move(loaded.graph);
+  const perception::TerrainMapShape shape = config.terrain ? config.terrain->map : perception::TerrainMapShape{};
+  auto made = nav::Navigator::create(*graph, n.navigator, shape);
+  if (!made.navigator) return "navigation: " + made.error;
+  navigator = std::move(made.navigator);
+  return {};
+}
+
+// One line on the loaded network and where the goal lies on it.
+std::string navigation_summary(const nav::NavigationSection& n, const osm::RoadGraph& g) {
+  double gx = 0.0, gy = 0.0;
+  g.to_utm(n.navigator.goal_lat, n.navigator.goal_lon, gx, gy);
+  const auto goal = g.project(gx, gy);
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "navigation: %s: %zu vertices, %zu segments, UTM zone %d%c; goal %.6f, %.6f lies %.1f m from the nearest routable way",
+                n.osm.c_str(), g.vertex_count(), g.segments().size(), g.zone(), g.north() ? 'N' : 'S', n.navigator.goal_lat,
+                n.navigator.goal_lon, goal ? goal->distance : 0.0);
+  return text;
+}
+
 }  // namespace
 
 Daemon::Daemon(const RobotConfig& config) : config_(config) {}
@@ -77,19 +106,10 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   // The road network first: the pose's UTM frame must be the network's zone.
   std::optional<pose::PoseEstimatorOptions> pose_options = config.pose;
   if (config.navigation) {
-    const nav::NavigationSection& n = *config.navigation;
-    auto loaded = osm::load_road_graph(n.osm, n.profile, {}, pose_options->utm.zone);
-    if (!loaded.graph) return fail("navigation: " + loaded.error);
-    d->graph_ = std::move(loaded.graph);
+    if (std::string e = build_navigation(config, d->graph_, d->navigator_); !e.empty()) return fail(e);
     pose_options->utm.zone = d->graph_->zone();
-    const perception::TerrainMapShape shape = config.terrain ? config.terrain->map : perception::TerrainMapShape{};
-    auto made = nav::Navigator::create(*d->graph_, n.navigator, shape);
-    if (!made.navigator) return fail("navigation: " + made.error);
-    d->navigator_ = std::move(made.navigator);
-    d->navigation_out_ = std::make_unique<Mailbox<nav::NavigationSnapshot>>(n.navigator.path_poses);
-    TN_LOG_INFO("navigation: %s: %zu vertices, %zu segments, UTM zone %d%c; goal %.6f, %.6f", n.osm.c_str(),
-                d->graph_->vertex_count(), d->graph_->segments().size(), d->graph_->zone(), d->graph_->north() ? 'N' : 'S',
-                n.navigator.goal_lat, n.navigator.goal_lon);
+    d->navigation_out_ = std::make_unique<Mailbox<nav::NavigationSnapshot>>(config.navigation->navigator.path_poses);
+    TN_LOG_INFO("%s", navigation_summary(*config.navigation, *d->graph_).c_str());
   }
   if (config.pose) {
     d->pose_ = std::make_unique<pose::PoseTask>(*pose_options, d->imu_ ? &d->imu_->readings() : nullptr,
@@ -224,28 +244,10 @@ bool Daemon::alive() noexcept {
 Daemon::NavigationCheck Daemon::check_navigation(const RobotConfig& config) {
   NavigationCheck out;
   if (!config.navigation) return out;
-  const nav::NavigationSection& n = *config.navigation;
-  auto loaded = osm::load_road_graph(n.osm, n.profile, {}, config.pose ? config.pose->utm.zone : 0);
-  if (!loaded.graph) {
-    out.error = "navigation: " + loaded.error;
-    return out;
-  }
-  const perception::TerrainMapShape shape = config.terrain ? config.terrain->map : perception::TerrainMapShape{};
-  auto made = nav::Navigator::create(*loaded.graph, n.navigator, shape);
-  if (!made.navigator) {
-    out.error = "navigation: " + made.error;
-    return out;
-  }
-  const osm::RoadGraph& g = *loaded.graph;
-  double gx = 0.0, gy = 0.0;
-  g.to_utm(n.navigator.goal_lat, n.navigator.goal_lon, gx, gy);
-  const auto goal = g.project(gx, gy);
-  char text[400];
-  std::snprintf(text, sizeof text,
-                "navigation: %s: %zu vertices, %zu segments, UTM zone %d%c; goal %.6f, %.6f lies %.1f m from the nearest routable way",
-                n.osm.c_str(), g.vertex_count(), g.segments().size(), g.zone(), g.north() ? 'N' : 'S', n.navigator.goal_lat,
-                n.navigator.goal_lon, goal ? goal->distance : 0.0);
-  out.summary = text;
+  std::optional<osm::RoadGraph> graph;
+  std::unique_ptr<nav::Navigator> navigator;
+  out.error = build_navigation(config, graph, navigator);
+  if (out.error.empty()) out.summary = navigation_summary(*config.navigation, *graph);
   return out;
 }
 

@@ -156,9 +156,8 @@ namespace {
 
 void read_road_graph(osmium::io::File file, const std::string& name, const RoutingProfile& profile,
                      const std::function<void(double)>& progress, int zone, RoadGraphResult& result) {
-  const std::string& path = name;
   if (profile.highways.empty()) {
-    result.error = path + ": the routing profile lists no highway types";
+    result.error = name + ": the routing profile lists no highway types";
     return;
   }
   RoadHandler handler(profile, result.stats);
@@ -177,13 +176,13 @@ void read_road_graph(osmium::io::File file, const std::string& name, const Routi
   }
   if (progress) progress(1.0);
   if (result.stats.nodes_read == 0 && result.stats.ways_read == 0) {
-    result.error = path + ": contains no OpenStreetMap nodes or ways";
+    result.error = name + ": contains no OpenStreetMap nodes or ways";
     return;
   }
   if (handler.pieces.empty()) {
     std::string types;
     for (const auto& h : profile.highways) types += (types.empty() ? "" : ", ") + h;
-    result.error = path + ": no routable way (" + std::to_string(result.stats.ways_read) + " ways read; none open with highway " +
+    result.error = name + ": no routable way (" + std::to_string(result.stats.ways_read) + " ways read; none open with highway " +
                    types + " and two known nodes)";
     return;
   }
@@ -196,12 +195,12 @@ void read_road_graph(osmium::io::File file, const std::string& name, const Routi
   }
   const double clat = 0.5 * (lat0 + lat1), clon = 0.5 * (lon0 + lon1);
   if (std::abs(lat0) > 84.0 || std::abs(lat1) > 84.0) {
-    result.error = path + ": the routable network reaches beyond 84 degrees latitude, where UTM is not defined";
+    result.error = name + ": the routable network reaches beyond 84 degrees latitude, where UTM is not defined";
     return;
   }
   if (zone == 0) zone = GeographicLib::UTMUPS::StandardZone(clat, clon);
   if (zone < 1 || zone > 60) {
-    result.error = path + ": UTM zone " + std::to_string(zone) + " is not 1..60";
+    result.error = name + ": UTM zone " + std::to_string(zone) + " is not 1..60";
     return;
   }
 

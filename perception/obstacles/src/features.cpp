@@ -261,6 +261,17 @@ struct RowSearch {
 };
 
 #if defined(__GNUC__)
+// Writes the W points at p that exist, from the block's search and sines.
+template <int W>
+[[gnu::always_inline]] inline void finish_lanes(const View& v, std::size_t p, const BestW<W>& b,
+                                                const typename Lanes<W>::F& sine, FeatureSink& out) noexcept {
+  for (int lane = 0; lane < W; ++lane) {
+    const std::size_t q = p + static_cast<std::size_t>(lane);
+    if (v.st[q] == PointState::none) continue;
+    out.finish(q, b.found[lane] != 0, b.any[lane] != 0, b.dz[lane], sine[lane]);
+  }
+}
+
 // Columns [j, end) of a ring, four at a time; returns the first column not done.
 int search_row4(const View& v, const RowSearch& r, int j, int end, FeatureSink& out) noexcept {
   for (; j + 4 <= end; j += 4) {
@@ -270,20 +281,14 @@ int search_row4(const View& v, const RowSearch& r, int j, int end, FeatureSink& 
     if (states == 0) continue;  // four missing points
     BestW<4> b;
     search_block<4>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, b);
-#if defined(__SSE2__)
     // The four sines at once (lanes without a neighbour hold dz -1, d2 1).
-    const Lanes<4>::F sine = b.dz / reinterpret_cast<Lanes<4>::F>(_mm_sqrt_ps(reinterpret_cast<__m128>(b.d2)));
-#endif
-    for (int lane = 0; lane < 4; ++lane) {
-      const std::size_t q = p + static_cast<std::size_t>(lane);
-      if (v.st[q] == PointState::none) continue;
+    Lanes<4>::F sine;
 #if defined(__SSE2__)
-      const float s = sine[lane];
+    sine = b.dz / reinterpret_cast<Lanes<4>::F>(_mm_sqrt_ps(reinterpret_cast<__m128>(b.d2)));
 #else
-      const float s = b.dz[lane] / std::sqrt(b.d2[lane]);
+    for (int lane = 0; lane < 4; ++lane) sine[lane] = b.dz[lane] / std::sqrt(b.d2[lane]);
 #endif
-      out.finish(q, b.found[lane] != 0, b.any[lane] != 0, b.dz[lane], s);
-    }
+    finish_lanes<4>(v, p, b, sine, out);
   }
   return j;
 }
@@ -293,8 +298,9 @@ int search_row4(const View& v, const RowSearch& r, int j, int end, FeatureSink& 
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // the eight-wide vectors live only inside this AVX2 function
 // The same eight at a time, compiled for AVX2 (called only when the CPU has
-// it). Not one template with search_row4: the AVX square root can only be
-// inlined into a function compiled for AVX, and a template instance is not.
+// it). The row loop is not one template with search_row4: the AVX square root
+// can only be inlined into a function compiled for AVX, and a template
+// instance is not (the eight-wide search then ran emulated, 13 ms).
 __attribute__((target("avx2"))) int search_row8(const View& v, const RowSearch& r, int j, int end,
                                                  FeatureSink& out) noexcept {
   for (; j + 8 <= end; j += 8) {
@@ -305,11 +311,7 @@ __attribute__((target("avx2"))) int search_row8(const View& v, const RowSearch& 
     BestW<8> b;
     search_block<8>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, b);
     const Lanes<8>::F sine = b.dz / reinterpret_cast<Lanes<8>::F>(_mm256_sqrt_ps(reinterpret_cast<__m256>(b.d2)));
-    for (int lane = 0; lane < 8; ++lane) {
-      const std::size_t q = p + static_cast<std::size_t>(lane);
-      if (v.st[q] == PointState::none) continue;
-      out.finish(q, b.found[lane] != 0, b.any[lane] != 0, b.dz[lane], sine[lane]);
-    }
+    finish_lanes<8>(v, p, b, sine, out);
   }
   return j;
 }
