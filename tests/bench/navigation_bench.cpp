@@ -42,21 +42,26 @@ void BM_AlignmentUpdate(benchmark::State& state) {
   c.sequence = static_cast<int>(state.range(1));
   const auto& map = track_map();
   subgoals::SubgoalAligner aligner(c, map.shape());
+  // 12 subgoals aligned, 4 more of the route ahead; with a third argument
+  // of 1 the route turns left at subgoal 10, inside the window, so every
+  // sample also moves the corner and scores the route beyond the window.
+  const bool corner = state.range(2) != 0;
   std::vector<subgoals::Vec2> raw;
-  for (int i = 0; i < 12; ++i) raw.push_back({4.0 * i, 1.0});
-  for (std::size_t i = 0; i < raw.size(); ++i) {
+  for (int i = 0; i < 16; ++i) raw.push_back(corner && i > 10 ? subgoals::Vec2{40.0, 4.0 * (i - 10)} : subgoals::Vec2{4.0 * i, 1.0});
+  for (std::size_t i = 0; i < 12; ++i) {
     aligner.push(raw);
     aligner.update(map, raw);
   }
   for (auto _ : state) {
     aligner.update(map, raw);
-    benchmark::DoNotOptimize(aligner.estimate(raw.size() - 1));
+    benchmark::DoNotOptimize(aligner.estimate(aligner.count() - 1));
   }
   state.counters["cells"] = static_cast<double>(aligner.counters().cells_summed);
   state.counters["n_eff"] = aligner.counters().last_neff;
 }
 BENCHMARK(BM_AlignmentUpdate)
-    ->Args({1000, 4})->Args({10000, 4})->Args({50000, 4})->Args({1000, 1})->Args({1000, 6})->Args({50000, 6})
+    ->Args({1000, 4, 0})->Args({10000, 4, 0})->Args({50000, 4, 0})->Args({1000, 1, 0})->Args({1000, 6, 0})
+    ->Args({50000, 6, 0})->Args({1000, 4, 1})->Args({50000, 4, 1})
     ->Unit(benchmark::kMicrosecond);
 
 void BM_RouteLiechtenstein(benchmark::State& state) {

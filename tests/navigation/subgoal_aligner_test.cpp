@@ -177,6 +177,41 @@ TEST(SubgoalAligner, MovesATurnMappedTooEarlyToWhereTheMapShowsIt) {
   EXPECT_GT(thesis, shifted);
 }
 
+// An X crossing whose node is mapped 6 m too far along: the road goes on
+// straight past the real junction, so the subgoals the map puts on the
+// stretch between the real and the mapped node lie on a road too, only not
+// on the route. Moving the corner with the subgoals' arc lengths kept, and
+// scoring the route beyond the window, takes them round the real corner; the
+// thesis' model leaves them on the straight-on road.
+TEST(SubgoalAligner, TakesTheRealTurnAtACrossingMappedTooFarAlong) {
+  const double jx = 20.0;
+  const auto roads = [&](double x, double y) { return std::abs(y) < 1.5 || std::abs(x - jx) < 1.5; };
+  std::vector<Vec2> raw = straight(0.0, 7);  // 0..24
+  raw.push_back({26.0, 0.0});
+  for (int i = 1; i <= 7; ++i) raw.push_back({26.0, 4.0 * i - 2.0});
+  // Distance to the route: east along y = 0 to the junction, then north.
+  const auto off_route = [&](const Vec2& p) {
+    const double east = p.x <= jx ? std::abs(p.y) : std::hypot(p.x - jx, p.y);
+    const double north = p.y >= 0.0 ? std::abs(p.x - jx) : std::hypot(p.x - jx, p.y);
+    return std::min(east, north);
+  };
+  const auto worst = [&](double corner_sigma) {
+    AlignerConfig c;
+    c.corner_sigma = corner_sigma;
+    TerrainClassMap map;
+    paint(map, 20.0, 10.0, roads);
+    SubgoalAligner aligner(c, map.shape());
+    const auto est = run(aligner, map, raw);
+    double w = 0.0;
+    for (const Vec2& e : est) w = std::max(w, off_route(e));
+    return w;
+  };
+  const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
+  std::printf("farthest subgoal from the route: %.2f m with the corner model, %.2f m without\n", moved, thesis);
+  EXPECT_LT(moved, 2.0);  // the junction criterion of eval-subgoals: within 0.5 m of the 3 m road's edge
+  EXPECT_GT(thesis, 4.0);
+}
+
 TEST(SubgoalAligner, ReproducesPerSeed) {
   TerrainClassMap map;
   paint(map, 25.0, 0.0, [](double, double y) { return std::abs(y - 1.5) < 1.5; });

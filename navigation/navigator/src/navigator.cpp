@@ -223,9 +223,14 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
   if (map != nullptr) {
     const std::size_t back = static_cast<std::size_t>(config_.aligner.sequence) + 2;
     const std::size_t from = std::min(aligner_->count(), want) > back ? std::min(aligner_->count(), want) - back : 0;
-    for (std::size_t i = from; i < want; ++i) raw_[i] = raw_local(i);
-    const std::span<const subgoals::Vec2> raw(raw_.data(), want);
+    // The route a few subgoals beyond them shapes the aligner's corner model.
+    const std::size_t ahead = std::min(n, want + subgoals::SubgoalAligner::kAhead);
+    for (std::size_t i = from; i < ahead; ++i) raw_[i] = raw_local(i);
+    const std::span<const subgoals::Vec2> raw(raw_.data(), ahead);
+    // Subgoals that join together (the robot's place on the route jumps where
+    // the map is off) are aligned one by one, so none leaves the window unseen.
     while (aligner_->count() < want && aligner_->push(raw)) {
+      if (aligner_->count() < want) aligner_->update(*map, raw);
     }
     aligner_->update(*map, raw);
     ++counters_.updates;

@@ -66,6 +66,8 @@ SubgoalAligner::SubgoalAligner(const AlignerConfig& config, const perception::Te
   log_alpha_.assign(n_, 0.0);
   weight_.assign(n_, 1.0 / static_cast<double>(n_));
   log_weight_.resize(n_);
+  prior_.assign(n_, 0.0);
+  extra_.resize(n_ * kExtra);
   anchor_tmp_.resize(n_);
   estimates_.resize(config.max_subgoals);
   estimated_.assign(config.max_subgoals, 0);
@@ -101,6 +103,18 @@ std::uint64_t SubgoalAligner::next_random() noexcept {  // xoshiro256**
 void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
   const std::size_t begin = window_begin();
   const std::size_t len = count_ - begin;
+  // The raw route near the window: pts[m] = raw[base + m], from the anchor's
+  // subgoal (or subgoal 0) through the window to up to kAhead subgoals of the
+  // route ahead of it, with its arc length.
+  const std::size_t base = begin > 0 ? begin - 1 : 0;
+  const std::size_t off = begin - base;  // pts index of window subgoal 0
+  const std::size_t np = std::min(raw.size(), count_ + kAhead) - base;
+  std::array<Vec2, 9 + kAhead> pts{};
+  std::array<double, 9 + kAhead> arc{};
+  for (std::size_t m = 0; m < np; ++m) {
+    pts[m] = raw[base + m];
+    if (m > 0) arc[m] = arc[m - 1] + std::hypot(pts[m].x - pts[m - 1].x, pts[m].y - pts[m - 1].y);
+  }
   // The raw steps of the window: unit direction and length.
   std::array<Vec2, 8> dir{};
   std::array<double, 8> dist{};
@@ -112,23 +126,24 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
     dist[i] = d;
     dir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : Vec2{1.0, 0.0};
   }
-  // Corners: steps that turn away from the previous raw step.
-  std::array<Vec2, 8> corner{};
-  std::array<std::uint8_t, 8> is_corner{};
+  // The first corner at the anchor or in the window: a raw step (the one
+  // after the window's newest subgoal included) that turns away from the step
+  // before it. Its vertex is the subgoal the turning step starts from.
+  std::size_t vertex = 0;  // pts index
+  bool corner = false;
+  Vec2 in{};
   const double cos_corner = std::cos(config_.corner_angle);
-  for (std::size_t i = 0; i < len && config_.corner_sigma > 0.0; ++i) {
-    const std::size_t g = begin + i;
-    if (g < 2) continue;
+  for (std::size_t g = std::max<std::size_t>(begin, 2); g <= count_ && g < base + np && config_.corner_sigma > 0.0; ++g) {
     const double dx = raw[g - 1].x - raw[g - 2].x, dy = raw[g - 1].y - raw[g - 2].y, d = std::hypot(dx, dy);
-    if (d < 1e-9) continue;
-    const Vec2 in{dx / d, dy / d};
-    if (in.x * dir[i].x + in.y * dir[i].y < cos_corner) {
-      corner[i] = in;
-      is_corner[i] = 1;
+    const double ox = raw[g].x - raw[g - 1].x, oy = raw[g].y - raw[g - 1].y, od = std::hypot(ox, oy);
+    if (d < 1e-9 || od < 1e-9) continue;
+    if ((dx * ox + dy * oy) / (d * od) < cos_corner) {
+      vertex = g - 1 - base;
+      in = {dx / d, dy / d};
+      corner = true;
+      break;
     }
   }
-  // The street direction at each window subgoal (the along-street prior's axis).
-  for (std::size_t i = 0; i < len; ++i) dir_[i] = (begin + i == 0 && len > 1) ? dir[1] : dir[i];
   // Eq. 8.8: the street direction at g_0.
   Vec2 e0{1.0, 0.0};
   double along = std::max(config_.sigma_along, config_.sigma_across), across = along;
@@ -140,11 +155,54 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
       across = config_.sigma_across;
     }
   }
+  // The route with the corner moved by s along the street before it: the
+  // street before the corner ends s further on (s < 0: earlier), everything
+  // after it moves by s * in, and each subgoal keeps its arc length from the
+  // anchor. A subgoal the map put on the stretch between the real and the
+  // mapped junction so goes round the real corner instead of beside it.
+  const double av = arc[vertex];
+  const auto after = [&](double b) {  // the raw route at arc length b >= av
+    std::size_t t = vertex;
+    while (t + 2 < np && arc[t + 1] < b) ++t;
+    const double seg = arc[t + 1] - arc[t];
+    const double f = seg > 1e-9 ? (b - arc[t]) / seg : 0.0;
+    return Vec2{pts[t].x + f * (pts[t + 1].x - pts[t].x), pts[t].y + f * (pts[t + 1].y - pts[t].y)};
+  };
+  const auto moved = [&](std::size_t m, double s) {
+    const double a = arc[m];
+    if (s >= 0.0 ? a <= av : a <= av + s) return pts[m];
+    if (s > 0.0 && a <= av + s) return Vec2{pts[vertex].x + (a - av) * in.x, pts[vertex].y + (a - av) * in.y};
+    const Vec2 q = after(a - s);
+    return Vec2{q.x + s * in.x, q.y + s * in.y};
+  };
+  const double s_min = -(av - arc[0]);  // the turn at the anchor at the earliest
+
   constexpr std::uint64_t kMask = kTable - 1;
+  const double inv2s2 = config_.along_prior > 0.0 ? 0.5 / (config_.along_prior * config_.along_prior) : 0.0;
   double min_x = std::numeric_limits<double>::max(), min_y = min_x, max_x = -min_x, max_y = -min_x;
+  std::array<Vec2, 8> sdir = dir;
+  std::array<double, 8> sdist = dist;
+  std::array<Vec2, 8> hyp{};
+  for (std::size_t i = 0; i < len; ++i) hyp[i] = pts[off + i];
+  const std::size_t extra = corner ? std::min(kExtra, np - off - len) : 0;
+  double shift = 0.0;
   for (std::size_t j = 0; j < n_; ++j) {
     Vec2* w = &window_[j * kk_];
     Vec2 prev = anchor_[j];
+    if (corner) {
+      // This sample's corner shift, and the raw steps of its route.
+      shift = std::max(s_min, config_.corner_sigma * normal_[next_random() & kMask]);
+      Vec2 last = pts[0];
+      for (std::size_t i = 0; i < len; ++i) {
+        hyp[i] = moved(off + i, shift);
+        if (begin + i == 0) continue;
+        const double dx = hyp[i].x - last.x, dy = hyp[i].y - last.y, d = std::hypot(dx, dy);
+        sdist[i] = d;
+        sdir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : dir[i];
+        last = hyp[i];
+      }
+    }
+    double a2 = 0.0;
     for (std::size_t i = 0; i < len; ++i) {
       const std::size_t g = begin + i;
       const std::uint64_t r = next_random();
@@ -154,15 +212,14 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
         p = {raw[0].x + a * e0.x - c * e0.y, raw[0].y + a * e0.y + c * e0.x};
       } else {
         // Eq. 8.6: (d + dd) along the step, (d + dd) tan(dth) across it.
-        const double l = dist[i] + config_.sigma_d * normal_[r & kMask];
+        const double l = sdist[i] + config_.sigma_d * normal_[r & kMask];
         const double lt = l * tan_theta_[(r >> 12) & kMask];
-        p = {prev.x + l * dir[i].x - lt * dir[i].y, prev.y + l * dir[i].y + lt * dir[i].x};
-        if (is_corner[i]) {
-          const double s = config_.corner_sigma * normal_[(r >> 24) & kMask];
-          p.x += s * corner[i].x;
-          p.y += s * corner[i].y;
-        }
+        p = {prev.x + l * sdir[i].x - lt * sdir[i].y, prev.y + l * sdir[i].y + lt * sdir[i].x};
       }
+      // The along-street prior: the offset from this sample's route along its street.
+      const Vec2 t = (g == 0 && len > 1) ? sdir[1] : sdir[i];
+      const double a = (p.x - hyp[i].x) * t.x + (p.y - hyp[i].y) * t.y;
+      a2 += a * a;
       w[g % kk_] = p;
       prev = p;
       min_x = std::min(min_x, p.x);
@@ -170,7 +227,22 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
       min_y = std::min(min_y, p.y);
       max_y = std::max(max_y, p.y);
     }
+    prior_[j] = a2 * inv2s2;
+    // The route beyond the window as this sample continues it: the raw
+    // subgoals ahead, moved by its corner shift and by where its newest
+    // subgoal lies. They are scored, not estimated: they tell the turns
+    // apart that the window alone cannot (at a crossing both ways are trail).
+    for (std::size_t e = 0; e < extra; ++e) {
+      const Vec2 h = moved(off + len + e, shift);
+      const Vec2 q = {h.x + prev.x - hyp[len - 1].x, h.y + prev.y - hyp[len - 1].y};
+      extra_[j * kExtra + e] = q;
+      min_x = std::min(min_x, q.x);
+      max_x = std::max(max_x, q.x);
+      min_y = std::min(min_y, q.y);
+      max_y = std::max(max_y, q.y);
+    }
   }
+  extra_count_ = extra;
   min_x_ = min_x;
   min_y_ = min_y;
   max_x_ = max_x;
@@ -247,20 +319,16 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
   draw_window(raw);
   build_cost_table(map);
   const std::size_t begin = window_begin();
-  const double inv2s2 = config_.along_prior > 0.0 ? 0.5 / (config_.along_prior * config_.along_prior) : 0.0;
   double best = -std::numeric_limits<double>::infinity();
   for (std::size_t j = 0; j < n_; ++j) {
     const Vec2* w = &window_[j * kk_];
-    double c = 0.0, a2 = 0.0;
+    double c = 0.0;
     for (std::size_t g = begin; g < count_; ++g) {
       const Vec2& q = w[g % kk_];
       c += patch_cost(q.x, q.y);
-      const Vec2& r = raw[g];
-      const Vec2& t = dir_[g - begin];
-      const double a = (q.x - r.x) * t.x + (q.y - r.y) * t.y;
-      a2 += a * a;
     }
-    const double lw = log_alpha_[j] - config_.lambda * c - a2 * inv2s2;  // Eq. 8.11, 8.14 (lambda^K cancels)
+    for (std::size_t e = 0; e < extra_count_; ++e) c += patch_cost(extra_[j * kExtra + e].x, extra_[j * kExtra + e].y);
+    const double lw = log_alpha_[j] - config_.lambda * c - prior_[j];  // Eq. 8.11, 8.14 (lambda^K cancels)
     log_weight_[j] = lw;
     best = std::max(best, lw);
   }

@@ -78,11 +78,17 @@ struct AlignerConfig {
   // sequences that end short of the unseen cells ahead win every update and
   // the subgoals drift metres behind the raw ones, so they turn early.
   double along_prior = 6.0;          // m, 0: off
-  // corner_sigma: a step that turns by at least corner_angle against the
-  // previous raw step also moves, with N(0, corner_sigma^2), along that
-  // previous step: a junction node mapped too early or too far shifts the
-  // turn, which Eq. 8.6's small step noise cannot do.
-  double corner_sigma = 3.0;         // m, 0: off
+  // corner_sigma: where the route turns by at least corner_angle (at the
+  // anchor, in the window or at the step just after it), each sample moves
+  // that corner by s ~ N(0, corner_sigma^2) along the street before it: the
+  // street before ends s later (s < 0: earlier, at the anchor at the
+  // earliest), the route after it moves by s, and the subgoals keep their arc
+  // lengths, so those the map put between the real and the mapped junction
+  // go round the real corner. Such a sample's route beyond the window
+  // (kExtra raw subgoals, moved as it moves) is scored too: at a crossing
+  // the window alone sees trail either way. Eq. 8.6's small step noise cannot
+  // move a turn by metres.
+  double corner_sigma = 12.0;        // m, 0: off
   double corner_angle = 0.45;        // rad
   double resample_below = 0.5;       // resample when n_eff < this x samples
   std::size_t max_subgoals = 65536;  // longest route, in subgoals
@@ -102,6 +108,9 @@ struct AlignerCounters {
 
 class SubgoalAligner {
  public:
+  static constexpr std::size_t kAhead = 4;  // route subgoals beyond the window the corner model reads
+  static constexpr std::size_t kExtra = 2;  // of those, scored with a corner window
+
   // Allocates the samples, tables and the cost box for `map_shape`.
   // Precondition: check_aligner_config(config) is empty.
   SubgoalAligner(const AlignerConfig& config, const perception::TerrainMapShape& map_shape);
@@ -120,7 +129,9 @@ class SubgoalAligner {
   std::size_t window_begin() const noexcept { return count_ > static_cast<std::size_t>(k_) ? count_ - static_cast<std::size_t>(k_) : 0; }
 
   // Re-samples the window against `map`. `raw` holds the raw local positions
-  // of subgoals 0..count()-1 (only window_begin()-2 .. count()-1 are read).
+  // of subgoals 0..count()-1 (only window_begin()-2 .. count()-1 are read),
+  // and may go on with the route's next subgoals: up to kAhead of them shape
+  // the corner model (see AlignerConfig::corner_sigma).
   void update(const perception::TerrainClassMap& map, std::span<const Vec2> raw) noexcept;
 
   // The corrected position of subgoal i < count(): the window's current
@@ -137,7 +148,6 @@ class SubgoalAligner {
  private:
   std::uint64_t next_random() noexcept;
   void draw_window(std::span<const Vec2> raw) noexcept;
-  std::array<Vec2, 8> dir_{};  // the raw street direction at each window subgoal
   void build_cost_table(const perception::TerrainClassMap& map) noexcept;
   double patch_cost(double x, double y) const noexcept;
   void resample_anchors() noexcept;
@@ -161,6 +171,9 @@ class SubgoalAligner {
   std::vector<double> log_alpha_;  // n, anchors' log weights
   std::vector<double> weight_;   // n, normalised
   std::vector<double> log_weight_;  // n, log alpha - lambda * sum f^N over the window
+  std::vector<Vec2> extra_;      // n x kExtra, the route ahead of each sample's window
+  std::size_t extra_count_ = 0;
+  std::vector<double> prior_;    // n, the along-street prior's -log factor of the drawn window
   std::vector<Vec2> anchor_tmp_;
   std::vector<Vec2> estimates_;  // max_subgoals
   std::vector<std::uint8_t> estimated_;
