@@ -44,6 +44,21 @@ std::vector<Vec2> straight(double y, int n, double x0 = 0.0) {
   return v;
 }
 
+// Aligns `raw` on a map of `roads` with the given corner spread and returns
+// the largest `off` of the estimates from subgoal `first` on.
+double worst_estimate(double corner_sigma, const std::function<bool(double, double)>& roads, const std::vector<Vec2>& raw,
+                      std::size_t first, const std::function<double(const Vec2&)>& off) {
+  AlignerConfig c;
+  c.corner_sigma = corner_sigma;
+  TerrainClassMap map;
+  paint(map, 20.0, 10.0, roads);
+  SubgoalAligner aligner(c, map.shape());
+  const auto est = run(aligner, map, raw);
+  double worst = 0.0;
+  for (std::size_t i = first; i < est.size(); ++i) worst = std::max(worst, off(est[i]));
+  return worst;
+}
+
 TEST(SubgoalAligner, ChecksItsConfiguration) {
   AlignerConfig c;
   EXPECT_EQ(check_aligner_config(c), "");
@@ -161,15 +176,7 @@ TEST(SubgoalAligner, MovesATurnMappedTooEarlyToWhereTheMapShowsIt) {
   std::vector<Vec2> raw = straight(0.0, 6);  // 0..20
   for (int i = 1; i <= 8; ++i) raw.push_back({20.0, 4.0 * i});
   const auto error_after_turn = [&](double corner_sigma) {
-    AlignerConfig c;
-    c.corner_sigma = corner_sigma;
-    TerrainClassMap map;
-    paint(map, 20.0, 10.0, road);
-    SubgoalAligner aligner(c, map.shape());
-    const auto est = run(aligner, map, raw);
-    double worst = 0.0;
-    for (std::size_t i = 8; i < est.size(); ++i) worst = std::max(worst, std::abs(est[i].x - jx));
-    return worst;
+    return worst_estimate(corner_sigma, road, raw, 8, [&](const Vec2& e) { return std::abs(e.x - jx); });
   };
   const double shifted = error_after_turn(3.0), thesis = error_after_turn(0.0);
   std::printf("farthest subgoal from the road after the turn: %.2f m with the corner shift, %.2f m without\n", shifted, thesis);
@@ -195,17 +202,7 @@ TEST(SubgoalAligner, TakesTheRealTurnAtACrossingMappedTooFarAlong) {
     const double north = p.y >= 0.0 ? std::abs(p.x - jx) : std::hypot(p.x - jx, p.y);
     return std::min(east, north);
   };
-  const auto worst = [&](double corner_sigma) {
-    AlignerConfig c;
-    c.corner_sigma = corner_sigma;
-    TerrainClassMap map;
-    paint(map, 20.0, 10.0, roads);
-    SubgoalAligner aligner(c, map.shape());
-    const auto est = run(aligner, map, raw);
-    double w = 0.0;
-    for (const Vec2& e : est) w = std::max(w, off_route(e));
-    return w;
-  };
+  const auto worst = [&](double corner_sigma) { return worst_estimate(corner_sigma, roads, raw, 0, off_route); };
   const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
   std::printf("farthest subgoal from the route: %.2f m with the corner model, %.2f m without\n", moved, thesis);
   EXPECT_LT(moved, 2.0);  // the junction criterion of eval-subgoals: within 0.5 m of the 3 m road's edge
