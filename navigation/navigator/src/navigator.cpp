@@ -228,9 +228,13 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     for (std::size_t i = from; i < ahead; ++i) raw_[i] = raw_local(i);
     const std::span<const subgoals::Vec2> raw(raw_.data(), ahead);
     // Subgoals that join together (the robot's place on the route jumps where
-    // the map is off) are aligned one by one, so none leaves the window unseen.
-    while (aligner_->count() < want && aligner_->push(raw)) {
-      if (aligner_->count() < want) aligner_->update(*map, raw);
+    // the map is off): before a push would retire a subgoal the aligner has
+    // never estimated, it aligns the window, so none leaves it unseen. That
+    // is one update per K pushes at most, none while the window fills.
+    const std::size_t k = static_cast<std::size_t>(config_.aligner.sequence);
+    while (aligner_->count() < want) {
+      if (aligner_->count() >= k && !aligner_->estimated(aligner_->window_begin())) aligner_->update(*map, raw);
+      if (!aligner_->push(raw)) break;
     }
     aligner_->update(*map, raw);
     ++counters_.updates;

@@ -115,17 +115,6 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
     pts[m] = raw[base + m];
     if (m > 0) arc[m] = arc[m - 1] + std::hypot(pts[m].x - pts[m - 1].x, pts[m].y - pts[m - 1].y);
   }
-  // The raw steps of the window: unit direction and length.
-  std::array<Vec2, 8> dir{};
-  std::array<double, 8> dist{};
-  for (std::size_t i = 0; i < len; ++i) {
-    const std::size_t g = begin + i;
-    if (g == 0) continue;
-    const double dx = raw[g].x - raw[g - 1].x, dy = raw[g].y - raw[g - 1].y;
-    const double d = std::hypot(dx, dy);
-    dist[i] = d;
-    dir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : Vec2{1.0, 0.0};
-  }
   // The first corner at the anchor or in the window: a raw step (the one
   // after the window's newest subgoal included) that turns away from the step
   // before it. Its vertex is the subgoal the turning step starts from.
@@ -180,27 +169,34 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
   constexpr std::uint64_t kMask = kTable - 1;
   const double inv2s2 = config_.along_prior > 0.0 ? 0.5 / (config_.along_prior * config_.along_prior) : 0.0;
   double min_x = std::numeric_limits<double>::max(), min_y = min_x, max_x = -min_x, max_y = -min_x;
-  std::array<Vec2, 8> sdir = dir;
-  std::array<double, 8> sdist = dist;
+  // The steps of Eq. 8.6 (unit direction and length) between the window
+  // subgoals of a route `hyp`, from the anchor's subgoal on: the raw route's,
+  // or a corner sample's moved one.
   std::array<Vec2, 8> hyp{};
+  std::array<Vec2, 8> sdir{};
+  std::array<double, 8> sdist{};
+  const auto steps_of = [&] {
+    Vec2 last = pts[0];
+    for (std::size_t i = 0; i < len; ++i) {
+      if (begin + i == 0) continue;
+      const double dx = hyp[i].x - last.x, dy = hyp[i].y - last.y, d = std::hypot(dx, dy);
+      sdist[i] = d;
+      sdir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : Vec2{1.0, 0.0};
+      last = hyp[i];
+    }
+  };
   for (std::size_t i = 0; i < len; ++i) hyp[i] = pts[off + i];
+  steps_of();
   const std::size_t extra = corner ? std::min(kExtra, np - off - len) : 0;
   double shift = 0.0;
   for (std::size_t j = 0; j < n_; ++j) {
     Vec2* w = &window_[j * kk_];
     Vec2 prev = anchor_[j];
     if (corner) {
-      // This sample's corner shift, and the raw steps of its route.
+      // This sample's corner shift, and the steps of its moved route.
       shift = std::max(s_min, config_.corner_sigma * normal_[next_random() & kMask]);
-      Vec2 last = pts[0];
-      for (std::size_t i = 0; i < len; ++i) {
-        hyp[i] = moved(off + i, shift);
-        if (begin + i == 0) continue;
-        const double dx = hyp[i].x - last.x, dy = hyp[i].y - last.y, d = std::hypot(dx, dy);
-        sdist[i] = d;
-        sdir[i] = d > 1e-9 ? Vec2{dx / d, dy / d} : dir[i];
-        last = hyp[i];
-      }
+      for (std::size_t i = 0; i < len; ++i) hyp[i] = moved(off + i, shift);
+      steps_of();
     }
     double a2 = 0.0;
     for (std::size_t i = 0; i < len; ++i) {
