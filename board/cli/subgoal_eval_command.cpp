@@ -160,6 +160,9 @@ void add_subgoal_eval_command(CLI::App& app) {
   cmd->add_option("--corner-sigma", c.options.navigator.aligner.corner_sigma,
                   "Sigma of a corner's shift along the street, m (0: off, the thesis)")
       ->capture_default_str();
+  cmd->add_option("--corner-turn", c.options.navigator.aligner.corner_turn,
+                  "Sigma of the turn of the route after a corner about that corner, rad (0: off)")
+      ->capture_default_str();
   cmd->add_option("--unknown-cells", c.unknown_cells,
                   "How a patch treats cells without observations: known-only (mean over the known cells) or other\n"
                   "(each costs unknown_cost, the thesis' reading)")

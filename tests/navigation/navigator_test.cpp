@@ -394,7 +394,7 @@ TEST(Navigator, PlansOnLiechtensteinLikeTheRouter) {
 TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   const std::string osm = std::filesystem::absolute(test::shared_data("osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf")).string();
   const ConfigNode ok = ConfigNode::parse("osm: " + osm + "\ngoal: [47.166, 9.51]\nhighways: [track, path]\nspacing: 3\n"
-                                          "aligner: {samples: 5000, sequence: 3, unknown_cells: known-only, along_prior: 0, corner_sigma: 4}\n",
+                                          "aligner: {samples: 5000, sequence: 3, unknown_cells: known-only, along_prior: 0, corner_sigma: 4, corner_turn: 0.1}\n",
                                           "nav.yaml");
   const NavigationSection s = parse_navigation_section(ok);
   EXPECT_EQ(s.osm, osm);
@@ -405,6 +405,7 @@ TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   EXPECT_TRUE(s.navigator.aligner.known_cells_only);
   EXPECT_EQ(s.navigator.aligner.along_prior, 0.0);
   EXPECT_EQ(s.navigator.aligner.corner_sigma, 4.0);
+  EXPECT_EQ(s.navigator.aligner.corner_turn, 0.1);
   auto error_of = [&](const std::string& text) -> std::string {
     try {
       parse_navigation_section(ConfigNode::parse(text, "nav.yaml"));
@@ -419,6 +420,7 @@ TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nreach: 9\n").find("reach"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {samples: 60000}\n").find("samples"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {corner_sigma: -1}\n").find("corner_sigma"), std::string::npos);
+  EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {corner_turn: 2}\n").find("corner_turn"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nlookahed: 3\n").find("lookahed"), std::string::npos);
 }
 

@@ -79,6 +79,9 @@ TEST(SubgoalAligner, ChecksItsConfiguration) {
   c = {};
   c.corner_angle = 0.0;
   EXPECT_NE(check_aligner_config(c).find("corner_angle"), std::string::npos);
+  c = {};
+  c.corner_turn = 1.5;
+  EXPECT_NE(check_aligner_config(c).find("corner_turn"), std::string::npos);
 }
 
 TEST(SubgoalAligner, PullsSubgoalsMappedBesideTheTrailOntoIt) {
@@ -206,6 +209,48 @@ TEST(SubgoalAligner, TakesTheRealTurnAtACrossingMappedTooFarAlong) {
   const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
   std::printf("farthest subgoal from the route: %.2f m with the corner model, %.2f m without\n", moved, thesis);
   EXPECT_LT(moved, 2.0);  // the junction criterion of eval-subgoals: within 0.5 m of the 3 m road's edge
+  EXPECT_GT(thesis, 4.0);
+}
+
+// The same crossing with subgoals every 4 m along the mapped way, which cut
+// its corner: given the way's own vertices (the navigator passes them), the
+// corner model turns where the way turns and the subgoals still go round the
+// real corner.
+TEST(SubgoalAligner, TakesTheRealTurnAtTheMappedWaysOwnVertex) {
+  const double jx = 20.0;
+  const auto roads = [&](double x, double y) { return std::abs(y) < 1.5 || std::abs(x - jx) < 1.5; };
+  const std::vector<Vec2> way{{0.0, 0.0}, {26.0, 0.0}, {26.0, 40.0}};
+  const std::vector<double> way_arc{0.0, 26.0, 66.0};
+  std::vector<Vec2> raw;
+  std::vector<double> raw_arc;
+  for (double a = 0.0; a <= 56.0; a += 4.0) {
+    raw.push_back(a <= 26.0 ? Vec2{a, 0.0} : Vec2{26.0, a - 26.0});
+    raw_arc.push_back(a);
+  }
+  const auto off_route = [&](const Vec2& p) {
+    const double east = p.x <= jx ? std::abs(p.y) : std::hypot(p.x - jx, p.y);
+    const double north = p.y >= 0.0 ? std::abs(p.x - jx) : std::hypot(p.x - jx, p.y);
+    return std::min(east, north);
+  };
+  TerrainClassMap map;
+  paint(map, 20.0, 10.0, roads);
+  const auto worst = [&](double corner_sigma) {
+    AlignerConfig c;
+    c.corner_sigma = corner_sigma;
+    SubgoalAligner aligner(c, map.shape());
+    const RouteShape shape{way, way_arc, raw_arc};
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      EXPECT_TRUE(aligner.push(raw, shape));
+      aligner.update(map, raw, shape);
+      aligner.update(map, raw, shape);
+    }
+    double w = 0.0;
+    for (std::size_t i = 0; i < raw.size(); ++i) w = std::max(w, off_route(aligner.estimate(i)));
+    return w;
+  };
+  const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
+  std::printf("farthest subgoal from the route: %.2f m with the corner model at the way's vertex, %.2f m without\n", moved, thesis);
+  EXPECT_LT(moved, 2.0);
   EXPECT_GT(thesis, 4.0);
 }
 

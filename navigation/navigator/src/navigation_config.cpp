@@ -42,6 +42,7 @@ NavigationSection parse_navigation_section(const ConfigNode& n) {
     ac.sigma_across = a->number("sigma_across", 0.0, 100.0, ac.sigma_across);
     ac.along_prior = a->number("along_prior", 0.0, 1000.0, ac.along_prior);
     ac.corner_sigma = a->number("corner_sigma", 0.0, 50.0, ac.corner_sigma);
+    ac.corner_turn = a->number("corner_turn", 0.0, 1.0, ac.corner_turn);
     ac.corner_angle = a->number("corner_angle", 0.01, 3.14, ac.corner_angle);
     ac.known_cells_only = a->choice("unknown_cells", {"other", "known-only"}, "other") == "known-only";
     ac.resample_below = a->number("resample_below", 0.0, 1.0, ac.resample_below);

@@ -227,16 +227,32 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     const std::size_t ahead = std::min(n, want + subgoals::SubgoalAligner::kAhead);
     for (std::size_t i = from; i < ahead; ++i) raw_[i] = raw_local(i);
     const std::span<const subgoals::Vec2> raw(raw_.data(), ahead);
+    // The route's own vertices over the same stretch (and the one before
+    // it): the corner model turns where the map's way turns, not where the
+    // 4 m subgoals cut the corner.
+    std::size_t v = static_cast<std::size_t>(std::lower_bound(route_arc_.begin(), route_arc_.end(), subgoal_arc_[from]) -
+                                             route_arc_.begin());
+    v = v > 0 ? v - 1 : 0;
+    const double until = subgoal_arc_[ahead - 1];
+    std::size_t np = 0;
+    for (; v < route_.size() && np < shape_points_.size(); ++v) {
+      const double dx = route_[v].x - utm_e_, dy = route_[v].y - utm_n_;
+      shape_points_[np] = {local_x_ + cos_ * dx - sin_ * dy, local_y_ + sin_ * dx + cos_ * dy};
+      shape_arc_[np++] = route_arc_[v];
+      if (route_arc_[v] >= until) break;
+    }
+    const subgoals::RouteShape shape{std::span<const subgoals::Vec2>(shape_points_.data(), np),
+                                     std::span<const double>(shape_arc_.data(), np), subgoal_arc_};
     // Subgoals that join together (the robot's place on the route jumps where
     // the map is off): before a push would retire a subgoal the aligner has
     // never estimated, it aligns the window, so none leaves it unseen. That
     // is one update per K pushes at most, none while the window fills.
     const std::size_t k = static_cast<std::size_t>(config_.aligner.sequence);
     while (aligner_->count() < want) {
-      if (aligner_->count() >= k && !aligner_->estimated(aligner_->window_begin())) aligner_->update(*map, raw);
-      if (!aligner_->push(raw)) break;
+      if (aligner_->count() >= k && !aligner_->estimated(aligner_->window_begin())) aligner_->update(*map, raw, shape);
+      if (!aligner_->push(raw, shape)) break;
     }
-    aligner_->update(*map, raw);
+    aligner_->update(*map, raw, shape);
     ++counters_.updates;
     ++path_revision_;
     ++active_revision_;

@@ -43,6 +43,7 @@ std::string check_aligner_config(const AlignerConfig& c) {
   if (!(c.along_prior >= 0.0 && c.along_prior <= 1000.0)) return "along_prior must be 0..1000 m (0: off)";
   if (!(c.corner_sigma >= 0.0 && c.corner_sigma <= 50.0)) return "corner_sigma must be 0..50 m (0: off)";
   if (!(c.corner_angle > 0.0 && c.corner_angle < 3.1416)) return "corner_angle must be in (0, pi) rad";
+  if (!(c.corner_turn >= 0.0 && c.corner_turn <= 1.0)) return "corner_turn must be 0..1 rad (0: off)";
   if (!(c.resample_below >= 0.0 && c.resample_below <= 1.0)) return "resample_below must be 0..1";
   if (c.max_subgoals < 2 || c.max_subgoals > 10000000) return "max_subgoals must be 2..10000000";
   return {};
@@ -100,34 +101,49 @@ std::uint64_t SubgoalAligner::next_random() noexcept {  // xoshiro256**
   return result;
 }
 
-void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
+void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& shape) noexcept {
   const std::size_t begin = window_begin();
   const std::size_t len = count_ - begin;
-  // The raw route near the window: pts[m] = raw[base + m], from the anchor's
-  // subgoal (or subgoal 0) through the window to up to kAhead subgoals of the
-  // route ahead of it, with its arc length.
-  const std::size_t base = begin > 0 ? begin - 1 : 0;
-  const std::size_t off = begin - base;  // pts index of window subgoal 0
-  const std::size_t np = std::min(raw.size(), count_ + kAhead) - base;
-  std::array<Vec2, 9 + kAhead> pts{};
-  std::array<double, 9 + kAhead> arc{};
-  for (std::size_t m = 0; m < np; ++m) {
-    pts[m] = raw[base + m];
-    if (m > 0) arc[m] = arc[m - 1] + std::hypot(pts[m].x - pts[m - 1].x, pts[m].y - pts[m - 1].y);
+  const std::size_t base = begin > 0 ? begin - 1 : 0;  // the anchor's subgoal (or subgoal 0)
+  // The route near the window, pts[m] with its arc length: the shape's
+  // vertices, or without one the raw subgoals from the one before the
+  // anchor's to up to kAhead beyond the window. sa(g): raw subgoal g's arc.
+  std::array<Vec2, kShapePoints> pts{};
+  std::array<double, kShapePoints> arc{};
+  std::size_t np = 0;
+  const bool given = !shape.points.empty();
+  const std::size_t first = base > 0 ? base - 1 : 0;
+  if (given) {
+    np = std::min({shape.points.size(), shape.arc.size(), kShapePoints});
+    for (std::size_t m = 0; m < np; ++m) {
+      pts[m] = shape.points[m];
+      arc[m] = shape.arc[m];
+    }
+  } else {
+    np = std::min({raw.size(), count_ + kAhead, first + kShapePoints}) - first;
+    for (std::size_t m = 0; m < np; ++m) {
+      pts[m] = raw[first + m];
+      arc[m] = m > 0 ? arc[m - 1] + std::hypot(pts[m].x - pts[m - 1].x, pts[m].y - pts[m - 1].y) : 0.0;
+    }
   }
-  // The first corner at the anchor or in the window: a raw step (the one
-  // after the window's newest subgoal included) that turns away from the step
-  // before it. Its vertex is the subgoal the turning step starts from.
+  const auto sa = [&](std::size_t g) { return given ? shape.subgoal_arc[g] : arc[g - first]; };
+  const double a_base = sa(base), a_new = sa(count_ - 1);
+  const double spacing = count_ - 1 > base ? (a_new - a_base) / static_cast<double>(count_ - 1 - base) : 4.0;
+  // The first corner at the anchor or in the window: a vertex of the route
+  // (one up to a subgoal spacing beyond the window's newest subgoal
+  // included) where it turns by at least corner_angle.
   std::size_t vertex = 0;  // pts index
   bool corner = false;
   Vec2 in{};
   const double cos_corner = std::cos(config_.corner_angle);
-  for (std::size_t g = std::max<std::size_t>(begin, 2); g <= count_ && g < base + np && config_.corner_sigma > 0.0; ++g) {
-    const double dx = raw[g - 1].x - raw[g - 2].x, dy = raw[g - 1].y - raw[g - 2].y, d = std::hypot(dx, dy);
-    const double ox = raw[g].x - raw[g - 1].x, oy = raw[g].y - raw[g - 1].y, od = std::hypot(ox, oy);
+  for (std::size_t v = 1; v + 1 < np && config_.corner_sigma > 0.0; ++v) {
+    if (arc[v] < a_base - 1e-9 || (given ? arc[v] >= a_new + spacing - 1e-9 : v + first > count_ - 1)) continue;
+    if (!given && v + first < 1) continue;
+    const double dx = pts[v].x - pts[v - 1].x, dy = pts[v].y - pts[v - 1].y, d = std::hypot(dx, dy);
+    const double ox = pts[v + 1].x - pts[v].x, oy = pts[v + 1].y - pts[v].y, od = std::hypot(ox, oy);
     if (d < 1e-9 || od < 1e-9) continue;
     if ((dx * ox + dy * oy) / (d * od) < cos_corner) {
-      vertex = g - 1 - base;
+      vertex = v;
       in = {dx / d, dy / d};
       corner = true;
       break;
@@ -146,25 +162,28 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
   }
   // The route with the corner moved by s along the street before it: the
   // street before the corner ends s further on (s < 0: earlier), everything
-  // after it moves by s * in, and each subgoal keeps its arc length from the
-  // anchor. A subgoal the map put on the stretch between the real and the
-  // mapped junction so goes round the real corner instead of beside it.
+  // after it moves by s * in (and turns about the corner), and each subgoal
+  // keeps its arc length. A subgoal the map put on the stretch between the
+  // real and the mapped junction so goes round the real corner instead of
+  // beside it.
   const double av = arc[vertex];
-  const auto after = [&](double b) {  // the raw route at arc length b >= av
-    std::size_t t = vertex;
+  const auto route_at = [&](double b, std::size_t t) {  // the route at arc length b (t: a vertex at or before it)
     while (t + 2 < np && arc[t + 1] < b) ++t;
     const double seg = arc[t + 1] - arc[t];
     const double f = seg > 1e-9 ? (b - arc[t]) / seg : 0.0;
     return Vec2{pts[t].x + f * (pts[t + 1].x - pts[t].x), pts[t].y + f * (pts[t + 1].y - pts[t].y)};
   };
-  const auto moved = [&](std::size_t m, double s) {
-    const double a = arc[m];
-    if (s >= 0.0 ? a <= av : a <= av + s) return pts[m];
+  double rc = 1.0, rs = 0.0;  // the sample's turn of the route after the corner
+  const auto before_corner = [&](double a, double s) { return s >= 0.0 ? a <= av : a <= av + s; };
+  const auto moved_at = [&](double a, double s) {
+    if (before_corner(a, s)) return route_at(a, 0);
     if (s > 0.0 && a <= av + s) return Vec2{pts[vertex].x + (a - av) * in.x, pts[vertex].y + (a - av) * in.y};
-    const Vec2 q = after(a - s);
-    return Vec2{q.x + s * in.x, q.y + s * in.y};
+    const Vec2 q = route_at(a - s, vertex);
+    const double qx = q.x - pts[vertex].x, qy = q.y - pts[vertex].y;
+    return Vec2{pts[vertex].x + s * in.x + rc * qx - rs * qy, pts[vertex].y + s * in.y + rs * qx + rc * qy};
   };
-  const double s_min = -(av - arc[0]);  // the turn at the anchor at the earliest
+  const auto moved = [&](std::size_t g, double s) { return before_corner(sa(g), s) ? raw[g] : moved_at(sa(g), s); };
+  const double s_min = -(av - a_base);  // the turn at the anchor at the earliest
 
   constexpr std::uint64_t kMask = kTable - 1;
   const double inv2s2 = config_.along_prior > 0.0 ? 0.5 / (config_.along_prior * config_.along_prior) : 0.0;
@@ -176,7 +195,7 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
   std::array<Vec2, 8> sdir{};
   std::array<double, 8> sdist{};
   const auto steps_of = [&] {
-    Vec2 last = pts[0];
+    Vec2 last = raw[base];
     for (std::size_t i = 0; i < len; ++i) {
       if (begin + i == 0) continue;
       const double dx = hyp[i].x - last.x, dy = hyp[i].y - last.y, d = std::hypot(dx, dy);
@@ -185,17 +204,24 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
       last = hyp[i];
     }
   };
-  for (std::size_t i = 0; i < len; ++i) hyp[i] = pts[off + i];
+  for (std::size_t i = 0; i < len; ++i) hyp[i] = raw[begin + i];
   steps_of();
-  const std::size_t extra = corner ? std::min(kExtra, np - off - len) : 0;
+  // Route beyond the window to score (none past the route's end).
+  const std::size_t beyond = given ? static_cast<std::size_t>(std::max(0.0, (arc[np - 1] - a_new) / spacing + 1e-6))
+                                   : first + np - count_;
+  const std::size_t extra = corner ? std::min(kExtra, beyond) : 0;
   double shift = 0.0;
   for (std::size_t j = 0; j < n_; ++j) {
     Vec2* w = &window_[j * kk_];
     Vec2 prev = anchor_[j];
     if (corner) {
-      // This sample's corner shift, and the steps of its moved route.
-      shift = std::max(s_min, config_.corner_sigma * normal_[next_random() & kMask]);
-      for (std::size_t i = 0; i < len; ++i) hyp[i] = moved(off + i, shift);
+      // This sample's corner shift and turn, and the steps of its moved route.
+      const std::uint64_t rr = next_random();
+      shift = std::max(s_min, config_.corner_sigma * normal_[rr & kMask]);
+      const double phi = config_.corner_turn * normal_[(rr >> 12) & kMask];
+      rc = std::cos(phi);
+      rs = std::sin(phi);
+      for (std::size_t i = 0; i < len; ++i) hyp[i] = moved(begin + i, shift);
       steps_of();
     }
     double a2 = 0.0;
@@ -229,7 +255,8 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw) noexcept {
     // subgoal lies. They are scored, not estimated: they tell the turns
     // apart that the window alone cannot (at a crossing both ways are trail).
     for (std::size_t e = 0; e < extra; ++e) {
-      const Vec2 h = moved(off + len + e, shift);
+      const double b = std::max(a_new, av + shift) + spacing * static_cast<double>(e + 1);
+      const Vec2 h = moved_at(b, shift);
       const Vec2 q = {h.x + prev.x - hyp[len - 1].x, h.y + prev.y - hyp[len - 1].y};
       extra_[j * kExtra + e] = q;
       min_x = std::min(min_x, q.x);
@@ -267,7 +294,6 @@ void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) no
   const auto stride = static_cast<std::size_t>(box_w_ + 1);
   std::fill(sat_.begin(), sat_.begin() + static_cast<std::ptrdiff_t>(stride), 0.0);
   std::fill(sat_known_.begin(), sat_known_.begin() + static_cast<std::ptrdiff_t>(stride), 0u);
-  const bool known_only = config_.known_cells_only;
   for (std::int32_t y = 0; y < box_h_; ++y) {
     double row = 0.0;
     std::uint32_t row_known = 0;
@@ -276,7 +302,7 @@ void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) no
     sat_known_[base] = 0;
     for (std::int32_t x = 0; x < box_w_; ++x) {
       const perception::TerrainCell& c = grid.at({x0 + x, y0 + y});
-      if (c.known || !known_only) {
+      if (c.known) {
         row += static_cast<double>(perception::terrain_cost(c, config_.cost, config_.unknown_cost));
         ++row_known;
       }
@@ -288,7 +314,7 @@ void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) no
   counters_.cells_summed = static_cast<std::uint64_t>(box_w_) * static_cast<std::uint64_t>(box_h_);
 }
 
-double SubgoalAligner::patch_cost(double x, double y) const noexcept {
+double SubgoalAligner::patch_cost(double x, double y, bool known_only) const noexcept {
   const auto nb = static_cast<std::int32_t>(config_.neighbourhood);
   const auto cx = static_cast<std::int32_t>(std::floor(x / resolution_)) - box_x0_;
   const auto cy = static_cast<std::int32_t>(std::floor(y / resolution_)) - box_y0_;
@@ -305,14 +331,15 @@ double SubgoalAligner::patch_cost(double x, double y) const noexcept {
     inside = static_cast<double>(sat_known_[uy1 * stride + ux1] - sat_known_[uy0 * stride + ux1] -
                                  sat_known_[uy1 * stride + ux0] + sat_known_[uy0 * stride + ux0]);
   }
-  if (config_.known_cells_only) return inside > 0.0 ? sum / inside : static_cast<double>(config_.unknown_cost);
-  // Cells beyond the map are unknown.
+  if (known_only) return inside > 0.0 ? sum / inside : static_cast<double>(config_.unknown_cost);
+  // Unknown cells and cells beyond the map cost unknown_cost.
   return (sum + (cells - inside) * static_cast<double>(config_.unknown_cost)) / cells;
 }
 
-void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<const Vec2> raw) noexcept {
+void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<const Vec2> raw,
+                            const RouteShape& shape) noexcept {
   if (count_ == 0) return;
-  draw_window(raw);
+  draw_window(raw, shape);
   build_cost_table(map);
   const std::size_t begin = window_begin();
   double best = -std::numeric_limits<double>::infinity();
@@ -321,9 +348,9 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
     double c = 0.0;
     for (std::size_t g = begin; g < count_; ++g) {
       const Vec2& q = w[g % kk_];
-      c += patch_cost(q.x, q.y);
+      c += patch_cost(q.x, q.y, config_.known_cells_only);
     }
-    for (std::size_t e = 0; e < extra_count_; ++e) c += patch_cost(extra_[j * kExtra + e].x, extra_[j * kExtra + e].y);
+    for (std::size_t e = 0; e < extra_count_; ++e) c += patch_cost(extra_[j * kExtra + e].x, extra_[j * kExtra + e].y, true);
     const double lw = log_alpha_[j] - config_.lambda * c - prior_[j];  // Eq. 8.11, 8.14 (lambda^K cancels)
     log_weight_[j] = lw;
     best = std::max(best, lw);
@@ -369,12 +396,12 @@ void SubgoalAligner::resample_anchors() noexcept {
   ++counters_.resamples;
 }
 
-bool SubgoalAligner::push(std::span<const Vec2> raw) noexcept {
+bool SubgoalAligner::push(std::span<const Vec2> raw, const RouteShape& shape) noexcept {
   if (count_ >= config_.max_subgoals) return false;
   if (count_ >= kk_) {
     const std::size_t leaving = count_ - kk_;
     if (drawn_ != count_) {  // pushed without an update: draw the window now
-      draw_window(raw);
+      draw_window(raw, shape);
     }
     if (!estimated_[leaving]) {
       estimates_[leaving] = raw[leaving];

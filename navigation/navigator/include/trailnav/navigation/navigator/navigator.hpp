@@ -27,6 +27,7 @@
 // on a real-time thread after arm.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -175,6 +176,8 @@ class Navigator {
   std::vector<osm::Point2> subgoals_;
   std::vector<double> subgoal_arc_;
   std::vector<subgoals::Vec2> raw_;  // odometry-frame positions handed to the aligner
+  std::array<subgoals::Vec2, subgoals::SubgoalAligner::kShapePoints> shape_points_{};  // route vertices near the window
+  std::array<double, subgoals::SubgoalAligner::kShapePoints> shape_arc_{};
   std::size_t active_ = 0;
   double robot_arc_ = 0.0;
   double cross_track_ = 0.0;

@@ -84,12 +84,18 @@ struct AlignerConfig {
   // street before ends s later (s < 0: earlier, at the anchor at the
   // earliest), the route after it moves by s, and the subgoals keep their arc
   // lengths, so those the map put between the real and the mapped junction
-  // go round the real corner. Such a sample's route beyond the window
-  // (kExtra raw subgoals, moved as it moves) is scored too: at a crossing
-  // the window alone sees trail either way. Eq. 8.6's small step noise cannot
-  // move a turn by metres.
+  // go round the real corner. The corner is a vertex of the route's own
+  // shape (RouteShape) where one is given. Each sample also turns the route
+  // after the corner about it by phi ~ N(0, corner_turn^2): a junction node
+  // mapped metres off drags the way leaving it askew. Such a sample's route
+  // beyond the window is scored too (kExtra points a subgoal spacing apart,
+  // after its corner if that lies beyond the window; a point's cost is the
+  // mean over the known cells of its patch, unknown_cost if none is known):
+  // at a crossing the window alone sees trail either way. Eq. 8.6's small
+  // step noise cannot move a turn by metres.
   double corner_sigma = 12.0;        // m, 0: off
   double corner_angle = 0.45;        // rad
+  double corner_turn = 0.3;          // rad, 0: the route after a corner keeps its direction
   double resample_below = 0.5;       // resample when n_eff < this x samples
   std::size_t max_subgoals = 65536;  // longest route, in subgoals
   std::uint64_t seed = 1;
@@ -106,8 +112,21 @@ struct AlignerCounters {
   std::uint64_t cells_summed = 0;   // cells of the last update's cost table
 };
 
+// The route's shape near the aligner's window, for the corner model: its
+// vertices in the odometry frame with their arc lengths along the route, and
+// the arc length of each raw subgoal (indexed as `raw`). From the vertex
+// before the anchor's subgoal to some way beyond the window; at most
+// SubgoalAligner::kShapePoints vertices are read. Empty: the raw subgoals
+// themselves are the route's shape (its corners cut by the subgoal spacing).
+struct RouteShape {
+  std::span<const Vec2> points;
+  std::span<const double> arc;
+  std::span<const double> subgoal_arc;
+};
+
 class SubgoalAligner {
  public:
+  static constexpr std::size_t kShapePoints = 64;  // route vertices the corner model reads
   static constexpr std::size_t kAhead = 4;  // route subgoals beyond the window the corner model reads
   static constexpr std::size_t kExtra = 2;  // of those, scored with a corner window
 
@@ -123,7 +142,7 @@ class SubgoalAligner {
   // Appends the next subgoal; false beyond max_subgoals. `raw` as for
   // update() (it is read only when subgoals were pushed without an update
   // in between, to draw the one leaving the window).
-  bool push(std::span<const Vec2> raw) noexcept;
+  bool push(std::span<const Vec2> raw, const RouteShape& shape = {}) noexcept;
   std::size_t count() const noexcept { return count_; }
   // First subgoal in the window.
   std::size_t window_begin() const noexcept { return count_ > static_cast<std::size_t>(k_) ? count_ - static_cast<std::size_t>(k_) : 0; }
@@ -132,7 +151,7 @@ class SubgoalAligner {
   // of subgoals 0..count()-1 (only window_begin()-2 .. count()-1 are read),
   // and may go on with the route's next subgoals: up to kAhead of them shape
   // the corner model (see AlignerConfig::corner_sigma).
-  void update(const perception::TerrainClassMap& map, std::span<const Vec2> raw) noexcept;
+  void update(const perception::TerrainClassMap& map, std::span<const Vec2> raw, const RouteShape& shape = {}) noexcept;
 
   // The corrected position of subgoal i < count(): the window's current
   // estimate, or the estimate frozen when it left the window. Before the
@@ -147,9 +166,9 @@ class SubgoalAligner {
 
  private:
   std::uint64_t next_random() noexcept;
-  void draw_window(std::span<const Vec2> raw) noexcept;
+  void draw_window(std::span<const Vec2> raw, const RouteShape& shape) noexcept;
   void build_cost_table(const perception::TerrainClassMap& map) noexcept;
-  double patch_cost(double x, double y) const noexcept;
+  double patch_cost(double x, double y, bool known_only) const noexcept;
   void resample_anchors() noexcept;
 
   AlignerConfig config_;
