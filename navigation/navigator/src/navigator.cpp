@@ -160,10 +160,12 @@ bool Navigator::plan(const pose::UtmPose& utm, std::int64_t now) noexcept {
   return true;
 }
 
-subgoals::Vec2 Navigator::raw_local(std::size_t i) const noexcept {
-  const double dx = subgoals_[i].x - utm_e_, dy = subgoals_[i].y - utm_n_;
+subgoals::Vec2 Navigator::to_local(const osm::Point2& p) const noexcept {
+  const double dx = p.x - utm_e_, dy = p.y - utm_n_;
   return {local_x_ + cos_ * dx - sin_ * dy, local_y_ + sin_ * dx + cos_ * dy};
 }
+
+subgoals::Vec2 Navigator::raw_local(std::size_t i) const noexcept { return to_local(subgoals_[i]); }
 
 subgoals::Vec2 Navigator::corrected(std::size_t i) const noexcept {
   return is_corrected(i) ? aligner_->estimate(i) : raw_local(i);
@@ -236,8 +238,7 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     const double until = subgoal_arc_[ahead - 1];
     std::size_t np = 0;
     for (; v < route_.size() && np < shape_points_.size(); ++v) {
-      const double dx = route_[v].x - utm_e_, dy = route_[v].y - utm_n_;
-      shape_points_[np] = {local_x_ + cos_ * dx - sin_ * dy, local_y_ + sin_ * dx + cos_ * dy};
+      shape_points_[np] = to_local(route_[v]);
       shape_arc_[np++] = route_arc_[v];
       if (route_arc_[v] >= until) break;
     }

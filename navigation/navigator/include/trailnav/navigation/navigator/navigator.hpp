@@ -150,6 +150,7 @@ class Navigator {
   // Subgoal i in the odometry frame: raw (its OSM position through the
   // latest pose) and corrected (the aligner's estimate, raw before one).
   subgoals::Vec2 raw_local(std::size_t i) const noexcept;
+  subgoals::Vec2 to_local(const osm::Point2& utm) const noexcept;  // through this step's pose
   subgoals::Vec2 corrected(std::size_t i) const noexcept;
   bool is_corrected(std::size_t i) const noexcept { return i < aligner_->count() && aligner_->estimated(i); }
   const subgoals::SubgoalAligner& aligner() const noexcept { return *aligner_; }
