@@ -57,10 +57,12 @@ SubgoalAligner::SubgoalAligner(const AlignerConfig& config, const perception::Te
       resolution_(shape.resolution) {
   normal_.resize(kTable);
   tan_theta_.resize(kTable);
+  turn_.resize(kTable);
   for (std::size_t i = 0; i < kTable; ++i) {
     const double z = normal_quantile((static_cast<double>(i) + 0.5) / static_cast<double>(kTable));
     normal_[i] = z;
     tan_theta_[i] = std::tan(config.sigma_theta * z);
+    turn_[i] = {std::cos(config.corner_turn * z), std::sin(config.corner_turn * z)};
   }
   window_.resize(n_ * kk_);
   anchor_.resize(n_);
@@ -138,7 +140,6 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
   const double cos_corner = std::cos(config_.corner_angle);
   for (std::size_t v = 1; v + 1 < np && config_.corner_sigma > 0.0; ++v) {
     if (arc[v] < a_base - 1e-9 || (given ? arc[v] >= a_new + spacing - 1e-9 : v + first > count_ - 1)) continue;
-    if (!given && v + first < 1) continue;
     const double dx = pts[v].x - pts[v - 1].x, dy = pts[v].y - pts[v - 1].y, d = std::hypot(dx, dy);
     const double ox = pts[v + 1].x - pts[v].x, oy = pts[v + 1].y - pts[v].y, od = std::hypot(ox, oy);
     if (d < 1e-9 || od < 1e-9) continue;
@@ -218,9 +219,8 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
       // This sample's corner shift and turn, and the steps of its moved route.
       const std::uint64_t rr = next_random();
       shift = std::max(s_min, config_.corner_sigma * normal_[rr & kMask]);
-      const double phi = config_.corner_turn * normal_[(rr >> 12) & kMask];
-      rc = std::cos(phi);
-      rs = std::sin(phi);
+      rc = turn_[(rr >> 12) & kMask].x;
+      rs = turn_[(rr >> 12) & kMask].y;
       for (std::size_t i = 0; i < len; ++i) hyp[i] = moved(begin + i, shift);
       steps_of();
     }

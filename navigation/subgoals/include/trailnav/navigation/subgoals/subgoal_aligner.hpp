@@ -184,6 +184,7 @@ class SubgoalAligner {
   static constexpr std::size_t kTable = 4096;
   std::vector<double> normal_;    // standard normal quantiles
   std::vector<double> tan_theta_;  // tan(sigma_theta * quantile)
+  std::vector<Vec2> turn_;         // (cos, sin) of corner_turn * quantile
 
   std::vector<Vec2> window_;     // n x K ring, slot = subgoal % K
   std::vector<Vec2> anchor_;     // n
