@@ -4,6 +4,8 @@
 // with frozen and re-opened cells, and the features of a real KITTI scan.
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -72,6 +74,63 @@ TEST(TerrainFeatures, PointsAlongOneRingTakeTheLinesRise) {
     s.add(x, 0.001f * static_cast<float>(i % 2), 0.2f * x, 25.0f);
   }
   EXPECT_NEAR(compute_terrain_feature(s)[kSlope], std::atan(0.2) * 180.0 / std::numbers::pi, 0.3);
+}
+
+// The closed-form eigen solution against Eigen's solver on thousands of
+// cells: flat, tilted, noisy, along one line, bushy; roughness and slope
+// agree wherever the normal is determined.
+TEST(TerrainFeatures, ClosedFormAgreesWithAnIterativeEigenSolver) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int compared = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    CellStats s;
+    const int kind = trial % 4;
+    const float tx = 2.0f * u(rng), ty = 2.0f * u(rng);
+    const float noise = kind == 3 ? 0.1f : 0.02f * (0.5f + 0.5f * u(rng)) * (0.5f + 0.5f * u(rng));
+    for (int i = 0; i < 25; ++i) {
+      float x = 0.1f * u(rng), y = 0.1f * u(rng);
+      if (kind == 2) y = 0.002f * u(rng);  // one ring crossing the cell
+      s.add(x, y, 3.0f + tx * x + ty * y + noise * u(rng), 30.0f);
+    }
+    // The same covariance as the feature's, in double.
+    const double inv = 1.0 / s.n;
+    auto mean = [&](float sum) { return static_cast<double>(sum) * inv; };
+    const double mx = mean(s.sx), my = mean(s.sy), mz = mean(s.sz);
+    const double xy = mean(s.sxy) - mx * my, xz = mean(s.sxz) - mx * mz, yz = mean(s.syz) - my * mz;
+    Eigen::Matrix3d c;
+    c << mean(s.sxx) - mx * mx, xy, xz, xy, mean(s.syy) - my * my, yz, xz, yz, mean(s.szz) - mz * mz;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(c);
+    const Eigen::Vector3d l = eig.eigenvalues();
+    const FeatureVector f = compute_terrain_feature(s);
+    EXPECT_NEAR(static_cast<double>(f[kRough]), l(0), 2e-4 * l(2) + 1e-9) << trial;
+    // Near the line rule's border, or with the two smaller eigenvalues nearly
+    // equal, the normal is not determined: nothing to compare.
+    const bool line = l(1) < 0.05 * l(2);
+    if (std::abs(l(1) / l(2) - 0.05) < 0.005 || (!line && l(1) - l(0) < 0.05 * l(2))) continue;
+    const double slope = line ? std::asin(std::min(1.0, std::abs(eig.eigenvectors()(2, 2))))
+                              : std::acos(std::min(1.0, std::abs(eig.eigenvectors()(2, 0))));
+    EXPECT_NEAR(static_cast<double>(f[kSlope]), slope * 180.0 / std::numbers::pi, 0.2) << trial;
+    ++compared;
+  }
+  EXPECT_GT(compared, 3000);
+  // Four cells at once, each in its lane: the same as one at a time.
+  std::array<CellStats, 4> four;
+  for (std::size_t l = 0; l < 4; ++l) {
+    for (int i = 0; i < 15 + static_cast<int>(l); ++i) {
+      const float x = 0.1f * u(rng), y = l == 2 ? 0.0f : 0.1f * u(rng);
+      four[l].add(x, y, 0.3f * static_cast<float>(l) * x + 0.01f * u(rng), 20.0f + 10.0f * u(rng));
+    }
+  }
+  std::array<FeatureVector, 4> together;
+  compute_terrain_features({&four[0], &four[1], &four[2], &four[3]}, together);
+  for (std::size_t l = 0; l < 4; ++l) EXPECT_EQ(together[l], compute_terrain_feature(four[l])) << l;
+  // All points at one spot: no roughness, no slope, and no NaN.
+  CellStats same;
+  for (int i = 0; i < 20; ++i) same.add(0.01f, -0.02f, 4.0f, 12.0f);
+  const FeatureVector f = compute_terrain_feature(same);
+  EXPECT_EQ(f[kRough], 0.0f);
+  EXPECT_EQ(f[kSlope], 0.0f);
 }
 
 // One stump of a tree: f[0] <= 0.5 ? leaf 0 : leaf 1.

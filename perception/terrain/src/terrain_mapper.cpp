@@ -122,20 +122,31 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   step_ns_ = now_ns;
   ++counters_.steps;
   const CellIndex o = work_.origin();
+  // Cells due for a feature are batched: their features are computed four at
+  // a time on four-wide vectors, then the forest walks them one by one.
   std::uint64_t classified = 0, known = 0;
+  std::size_t pending = 0;
   work_.for_each_in_window(o, {o.x + work_.size_x(), o.y + work_.size_y()}, [&](CellIndex i, TerrainWorkCell& w) {
     TerrainCell& c = map_.grid().at(i);
-    if (w.stats.n > 0 || w.frozen) update_cell(w, c, i, now_ns);
+    if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, now_ns)) {
+      batch_[pending++] = {&w, &c, i};
+      if (pending == batch_.size()) {
+        finish_batch(pending, now_ns, classified, known);
+        pending = 0;
+      }
+      return;
+    }
     classified += w.frozen ? 1 : 0;
     known += c.known ? 1 : 0;
   });
+  finish_batch(pending, now_ns, classified, known);
   counters_.classified_cells = classified;
   counters_.known_cells = known;
   map_.sequence = counters_.steps;
   map_.time_ns = now_ns;
 }
 
-void TerrainMapper::update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, std::int64_t now_ns) noexcept {
+bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept {
   if (w.frozen && config_.reopen_after > 0.0 && static_cast<double>(now_ns - w.frozen_ns) >= config_.reopen_after * 1e9) {
     // Open the cell again (§7.2.3), softened so new evidence can move it.
     w.frozen = false;
@@ -145,14 +156,37 @@ void TerrainMapper::update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i,
     c.set(p);
     ++counters_.reopened;
   }
-  if (w.stats.n < static_cast<std::uint32_t>(config_.min_points)) return;  // keeps accumulating
+  if (w.stats.n < static_cast<std::uint32_t>(config_.min_points)) return false;  // keeps accumulating
   if (w.frozen && observer_ == nullptr) {
     ++counters_.frozen_skipped;
     w.stats = CellStats{};
-    return;
+    return false;
   }
+  return true;
+}
+
+void TerrainMapper::finish_batch(std::size_t count, std::int64_t now_ns, std::uint64_t& classified,
+                                 std::uint64_t& known) noexcept {
+  std::array<FeatureVector, 4> features;
+  for (std::size_t k = 0; k < count; k += 4) {
+    // A short last group repeats its last cell in the lanes it lacks.
+    std::array<const CellStats*, 4> cells;
+    for (std::size_t l = 0; l < 4; ++l) cells[l] = &batch_[std::min(k + l, count - 1)].work->stats;
+    compute_terrain_features(cells, features);
+    for (std::size_t l = 0; l < 4 && k + l < count; ++l) batch_[k + l].feature = features[l];
+  }
+  for (std::size_t k = 0; k < count; ++k) {
+    Pending& b = batch_[k];
+    update_cell(*b.work, *b.cell, b.index, b.feature, now_ns);
+    classified += b.work->frozen ? 1 : 0;
+    known += b.cell->known ? 1 : 0;
+  }
+}
+
+void TerrainMapper::update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, const FeatureVector& feature,
+                                std::int64_t now_ns) noexcept {
   TerrainObservation obs;
-  obs.feature = compute_terrain_feature(w.stats);
+  obs.feature = feature;
   if (forest_ != nullptr) {
     forest_->predict(obs.feature, obs.likelihood);
   } else {

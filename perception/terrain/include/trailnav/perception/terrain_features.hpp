@@ -62,5 +62,7 @@ static_assert(sizeof(CellStats) == 68, "docs/terrain.md gives the cell's size");
 
 // The feature of a cell with at least three points.
 FeatureVector compute_terrain_feature(const CellStats& s) noexcept;
+// The same for four cells at once (four-wide vectors); the same results.
+void compute_terrain_features(const std::array<const CellStats*, 4>& cells, std::array<FeatureVector, 4>& out) noexcept;
 
 }  // namespace trailnav::perception

@@ -5,6 +5,7 @@
 // frozen and re-opened (§7.2.3). Everything is allocated by create().
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -92,7 +93,20 @@ class TerrainMapper {
  private:
   TerrainMapper(const TerrainConfig& config, const MountParams& mount, const velodyne::RangeImageShape& shape,
                 const RandomForest* forest);
-  void update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, std::int64_t now_ns) noexcept;
+  // Re-opens a frozen cell when its time has come; whether the cell gets a
+  // feature at this step.
+  bool due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept;
+  // Features, then forest and Bayes update, for the first `count` batched cells.
+  void finish_batch(std::size_t count, std::int64_t now_ns, std::uint64_t& classified, std::uint64_t& known) noexcept;
+  void update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, const FeatureVector& feature,
+                   std::int64_t now_ns) noexcept;
+
+  struct Pending {
+    TerrainWorkCell* work = nullptr;
+    TerrainCell* cell = nullptr;
+    CellIndex index{};
+    FeatureVector feature{};
+  };
 
   TerrainConfig config_;
   CloudAligner aligner_;
@@ -101,6 +115,7 @@ class TerrainMapper {
   RollingGrid<TerrainWorkCell> work_;
   TerrainClassMap map_;
   TerrainObserver* observer_ = nullptr;
+  std::array<Pending, 32> batch_{};
   TerrainCounters counters_;
   bool have_step_ = false;
   double step_x_ = 0.0, step_y_ = 0.0;
