@@ -113,6 +113,13 @@ RandomForest::Loaded RandomForest::from_parts(std::vector<std::uint32_t> roots, 
     if (visited != end - begin) return {std::nullopt, "tree " + std::to_string(t) + ": has nodes no path reaches"};
   }
   RandomForest f;
+  static_assert(kTerrainFeatures < static_cast<int>(kLeafCode) && kMaxNodes <= (1u << 29));
+  f.walk_.resize(nodes.size());
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    const ForestNode& n = nodes[i];
+    const auto code = n.feature < 0 ? kLeafCode : static_cast<std::uint32_t>(n.feature);
+    f.walk_[i] = {n.feature < 0 ? 0.0f : n.threshold, (static_cast<std::uint32_t>(n.next) << 3) | code};
+  }
   f.roots_ = std::move(roots);
   f.nodes_ = std::move(nodes);
   f.leaves_ = std::move(leaves);

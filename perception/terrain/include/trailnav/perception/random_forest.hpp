@@ -56,22 +56,23 @@ class RandomForest {
   // P(t | f): the mean of the trees' leaf distributions.
   void predict(const FeatureVector& f, ClassDistribution& out) const noexcept {
     out.fill(0.0f);
-    const ForestNode* nodes = nodes_.data();
-    for (const std::uint32_t root : roots_) {
-      const ForestNode* n = nodes + root;
-      while (n->feature >= 0) n = f[static_cast<std::size_t>(n->feature)] <= n->threshold ? n + 1 : nodes + n->next;
-      const float* p = leaves_.data() + static_cast<std::size_t>(n->next) * kTerrainClasses;
-      for (int t = 0; t < kTerrainClasses; ++t) out[static_cast<std::size_t>(t)] += p[t];
+    for (std::size_t t = 0; t < roots_.size(); ++t) {
+      const float* p = tree_leaf(t, f);
+      for (int c = 0; c < kTerrainClasses; ++c) out[static_cast<std::size_t>(c)] += p[c];
     }
     const float inv = 1.0f / static_cast<float>(roots_.size());
     for (float& v : out) v *= inv;
   }
   // One tree's leaf distribution.
   const float* tree_leaf(std::size_t tree, const FeatureVector& f) const noexcept {
-    const ForestNode* nodes = nodes_.data();
-    const ForestNode* n = nodes + roots_[tree];
-    while (n->feature >= 0) n = f[static_cast<std::size_t>(n->feature)] <= n->threshold ? n + 1 : nodes + n->next;
-    return leaves_.data() + static_cast<std::size_t>(n->next) * kTerrainClasses;
+    const WalkNode* nodes = walk_.data();
+    const WalkNode* n = nodes + roots_[tree];
+    std::uint32_t word = n->word;
+    while ((word & kLeafCode) != kLeafCode) {
+      n = f[word & kLeafCode] <= n->threshold ? n + 1 : nodes + (word >> 3);
+      word = n->word;
+    }
+    return leaves_.data() + static_cast<std::size_t>(word >> 3) * kTerrainClasses;
   }
 
   std::size_t trees() const noexcept { return roots_.size(); }
@@ -86,6 +87,16 @@ class RandomForest {
   RandomForest() = default;
   std::vector<std::uint32_t> roots_;
   std::vector<ForestNode> nodes_;
+  // The nodes as inference walks them, 8 bytes each so the whole forest
+  // stays in a core's cache while the grid streams past: the threshold, and
+  // the feature (low 3 bits; kLeafCode for a leaf) with the right child's
+  // index or the leaf's row above them.
+  struct WalkNode {
+    float threshold;
+    std::uint32_t word;
+  };
+  static constexpr std::uint32_t kLeafCode = 7;
+  std::vector<WalkNode> walk_;
   std::vector<float> leaves_;
   std::size_t max_depth_ = 0;
 };
