@@ -254,6 +254,50 @@ TEST(SubgoalAligner, TakesTheRealTurnAtTheMappedWaysOwnVertex) {
   EXPECT_GT(thesis, 4.0);
 }
 
+// An X crossing mapped 8 m too early, its mapped turn between two
+// subgoals: by the time the subgoals after the turn join the window, the
+// turn lies behind their anchor. The corner is still moved forward past the
+// anchor to the crossing the map shows. (Before, corners were only looked
+// for from the anchor on: 4.13 m here.)
+TEST(SubgoalAligner, MovesATurnMappedTooEarlyFromBehindTheAnchor) {
+  const double jx = 26.0;
+  const auto roads = [&](double x, double y) { return std::abs(y) < 1.5 || std::abs(x - jx) < 1.5; };
+  const std::vector<Vec2> way{{0.0, 0.0}, {18.0, 0.0}, {18.0, 50.0}};
+  const std::vector<double> way_arc{0.0, 18.0, 68.0};
+  std::vector<Vec2> raw;
+  std::vector<double> raw_arc;
+  for (double a = 0.0; a <= 60.0; a += 4.0) {
+    raw.push_back(a <= 18.0 ? Vec2{a, 0.0} : Vec2{18.0, a - 18.0});
+    raw_arc.push_back(a);
+  }
+  const auto off_route = [&](const Vec2& p) {
+    const double east = p.x <= jx ? std::abs(p.y) : std::hypot(p.x - jx, p.y);
+    const double north = p.y >= 0.0 ? std::abs(p.x - jx) : std::hypot(p.x - jx, p.y);
+    return std::min(east, north);
+  };
+  TerrainClassMap map;
+  paint(map, 20.0, 10.0, roads);
+  const auto worst = [&](double corner_sigma) {
+    AlignerConfig c;
+    c.corner_sigma = corner_sigma;
+    SubgoalAligner aligner(c, map.shape());
+    const RouteShape shape{way, way_arc, raw_arc};
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      EXPECT_TRUE(aligner.push(raw, shape));
+      aligner.update(map, raw, shape);
+      aligner.update(map, raw, shape);
+    }
+    double w = 0.0;
+    for (std::size_t i = 0; i < raw.size(); ++i) w = std::max(w, off_route(aligner.estimate(i)));
+    return w;
+  };
+  const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
+  std::printf("farthest subgoal from the route: %.2f m with the corner moved from behind the anchor, %.2f m without\n", moved,
+              thesis);
+  EXPECT_LT(moved, 2.0);
+  EXPECT_GT(thesis, 4.0);
+}
+
 TEST(SubgoalAligner, ReproducesPerSeed) {
   TerrainClassMap map;
   paint(map, 25.0, 0.0, [](double, double y) { return std::abs(y - 1.5) < 1.5; });

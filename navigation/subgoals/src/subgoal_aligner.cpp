@@ -133,22 +133,23 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
   const double spacing = count_ - 1 > base ? (a_new - a_base) / static_cast<double>(count_ - 1 - base) : 4.0;
   // The first corner at the anchor or in the window: a vertex of the route
   // (one up to a subgoal spacing beyond the window's newest subgoal
-  // included) where it turns by at least corner_angle.
+  // included) where it turns by at least corner_angle. Failing that, the
+  // last such vertex up to kBehind spacings behind the anchor: a junction
+  // mapped too early, whose mapped turn the anchor has already passed.
   std::size_t vertex = 0;  // pts index
   bool corner = false;
   Vec2 in{};
   const double cos_corner = std::cos(config_.corner_angle);
+  const double behind_from = a_base - kBehind * spacing - 1e-9;
   for (std::size_t v = 1; v + 1 < np && config_.corner_sigma > 0.0; ++v) {
-    if (arc[v] < a_base - 1e-9 || (given ? arc[v] >= a_new + spacing - 1e-9 : v + first > count_ - 1)) continue;
+    if (arc[v] < behind_from || (given ? arc[v] >= a_new + spacing - 1e-9 : v + first > count_ - 1)) continue;
     const double dx = pts[v].x - pts[v - 1].x, dy = pts[v].y - pts[v - 1].y, d = std::hypot(dx, dy);
     const double ox = pts[v + 1].x - pts[v].x, oy = pts[v + 1].y - pts[v].y, od = std::hypot(ox, oy);
-    if (d < 1e-9 || od < 1e-9) continue;
-    if ((dx * ox + dy * oy) / (d * od) < cos_corner) {
-      vertex = v;
-      in = {dx / d, dy / d};
-      corner = true;
-      break;
-    }
+    if (d < 1e-9 || od < 1e-9 || (dx * ox + dy * oy) / (d * od) >= cos_corner) continue;
+    vertex = v;
+    in = {dx / d, dy / d};
+    corner = true;
+    if (arc[v] >= a_base - 1e-9) break;  // ahead of the anchor: this one
   }
   // Eq. 8.8: the street direction at g_0.
   Vec2 e0{1.0, 0.0};
@@ -195,8 +196,7 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
   std::array<Vec2, 8> hyp{};
   std::array<Vec2, 8> sdir{};
   std::array<double, 8> sdist{};
-  const auto steps_of = [&] {
-    Vec2 last = raw[base];
+  const auto steps_of = [&](Vec2 last) {
     for (std::size_t i = 0; i < len; ++i) {
       if (begin + i == 0) continue;
       const double dx = hyp[i].x - last.x, dy = hyp[i].y - last.y, d = std::hypot(dx, dy);
@@ -206,7 +206,7 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
     }
   };
   for (std::size_t i = 0; i < len; ++i) hyp[i] = raw[begin + i];
-  steps_of();
+  steps_of(raw[base]);
   // Route beyond the window to score (none past the route's end).
   const std::size_t beyond = given ? static_cast<std::size_t>(std::max(0.0, (arc[np - 1] - a_new) / spacing + 1e-6))
                                    : first + np - count_;
@@ -218,11 +218,20 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
     if (corner) {
       // This sample's corner shift and turn, and the steps of its moved route.
       const std::uint64_t rr = next_random();
-      shift = std::max(s_min, config_.corner_sigma * normal_[rr & kMask]);
+      shift = config_.corner_sigma * normal_[rr & kMask];
       rc = turn_[(rr >> 12) & kMask].x;
       rs = turn_[(rr >> 12) & kMask].y;
+      if (av < a_base && shift <= s_min) {
+        // A mapped corner behind the anchor that stays behind it: the route
+        // as mapped (the turn already taken).
+        shift = 0.0;
+        rc = 1.0;
+        rs = 0.0;
+      } else {
+        shift = std::max(s_min, shift);
+      }
       for (std::size_t i = 0; i < len; ++i) hyp[i] = moved(begin + i, shift);
-      steps_of();
+      steps_of(moved(base, shift));
     }
     double a2 = 0.0;
     for (std::size_t i = 0; i < len; ++i) {

@@ -129,6 +129,9 @@ class SubgoalAligner {
   static constexpr std::size_t kShapePoints = 64;  // route vertices the corner model reads
   static constexpr std::size_t kAhead = 4;  // route subgoals beyond the window the corner model reads
   static constexpr std::size_t kExtra = 2;  // of those, scored with a corner window
+  // How many subgoal spacings behind the anchor a mapped corner may lie and
+  // still be moved forward past it (a junction mapped too early).
+  static constexpr double kBehind = 1.0;
 
   // Allocates the samples, tables and the cost box for `map_shape`.
   // Precondition: check_aligner_config(config) is empty.
