@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <functional>
+#include <utility>
+#include <vector>
 
 #include "trailnav/navigation/subgoals/subgoal_aligner.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
@@ -212,19 +214,19 @@ TEST(SubgoalAligner, TakesTheRealTurnAtACrossingMappedTooFarAlong) {
   EXPECT_GT(thesis, 4.0);
 }
 
-// The same crossing with subgoals every 4 m along the mapped way, which cut
-// its corner: given the way's own vertices (the navigator passes them), the
-// corner model turns where the way turns and the subgoals still go round the
-// real corner.
-TEST(SubgoalAligner, TakesTheRealTurnAtTheMappedWaysOwnVertex) {
-  const double jx = 20.0;
+// An X crossing at x = jx of a road along y = 0 and one along x = jx, the
+// route east then north; the mapped way turns north at x = mapped (to y =
+// way_end) and the raw subgoals lie every 4 m along it up to arc `last`; the
+// aligner is given the way's vertices. Returns the farthest estimate from the
+// route with the default corner model and with the thesis' model.
+std::pair<double, double> farthest_at_mapped_crossing(double jx, double mapped, double way_end, double last) {
   const auto roads = [&](double x, double y) { return std::abs(y) < 1.5 || std::abs(x - jx) < 1.5; };
-  const std::vector<Vec2> way{{0.0, 0.0}, {26.0, 0.0}, {26.0, 40.0}};
-  const std::vector<double> way_arc{0.0, 26.0, 66.0};
+  const std::vector<Vec2> way{{0.0, 0.0}, {mapped, 0.0}, {mapped, way_end}};
+  const std::vector<double> way_arc{0.0, mapped, mapped + way_end};
   std::vector<Vec2> raw;
   std::vector<double> raw_arc;
-  for (double a = 0.0; a <= 56.0; a += 4.0) {
-    raw.push_back(a <= 26.0 ? Vec2{a, 0.0} : Vec2{26.0, a - 26.0});
+  for (double a = 0.0; a <= last; a += 4.0) {
+    raw.push_back(a <= mapped ? Vec2{a, 0.0} : Vec2{mapped, a - mapped});
     raw_arc.push_back(a);
   }
   const auto off_route = [&](const Vec2& p) {
@@ -248,7 +250,15 @@ TEST(SubgoalAligner, TakesTheRealTurnAtTheMappedWaysOwnVertex) {
     for (std::size_t i = 0; i < raw.size(); ++i) w = std::max(w, off_route(aligner.estimate(i)));
     return w;
   };
-  const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
+  return {worst(AlignerConfig{}.corner_sigma), worst(0.0)};
+}
+
+// The same crossing with subgoals every 4 m along the mapped way, which cut
+// its corner: given the way's own vertices (the navigator passes them), the
+// corner model turns where the way turns and the subgoals still go round the
+// real corner.
+TEST(SubgoalAligner, TakesTheRealTurnAtTheMappedWaysOwnVertex) {
+  const auto [moved, thesis] = farthest_at_mapped_crossing(20.0, 26.0, 40.0, 56.0);
   std::printf("farthest subgoal from the route: %.2f m with the corner model at the way's vertex, %.2f m without\n", moved, thesis);
   EXPECT_LT(moved, 2.0);
   EXPECT_GT(thesis, 4.0);
@@ -260,38 +270,7 @@ TEST(SubgoalAligner, TakesTheRealTurnAtTheMappedWaysOwnVertex) {
 // anchor to the crossing the map shows. (Before, corners were only looked
 // for from the anchor on: 4.13 m here.)
 TEST(SubgoalAligner, MovesATurnMappedTooEarlyFromBehindTheAnchor) {
-  const double jx = 26.0;
-  const auto roads = [&](double x, double y) { return std::abs(y) < 1.5 || std::abs(x - jx) < 1.5; };
-  const std::vector<Vec2> way{{0.0, 0.0}, {18.0, 0.0}, {18.0, 50.0}};
-  const std::vector<double> way_arc{0.0, 18.0, 68.0};
-  std::vector<Vec2> raw;
-  std::vector<double> raw_arc;
-  for (double a = 0.0; a <= 60.0; a += 4.0) {
-    raw.push_back(a <= 18.0 ? Vec2{a, 0.0} : Vec2{18.0, a - 18.0});
-    raw_arc.push_back(a);
-  }
-  const auto off_route = [&](const Vec2& p) {
-    const double east = p.x <= jx ? std::abs(p.y) : std::hypot(p.x - jx, p.y);
-    const double north = p.y >= 0.0 ? std::abs(p.x - jx) : std::hypot(p.x - jx, p.y);
-    return std::min(east, north);
-  };
-  TerrainClassMap map;
-  paint(map, 20.0, 10.0, roads);
-  const auto worst = [&](double corner_sigma) {
-    AlignerConfig c;
-    c.corner_sigma = corner_sigma;
-    SubgoalAligner aligner(c, map.shape());
-    const RouteShape shape{way, way_arc, raw_arc};
-    for (std::size_t i = 0; i < raw.size(); ++i) {
-      EXPECT_TRUE(aligner.push(raw, shape));
-      aligner.update(map, raw, shape);
-      aligner.update(map, raw, shape);
-    }
-    double w = 0.0;
-    for (std::size_t i = 0; i < raw.size(); ++i) w = std::max(w, off_route(aligner.estimate(i)));
-    return w;
-  };
-  const double moved = worst(AlignerConfig{}.corner_sigma), thesis = worst(0.0);
+  const auto [moved, thesis] = farthest_at_mapped_crossing(26.0, 18.0, 50.0, 60.0);
   std::printf("farthest subgoal from the route: %.2f m with the corner moved from behind the anchor, %.2f m without\n", moved,
               thesis);
   EXPECT_LT(moved, 2.0);
