@@ -160,7 +160,7 @@ int evaluate(EvalOptions& o) {
   }
   std::printf("model %s: %zu trees, %zu nodes, depth up to %zu\n", config.model.c_str(), loaded.forest->trees(),
               loaded.forest->nodes(), loaded.forest->max_depth());
-  ConfusionMatrix integrated, single;
+  ConfusionMatrix integrated, single, last;
   double step_ms = 0.0, register_ms = 0.0;
   std::uint64_t steps = 0, revolutions = 0, features = 0;
   for (const std::string& input : o.inputs) {
@@ -178,6 +178,7 @@ int evaluate(EvalOptions& o) {
                 perception::format_confusion(r.integrated, &r.single).c_str());
     integrated += r.integrated;
     single += r.single;
+    last += r.last;
     step_ms += r.step_ms * static_cast<double>(r.counters.steps);
     register_ms += r.register_ms * static_cast<double>(r.revolutions);
     steps += r.counters.steps;
@@ -188,6 +189,8 @@ int evaluate(EvalOptions& o) {
     std::printf("\nall %zu recordings: integrated map, Eq. 7.15 (single features in brackets):\n%s", o.inputs.size(),
                 perception::format_confusion(integrated, &single).c_str());
   }
+  std::printf("\neach labelled cell once, the map's class at its last observation:\n%s",
+              perception::format_confusion(last).c_str());
   std::printf("\nrecall per class (integrated / single feature / thesis Table 7.2):\n");
   for (int t = 0; t < perception::kTerrainClasses; ++t) {
     if (integrated.row_total(t) == 0) continue;
@@ -235,7 +238,8 @@ void add_terrain_commands(CLI::App& app) {
       "terrain-eval",
       "Run the terrain analysis (thesis §7.2) over simulated recordings with a trained model and print\n"
       "the cell-wise confusion matrix against the truth, as the thesis' Table 7.2: the integrated class\n"
-      "map (Eq. 7.15) and, in brackets, the forest's answer to each single feature.\n"
+      "map (Eq. 7.15) and, in brackets, the forest's answer to each single feature, for every labelled\n"
+      "cell at every step; then each labelled cell once, with the map's class at its last observation.\n"
       "Example:\n"
       "  trailnav terrain-eval build/sim/mixed-route --model build/terrain.tnrf");
   static EvalOptions e;

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <unordered_map>
+#include <utility>
 
 #include "revolution_source.hpp"
 #include "world.hpp"
@@ -35,6 +37,13 @@ class Scorer final : public perception::TerrainObserver {
     const auto best = static_cast<int>(std::max_element(o.likelihood.begin(), o.likelihood.end()) - o.likelihood.begin());
     report_.single.add(t, best);
     report_.integrated.add(t, static_cast<int>(o.estimate->best));
+    const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(o.cell.x)) << 32) |
+                              static_cast<std::uint32_t>(o.cell.y);
+    last_[key] = {t, static_cast<int>(o.estimate->best)};
+  }
+  // Each labelled cell once, with the class the map held for it last.
+  void add_last(perception::ConfusionMatrix& m) const {
+    for (const auto& [key, v] : last_) m.add(v.first, v.second);
   }
 
  private:
@@ -43,6 +52,7 @@ class Scorer final : public perception::TerrainObserver {
   TerrainRunReport& report_;
   bool collect_;
   bool scored_;
+  std::unordered_map<std::uint64_t, std::pair<int, int>> last_;
 };
 
 }  // namespace
@@ -128,6 +138,7 @@ TerrainRunReport run_terrain(const TerrainRunOptions& options) {
     return report;
   }
   report.counters = mapper.counters();
+  scorer.add_last(report.last);
   if (report.revolutions > 0) {
     report.align_ms = align_ms / static_cast<double>(report.revolutions);
     report.register_ms = register_ms / static_cast<double>(report.revolutions);

@@ -45,6 +45,7 @@ struct TerrainRunReport {
   perception::LabelledFeatures samples;
   perception::ConfusionMatrix integrated;  // the map's best class per observed, labelled cell and step
   perception::ConfusionMatrix single;      // the forest's best class for that step's feature alone
+  perception::ConfusionMatrix last;        // each labelled cell once: the map's best class at its last observation
   std::uint64_t unlabelled = 0;            // observations of mixed cells (not scored)
   double align_ms = 0.0;     // mean per revolution
   double register_ms = 0.0;  // mean per revolution
