@@ -191,6 +191,15 @@ TEST(RandomForest, ModelFileRoundTripsAndEveryCorruptionIsNamed) {
     EXPECT_EQ(a, b);
   }
   const auto good = file_bytes(path);
+  // The shipped model, loaded and saved again, is the same bytes: the nodes
+  // kept only in their walking form come back exactly.
+  {
+    auto shipped = RandomForest::load("board/models/terrain-sim.tnrf");
+    ASSERT_TRUE(shipped.forest) << shipped.error;
+    const std::string again = (dir / "again.tnrf").string();
+    ASSERT_TRUE(shipped.forest->save(again));
+    EXPECT_EQ(file_bytes(again), file_bytes("board/models/terrain-sim.tnrf"));
+  }
   auto expect_error = [&](std::vector<std::uint8_t> bytes, const std::string& words) {
     write_bytes(path, bytes);
     const auto r = RandomForest::load(path);

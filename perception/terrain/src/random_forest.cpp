@@ -118,14 +118,25 @@ RandomForest::Loaded RandomForest::from_parts(std::vector<std::uint32_t> roots, 
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     const ForestNode& n = nodes[i];
     const auto code = n.feature < 0 ? kLeafCode : static_cast<std::uint32_t>(n.feature);
-    f.walk_[i] = {n.feature < 0 ? 0.0f : n.threshold, (static_cast<std::uint32_t>(n.next) << 3) | code};
+    f.walk_[i] = {n.threshold, (static_cast<std::uint32_t>(n.next) << 3) | code};  // a leaf keeps its (unread) threshold so save() writes the same bytes
   }
   f.roots_ = std::move(roots);
-  f.nodes_ = std::move(nodes);
   f.leaves_ = std::move(leaves);
   f.max_depth_ = max_depth;
   result.forest = std::move(f);
   return result;
+}
+
+std::vector<ForestNode> RandomForest::node_table() const {
+  std::vector<ForestNode> table(walk_.size());
+  for (std::size_t i = 0; i < walk_.size(); ++i) {
+    const std::uint32_t code = walk_[i].word & kLeafCode;
+    ForestNode& n = table[i];
+    n.feature = code == kLeafCode ? std::int16_t{-1} : static_cast<std::int16_t>(code);
+    n.threshold = walk_[i].threshold;
+    n.next = static_cast<std::int32_t>(walk_[i].word >> 3);
+  }
+  return table;
 }
 
 Status RandomForest::save(const std::string& path) const {
@@ -134,10 +145,10 @@ Status RandomForest::save(const std::string& path) const {
   put_u32(out, kTerrainFeatures);
   put_u32(out, kTerrainClasses);
   put_u32(out, static_cast<std::uint32_t>(roots_.size()));
-  put_u32(out, static_cast<std::uint32_t>(nodes_.size()));
+  put_u32(out, static_cast<std::uint32_t>(walk_.size()));
   put_u32(out, static_cast<std::uint32_t>(leaves()));
   for (std::uint32_t r : roots_) put_u32(out, r);
-  for (const ForestNode& n : nodes_) {
+  for (const ForestNode& n : node_table()) {
     put_u32(out, static_cast<std::uint16_t>(n.feature));
     put_f32(out, n.threshold);
     put_u32(out, static_cast<std::uint32_t>(n.next));

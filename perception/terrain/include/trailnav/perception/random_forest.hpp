@@ -76,21 +76,22 @@ class RandomForest {
   }
 
   std::size_t trees() const noexcept { return roots_.size(); }
-  std::size_t nodes() const noexcept { return nodes_.size(); }
+  std::size_t nodes() const noexcept { return walk_.size(); }
   std::size_t leaves() const noexcept { return leaves_.size() / kTerrainClasses; }
   std::size_t max_depth() const noexcept { return max_depth_; }
   std::span<const std::uint32_t> roots() const noexcept { return roots_; }
-  std::span<const ForestNode> node_table() const noexcept { return nodes_; }
+  // The nodes as the file stores them (rebuilt from the walking table).
+  std::vector<ForestNode> node_table() const;
   std::span<const float> leaf_table() const noexcept { return leaves_; }
 
  private:
   RandomForest() = default;
   std::vector<std::uint32_t> roots_;
-  std::vector<ForestNode> nodes_;
   // The nodes as inference walks them, 8 bytes each so the whole forest
   // stays in a core's cache while the grid streams past: the threshold, and
   // the feature (low 3 bits; kLeafCode for a leaf) with the right child's
-  // index or the leaf's row above them.
+  // index or the leaf's row above them. The only copy of the nodes:
+  // node_table() and save() rebuild the file's 12-byte form from it.
   struct WalkNode {
     float threshold;
     std::uint32_t word;
