@@ -27,12 +27,13 @@ struct ObstaclesCliOptions {
 
 void print_score(const char* model, const eval::MapScore& s) {
   const auto all = s.all_free();
-  std::printf("  %s: obstacle outlines %llu/%llu cells found (recall %.4f), whole footprints %.4f (%llu); ditches %.4f (%llu); "
-              "bushes %.4f (%llu)\n",
-              model, static_cast<unsigned long long>(s.outlines.found), static_cast<unsigned long long>(s.outlines.cells),
-              s.outlines.recall(), s.obstacles.recall(), static_cast<unsigned long long>(s.obstacles.cells),
-              s.negative.recall(), static_cast<unsigned long long>(s.negative.cells),
-              s.vegetation.recall(), static_cast<unsigned long long>(s.vegetation.cells));
+  std::printf("  %s: obstacle faces seen %llu/%llu cells found (recall %.4f); outlines seen anywhere %.4f (%llu), whole "
+              "footprints %.4f (%llu); ditches %.4f (%llu); bushes %.4f (%llu)\n",
+              model, static_cast<unsigned long long>(s.faces.found), static_cast<unsigned long long>(s.faces.cells),
+              s.faces.recall(), s.outlines.recall(), static_cast<unsigned long long>(s.outlines.cells), s.obstacles.recall(),
+              static_cast<unsigned long long>(s.obstacles.cells), s.negative.recall(),
+              static_cast<unsigned long long>(s.negative.cells), s.vegetation.recall(),
+              static_cast<unsigned long long>(s.vegetation.cells));
   std::printf("      fake obstacles: all %.4f (%llu/%llu)", all.rate(), static_cast<unsigned long long>(all.fake),
               static_cast<unsigned long long>(all.free));
   for (int t = 0; t < perception::kTerrainClasses; ++t) {
@@ -46,8 +47,10 @@ void print_score(const char* model, const eval::MapScore& s) {
               s.snapshots ? 100.0 * static_cast<double>(s.blocked) / static_cast<double>(s.snapshots) : 0.0);
   for (const auto& n : s.named) {
     if (n.snapshots == 0) continue;
-    std::printf("      %-28s detected in %llu of %llu snapshots within range\n", n.name.c_str(),
-                static_cast<unsigned long long>(n.detected), static_cast<unsigned long long>(n.snapshots));
+    std::printf("      %-28s detected in %llu of %llu snapshots within range; faces %llu/%llu cells (%.4f)\n",
+                n.name.c_str(), static_cast<unsigned long long>(n.detected), static_cast<unsigned long long>(n.snapshots),
+                static_cast<unsigned long long>(n.faces.found), static_cast<unsigned long long>(n.faces.cells),
+                n.faces.recall());
   }
 }
 

@@ -53,6 +53,7 @@ class TruthCells {
     near_.assign(n, 0);
     outline_.assign(n, 0);
     sighted_.assign(truth.sightings.empty() ? 0 : n, 0);
+    side_sighted_.assign(truth.side_sightings.empty() ? 0 : n, 0);
     std::vector<std::array<std::uint16_t, perception::kTerrainClasses>> counts(n);
     for (int j = 0; j < o.height; ++j) {
       for (int i = 0; i < o.width; ++i) {
@@ -64,6 +65,10 @@ class TruthCells {
         if (!truth.sightings.empty() && o.data[src] == 1 && truth.sightings[src] != 0) {
           std::uint32_t& first = sighted_[k];
           first = first == 0 ? truth.sightings[src] : std::min(first, truth.sightings[src]);
+        }
+        if (!truth.side_sightings.empty() && o.data[src] == 1 && truth.side_sightings[src] != 0) {
+          std::uint32_t& first = side_sighted_[k];
+          first = first == 0 ? truth.side_sightings[src] : std::min(first, truth.side_sightings[src]);
         }
         const std::uint8_t t = truth.terrain.data[src];
         if (t < perception::kTerrainClasses) ++counts[k][t];
@@ -112,6 +117,11 @@ class TruthCells {
   bool sighted(std::size_t k, std::int64_t ms) const noexcept {
     return sighted_[k] != 0 && static_cast<std::int64_t>(sighted_[k]) <= ms + 1;
   }
+  bool has_side_sightings() const noexcept { return !side_sighted_.empty(); }
+  // ... from one of its sides (a vertical face), not only its top?
+  bool side_sighted(std::size_t k, std::int64_t ms) const noexcept {
+    return side_sighted_[k] != 0 && static_cast<std::int64_t>(side_sighted_[k]) <= ms + 1;
+  }
   double resolution() const noexcept { return res_; }
 
  private:
@@ -121,7 +131,7 @@ class TruthCells {
   double res_;
   std::int32_t ix0_ = 0, iy0_ = 0, nx_ = 0, ny_ = 0;
   std::vector<std::uint8_t> code_, cls_, near_, outline_;
-  std::vector<std::uint32_t> sighted_;
+  std::vector<std::uint32_t> sighted_, side_sighted_;
 };
 
 struct NamedShape {
@@ -154,7 +164,7 @@ class Scorer {
         shapes_(named_obstacles(truth.scenario)) {}
 
   void init(MapScore& s) const {
-    for (const NamedShape& n : shapes_) s.named.push_back({n.name, 0, 0});
+    for (const NamedShape& n : shapes_) s.named.push_back({n.name, 0, 0, {}});
   }
 
   void score(const ObstacleMap& map, double rx, double ry, std::int64_t t_ns, MapScore& s) const {
@@ -184,9 +194,8 @@ class Scorer {
         }
         // A solid obstacle counts once the lidar has seen it (simulated
         // recordings say when), not when grass around it was seen.
-        if (code == 1 && cells_.has_sightings() && !cells_.sighted(k, (t_ns - truth_.scenario.start_utc_ns) / 1'000'000)) {
-          continue;
-        }
+        const std::int64_t ms = (t_ns - truth_.scenario.start_utc_ns) / 1'000'000;
+        if (code == 1 && cells_.has_sightings() && !cells_.sighted(k, ms)) continue;
         FoundCells& f = code == 1 ? s.obstacles : code == 2 ? s.negative : s.vegetation;
         ++f.cells;
         bool found = false;
@@ -194,9 +203,21 @@ class Scorer {
           for (std::int32_t tx = -tolerance_; tx <= tolerance_ && !found; ++tx) found = occupied(x + tx, y + ty);
         }
         if (found) ++f.found;
-        if (code == 1 && cells_.outline(k)) {
-          ++s.outlines.cells;
-          if (found) ++s.outlines.found;
+        if (code != 1 || !cells_.outline(k)) continue;
+        ++s.outlines.cells;
+        if (found) ++s.outlines.found;
+        // Of the outline, the cells where the lidar has seen a side of the
+        // obstacle: a step the geometry can show (a box's back edge seen
+        // only on its top cannot).
+        if (!cells_.has_side_sightings() || !cells_.side_sighted(k, ms)) continue;
+        ++s.faces.cells;
+        if (found) ++s.faces.found;
+        const double wx = (x + 0.5) * res, wy = (y + 0.5) * res;
+        for (std::size_t n = 0; n < shapes_.size(); ++n) {
+          if (std::hypot(shapes_[n].x - wx, shapes_[n].y - wy) > shapes_[n].radius + res) continue;
+          ++s.named[n].faces.cells;
+          if (found) ++s.named[n].faces.found;
+          break;
         }
       }
     }

@@ -65,10 +65,12 @@ struct NamedObstacle {
   std::string name;
   std::uint64_t snapshots = 0;  // scored while it was within the radius
   std::uint64_t detected = 0;   // of them, with an occupied cell on it
+  FoundCells faces;             // its outline cells with a side seen (as MapScore::faces)
 };
 struct MapScore {
   FoundCells obstacles;   // solid obstacles >= 10 cm: every observed cell of their footprint
   FoundCells outlines;    // of them, the cells on the footprint's outline, where the height steps
+  FoundCells faces;       // of those, the cells where the lidar has seen a side (side_sightings.u32)
   FoundCells negative;    // ditches
   FoundCells vegetation;  // bushes, undergrowth
   std::array<ClassCells, perception::kTerrainClasses> classes;

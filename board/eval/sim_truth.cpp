@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <utility>
 
 #include "png.hpp"
 #include "trailnav/drivers/velodyne/packet.hpp"
@@ -76,17 +77,18 @@ SimTruthResult load_sim_truth(const std::string& dir) {
   if (Status st = load_raster((fs::path(dir) / "obstacles.png").string(), width, height, t.obstacles); !st) {
     return {std::nullopt, st.message()};
   }
-  const fs::path sight = fs::path(dir) / "sightings.u32";
-  if (fs::exists(sight)) {
-    const auto n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  const auto n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  for (auto [file, out] : {std::pair{"sightings.u32", &t.sightings}, std::pair{"side_sightings.u32", &t.side_sightings}}) {
+    const fs::path sight = fs::path(dir) / file;
+    if (!fs::exists(sight)) continue;
     std::ifstream s(sight, std::ios::binary);
     std::vector<std::uint8_t> bytes(n * 4);
     if (!s.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size())) || s.peek() != EOF) {
       return {std::nullopt, sight.string() + ": not " + std::to_string(n) + " uint32 values (" + std::to_string(width) +
                                 " x " + std::to_string(height) + " pixels)"};
     }
-    t.sightings.resize(n);
-    for (std::size_t i = 0; i < n; ++i) t.sightings[i] = velodyne::read_u32(bytes.data() + i * 4);  // little-endian
+    out->resize(n);
+    for (std::size_t i = 0; i < n; ++i) (*out)[i] = velodyne::read_u32(bytes.data() + i * 4);  // little-endian
   }
   const std::string traj = (fs::path(dir) / "trajectory.csv").string();
   std::ifstream in(traj);

@@ -46,6 +46,9 @@ struct SimTruth {
   // first lidar return from a solid obstacle there; 0 never. Empty for
   // recordings made before the simulator wrote sightings.u32.
   std::vector<std::uint32_t> sightings;
+  // The same for returns from an obstacle's side (a vertical face), not its
+  // top (side_sightings.u32); empty for older recordings.
+  std::vector<std::uint32_t> side_sightings;
   std::vector<TruthPose> trajectory;
 };
 

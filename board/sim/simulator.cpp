@@ -82,7 +82,8 @@ class LidarSim {
       intensity_corrected_.push_back(c.focal_slope != 0.0 || c.min_intensity != 0 || c.max_intensity != 255);
     }
     mount_ = s.robot.lidar_mount;
-    sighted_.assign(static_cast<std::size_t>(world.width()) * static_cast<std::size_t>(world.height()), 0);
+    sighted_.any.assign(static_cast<std::size_t>(world.width()) * static_cast<std::size_t>(world.height()), 0);
+    sighted_.side.assign(sighted_.any.size(), 0);
   }
 
   double packet_start_us(std::uint64_t i) const { return static_cast<double>(i) * packet_period_us_; }
@@ -164,12 +165,24 @@ class LidarSim {
           if (raw < 1.0 || raw > 65535.0) continue;
           const auto r16 = static_cast<std::uint16_t>(raw);
           if (hit.kind == HitKind::object || hit.kind == HitKind::ground) {
+            const auto ms = static_cast<std::uint32_t>(tg_us / 1000.0) + 1;
+            const auto mark = [&](std::vector<std::uint32_t>& first, const Vec3& at) {
+              const std::ptrdiff_t px = world_.pixel(at.x(), at.y());
+              if (px < 0 || world_.obstacle_raster()[static_cast<std::size_t>(px)] !=
+                                static_cast<std::uint8_t>(ObstacleTruth::obstacle)) {
+                return;
+              }
+              std::uint32_t& f = first[static_cast<std::size_t>(px)];
+              if (f == 0 || ms < f) f = ms;
+            };
             const Vec3 at = sensor + R * (os + ds * hit.distance);
-            const std::ptrdiff_t px = world_.pixel(at.x(), at.y());
-            if (px >= 0 && world_.obstacle_raster()[static_cast<std::size_t>(px)] ==
-                               static_cast<std::uint8_t>(ObstacleTruth::obstacle)) {
-              std::uint32_t& first = sighted_[static_cast<std::size_t>(px)];
-              if (first == 0) first = static_cast<std::uint32_t>(tg_us / 1000.0) + 1;
+            mark(sighted_.any, at);
+            if (hit.kind == HitKind::object && hit.side) {
+              // A side's hit lies on the footprint's edge: the pixel just
+              // inside the face is the one seen.
+              const Vec3 in = at + R * ds * 0.03;
+              mark(sighted_.any, in);
+              if (hit.distance <= kSideSightingRange) mark(sighted_.side, in);
             }
           }
           double intensity = hit.reflectivity * (0.55 + 0.45 * hit.cos_incidence) + 2.0 * gaussian(hash(key, 0xD2));
@@ -209,8 +222,9 @@ class LidarSim {
 
   std::uint64_t rays() const { return rays_; }
   // Per truth pixel: milliseconds after the start (plus one) of the first
-  // return that came from a solid obstacle in it; 0: never seen.
-  std::vector<std::uint32_t> take_sightings() { return std::move(sighted_); }
+  // return that came from a solid obstacle in it (any part; or a side, from
+  // within kSideSightingRange); 0: never seen.
+  Sightings take_sightings() { return std::move(sighted_); }
   std::uint64_t returns() const { return returns_; }
 
  private:
@@ -226,7 +240,7 @@ class LidarSim {
   double packet_period_us_ = 0.0;
   double rate_ = 0.0;
   double phase0_ = 0.0;
-  std::vector<std::uint32_t> sighted_;
+  Sightings sighted_;
   Vec3 mount_{0, 0, 0};
   std::vector<Vec3> dir0_;
   std::vector<Vec3> origin0_;
@@ -495,7 +509,7 @@ SimReport run_simulation(const SimOptions& o) {
   }
 
   // Lidar data and position packets, in the order they leave the sensor.
-  std::vector<std::uint32_t> sightings;
+  Sightings sightings;
   if (o.lidar_packets) {
     const auto t_lidar = Clock::now();
     LidarSim lidar(decoder, s, *world, traj, o.seed);

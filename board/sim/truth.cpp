@@ -44,11 +44,26 @@ Status write_raster(const std::string& path, const World& w, const std::vector<s
   return cli::write_png(path, static_cast<std::uint32_t>(nx), static_cast<std::uint32_t>(ny), cli::PngColor::grey, flipped);
 }
 
+// Little-endian uint32 per pixel, row 0 at the south edge.
+Status write_u32_raster(const std::string& path, const std::vector<std::uint32_t>& values) {
+  std::vector<std::uint8_t> bytes(values.size() * 4);
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    for (std::size_t b = 0; b < 4; ++b) bytes[i * 4 + b] = static_cast<std::uint8_t>(values[i] >> (8 * b));
+  }
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f || std::fwrite(bytes.data(), 1, bytes.size(), f) != bytes.size()) {
+    if (f) std::fclose(f);
+    return Status::error("cannot write " + path);
+  }
+  std::fclose(f);
+  return Status::ok();
+}
+
 }  // namespace
 
 Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed, const World& world,
                    const RoadNetwork& roads, const Trajectory& traj, const GeoFrame& geo,
-                   const std::vector<std::uint32_t>& sightings) {
+                   const Sightings& sightings) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return Status::error("cannot create " + dir + ": " + ec.message());
@@ -111,19 +126,11 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
   // Rasters.
   if (Status st = write_raster(dir + "/terrain.png", world, world.terrain_raster()); !st) return st;
   if (Status st = write_raster(dir + "/obstacles.png", world, world.obstacle_raster()); !st) return st;
-  const bool sighted = sightings.size() == world.obstacle_raster().size();
+  const bool sighted = sightings.any.size() == world.obstacle_raster().size() &&
+                       sightings.side.size() == world.obstacle_raster().size();
   if (sighted) {
-    // Little-endian uint32 per pixel, row 0 at the south edge.
-    std::vector<std::uint8_t> bytes(sightings.size() * 4);
-    for (std::size_t i = 0; i < sightings.size(); ++i) {
-      for (std::size_t b = 0; b < 4; ++b) bytes[i * 4 + b] = static_cast<std::uint8_t>(sightings[i] >> (8 * b));
-    }
-    f = std::fopen((dir + "/sightings.u32").c_str(), "wb");
-    if (!f || std::fwrite(bytes.data(), 1, bytes.size(), f) != bytes.size()) {
-      if (f) std::fclose(f);
-      return Status::error("cannot write " + dir + "/sightings.u32");
-    }
-    std::fclose(f);
+    if (Status st = write_u32_raster(dir + "/sightings.u32", sightings.any); !st) return st;
+    if (Status st = write_u32_raster(dir + "/side_sightings.u32", sightings.side); !st) return st;
   }
   f = std::fopen((dir + "/rasters.yaml").c_str(), "w");
   if (!f) return Status::error("cannot write " + dir + "/rasters.yaml");
@@ -143,7 +150,10 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
   if (sighted) {
     std::fprintf(f,
                  "sightings.u32: {type: uint32 little-endian, rows: south_up, value: \"ms after the start + 1 of the first "
-                 "lidar return from a solid obstacle in the pixel; 0: never\"}\n");
+                 "lidar return from a solid obstacle in the pixel; 0: never\"}\n"
+                 "side_sightings.u32: {type: uint32 little-endian, rows: south_up, value: \"the same for returns from an "
+                 "obstacle's side (a vertical face, not its top) within %.0f m of the sensor\"}\n",
+                 kSideSightingRange);
   }
   std::fclose(f);
 

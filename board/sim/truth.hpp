@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "motion.hpp"
 #include "roads.hpp"
@@ -14,8 +15,19 @@
 
 namespace trailnav::sim {
 
+// Per pixel of the obstacle raster: ms after the start + 1 of the first lidar
+// return from a solid obstacle there (`any`: its top included, from any
+// range; `side`: from one of its vertical faces, within kSideSightingRange of
+// the sensor, the radius obstacle recall is scored in); 0: never. Empty when
+// no lidar was simulated.
+inline constexpr double kSideSightingRange = 20.0;  // m
+struct Sightings {
+  std::vector<std::uint32_t> any;
+  std::vector<std::uint32_t> side;
+};
+
 Status write_truth(const std::string& directory, const Scenario& scenario, std::uint64_t seed, const World& world,
                    const RoadNetwork& roads, const Trajectory& trajectory, const GeoFrame& geo,
-                   const std::vector<std::uint32_t>& sightings);
+                   const Sightings& sightings);
 
 }  // namespace trailnav::sim

@@ -496,6 +496,7 @@ bool World::intersect(const Primitive& p, const Vec3& o, const Vec3& d, double t
       if (axis < 0) return false;  // starts inside
       hit.distance = t0;
       hit.cos_incidence = std::abs(ld[axis]);
+      hit.side = axis < 2;
       break;
     }
     case Primitive::Shape::cylinder: {
@@ -533,6 +534,7 @@ bool World::intersect(const Primitive& p, const Vec3& o, const Vec3& d, double t
       const double nx = (ox + t_in * d.x()) / p.radius;
       const double ny = (oy + t_in * d.y()) / p.radius;
       hit.cos_incidence = std::abs(nx * d.x() + ny * d.y());
+      hit.side = true;
       break;
     }
     case Primitive::Shape::ellipsoid: {
@@ -672,6 +674,7 @@ Hit World::cast(const Vec3& o, const Vec3& d, double min_range, double max_range
                     best.reflectivity = mat.remission_mean + mat.remission_std * gaussian(hash(ray_key, 0xB1ADE));
                     best.cos_incidence = 0.3 + 0.7 * unit(hash(ray_key, 0xB1ADF));
                     best.through_medium = true;
+                    best.side = false;
                   }
                   t_ground = kInf;
                 }
@@ -695,6 +698,7 @@ Hit World::cast(const Vec3& o, const Vec3& d, double min_range, double max_range
             best.terrain = static_cast<TerrainClass>(cls_[index(gi, gj)]);
             best.reflectivity = refl_[index(gi, gj)];
             best.through_medium = medium_seen;
+            best.side = false;
           }
         }
         if (best_t <= tq) break;

@@ -30,6 +30,7 @@ struct Hit {
   TerrainClass terrain = TerrainClass::other;
   HitKind kind = HitKind::ground;
   bool through_medium = false;  // the ray passed through grass or leaves before the hit
+  bool side = false;            // a solid primitive's side (a vertical face), not its top
 };
 
 // Codes of the obstacle truth raster.

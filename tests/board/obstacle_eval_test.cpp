@@ -5,6 +5,7 @@
 // (Dirac thresholds, the thesis' online setting).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <string>
 
@@ -82,6 +83,11 @@ TEST_F(MeadowBlock, AdaptiveDetectionAvoidsBothFailures) {
   EXPECT_GT(a.outlines.cells, 0u);
   EXPECT_LE(a.outlines.cells, a.obstacles.cells);
   EXPECT_GE(a.outlines.recall(), s.outlines.recall() * 0.9);
+  // Of the outline, the cells whose side the lidar saw within 20 m.
+  EXPECT_GT(a.faces.cells, 0u);
+  EXPECT_LE(a.faces.cells, a.outlines.cells);
+  EXPECT_GE(a.faces.recall(), s.faces.recall() * 0.9);
+  EXPECT_EQ(g.faces.found, 0u);
   // The smooth models differ from PC only through the class distribution.
   ASSERT_TRUE(adaptive.kl.has_value());
   EXPECT_LT(adaptive.kl->mean_ps, adaptive.kl->mean_pw);
@@ -105,6 +111,31 @@ TEST_F(MeadowBlock, SightingsMarkOnlySolidObstaclesTheLidarHit) {
   }
   EXPECT_GT(sighted, 20u);   // the block and the crate show some of their faces
   EXPECT_LT(sighted, solid);  // but never all of them: tops in grass, hidden faces
+
+  // Sides: a subset of the sightings, never earlier. The crate (0.8 m, at
+  // (36, -3.5), turned by -10 degrees) shows the drive along y ~ 1 from x =
+  // -10 to 27 its west and north sides; its east side faces away the whole
+  // time, and its south side is seen only from beyond 20 m.
+  ASSERT_EQ(t.side_sightings.size(), t.obstacles.data.size());
+  std::size_t sides = 0, crate_sides = 0;
+  const double yaw = -10.0 * 3.14159265358979 / 180.0;
+  for (std::size_t i = 0; i < t.side_sightings.size(); ++i) {
+    if (t.side_sightings[i] == 0) continue;
+    ++sides;
+    EXPECT_NE(t.sightings[i], 0u) << "pixel " << i;
+    EXPECT_LE(t.sightings[i], t.side_sightings[i]) << "pixel " << i;
+    const double x = t.obstacles.x0 + static_cast<double>(i % static_cast<std::size_t>(t.obstacles.width)) * t.obstacles.resolution;
+    const double y = t.obstacles.y0 + static_cast<double>(i / static_cast<std::size_t>(t.obstacles.width)) * t.obstacles.resolution;
+    const double lx = (x - 36.0) * std::cos(yaw) + (y + 3.5) * std::sin(yaw);
+    const double ly = -(x - 36.0) * std::sin(yaw) + (y + 3.5) * std::cos(yaw);
+    if (std::abs(lx) > 0.5 || std::abs(ly) > 0.5) continue;
+    ++crate_sides;
+    // (Away from the corners, whose pixels also belong to a seen side.)
+    EXPECT_FALSE(lx > 0.3 && std::abs(ly) < 0.3) << "the crate's east side at " << x << ", " << y;
+    EXPECT_FALSE(ly < -0.3 && std::abs(lx) < 0.3) << "the crate's south side at " << x << ", " << y;
+  }
+  EXPECT_GT(crate_sides, 10u);
+  EXPECT_LT(sides, sighted);  // tops are not sides
 }
 
 }  // namespace
