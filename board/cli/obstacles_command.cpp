@@ -99,6 +99,7 @@ int run(ObstaclesCliOptions& o) {
       }
       o.forest = std::move(loaded.forest);
       o.run.terrain_forest = &*o.forest;
+      o.run.terrain_forest_name = o.run.terrain_config.model;
     } else if (o.terrain == "adaptive") {
       o.run.config.fixed_class.reset();
     } else if (const auto c = perception::parse_terrain_class(o.terrain)) {

@@ -72,6 +72,7 @@ int run_eval(SubgoalEvalCli& c) {
     forest.emplace(std::move(*loaded.forest));
   }
   o.forest = &*forest;
+  o.forest_name = model_name;
   std::map<std::string, std::unique_ptr<ProgressBar>> bars;
   std::string current;
   if (!c.quiet) {

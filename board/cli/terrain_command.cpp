@@ -59,6 +59,7 @@ struct TrainOptions {
   std::string save_features;
   perception::ForestParams forest;
   std::size_t max_per_class = 40000;
+  std::string lidar;  // empty: the recordings' lidar model
   bool quiet = false;
 };
 
@@ -71,6 +72,7 @@ int train(TrainOptions& o) {
     return 2;
   }
   perception::LabelledFeatures data;
+  std::string lidar;  // the recordings' lidar model, if they agree
   for (const std::string& input : o.inputs) {
     if (fs::path(input).extension() == ".csv") {
       const std::size_t before = data.size();
@@ -87,6 +89,14 @@ int train(TrainOptions& o) {
     run.collect_samples = true;
     eval::TerrainRunReport r;
     if (!run_recording(run, "features", o.quiet, who, r)) return 2;
+    if (o.lidar.empty() && !lidar.empty() && r.lidar != lidar) {
+      std::fprintf(stderr,
+                   "%s: %s is a %s recording, the ones before are %s: their remissions differ; train one model per lidar "
+                   "(or say which lidar the model is for with --lidar)\n",
+                   who, input.c_str(), r.lidar.c_str(), lidar.c_str());
+      return 2;
+    }
+    lidar = r.lidar;
     std::printf("%s: %llu revolutions, %llu steps, %zu labelled cell features (%llu mixed cells left out):", input.c_str(),
                 static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(r.counters.steps),
                 r.samples.size(), static_cast<unsigned long long>(r.unlabelled));
@@ -114,12 +124,18 @@ int train(TrainOptions& o) {
     std::fprintf(stderr, "%s: %s\n", who, trained.error.c_str());
     return 2;
   }
-  if (Status st = trained.forest->save(o.out); !st) {
+  perception::RandomForest model = *trained.forest;
+  if (!o.lidar.empty()) lidar = o.lidar;
+  if (std::string e = model.set_lidar(lidar); !e.empty()) {
+    std::fprintf(stderr, "%s: --lidar: %s\n", who, e.c_str());
+    return 2;
+  }
+  if (Status st = model.save(o.out); !st) {
     std::fprintf(stderr, "%s: %s\n", who, st.message().c_str());
     return 2;
   }
-  std::printf("forest: %zu trees, %zu nodes, %zu leaves, depth up to %zu; wrote %s\n", trained.forest->trees(),
-              trained.forest->nodes(), trained.forest->leaves(), trained.forest->max_depth(), o.out.c_str());
+  std::printf("forest: %zu trees, %zu nodes, %zu leaves, depth up to %zu, for %s; wrote %s\n", model.trees(), model.nodes(),
+              model.leaves(), model.max_depth(), lidar.empty() ? "any lidar (not said)" : lidar.c_str(), o.out.c_str());
   std::printf("out-of-bag confusion (rows: true class, columns: estimated; single features):\n%s",
               perception::format_confusion(trained.out_of_bag).c_str());
   return 0;
@@ -158,8 +174,9 @@ int evaluate(EvalOptions& o) {
     std::fprintf(stderr, "%s: %s\n", who, loaded.error.c_str());
     return 2;
   }
-  std::printf("model %s: %zu trees, %zu nodes, depth up to %zu\n", config.model.c_str(), loaded.forest->trees(),
-              loaded.forest->nodes(), loaded.forest->max_depth());
+  std::printf("model %s: %zu trees, %zu nodes, depth up to %zu, for %s\n", config.model.c_str(), loaded.forest->trees(),
+              loaded.forest->nodes(), loaded.forest->max_depth(),
+              loaded.forest->lidar().empty() ? "any lidar (not said)" : loaded.forest->lidar().c_str());
   ConfusionMatrix integrated, single, last;
   double step_ms = 0.0, register_ms = 0.0;
   std::uint64_t steps = 0, revolutions = 0, features = 0;
@@ -168,6 +185,7 @@ int evaluate(EvalOptions& o) {
     run.input = input;
     run.config = config;
     run.forest = &*loaded.forest;
+    run.forest_name = config.model;
     eval::TerrainRunReport r;
     if (!run_recording(run, "terrain", o.quiet, who, r)) return 2;
     std::printf("\n%s: %llu revolutions, %llu steps, %llu cell features; align %.2f ms + register %.2f ms per revolution, "
@@ -231,6 +249,9 @@ void add_terrain_commands(CLI::App& app) {
       ->capture_default_str();
   tr->add_option("--threads", t.forest.threads, "Trees grown in parallel (0: one per core)")->capture_default_str();
   tr->add_option("--save-features", t.save_features, "Also write every labelled cell feature to this CSV");
+  tr->add_option("--lidar", t.lidar,
+                 "The lidar model the forest is for (VLP-16, HDL-64E, ...; default: the recordings'). Its remissions are "
+                 "that sensor's: the terrain thread and the tools refuse the model for another lidar");
   tr->add_flag("--quiet", t.quiet, "No progress bars");
   tr->callback([&] { std::exit(train(t)); });
 

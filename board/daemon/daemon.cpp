@@ -134,6 +134,11 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (config.terrain) {
     auto model = perception::RandomForest::load(config.terrain->model);
     if (!model.forest) return fail("terrain: " + model.error);
+    if (std::string e = perception::check_forest_lidar(*model.forest, velodyne::model_info(config.lidar->model).name,
+                                                       config.terrain->model);
+        !e.empty()) {
+      return fail("terrain: " + e);
+    }
     d->forest_ = std::move(model.forest);
     const perception::MountParams mount = config.obstacles ? config.obstacles->mount : perception::MountParams{};
     auto made = perception::TerrainMapper::create(*config.terrain, mount, d->lidar_->revolution_shape(), &*d->forest_);

@@ -213,7 +213,12 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     c.terrain = perception::parse_terrain_config(*n);
     if (!c.lidar) root.fail("terrain", "the terrain map needs a lidar: add a 'lidar' section");
     if (c.terrain->model.empty()) n->fail("model", "the terrain classifier needs its model file (trailnav terrain-train)");
-    if (auto m = perception::RandomForest::load(c.terrain->model); !m.forest) n->fail("model", m.error);
+    if (auto m = perception::RandomForest::load(c.terrain->model); !m.forest) {
+      n->fail("model", m.error);
+    } else if (c.lidar) {
+      const std::string e = perception::check_forest_lidar(*m.forest, velodyne::model_info(c.lidar->model).name, c.terrain->model);
+      if (!e.empty()) n->fail("model", e);
+    }
   }
   if (auto n = root.optional_map("navigation")) {
     c.navigation = nav::parse_navigation_section(*n);

@@ -391,6 +391,11 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       report.error = "estimated terrain classes need a terrain model";
       return report;
     }
+    if (std::string e = perception::check_forest_lidar(*options.terrain_forest, source.model_name(), options.terrain_forest_name);
+        !e.empty()) {
+      report.error = e;
+      return report;
+    }
     auto made_mapper = perception::TerrainMapper::create(options.terrain_config, config.mount, shape, options.terrain_forest);
     if (!made_mapper.mapper) {
       report.error = "terrain: " + made_mapper.error;

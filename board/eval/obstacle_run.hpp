@@ -32,6 +32,7 @@ struct ObstacleRunOptions {
   // TerrainMode::estimated: the terrain analysis' settings and its model.
   perception::TerrainConfig terrain_config;
   const perception::RandomForest* terrain_forest = nullptr;
+  std::string terrain_forest_name = "the terrain model";  // its file, for errors
   std::string calibration;   // empty: the recording's scenario or the model's default; "builtin": the model's built-in one
   std::string out_dir;       // empty: no files
   int png_every = 0;         // revolutions between map pictures (0: only the last)

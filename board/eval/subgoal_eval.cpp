@@ -174,6 +174,7 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     tr.input = rec;
     tr.config = o.terrain;
     tr.forest = o.forest;
+    tr.forest_name = o.forest_name;
     tr.progress = [&](double f) { if (o.progress) o.progress(name + " terrain + alignment", f); };
     tr.on_revolution = [&](const perception::TerrainMapper& mapper, bool stepped) {
       if (!stepped || !plan_error.empty()) return;

@@ -45,6 +45,7 @@ struct SubgoalEvalOptions {
   nav::NavigatorConfig navigator;
   perception::TerrainConfig terrain;
   const perception::RandomForest* forest = nullptr;
+  std::string forest_name = "the terrain model";  // its file, for errors
   osm::RoutingProfile profile;
   double street_width = 3.0;  // s of Eq. 8.15
   double junction_before = 8.0, junction_after = 12.0;  // m of route around a junction

@@ -95,9 +95,16 @@ TerrainRunReport run_terrain(const TerrainRunOptions& options) {
     return report;
   }
   RevolutionSource& source = *opened.source;
+  report.lidar = source.model_name();
   if (!source.truth()) {
     report.error = options.input + ": not a simulated recording (no truth/ directory): its cells have no labels";
     return report;
+  }
+  if (options.forest != nullptr) {
+    if (std::string e = perception::check_forest_lidar(*options.forest, source.model_name(), options.forest_name); !e.empty()) {
+      report.error = options.input + ": " + e;
+      return report;
+    }
   }
   const SimTruth& truth = *source.truth();
   perception::MountParams mount = options.mount;

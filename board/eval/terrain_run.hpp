@@ -31,6 +31,7 @@ struct TerrainRunOptions {
   perception::TerrainConfig config;
   perception::MountParams mount;   // translation zero: the simulated scenario's
   const perception::RandomForest* forest = nullptr;  // null: features only
+  std::string forest_name = "the terrain model";      // its file, for errors
   std::string calibration;
   bool collect_samples = false;    // keep (feature, true class) of every labelled observation
   std::function<void(double)> progress;
@@ -40,6 +41,7 @@ struct TerrainRunOptions {
 
 struct TerrainRunReport {
   std::string error;
+  std::string lidar;  // the recording's lidar model ("VLP-16", ...)
   std::uint64_t revolutions = 0;
   perception::TerrainCounters counters;
   perception::LabelledFeatures samples;

@@ -76,6 +76,14 @@ TEST(RobotConfig, TerrainNeedsAModelThatLoadsAndItsTask) {
   EXPECT_NE(e.find("not a trailnav terrain model"), std::string::npos) << e;
   e = load_error(std::string(kMinimal) + "terrain: {model: ../models/terrain-sim.tnrf}\n");
   EXPECT_NE(e.find("terrain"), std::string::npos) << e;  // no task for it
+  // The shipped model learnt a VLP-16's remissions: refused for an HDL-64E.
+  std::string hdl = std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf}\n";
+  hdl.replace(hdl.find("VLP-16"), 6,
+              "HDL-64E, calibration: " +
+                  fs::absolute("../shared/data/velodyne/calibration/ros_velodyne_64e_s2.1-sztaki.yaml").string());
+  e = load_error(hdl);
+  EXPECT_NE(e.find(":9:"), std::string::npos) << e;
+  EXPECT_NE(e.find("trained on VLP-16 returns, this lidar is HDL-64E"), std::string::npos) << e;
 }
 
 TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {

@@ -3,6 +3,7 @@
 // learnt; the same seed gives the same bytes), the Bayes update of Eq. 7.15
 // with frozen and re-opened cells, and the features of a real KITTI scan.
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include <Eigen/Eigenvalues>
 
@@ -219,6 +220,60 @@ TEST(RandomForest, ModelFileRoundTripsAndEveryCorruptionIsNamed) {
   expect_error(version, "version 9");
   expect_error({}, "not a trailnav terrain model");
   EXPECT_NE(RandomForest::load((dir / "missing.tnrf").string()).error.find("cannot open"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+// A model says which lidar's remissions it learnt; version 1 files (which
+// do not) are still read; the tools refuse a model for another lidar.
+TEST(RandomForest, ModelFileNamesItsLidarAndAnotherLidarIsRefused) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-forest-lidar-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string path = (dir / "m.tnrf").string();
+  RandomForest f = stump({0.7f, 0.3f, 0, 0, 0}, {0, 0, 0.25f, 0.75f, 0});
+  EXPECT_EQ(f.lidar(), "");
+  EXPECT_EQ(check_forest_lidar(f, "HDL-64E", path), "");  // says nothing: any lidar
+  EXPECT_NE(f.set_lidar("VLP 16").find("without spaces"), std::string::npos);
+  EXPECT_NE(f.set_lidar("A-LIDAR-NAME-TOO-LONG").find("at most 15"), std::string::npos);
+  EXPECT_EQ(f.lidar(), "");
+  ASSERT_EQ(f.set_lidar("HDL-64E"), "");
+  ASSERT_TRUE(f.save(path));
+  const auto v2 = file_bytes(path);
+  auto back = RandomForest::load(path);
+  ASSERT_TRUE(back.forest) << back.error;
+  EXPECT_EQ(back.forest->lidar(), "HDL-64E");
+  EXPECT_EQ(check_forest_lidar(*back.forest, "hdl-64e", path), "");
+  const std::string e = check_forest_lidar(*back.forest, "VLP-16", path);
+  EXPECT_EQ(e.rfind(path, 0), 0u) << e;
+  EXPECT_NE(e.find("trained on HDL-64E returns, this lidar is VLP-16"), std::string::npos) << e;
+
+  // The same forest as version 1: no lidar field (16 bytes after the six
+  // header words), another checksum.
+  std::vector<std::uint8_t> v1(v2.begin(), v2.begin() + 32);
+  v1[8] = 1;
+  v1.insert(v1.end(), v2.begin() + 48, v2.end() - 4);
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, v1.data(), static_cast<uInt>(v1.size())));
+  for (int i = 0; i < 4; ++i) v1.push_back(static_cast<std::uint8_t>(crc >> (8 * i)));
+  write_bytes(path, v1);
+  auto old = RandomForest::load(path);
+  ASSERT_TRUE(old.forest) << old.error;
+  EXPECT_EQ(old.forest->lidar(), "");
+  ClassDistribution a, b;
+  f.predict({0.5f, 0, 0, 0, 0}, a);
+  old.forest->predict({0.5f, 0, 0, 0, 0}, b);
+  EXPECT_EQ(a, b);
+
+  // Text after the field's terminating NUL is corruption, named.
+  auto bad = v2;
+  bad[32 + 10] = 'x';
+  const auto bad_crc = static_cast<std::uint32_t>(crc32(0L, bad.data(), static_cast<uInt>(bad.size() - 4)));
+  for (std::size_t i = 0; i < 4; ++i) bad[bad.size() - 4 + i] = static_cast<std::uint8_t>(bad_crc >> (8 * i));
+  write_bytes(path, bad);
+  EXPECT_NE(RandomForest::load(path).error.find("malformed lidar field"), std::string::npos);
+
+  // The shipped model is for the simulator's default lidar.
+  auto shipped = RandomForest::load("board/models/terrain-sim.tnrf");
+  ASSERT_TRUE(shipped.forest) << shipped.error;
+  EXPECT_EQ(shipped.forest->lidar(), "VLP-16");
   fs::remove_all(dir);
 }
 

@@ -3,6 +3,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -147,6 +148,7 @@ Status RandomForest::save(const std::string& path) const {
   put_u32(out, static_cast<std::uint32_t>(roots_.size()));
   put_u32(out, static_cast<std::uint32_t>(walk_.size()));
   put_u32(out, static_cast<std::uint32_t>(leaves()));
+  for (std::size_t i = 0; i < kLidarBytes; ++i) out.push_back(i < lidar_.size() ? static_cast<std::uint8_t>(lidar_[i]) : 0);
   for (std::uint32_t r : roots_) put_u32(out, r);
   for (const ForestNode& n : node_table()) {
     put_u32(out, static_cast<std::uint16_t>(n.feature));
@@ -184,8 +186,9 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   c.u32(skip);  // the magic
   std::uint32_t version = 0, features = 0, classes = 0, trees = 0, nodes = 0, leaves = 0;
   if (!c.u32(version)) return fail("truncated header");
-  if (version != kVersion) {
-    return fail("model format version " + std::to_string(version) + "; this build reads version " + std::to_string(kVersion));
+  if (version != 1 && version != kVersion) {
+    return fail("model format version " + std::to_string(version) + "; this build reads versions 1 and " +
+                std::to_string(kVersion));
   }
   if (!c.u32(features) || !c.u32(classes) || !c.u32(trees) || !c.u32(nodes) || !c.u32(leaves)) return fail("truncated header");
   if (features != kTerrainFeatures || classes != kTerrainClasses) {
@@ -193,7 +196,8 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
                 " classes; this build uses " + std::to_string(kTerrainFeatures) + " and " + std::to_string(kTerrainClasses));
   }
   if (trees == 0 || trees > kMaxTrees || nodes > kMaxNodes || leaves > kMaxNodes) return fail("implausible sizes in the header");
-  const std::size_t expected = c.pos() + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
+  const std::size_t lidar_bytes = version >= 2 ? kLidarBytes : 0;
+  const std::size_t expected = c.pos() + lidar_bytes + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
   if (data.size() != expected) {
     return fail("size " + std::to_string(data.size()) + " bytes, the header announces " + std::to_string(expected) +
                 " (truncated or corrupt)");
@@ -202,6 +206,18 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   std::uint32_t stored = 0;
   for (std::size_t i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(data[data.size() - 4 + i]) << (8 * i);
   if (stored != crc) return fail("checksum mismatch: the file is corrupt");
+  std::string lidar;
+  if (lidar_bytes > 0) {
+    const std::uint8_t* f = data.data() + c.pos();
+    std::size_t n = 0;
+    while (n < lidar_bytes && f[n] != 0) ++n;
+    for (std::size_t i = n; i < lidar_bytes; ++i) {
+      if (f[i] != 0) return fail("malformed lidar field (text after its end)");
+    }
+    lidar.assign(reinterpret_cast<const char*>(f), n);
+    std::uint32_t skip_lidar;
+    for (std::size_t i = 0; i < lidar_bytes / 4; ++i) c.u32(skip_lidar);
+  }
   std::vector<std::uint32_t> roots(trees);
   for (auto& r : roots) c.u32(r);
   std::vector<ForestNode> table(nodes);
@@ -217,8 +233,35 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   std::vector<float> leaf_table(static_cast<std::size_t>(leaves) * kTerrainClasses);
   for (float& p : leaf_table) c.f32(p);
   Loaded loaded = from_parts(std::move(roots), std::move(table), std::move(leaf_table));
-  if (!loaded.forest) loaded.error = path + ": " + loaded.error;
+  if (!loaded.forest) {
+    loaded.error = path + ": " + loaded.error;
+    return loaded;
+  }
+  if (std::string e = loaded.forest->set_lidar(lidar); !e.empty()) return fail("lidar field: " + e);
   return loaded;
+}
+
+std::string RandomForest::set_lidar(std::string_view name) {
+  if (name.size() >= kLidarBytes) return "a lidar name has at most " + std::to_string(kLidarBytes - 1) + " characters";
+  for (char ch : name) {
+    if (ch < 0x21 || ch > 0x7E) return "a lidar name is printable ASCII without spaces";
+  }
+  lidar_.assign(name);
+  return {};
+}
+
+std::string check_forest_lidar(const RandomForest& forest, std::string_view lidar, const std::string& model_path) {
+  const std::string& trained = forest.lidar();
+  if (trained.empty() || lidar.empty()) return {};
+  const auto lower = [](std::string_view s) {
+    std::string out(s);
+    for (char& ch : out) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    return out;
+  };
+  if (lower(trained) == lower(lidar)) return {};
+  return model_path + ": the terrain model was trained on " + trained + " returns, this lidar is " + std::string(lidar) +
+         ": its remissions differ (another scale, other per-laser limits), so the classes would be wrong. Train a "
+         "model for this lidar (trailnav terrain-train, docs/terrain.md)";
 }
 
 }  // namespace trailnav::perception

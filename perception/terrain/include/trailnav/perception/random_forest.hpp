@@ -8,8 +8,11 @@
 //
 // Model file (little-endian; docs/terrain.md):
 //   "TNTERRF\0"  magic (8 bytes)
-//   u32 version (1), u32 features (5), u32 classes (5)
+//   u32 version (2; 1 is read too), u32 features (5), u32 classes (5)
 //   u32 trees, u32 nodes, u32 leaves
+//   16 bytes: the lidar model the forest was trained for ("VLP-16",
+//             "HDL-64E", ...), ASCII, NUL-padded; all NUL: not said
+//             (version 2 only)
 //   trees  x u32 first node of each tree
 //   nodes  x { i16 feature (-1: leaf), u16 0, f32 threshold, i32 right child or leaf row }
 //   leaves x classes x f32 probability
@@ -21,6 +24,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "trailnav/perception/terrain_class_map.hpp"
@@ -41,7 +45,8 @@ using ClassDistribution = std::array<float, kTerrainClasses>;
 
 class RandomForest {
  public:
-  static constexpr std::uint32_t kVersion = 1;
+  static constexpr std::uint32_t kVersion = 2;
+  static constexpr std::size_t kLidarBytes = 16;  // the lidar field, NUL-padded
 
   struct Loaded;
   // Reads and validates a model file.
@@ -79,6 +84,12 @@ class RandomForest {
   std::size_t nodes() const noexcept { return walk_.size(); }
   std::size_t leaves() const noexcept { return leaves_.size() / kTerrainClasses; }
   std::size_t max_depth() const noexcept { return max_depth_; }
+  // The lidar model the forest was trained for (its remissions are that
+  // sensor's); empty: not said (a version 1 file, or mixed training data).
+  const std::string& lidar() const noexcept { return lidar_; }
+  // Empty when `name` (printable ASCII, at most 15 characters) was taken,
+  // else what is wrong with it.
+  std::string set_lidar(std::string_view name);
   std::span<const std::uint32_t> roots() const noexcept { return roots_; }
   // The nodes as the file stores them (rebuilt from the walking table).
   std::vector<ForestNode> node_table() const;
@@ -100,7 +111,13 @@ class RandomForest {
   std::vector<WalkNode> walk_;
   std::vector<float> leaves_;
   std::size_t max_depth_ = 0;
+  std::string lidar_;
 };
+
+// Empty when `forest` may classify the returns of a `lidar` (a model name as
+// velodyne::Model spells it): the forest does not say its lidar, or says the
+// same one (case-insensitive). Else the error to show, naming both.
+std::string check_forest_lidar(const RandomForest& forest, std::string_view lidar, const std::string& model_path);
 
 struct RandomForest::Loaded {
   std::optional<RandomForest> forest;
