@@ -129,12 +129,20 @@ int run(ObstaclesCliOptions& o) {
   std::printf("trailnav obstacles: %s, %s; %llu revolutions; terrain: %s; model %s\n", r.input_kind.c_str(),
               r.model_name.c_str(), static_cast<unsigned long long>(r.revolutions), terrain,
               std::string(perception::fusion_model_name(o.run.config.model)).c_str());
-  std::printf("  points %llu (out of range %llu); features: measured %llu, flat %llu, isolated %llu; outside map %llu; "
-              "malformed packets %llu\n",
+  std::printf("  points %llu (out of range %llu, the robot itself %llu); features: measured %llu, flat %llu, isolated %llu; "
+              "outside map %llu; malformed packets %llu\n",
               static_cast<unsigned long long>(c.align.points), static_cast<unsigned long long>(c.align.out_of_range),
+              static_cast<unsigned long long>(c.align.self_hits),
               static_cast<unsigned long long>(c.features.measured), static_cast<unsigned long long>(c.features.flat),
               static_cast<unsigned long long>(c.features.isolated), static_cast<unsigned long long>(c.map.outside_map),
               static_cast<unsigned long long>(r.malformed_packets));
+  if (r.self_box_applied) {
+    const auto& b = perception::kKittiCarBox;
+    std::printf("  KITTI: returns from the recording car itself dropped (features.self_box [%.2f, %.2f, %.2f, %.2f, %.2f, "
+                "%.2f] in the sensor frame; give your own in --config)\n",
+                static_cast<double>(b[0]), static_cast<double>(b[1]), static_cast<double>(b[2]), static_cast<double>(b[3]),
+                static_cast<double>(b[4]), static_cast<double>(b[5]));
+  }
   std::printf("  time per revolution: align %.3f ms, smoothing + features %.3f ms, map update%s %.3f ms\n", r.align_ms,
               r.features_ms, r.kl ? " (PW + PS + PC)" : "", r.map_ms);
   if (o.run.terrain == eval::TerrainMode::estimated) {

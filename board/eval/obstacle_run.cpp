@@ -352,6 +352,12 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   report.model_name = source.model_name();
   const std::optional<SimTruth>& truth = source.truth();
   perception::ObstacleConfig config = options.config;
+  if (source.input_kind() == "kitti" && !config.features.self_box) {
+    // The recording car's own body, racks and mirrors, in the sensor frame
+    // (measured on the shared scans: the returns that sit still in both).
+    config.features.self_box = perception::kKittiCarBox;
+    report.self_box_applied = true;
+  }
   if (truth && config.mount.translation == std::array<double, 3>{0.0, 0.0, 0.0}) config.mount.translation = source.mount_translation();
   if (options.terrain == TerrainMode::truth && !truth) {
     report.error = "--terrain truth needs a simulated recording (a directory with truth/)";
@@ -391,7 +397,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       report.error = "estimated terrain classes need a terrain model";
       return report;
     }
-    if (std::string e = perception::check_forest_lidar(*options.terrain_forest, source.model_name(), options.terrain_forest_name);
+    if (std::string e = perception::check_forest_lidar(*options.terrain_forest, source.lidar_model(), options.terrain_forest_name);
         !e.empty()) {
       report.error = e;
       return report;

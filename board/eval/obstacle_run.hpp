@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/random_forest.hpp"
@@ -93,6 +94,7 @@ struct ObstacleRunReport {
   std::string error;  // non-empty: nothing ran
   std::string input_kind;  // "recording", "kitti"
   std::string model_name;  // lidar
+  bool self_box_applied = false;  // KITTI: the car's body box (perception::kKittiCarBox) was used
   bool scored = false;
   std::uint64_t revolutions = 0;
   perception::PipelineCounters counters;

@@ -30,6 +30,10 @@ class RevolutionSource {
 
   const std::string& input_kind() const noexcept { return kind_; }    // "recording", "kitti"
   const std::string& model_name() const noexcept { return model_; }
+  // The lidar model as velodyne::Model spells it ("HDL-64E" for KITTI scans).
+  std::string_view lidar_model() const noexcept {
+    return kind_ == "kitti" ? std::string_view("HDL-64E") : std::string_view(model_);
+  }
   velodyne::RangeImageShape shape() const noexcept { return shape_; }
   // The simulated recording's truth, if it has one.
   const std::optional<SimTruth>& truth() const noexcept { return truth_; }

@@ -108,6 +108,40 @@ TEST(Kitti, MapShowsRealObstaclesAndAClearRoad) {
   }
 }
 
+// The recording car's own body, roof rack and mirrors return points within a
+// few metres of the sensor; without features.self_box they are obstacles
+// drawn around the robot. With the KITTI car box they are dropped and counted,
+// and no cell under the car is occupied.
+TEST(Kitti, TheRecordingCarItselfIsNotAnObstacle) {
+  std::vector<float> buffer;
+  velodyne::RangeImage image(kitti_shape());
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, image));
+  const auto occupied_under_car = [](const ObstacleMap& map) {
+    std::size_t n = 0;
+    for (double x = -2.75; x < 2.8; x += 0.1) {
+      for (double y = -1.55; y < 1.6; y += 0.1) n += map.state(*map.grid().find(x, y)) == CellState::occupied;
+    }
+    return n;
+  };
+  ObstacleConfig plain;
+  plain.fixed_class = TerrainClass::street;
+  plain.model = FusionModel::pw;
+  auto without = ObstaclePipeline::create(plain, kitti_shape());
+  ASSERT_TRUE(without.pipeline) << without.error;
+  without.pipeline->process(image, nullptr, nullptr);
+  EXPECT_EQ(without.pipeline->counters().align.self_hits, 0u);
+  EXPECT_GT(occupied_under_car(*without.pipeline->map(FusionModel::pw)), 3u);
+
+  ObstacleConfig boxed = plain;
+  boxed.features.self_box = kKittiCarBox;
+  auto with = ObstaclePipeline::create(boxed, kitti_shape());
+  ASSERT_TRUE(with.pipeline) << with.error;
+  with.pipeline->process(image, nullptr, nullptr);
+  EXPECT_GT(with.pipeline->counters().align.self_hits, 20u);
+  EXPECT_LT(with.pipeline->counters().align.self_hits, 500u);  // the car, not the road around it
+  EXPECT_EQ(occupied_under_car(*with.pipeline->map(FusionModel::pw)), 0u);
+}
+
 }  // namespace
 }  // namespace trailnav::perception
 

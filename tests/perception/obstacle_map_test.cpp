@@ -276,6 +276,23 @@ TEST(ObstacleConfig, DefaultsAreTheThesisAndErrorsNameTheLine) {
     EXPECT_EQ(e.line(), 3);
     EXPECT_NE(std::string(e.what()).find("three numbers"), std::string::npos) << e.what();
   }
+  const ConfigNode box = ConfigNode::parse("obstacles:\n  features:\n    self_box: [-1, 1, 0.5, -0.5, -1, 0]\n", "robot.yaml");
+  try {
+    parse_obstacle_config(box.map("obstacles"));
+    FAIL() << "a self_box with a reversed range was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.line(), 3);
+    EXPECT_NE(std::string(e.what()).find("lower to a higher"), std::string::npos) << e.what();
+  }
+  const ConfigNode box5 = ConfigNode::parse("obstacles:\n  features: {self_box: [-1, 1, -0.5, 0.5, -1]}\n", "robot.yaml");
+  EXPECT_THROW(parse_obstacle_config(box5.map("obstacles")), ConfigError);
+  EXPECT_FALSE(d.features.self_box.has_value());
+  const ConfigNode box_ok =
+      ConfigNode::parse("obstacles:\n  features: {self_box: [-0.4, 0.6, -0.3, 0.3, -0.9, 0.1]}\n", "robot.yaml");
+  const ObstacleConfig b = parse_obstacle_config(box_ok.map("obstacles"));
+  ASSERT_TRUE(b.features.self_box.has_value());
+  EXPECT_FLOAT_EQ((*b.features.self_box)[1], 0.6f);
+  EXPECT_FLOAT_EQ((*b.features.self_box)[4], -0.9f);
   const ConfigNode mount_ok =
       ConfigNode::parse("obstacles:\n  mount: {translation: [0.2, 0, 1.1], rotation: [0, 2, 0]}\n", "robot.yaml");
   const ObstacleConfig m = parse_obstacle_config(mount_ok.map("obstacles"));

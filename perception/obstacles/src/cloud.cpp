@@ -63,7 +63,9 @@ CloudAligner::CloudAligner(const MountParams& mount, const FeatureParams& featur
     : fixed_roll_(mount.fixed_roll_deg * kDeg),
       fixed_pitch_(mount.fixed_pitch_deg * kDeg),
       min_range_(features.min_range),
-      max_range_(features.max_range) {
+      max_range_(features.max_range),
+      self_filter_(features.self_box.has_value()),
+      self_box_(features.self_box.value_or(std::array<float, 6>{})) {
   double r[9];
   rotation(mount.rotation_deg[0] * kDeg, mount.rotation_deg[1] * kDeg, mount.rotation_deg[2] * kDeg, r);
   for (int i = 0; i < 9; ++i) mount_r_[i] = static_cast<float>(r[i]);
@@ -144,7 +146,7 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   const auto cut = static_cast<float>(image.cut_azimuth);
   const float min_r = min_range_;
   const float max_r = max_range_;
-  std::uint64_t points = 0, out_of_range = 0, collisions = 0;
+  std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0;
   for (int i = 0; i < rings; ++i) {
     const velodyne::RangeCell* row = image.row(0, i).data();
     const std::size_t base = out.index(i, 0);
@@ -160,6 +162,11 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
       ++points;
       if (cell.distance < min_r || cell.distance > max_r) {
         ++out_of_range;
+        continue;
+      }
+      if (self_filter_ && cell.x >= self_box_[0] && cell.x <= self_box_[1] && cell.y >= self_box_[2] &&
+          cell.y <= self_box_[3] && cell.z >= self_box_[4] && cell.z <= self_box_[5]) {
+        ++self_hits;
         continue;
       }
       double rel = static_cast<double>(cell.azimuth - cut);
@@ -181,6 +188,7 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   counters_.points += points;
   counters_.out_of_range += out_of_range;
   counters_.collisions += collisions;
+  counters_.self_hits += self_hits;
 }
 
 }  // namespace trailnav::perception

@@ -9,6 +9,7 @@
 // them small enough for floats far from the odometry origin.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -81,6 +82,7 @@ struct AlignCounters {
   std::uint64_t pose_clamped = 0;       // columns outside the pose history (nearest pose used)
   std::uint64_t no_pose = 0;            // revolutions aligned with the fixed orientation
   std::uint64_t collisions = 0;         // points whose azimuth column a point of their ring already took: dropped
+  std::uint64_t self_hits = 0;          // returns inside features.self_box (the robot itself): dropped
 };
 
 // Range image -> gravity-aligned cloud, compensating the sensor's motion
@@ -102,6 +104,8 @@ class CloudAligner {
   double fixed_pitch_ = 0.0;
   float min_range_ = 0.0f;
   float max_range_ = 0.0f;
+  bool self_filter_ = false;
+  std::array<float, 6> self_box_{};
   AlignCounters counters_;
 };
 

@@ -9,6 +9,7 @@
 // the column of its azimuth.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -20,6 +21,10 @@ namespace trailnav::perception {
 
 inline constexpr int kKittiRings = 64;
 inline constexpr int kKittiColumns = 2160;  // a little more than the densest ring's points
+// The recording car around its HDL-64E (sensor frame, m: x, y, z from and
+// to): its body, roof rack and mirrors, measured on the shared scans as the
+// returns that sit at the same place in both. Meant as features.self_box.
+inline constexpr std::array<float, 6> kKittiCarBox{-2.8f, 2.8f, -1.6f, 1.6f, -1.45f, 0.3f};
 
 struct KittiStats {
   std::uint64_t points = 0;
