@@ -3,6 +3,7 @@
 // x gives nothing; smoothing keeps edges; missing points are skipped.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <vector>
@@ -141,6 +142,39 @@ TEST(Features, MissingPointsAreSkippedAndLonePointsIsolated) {
   EXPECT_EQ(c.state[c.index(3, 200)], PointState::isolated);
   EXPECT_EQ(c.state[c.index(4, 100)], PointState::none);
   EXPECT_EQ(counters.isolated, 1u);
+}
+
+// A stray return 30 m away and 11 m below flat ground (as in KITTI scan
+// 000000, ring 4) sits in the range image between ground points. It is
+// farther from them than they are from the sensor (neighbour_reach 1): not on
+// their surface, so they skip it and stay flat, in every search kernel.
+TEST(Features, AStrayReturnFarBelowIsNoNeighbour) {
+  for (FeatureKernel kernel : {FeatureKernel::portable, FeatureKernel::four_wide, FeatureKernel::fastest}) {
+    for (float reach : {1.0f, 1000.0f}) {
+      RevolutionCloud c = make_cloud([](double, double, int, int) { return 0.0; });
+      const std::size_t stray = c.index(2, 100);
+      c.x[stray] *= 30.0f / 4.0f;
+      c.y[stray] *= 30.0f / 4.0f;
+      c.z[stray] = -11.0f;
+      c.range[stray] = 32.0f;
+      FeatureParams params = no_smoothing();
+      params.neighbour_reach = reach;
+      FeatureCounters counters;
+      compute_features(c, params, counters, kernel);
+      float worst = 0.0f;
+      for (int i = 0; i < kRings; ++i) {
+        for (int j = 0; j < kColumns; ++j) {
+          if (c.index(i, j) != stray) worst = std::max(worst, c.step_height[c.index(i, j)]);
+        }
+      }
+      if (reach == 1.0f) {
+        EXPECT_EQ(worst, 0.0f) << "kernel " << static_cast<int>(kernel);
+        EXPECT_EQ(c.state[c.index(2, 99)], PointState::measured);  // found the point beyond the stray
+      } else {
+        EXPECT_NEAR(worst, 11.0f, 1e-3f) << "without the reach the stray is a neighbour";
+      }
+    }
+  }
 }
 
 TEST(Smoothing, AveragesNoiseAndKeepsEdges) {

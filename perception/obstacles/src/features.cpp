@@ -74,6 +74,7 @@ struct View {
   const float* __restrict x;
   const float* __restrict y;
   const float* __restrict z;
+  const float* __restrict range;
   const PointState* st;
 };
 
@@ -95,13 +96,16 @@ struct Best {
 };
 
 // Neighbour q of point p: true when the search in this direction ends here.
-inline bool consider(const View& v, std::size_t p, std::size_t q, float x2, Best& best) noexcept {
+// A neighbour farther from p than `reach2` (squared) lies on another surface,
+// behind or far below p, and counts as missing.
+inline bool consider(const View& v, std::size_t p, std::size_t q, float x2, float reach2, Best& best) noexcept {
   if (v.st[q] == PointState::none) return false;
-  best.any_valid = true;
   const float dx = v.x[q] - v.x[p];
   const float dy = v.y[q] - v.y[p];
   const float dz = v.z[q] - v.z[p];
   const float d2 = dx * dx + dy * dy + dz * dz;
+  if (d2 > reach2) return false;
+  best.any_valid = true;
   if (d2 <= x2) return false;
   best.offer(std::abs(dz), d2);
   return true;
@@ -109,7 +113,7 @@ inline bool consider(const View& v, std::size_t p, std::size_t q, float x2, Best
 
 // Along the ring, one point at a time, wrapping around a full turn.
 void along_ring_portable(const View& v, std::size_t row, int j, int columns, int k_max, bool wrap, float x2,
-                         Best& best) noexcept {
+                         float reach2, Best& best) noexcept {
   const std::size_t p = row + static_cast<std::size_t>(j);
   for (int dir = -1; dir <= 1; dir += 2) {
     for (int k = 1; k <= k_max; ++k) {
@@ -118,7 +122,7 @@ void along_ring_portable(const View& v, std::size_t row, int j, int columns, int
         if (!wrap) break;
         jj = jj < 0 ? jj + columns : jj - columns;
       }
-      if (consider(v, p, row + static_cast<std::size_t>(jj), x2, best)) break;
+      if (consider(v, p, row + static_cast<std::size_t>(jj), x2, reach2, best)) break;
     }
   }
 }
@@ -172,7 +176,7 @@ template <int W>
 // at + step * k for k = reach .. 1.
 template <int W>
 [[gnu::always_inline]] inline void search_lanes(const View& v, std::size_t at, std::ptrdiff_t step, int reach, float x2,
-                                                BestW<W>& best) noexcept {
+                                                const typename Lanes<W>::F& reach2, BestW<W>& best) noexcept {
   using F = typename Lanes<W>::F;
   using I = typename Lanes<W>::I;
   using B = typename Lanes<W>::B;
@@ -188,7 +192,6 @@ template <int W>
     const auto q = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(at) + step * k);
     B states;
     std::memcpy(&states, v.st + q, sizeof states);
-    const I valid = __builtin_convertvector(states, I) != 0;
     F qx, qy, qz;
     load_lanes<W>(v.x + q, qx);
     load_lanes<W>(v.y + q, qy);
@@ -197,6 +200,7 @@ template <int W>
     const F dy = qy - py;
     const F dz = qz - pz;
     const F d2 = dx * dx + dy * dy + dz * dz;
+    const I valid = (__builtin_convertvector(states, I) != 0) & (d2 <= reach2);
     const I far = valid & (d2 > x2);
     const F adz = reinterpret_cast<F>(reinterpret_cast<I>(dz) & magnitude);
     cdz = far ? adz : cdz;
@@ -215,11 +219,15 @@ template <int W>
 // across it (`down` rings below, `up` above, `stride` apart).
 template <int W>
 [[gnu::always_inline]] inline void search_block(const View& v, std::size_t p, int k_max, std::ptrdiff_t stride, int down,
-                                                int up, float x2, BestW<W>& best) noexcept {
-  search_lanes<W>(v, p, -1, k_max, x2, best);
-  search_lanes<W>(v, p, 1, k_max, x2, best);
-  search_lanes<W>(v, p, -stride, down, x2, best);
-  search_lanes<W>(v, p, stride, up, x2, best);
+                                                int up, float x2, float reach, BestW<W>& best) noexcept {
+  typename Lanes<W>::F range;
+  load_lanes<W>(v.range + p, range);
+  const typename Lanes<W>::F r = range * reach;
+  const typename Lanes<W>::F reach2 = r * r;
+  search_lanes<W>(v, p, -1, k_max, x2, reach2, best);
+  search_lanes<W>(v, p, 1, k_max, x2, reach2, best);
+  search_lanes<W>(v, p, -stride, down, x2, reach2, best);
+  search_lanes<W>(v, p, stride, up, x2, reach2, best);
 }
 #else
 constexpr bool kSimd = false;
@@ -258,6 +266,7 @@ struct RowSearch {
   std::ptrdiff_t stride;
   int down, up;      // rings searched below and above
   float x2;
+  float reach;       // a neighbour counts up to reach * the point's range away
 };
 
 #if defined(__GNUC__)
@@ -280,7 +289,7 @@ int search_row4(const View& v, const RowSearch& r, int j, int end, FeatureSink& 
     std::memcpy(&states, v.st + p, sizeof states);
     if (states == 0) continue;  // four missing points
     BestW<4> b;
-    search_block<4>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, b);
+    search_block<4>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, r.reach, b);
     // The four sines at once (lanes without a neighbour hold dz -1, d2 1).
     Lanes<4>::F sine;
 #if defined(__SSE2__)
@@ -309,7 +318,7 @@ __attribute__((target("avx2"))) int search_row8(const View& v, const RowSearch& 
     std::memcpy(&states, v.st + p, sizeof states);
     if (states == 0) continue;  // eight missing points
     BestW<8> b;
-    search_block<8>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, b);
+    search_block<8>(v, p, r.k_max, r.stride, r.down, r.up, r.x2, r.reach, b);
     const Lanes<8>::F sine = b.dz / reinterpret_cast<Lanes<8>::F>(_mm256_sqrt_ps(reinterpret_cast<__m256>(b.d2)));
     finish_lanes<8>(v, p, b, sine, out);
   }
@@ -339,7 +348,8 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
   const float x2 = params.min_distance * params.min_distance;
   const auto stride = static_cast<std::size_t>(cloud.stride());
   const bool wrap = cloud.full_turn;
-  const View v{cloud.x.data(), cloud.y.data(), cloud.z.data(), cloud.state.data()};
+  const float reach = params.neighbour_reach;
+  const View v{cloud.x.data(), cloud.y.data(), cloud.z.data(), cloud.range.data(), cloud.state.data()};
   FeatureSink out{cloud.state.data(), cloud.step_height.data(), cloud.sin_incline.data()};
   // The columns the W-wide search may use: k_max from both ends.
   const bool simd = kSimd && kernel != FeatureKernel::portable;
@@ -350,14 +360,16 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
     const std::size_t p = row + static_cast<std::size_t>(j);
     if (v.st[p] == PointState::none) return;
     Best best;
+    const float r = v.range[p] * reach;
+    const float reach2 = r * r;
     // Along the ring, each way (Eqs. 7.1, 7.2).
-    along_ring_portable(v, row, j, columns, k_max, wrap, x2, best);
+    along_ring_portable(v, row, j, columns, k_max, wrap, x2, reach2, best);
     // Across the rings, same column (Eqs. 7.3, 7.4).
     for (int l = 1; l <= l_max && l <= i; ++l) {
-      if (consider(v, p, p - static_cast<std::size_t>(l) * stride, x2, best)) break;
+      if (consider(v, p, p - static_cast<std::size_t>(l) * stride, x2, reach2, best)) break;
     }
     for (int l = 1; l <= l_max && i + l < rings; ++l) {
-      if (consider(v, p, p + static_cast<std::size_t>(l) * stride, x2, best)) break;
+      if (consider(v, p, p + static_cast<std::size_t>(l) * stride, x2, reach2, best)) break;
     }
     out.finish(p, best.found, best.any_valid, best.dz, best.found ? best.dz / std::sqrt(best.d2) : 0.0f);
   };
@@ -367,7 +379,8 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
     for (; j < std::min(simd_begin, columns); ++j) one_point(i, row, j);
 #if defined(__GNUC__)
     if (simd) {
-      const RowSearch r{row, k_max, static_cast<std::ptrdiff_t>(stride), std::min(l_max, i), std::min(l_max, rings - 1 - i), x2};
+      const RowSearch r{row,  k_max, static_cast<std::ptrdiff_t>(stride), std::min(l_max, i), std::min(l_max, rings - 1 - i),
+                        x2,   reach};
       if (eight) j = search_row8(v, r, j, simd_end, out);
       j = search_row4(v, r, j, simd_end, out);
     }

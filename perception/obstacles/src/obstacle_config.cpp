@@ -76,6 +76,7 @@ ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
     p.smoothing_max_jump = number_f(*f, "smoothing_max_jump", 0.001, 10.0, p.smoothing_max_jump);
     p.min_range = number_f(*f, "min_range", 0.0, 50.0, p.min_range);
     p.max_range = number_f(*f, "max_range", 1.0, 300.0, p.max_range);
+    p.neighbour_reach = number_f(*f, "neighbour_reach", 0.01, 1000.0, p.neighbour_reach);
     if (f->has("self_box")) {
       const std::vector<double> b = f->number_list("self_box", -50.0, 50.0);
       if (b.size() != 6) f->fail("self_box", "needs six numbers: [x_from, x_to, y_from, y_to, z_from, z_to] in metres");

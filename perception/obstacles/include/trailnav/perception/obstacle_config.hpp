@@ -41,6 +41,10 @@ struct FeatureParams {
   float smoothing_max_jump = 0.15f;  // m: a range jump this large between ring neighbours ends a window
   float min_range = 1.0f;          // m: nearer returns are ignored (the robot itself)
   float max_range = 40.0f;         // m: farther returns are ignored (the map reaches 30 m each way)
+  // A neighbour farther from a point than this times the point's range is
+  // on another surface (behind it, or a stray return far below the road) and
+  // counts as missing in the search.
+  float neighbour_reach = 1.0f;
   // Returns inside this box of the sensor frame (x, y, z from and to, m) are
   // the robot itself (its body, mirrors, racks) and ignored. Empty: none.
   std::optional<std::array<float, 6>> self_box;
