@@ -123,22 +123,34 @@ TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
   RevolutionCloud c = one_point(2.05f, 0.05f, 0.0f, 0.0f);
   const std::size_t k = c.index(0, 0);
   MapParams mp;
-  mp.dirac_hold_s = 0.5f;  // 5 revolutions at 10 Hz
+  mp.dirac_hold_s = 0.5f;      // 5 revolutions at 10 Hz
+  mp.dirac_top_hold_s = 1.5f;  // 15
   ObstacleModels models(default_class_params(), mp);
   TerrainSource street;
   street.fixed = true;
   ObstacleMap map(mp, FusionModel::pw);
-  auto rev = [&](int n, float step) {
+  // One point a revolution in the cell at height z, an obstacle point or not.
+  auto rev = [&](int n, float step, float z) {
     c.time_ns = n * 100'000'000LL;
     c.step_height[k] = step;
     c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
+    c.z[k] = z;
     map.integrate(c, models, street);
     return map.state(*map.grid().find(2.05, 0.05));
   };
-  EXPECT_EQ(rev(0, 0.0f), CellState::free);
-  EXPECT_EQ(rev(1, 0.2f), CellState::occupied);
-  for (int n = 2; n <= 6; ++n) EXPECT_EQ(rev(n, 0.0f), CellState::occupied) << n;  // held
-  EXPECT_EQ(rev(7, 0.0f), CellState::free);
+  EXPECT_EQ(rev(0, 0.0f, 0.0f), CellState::free);
+  // A box's face seen at 0.3 and 0.4 m, then only its flat top at 0.42 m.
+  EXPECT_EQ(rev(1, 0.2f, 0.3f), CellState::occupied);
+  EXPECT_EQ(rev(2, 0.2f, 0.4f), CellState::occupied);
+  for (int n = 3; n <= 7; ++n) EXPECT_EQ(rev(n, 0.0f, 0.0f), CellState::occupied) << n;  // held
+  // After the hold: the top (not 0.1 m below the highest face point) keeps
+  // it, until the top hold is over.
+  for (int n = 8; n <= 17; ++n) EXPECT_EQ(rev(n, 0.0f, 0.42f), CellState::occupied) << n;
+  EXPECT_EQ(rev(18, 0.0f, 0.42f), CellState::free);
+  // A new obstacle: the ground where it stood clears it right after the hold.
+  EXPECT_EQ(rev(19, 0.2f, 0.5f), CellState::occupied);
+  for (int n = 20; n <= 24; ++n) EXPECT_EQ(rev(n, 0.0f, 0.0f), CellState::occupied) << n;
+  EXPECT_EQ(rev(25, 0.0f, 0.0f), CellState::free);
 }
 
 TEST(ObstacleMap, TerrainClassesChangeTheVerdict) {
@@ -266,6 +278,12 @@ TEST(ObstacleConfig, DefaultsAreTheThesisAndErrorsNameTheLine) {
     EXPECT_EQ(e.line(), 4);
     EXPECT_NE(std::string(e.what()).find("resolutoin"), std::string::npos) << e.what();
   }
+  EXPECT_FLOAT_EQ(d.map.dirac_top_hold_s, d.map.dirac_hold_s);  // the thesis' hold unless asked
+  const ConfigNode holds =
+      ConfigNode::parse("obstacles:\n  map: {dirac_top_hold: 10, dirac_clear_depth: 0.15}\n", "robot.yaml");
+  const ObstacleConfig h = parse_obstacle_config(holds.map("obstacles"));
+  EXPECT_FLOAT_EQ(h.map.dirac_top_hold_s, 10.0f);
+  EXPECT_FLOAT_EQ(h.map.dirac_clear_depth, 0.15f);
   const ConfigNode range = ConfigNode::parse("obstacles:\n  features: {max_range: 80}\n", "robot.yaml");
   EXPECT_THROW(parse_obstacle_config(range.map("obstacles")), ConfigError);
   const ConfigNode mount = ConfigNode::parse("obstacles:\n  mount:\n    translation: [0.2, 1.1]\n", "robot.yaml");

@@ -96,6 +96,8 @@ ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
     p.logit_min = number_f(*m, "logit_min", -20.0, 0.0, p.logit_min);
     p.logit_max = number_f(*m, "logit_max", 0.0, 20.0, p.logit_max);
     p.dirac_hold_s = number_f(*m, "dirac_hold", 0.0, 3600.0, p.dirac_hold_s);
+    p.dirac_clear_depth = number_f(*m, "dirac_clear_depth", -100.0, 100.0, p.dirac_clear_depth);
+    p.dirac_top_hold_s = number_f(*m, "dirac_top_hold", 0.0, 3600.0, p.dirac_top_hold_s);
     p.occupied = number_f(*m, "occupied", 0.01, 0.99, p.occupied);
     m->reject_unknown_keys();
   }

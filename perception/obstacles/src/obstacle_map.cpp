@@ -11,7 +11,8 @@ ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
       percent_scale_(kPercentSteps / std::max(params.logit_max - params.logit_min, 1e-6f)),
       grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0}),
       occupancy_(params.size, params.size, params.resolution, std::int8_t{-1}),
-      hits_(model == FusionModel::pw ? params.size : 1, model == FusionModel::pw ? params.size : 1, params.resolution, 0u),
+      hits_(model == FusionModel::pw ? params.size : 1, model == FusionModel::pw ? params.size : 1, params.resolution,
+            DiracHit{}),
       occupied_logit_(logit(params.occupied)) {
   for (int i = 0; i <= kPercentSteps; ++i) {
     const float l = params.logit_min + (params.logit_max - params.logit_min) * static_cast<float>(i) / kPercentSteps;
@@ -27,6 +28,8 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
   const double period_s = revolution_ > 1 ? static_cast<double>(last_ns_ - first_ns_) * 1e-9 / (revolution_ - 1) : 0.1;
   hold_revolutions_ =
       static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_hold_s) / std::max(period_s, 1e-3)));
+  top_hold_revolutions_ =
+      static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_top_hold_s) / std::max(period_s, 1e-3)));
   counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
   occupancy_.move_to(cloud.robot_x, cloud.robot_y);
   if (model_ == FusionModel::pw) hits_.move_to(cloud.robot_x, cloud.robot_y);
@@ -44,6 +47,9 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
   const float hi = params_.logit_max;
   const std::uint32_t now = revolution_;
   const std::uint32_t hold = hold_revolutions_;
+  const float clear_depth = params_.dirac_clear_depth;
+  const std::uint32_t top_hold = top_hold_revolutions_;
+  const auto ref_z = static_cast<float>(cloud.ref_z);
   // Cell coordinates relative to the map's origin: a point's cell is
   // (offset + x / resolution), so no per-point floor of a large number.
   const double inv = 1.0 / grid_.resolution();
@@ -107,11 +113,16 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
       const float s = cloud.sin_incline[k];
       cell.seen = now;
       if constexpr (M == FusionModel::pw) {
-        std::uint32_t& hit = hits_.at_offset(grid_.offset_of(cell));
+        DiracHit& hit = hits_.at_offset(grid_.offset_of(cell));
+        const float z = ref_z + cloud.z[k];
         if (models.dirac(static_cast<int>(tc->best), h, s)) {
-          hit = now;
+          hit.top = (cell.logit == hi && hit.revolution != 0) ? std::max(hit.top, z) : z;
+          hit.revolution = now;
           cell.logit = hi;
-        } else if (hit == 0 || now - hit > hold) {
+        } else if (hit.revolution == 0 ||
+                   (now - hit.revolution > hold && (z < hit.top - clear_depth || now - hit.revolution > top_hold))) {
+          // Free ground below where the obstacle stood clears it once the hold
+          // is over; the flat top of a box (as high as its faces) does not.
           cell.logit = lo;
         }
       } else if constexpr (M == FusionModel::ps) {

@@ -59,6 +59,14 @@ struct MapParams {
   float logit_min = -4.0f;      // the cell's log-odds are clamped to [min, max]
   float logit_max = 4.0f;
   float dirac_hold_s = 2.0f;    // PW: an observed obstacle keeps its cell occupied this long
+  // PW: once dirac_hold is over, a free point clears the cell at once only if
+  // it lies more than dirac_clear_depth below the cell's highest obstacle
+  // point (ground where the obstacle stood); a free point at the obstacle's
+  // height (a box's flat top, or grass tops) clears it only dirac_top_hold
+  // after the last obstacle point. With dirac_top_hold <= dirac_hold (the
+  // default) every free point clears after the hold, as in the thesis.
+  float dirac_clear_depth = 0.1f;
+  float dirac_top_hold_s = 2.0f;
   float occupied = 0.5f;        // P above this is an obstacle (PNGs, scores, planners' 0-100)
 };
 

@@ -90,13 +90,19 @@ class ObstacleMap {
   float percent_scale_;
   RollingGrid<ObstacleCell> grid_;
   RollingGrid<std::int8_t> occupancy_;  // percent() of every cell, -1 unknown; moves with grid_
-  // PW: the revolution of each cell's last obstacle point (0: none); moves
-  // with grid_. Apart from the cells so that PS and PC maps stay 8 bytes a
-  // cell (one cell per point is a cache miss: the smaller, the fewer).
-  RollingGrid<std::uint32_t> hits_;
+  // PW: per cell, the revolution of its last obstacle point (0: none) and
+  // the highest obstacle point since the cell turned occupied (odometry-frame
+  // z); moves with grid_. Apart from the cells so that PS and PC maps stay 8
+  // bytes a cell (one cell per point is a cache miss: the smaller, the fewer).
+  struct DiracHit {
+    std::uint32_t revolution = 0;
+    float top = 0.0f;
+  };
+  RollingGrid<DiracHit> hits_;
   float occupied_logit_;
   std::uint32_t revolution_ = 0;
   std::uint32_t hold_revolutions_ = 0;
+  std::uint32_t top_hold_revolutions_ = 0;
   std::int64_t first_ns_ = 0;
   std::int64_t last_ns_ = 0;
   MapCounters counters_;
