@@ -1,7 +1,8 @@
 // Fuzzes the text and datagram formats of bench recordings and sensors:
 // candump log lines, serial and GPIO log lines, NMEA sentences and RMC times, CAN
-// and GPIO tunnel datagrams, DBC databases and the recording manifest. Round trips
-// are checked where a format has one.
+// and GPIO tunnel datagrams, DBC databases, the recording manifest and the
+// obstacle and terrain sections of a robot config. Round trips are checked
+// where a format has one.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -20,6 +21,8 @@
 #include "trailnav/drivers/gps/nmea.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
+#include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/terrain_config.hpp"
 #include "trailnav/runtime/config.hpp"
 
 using namespace trailnav;
@@ -116,6 +119,22 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     const ConfigNode node = ConfigNode::parse(std::string(text), "fuzz.yaml");
     (void)node.has("streams");
+    // What the obstacle parser accepts is what the pipeline can run with.
+    if (auto o = node.optional_map("obstacles")) {
+      const perception::ObstacleConfig c = perception::parse_obstacle_config(*o);
+      check(c.features.min_distance > 0.0f && c.features.neighbour_reach > 0.0f);
+      check(c.features.min_range < c.features.max_range);
+      check(c.map.size > 0 && c.map.resolution > 0.0 && c.map.measurement_min < c.map.measurement_max);
+      if (c.features.self_box) {
+        const auto& b = *c.features.self_box;
+        check(b[0] < b[1] && b[2] < b[3] && b[4] < b[5]);
+      }
+    }
+  } catch (const ConfigError&) {
+  }
+  try {
+    const ConfigNode node = ConfigNode::parse(std::string(text), "fuzz.yaml");
+    if (auto t = node.optional_map("terrain")) (void)perception::parse_terrain_config(*t);
   } catch (const ConfigError&) {
   }
   return 0;
