@@ -136,11 +136,11 @@ int run(ObstaclesCliOptions& o) {
               static_cast<unsigned long long>(c.features.measured), static_cast<unsigned long long>(c.features.flat),
               static_cast<unsigned long long>(c.features.isolated), static_cast<unsigned long long>(c.map.outside_map),
               static_cast<unsigned long long>(r.malformed_packets));
-  if (r.self_box_applied) {
-    const auto& b = perception::kKittiCarBox;
-    std::printf("  KITTI: returns from the recording car itself dropped (features.self_box [%.2f, %.2f, %.2f, %.2f, %.2f, "
+  if (r.source_self_box) {
+    const auto& b = *r.source_self_box;
+    std::printf("  returns from the recording vehicle itself dropped (%s input: features.self_box [%.2f, %.2f, %.2f, %.2f, %.2f, "
                 "%.2f] in the sensor frame; give your own in --config)\n",
-                static_cast<double>(b[0]), static_cast<double>(b[1]), static_cast<double>(b[2]), static_cast<double>(b[3]),
+                r.input_kind == "kitti" ? "KITTI" : r.input_kind.c_str(), static_cast<double>(b[0]), static_cast<double>(b[1]), static_cast<double>(b[2]), static_cast<double>(b[3]),
                 static_cast<double>(b[4]), static_cast<double>(b[5]));
   }
   std::printf("  time per revolution: align %.3f ms, smoothing + features %.3f ms, map update%s %.3f ms\n", r.align_ms,

@@ -352,11 +352,9 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   report.model_name = source.model_name();
   const std::optional<SimTruth>& truth = source.truth();
   perception::ObstacleConfig config = options.config;
-  if (source.input_kind() == "kitti" && !config.features.self_box) {
-    // The recording car's own body, racks and mirrors, in the sensor frame
-    // (measured on the shared scans: the returns that sit still in both).
-    config.features.self_box = perception::kKittiCarBox;
-    report.self_box_applied = true;
+  if (!config.features.self_box && source.self_box()) {
+    config.features.self_box = source.self_box();
+    report.source_self_box = config.features.self_box;
   }
   if (truth && config.mount.translation == std::array<double, 3>{0.0, 0.0, 0.0}) config.mount.translation = source.mount_translation();
   if (options.terrain == TerrainMode::truth && !truth) {

@@ -11,7 +11,6 @@
 #include <string>
 #include <vector>
 
-#include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/random_forest.hpp"
@@ -94,7 +93,9 @@ struct ObstacleRunReport {
   std::string error;  // non-empty: nothing ran
   std::string input_kind;  // "recording", "kitti"
   std::string model_name;  // lidar
-  bool self_box_applied = false;  // KITTI: the car's body box (perception::kKittiCarBox) was used
+  // The recording vehicle's box the input brought (KITTI's car), used as
+  // features.self_box because the config gave none.
+  std::optional<std::array<float, 6>> source_self_box;
   bool scored = false;
   std::uint64_t revolutions = 0;
   perception::PipelineCounters counters;

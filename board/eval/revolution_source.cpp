@@ -72,6 +72,11 @@ std::array<double, 3> RevolutionSource::mount_translation() const noexcept {
   return {m.x(), m.y(), m.z()};
 }
 
+std::optional<std::array<float, 6>> RevolutionSource::self_box() const noexcept {
+  if (kind_ == "kitti") return perception::kKittiCarBox;
+  return std::nullopt;
+}
+
 RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& inputs, const std::string& calibration) {
   if (inputs.empty()) return {std::nullopt, "no input: give a recording directory, a pcap file or KITTI .bin scans"};
   const bool kitti = std::all_of(inputs.begin(), inputs.end(), [](const std::string& p) { return fs::path(p).extension() == ".bin"; });

@@ -39,6 +39,9 @@ class RevolutionSource {
   const std::optional<SimTruth>& truth() const noexcept { return truth_; }
   // The lidar's position on the robot from the simulated scenario (zeros otherwise).
   std::array<double, 3> mount_translation() const noexcept;
+  // The box around the sensor that is the recording vehicle itself
+  // (features.self_box): KITTI's car; none for other inputs.
+  std::optional<std::array<float, 6>> self_box() const noexcept;
 
   // Hands every revolution to `on_image` in order; stops early when it
   // returns false. `progress` gets the fraction read. Returns an error

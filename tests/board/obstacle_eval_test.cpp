@@ -14,6 +14,8 @@
 #include "obstacle_run.hpp"
 #include "sim_truth.hpp"
 #include "simulator.hpp"
+#include "test_data.hpp"
+#include "trailnav/perception/kitti.hpp"
 
 namespace trailnav::eval {
 namespace {
@@ -136,6 +138,26 @@ TEST_F(MeadowBlock, SightingsMarkOnlySolidObstaclesTheLidarHit) {
   }
   EXPECT_GT(crate_sides, 10u);
   EXPECT_LT(sides, sighted);  // tops are not sides
+}
+
+// KITTI scans bring their recording car's box as the self box when the
+// config has none; a box in the config is used instead.
+TEST(ObstacleRun, KittiInputDropsTheRecordingCarUnlessTheConfigGivesABox) {
+  ObstacleRunOptions o;
+  o.inputs = {test::shared_data("kitti/000000.bin"), test::shared_data("kitti/000001.bin")};
+  o.terrain = TerrainMode::config;
+  o.config.fixed_class = TerrainClass::street;
+  const ObstacleRunReport car = run_obstacles(o);
+  ASSERT_TRUE(car.error.empty()) << car.error;
+  ASSERT_TRUE(car.source_self_box.has_value());
+  EXPECT_EQ(*car.source_self_box, perception::kKittiCarBox);
+  EXPECT_EQ(car.counters.align.self_hits, 64u);  // the two scans' returns from the car
+
+  o.config.features.self_box = std::array<float, 6>{-1.0f, 1.0f, -1.0f, 1.0f, -2.0f, 0.5f};
+  const ObstacleRunReport own = run_obstacles(o);
+  ASSERT_TRUE(own.error.empty()) << own.error;
+  EXPECT_FALSE(own.source_self_box.has_value());
+  EXPECT_EQ(own.counters.align.self_hits, 0u);  // nothing of the car within 1 m of the sensor
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -116,11 +117,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       }
     }
   }
+  std::optional<ConfigNode> node;
   try {
-    const ConfigNode node = ConfigNode::parse(std::string(text), "fuzz.yaml");
-    (void)node.has("streams");
+    node = ConfigNode::parse(std::string(text), "fuzz.yaml");
+    (void)node->has("streams");
+  } catch (const ConfigError&) {
+  }
+  if (!node) return 0;
+  try {
     // What the obstacle parser accepts is what the pipeline can run with.
-    if (auto o = node.optional_map("obstacles")) {
+    if (auto o = node->optional_map("obstacles")) {
       const perception::ObstacleConfig c = perception::parse_obstacle_config(*o);
       check(c.features.min_distance > 0.0f && c.features.neighbour_reach > 0.0f);
       check(c.features.min_range < c.features.max_range);
@@ -133,8 +139,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   } catch (const ConfigError&) {
   }
   try {
-    const ConfigNode node = ConfigNode::parse(std::string(text), "fuzz.yaml");
-    if (auto t = node.optional_map("terrain")) (void)perception::parse_terrain_config(*t);
+    if (auto t = node->optional_map("terrain")) (void)perception::parse_terrain_config(*t);
   } catch (const ConfigError&) {
   }
   return 0;
