@@ -182,7 +182,7 @@ class Scorer {
         const std::int32_t x = c.x + dx, y = c.y + dy;
         if (!cells_.contains(x, y) || !g.contains({x, y})) continue;
         const perception::ObstacleCell& cell = g.at({x, y});
-        if (cell.seen == 0) continue;
+        if (!cell.known()) continue;
         const std::size_t k = cells_.index(x, y);
         const std::uint8_t code = cells_.code(k);
         if (code == 0) {
@@ -285,7 +285,7 @@ double mean_kl(const ObstacleMap& p_map, const ObstacleMap& q_map) {
   for (std::int32_t y = 0; y < gp.size_y(); ++y) {
     for (std::int32_t x = 0; x < gp.size_x(); ++x) {
       const perception::ObstacleCell& a = gp.at({o.x + x, o.y + y});
-      if (a.seen == 0 || !gq.contains({o.x + x, o.y + y})) continue;
+      if (!a.known() || !gq.contains({o.x + x, o.y + y})) continue;
       const perception::ObstacleCell& b = gq.at({o.x + x, o.y + y});
       const double p = static_cast<double>(perception::logistic(a.logit));
       const double q = static_cast<double>(perception::logistic(b.logit));
@@ -309,7 +309,7 @@ Status write_obstacle_png(const std::string& path, const ObstacleMap& map, doubl
     for (std::uint32_t col = 0; col < w; ++col) {
       const perception::ObstacleCell& c = g.at({o.x + static_cast<std::int32_t>(col), o.y + y});
       std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + col) * 3];
-      if (c.seen == 0) {
+      if (!c.known()) {
         px[0] = 60;
         px[1] = 70;
         px[2] = 90;

@@ -91,7 +91,7 @@ TEST(ObstacleMap, UnknownFreeAndOccupiedAreDistinct) {
       for (std::int32_t x = 0; x < g.size_x(); ++x) {
         const ObstacleCell& cell = g.at({g.origin().x + x, g.origin().y + y});
         const std::int8_t v = occupancy[static_cast<std::size_t>(y * g.size_x() + x)];
-        if (cell.seen == 0) {
+        if (!cell.known()) {
           ASSERT_EQ(v, -1);
           ++unknown;
         } else {

@@ -97,6 +97,19 @@ TEST(RollingGrid, CopyToLinearisesFromTheOrigin) {
   for (int i = 0; i < 20; ++i) EXPECT_EQ(out[static_cast<std::size_t>(i)], 10 * (i / 5) + i % 5);
 }
 
+TEST(RollingGrid, OffsetFromOriginNamesTheSameCellAsItsWorldIndex) {
+  RollingGrid<int> grid(5, 4, 1.0, 0);
+  for (const CellIndex origin : {CellIndex{0, 0}, CellIndex{-7, 13}, CellIndex{3, -2}, CellIndex{-11, -9}}) {
+    grid.move_origin_to(origin);
+    for (std::int32_t y = 0; y < 4; ++y) {
+      for (std::int32_t x = 0; x < 5; ++x) {
+        EXPECT_EQ(grid.offset_from_origin(x, y), grid.offset_of(grid.at({origin.x + x, origin.y + y})))
+            << "origin " << origin.x << "," << origin.y << " cell " << x << "," << y;
+      }
+    }
+  }
+}
+
 TEST(RollingGrid, WindowIterationIsClippedToTheMap) {
   RollingGrid<int> grid(10, 10, 1.0, 0);
   int visited = 0;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace trailnav::perception {
 
@@ -9,11 +10,12 @@ ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
     : params_(params),
       model_(model),
       percent_scale_(kPercentSteps / std::max(params.logit_max - params.logit_min, 1e-6f)),
-      grid_(params.size, params.size, params.resolution, ObstacleCell{logit(params.prior), 0}),
+      grid_(params.size, params.size, params.resolution, ObstacleCell{}),
       occupancy_(params.size, params.size, params.resolution, std::int8_t{-1}),
       hits_(model == FusionModel::pw ? params.size : 1, model == FusionModel::pw ? params.size : 1, params.resolution,
             DiracHit{}),
-      occupied_logit_(logit(params.occupied)) {
+      occupied_logit_(logit(params.occupied)),
+      prior_logit_(logit(params.prior)) {
   for (int i = 0; i <= kPercentSteps; ++i) {
     const float l = params.logit_min + (params.logit_max - params.logit_min) * static_cast<float>(i) / kPercentSteps;
     percent_[static_cast<std::size_t>(i)] = static_cast<std::int8_t>(std::lround(100.0f * logistic(l)));
@@ -45,6 +47,7 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
                                    const TerrainSource& terrain) noexcept {
   const float lo = params_.logit_min;
   const float hi = params_.logit_max;
+  const float prior = prior_logit_;
   const std::uint32_t now = revolution_;
   const std::uint32_t hold = hold_revolutions_;
   const float clear_depth = params_.dirac_clear_depth;
@@ -81,6 +84,69 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
   const auto tfinv = static_cast<float>(t_inv);
 
   std::uint64_t updates = 0, outside = 0, unknown = 0;
+  // The points go through in batches. First each point's cells are found and
+  // fetched ahead (prefetch); then the batch is integrated, by when they are
+  // in the cache. A revolution's cells are spread over megabytes, and the
+  // alignment and the features stream through the cache between two updates.
+  constexpr std::size_t kBatch = 128;
+  constexpr std::uint32_t kNoTerrain = std::numeric_limits<std::uint32_t>::max();
+  std::array<std::uint32_t, kBatch> batch_point;
+  std::array<std::uint32_t, kBatch> batch_cell;
+  std::array<std::uint32_t, kBatch> batch_terrain;
+  std::size_t batch = 0;
+
+  const auto integrate_batch = [&]() noexcept {
+    for (std::size_t b = 0; b < batch; ++b) {
+      const std::size_t k = batch_point[b];
+      const std::size_t offset = batch_cell[b];
+      const TerrainCell* tc = &unknown_cell;
+      if (tmap != nullptr) {
+        const TerrainCell* c = batch_terrain[b] == kNoTerrain ? nullptr : &tmap->grid().at_offset(batch_terrain[b]);
+        if (c != nullptr && c->known) {
+          tc = c;
+        } else {
+          ++unknown;
+        }
+      }
+      ObstacleCell& cell = grid_.at_offset(offset);
+      const float h = cloud.step_height[k];
+      const float s = cloud.sin_incline[k];
+      // A cell's first point starts from the prior.
+      const float before = std::isnan(cell.logit) ? prior : cell.logit;
+      if constexpr (M == FusionModel::pw) {
+        DiracHit& hit = hits_.at_offset(offset);
+        const float z = ref_z + cloud.z[k];
+        if (models.dirac(static_cast<int>(tc->best), h, s)) {
+          hit.top = (before == hi && hit.revolution != 0) ? std::max(hit.top, z) : z;
+          hit.revolution = now;
+          cell.logit = hi;
+        } else if (hit.revolution == 0 ||
+                   (now - hit.revolution > hold && (z < hit.top - clear_depth || now - hit.revolution > top_hold))) {
+          // Free ground below where the obstacle stood clears it once the hold
+          // is over; the flat top of a box (as high as its faces) does not.
+          cell.logit = lo;
+        } else {
+          cell.logit = before;
+        }
+      } else if constexpr (M == FusionModel::ps) {
+        const float p = models.smooth(static_cast<int>(tc->best), h, s);
+        cell.logit = std::clamp(before + models.increment(p), lo, hi);
+      } else {
+        const int hi_index = ObstacleModels::step_index(h);
+        const int si_index = ObstacleModels::sin_index(s);
+        float p = 0.0f;
+        // No branch on zero weights: a class of weight 0 adds exactly 0.
+        for (int t = 0; t < kTerrainClasses; ++t) {
+          p += tc->p[static_cast<std::size_t>(t)] * models.step_part(t, hi_index) * models.incline_part(t, si_index);
+        }
+        cell.logit = std::clamp(before + models.increment(p), lo, hi);
+      }
+      occupancy_.at_offset(offset) = percent(cell.logit);
+    }
+    updates += batch;
+    batch = 0;
+  };
+
   const int columns = cloud.columns();
   for (int ring = 0; ring < cloud.rings(); ++ring) {
     const std::size_t base = cloud.index(ring, 0);
@@ -94,54 +160,27 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
         ++outside;
         continue;
       }
-      ObstacleCell& cell = grid_.at({origin.x + static_cast<std::int32_t>(lx), origin.y + static_cast<std::int32_t>(ly)});
-      const TerrainCell* tc = &unknown_cell;
+      const std::size_t offset = grid_.offset_from_origin(static_cast<std::int32_t>(lx), static_cast<std::int32_t>(ly));
+      __builtin_prefetch(&grid_.at_offset(offset), 1);
+      __builtin_prefetch(&occupancy_.at_offset(offset), 1);
+      if constexpr (M == FusionModel::pw) __builtin_prefetch(&hits_.at_offset(offset), 1);
+      std::uint32_t toffset = kNoTerrain;
       if (tmap != nullptr) {
         const float tx = tox + cloud.x[k] * tfinv;
         const float ty = toy + cloud.y[k] * tfinv;
-        const TerrainCell* c = nullptr;
         if (tx >= 0.0f && tx < tsize_x && ty >= 0.0f && ty < tsize_y) {
-          c = &tmap->grid().at({torigin.x + static_cast<std::int32_t>(tx), torigin.y + static_cast<std::int32_t>(ty)});
-        }
-        if (c != nullptr && c->known) {
-          tc = c;
-        } else {
-          ++unknown;
+          const std::size_t t = tmap->grid().offset_from_origin(static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty));
+          __builtin_prefetch(&tmap->grid().at_offset(t), 0);
+          toffset = static_cast<std::uint32_t>(t);
         }
       }
-      const float h = cloud.step_height[k];
-      const float s = cloud.sin_incline[k];
-      cell.seen = now;
-      if constexpr (M == FusionModel::pw) {
-        DiracHit& hit = hits_.at_offset(grid_.offset_of(cell));
-        const float z = ref_z + cloud.z[k];
-        if (models.dirac(static_cast<int>(tc->best), h, s)) {
-          hit.top = (cell.logit == hi && hit.revolution != 0) ? std::max(hit.top, z) : z;
-          hit.revolution = now;
-          cell.logit = hi;
-        } else if (hit.revolution == 0 ||
-                   (now - hit.revolution > hold && (z < hit.top - clear_depth || now - hit.revolution > top_hold))) {
-          // Free ground below where the obstacle stood clears it once the hold
-          // is over; the flat top of a box (as high as its faces) does not.
-          cell.logit = lo;
-        }
-      } else if constexpr (M == FusionModel::ps) {
-        const float p = models.smooth(static_cast<int>(tc->best), h, s);
-        cell.logit = std::clamp(cell.logit + models.increment(p), lo, hi);
-      } else {
-        const int hi_index = ObstacleModels::step_index(h);
-        const int si_index = ObstacleModels::sin_index(s);
-        float p = 0.0f;
-        // No branch on zero weights: a class of weight 0 adds exactly 0.
-        for (int t = 0; t < kTerrainClasses; ++t) {
-          p += tc->p[static_cast<std::size_t>(t)] * models.step_part(t, hi_index) * models.incline_part(t, si_index);
-        }
-        cell.logit = std::clamp(cell.logit + models.increment(p), lo, hi);
-      }
-      occupancy_.at_offset(grid_.offset_of(cell)) = percent(cell.logit);
-      ++updates;
+      batch_point[batch] = static_cast<std::uint32_t>(k);
+      batch_cell[batch] = static_cast<std::uint32_t>(offset);
+      batch_terrain[batch] = toffset;
+      if (++batch == kBatch) integrate_batch();
     }
   }
+  integrate_batch();
   counters_.updates += updates;
   counters_.outside_map += outside;
   counters_.unknown_terrain += unknown;

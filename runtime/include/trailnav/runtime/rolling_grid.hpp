@@ -151,6 +151,13 @@ class RollingGrid {
   // companion grid (a cache of derived values) can follow a main grid.
   std::size_t offset_of(const Cell& c) const noexcept { return static_cast<std::size_t>(&c - cells_.get()); }
   Cell& at_offset(std::size_t offset) noexcept { return cells_[offset]; }
+  const Cell& at_offset(std::size_t offset) const noexcept { return cells_[offset]; }
+  // The storage offset of the cell `dx` columns and `dy` rows from the
+  // origin. Precondition: 0 <= dx < size_x, 0 <= dy < size_y.
+  std::size_t offset_from_origin(std::int32_t dx, std::int32_t dy) const noexcept {
+    assert(dx >= 0 && dx < size_x_ && dy >= 0 && dy < size_y_);
+    return storage_offset({origin_.x + dx, origin_.y + dy});
+  }
 
   // Copies the map into `out` (size_x * size_y cells) in row-major order
   // starting at the origin: out[(y - origin.y) * size_x + (x - origin.x)].
