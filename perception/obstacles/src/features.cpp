@@ -41,12 +41,18 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept 
       while (b < columns && st[b] != PointState::none && std::abs(r[b] - r[b - 1]) <= jump) ++b;
       if (b - a > 1) {
         // Prefix sums over the segment (doubles: no drift over long rings).
+        // The running sums stay in registers: read back from the arrays, each
+        // step would wait for the store before it.
         sx[0] = sy[0] = sz[0] = 0.0;
+        double ax = 0.0, ay = 0.0, az = 0.0;
         for (int j = a; j < b; ++j) {
           const auto q = static_cast<std::size_t>(j - a);
-          sx[q + 1] = sx[q] + static_cast<double>(px[j]);
-          sy[q + 1] = sy[q] + static_cast<double>(py[j]);
-          sz[q + 1] = sz[q] + static_cast<double>(pz[j]);
+          ax += static_cast<double>(px[j]);
+          ay += static_cast<double>(py[j]);
+          az += static_cast<double>(pz[j]);
+          sx[q + 1] = ax;
+          sy[q + 1] = ay;
+          sz[q + 1] = az;
         }
         for (int j = a; j < b; ++j) {
           // A symmetric window, narrowed near the segment's ends so the
