@@ -127,11 +127,11 @@ TEST(Features, NeighboursAllWithinXAreFlat) {
 TEST(Features, MissingPointsAreSkippedAndLonePointsIsolated) {
   RevolutionCloud c = make_cloud([](double, double, int i, int) { return i >= 4 ? 0.3 : 0.0; });
   // Ring 4 loses column 100: ring 3's point there finds ring 5 instead.
-  c.state[c.index(4, 100)] = PointState::none;
+  c.remove(c.index(4, 100));
   // A lone point: everything around (3, 200) within K and L missing.
   for (int i = 0; i < kRings; ++i) {
     for (int j = 190; j <= 210; ++j) {
-      if (!(i == 3 && j == 200)) c.state[c.index(i, j)] = PointState::none;
+      if (!(i == 3 && j == 200)) c.remove(c.index(i, j));
     }
   }
   FeatureCounters counters;

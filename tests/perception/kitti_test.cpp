@@ -150,6 +150,34 @@ namespace {
 // searches find the same neighbours as the portable one on real HDL-64E
 // geometry: every point's state, stepHeight and sin(incline) bit for bit,
 // with and without a full turn (the ring ends).
+// The W-wide neighbour searches take a point to exist where its range is
+// above 0: the aligner must write the two together, also for the returns it
+// drops (out of range, the car itself).
+TEST(Kitti, AlignedPointsExistExactlyWhereTheirRangeIsAboveZero) {
+  velodyne::RangeImage image(kitti_shape());
+  std::vector<float> buffer;
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, image));
+  ObstacleConfig config;
+  config.features.self_box = kKittiCarBox;
+  config.features.max_range = 40.0f;
+  RevolutionCloud cloud(CloudShape{image.rings(), image.shape().max_columns});
+  CloudAligner aligner(config.mount, config.features);
+  aligner.align(image, nullptr, cloud);
+  EXPECT_GT(aligner.counters().out_of_range, 1'000u);
+  EXPECT_GT(aligner.counters().self_hits, 10u);
+  std::size_t points = 0, mismatched = 0;
+  for (int i = 0; i < cloud.rings(); ++i) {
+    for (int j = 0; j < cloud.columns(); ++j) {
+      const std::size_t k = cloud.index(i, j);
+      const bool exists = cloud.state[k] != PointState::none;
+      if (exists) ++points;
+      if (exists != (cloud.range[k] > 0.0f)) ++mismatched;
+    }
+  }
+  EXPECT_GT(points, 50'000u);
+  EXPECT_EQ(mismatched, 0u);
+}
+
 TEST(Kitti, EveryFeatureSearchAgreesBitForBit) {
   std::printf("four-wide search: %s, eight-wide (AVX2): %s\n", simd_features_available() ? "yes" : "no",
               wide_features_available() ? "yes" : "no");

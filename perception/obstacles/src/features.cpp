@@ -151,13 +151,11 @@ template <>
 struct Lanes<4> {
   using F = float __attribute__((vector_size(16)));
   using I = std::int32_t __attribute__((vector_size(16)));
-  using B = std::uint8_t __attribute__((vector_size(4)));
 };
 template <>
 struct Lanes<8> {
   using F = float __attribute__((vector_size(32)));
   using I = std::int32_t __attribute__((vector_size(32)));
-  using B = std::uint8_t __attribute__((vector_size(8)));
 };
 
 // The best farther neighbour of W points so far (as Best).
@@ -185,7 +183,6 @@ template <int W>
                                                 const typename Lanes<W>::F& reach2, BestW<W>& best) noexcept {
   using F = typename Lanes<W>::F;
   using I = typename Lanes<W>::I;
-  using B = typename Lanes<W>::B;
   F px, py, pz;
   load_lanes<W>(v.x + at, px);
   load_lanes<W>(v.y + at, py);
@@ -196,9 +193,10 @@ template <int W>
   const I magnitude = I{} + 0x7fffffff;
   for (int k = reach; k >= 1; --k) {
     const auto q = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(at) + step * k);
-    B states;
-    std::memcpy(&states, v.st + q, sizeof states);
-    F qx, qy, qz;
+    // A point exists where its range is above 0 (the aligner writes both
+    // together): one float compare instead of widening the state bytes.
+    F qr, qx, qy, qz;
+    load_lanes<W>(v.range + q, qr);
     load_lanes<W>(v.x + q, qx);
     load_lanes<W>(v.y + q, qy);
     load_lanes<W>(v.z + q, qz);
@@ -206,7 +204,7 @@ template <int W>
     const F dy = qy - py;
     const F dz = qz - pz;
     const F d2 = dx * dx + dy * dy + dz * dz;
-    const I valid = (__builtin_convertvector(states, I) != 0) & (d2 <= reach2);
+    const I valid = (qr > 0.0f) & (d2 <= reach2);
     const I far = valid & (d2 > x2);
     const F adz = reinterpret_cast<F>(reinterpret_cast<I>(dz) & magnitude);
     cdz = far ? adz : cdz;

@@ -45,10 +45,17 @@ class RevolutionCloud {
   }
   // Clears the first `columns` columns of every ring.
   void reset(int columns) noexcept;
+  // Takes point k out: no return there. A point exists (state not `none`)
+  // exactly when its range is above 0; the neighbour searches test the
+  // range, a float compare, instead of widening the state bytes.
+  void remove(std::size_t k) noexcept {
+    state[k] = PointState::none;
+    range[k] = 0.0f;
+  }
 
   // Per point (index()).
   std::vector<float> x, y, z;        // aligned (after smoothing() these are the smoothed values)
-  std::vector<float> range;          // m, as measured (0: none)
+  std::vector<float> range;          // m, as measured; 0 exactly where state is `none`
   std::vector<float> intensity;      // 0..255
   std::vector<float> step_height;    // m (Eq. 7.5)
   std::vector<float> sin_incline;    // sin of the incline (Eq. 7.6)
