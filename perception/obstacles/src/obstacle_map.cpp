@@ -6,6 +6,25 @@
 
 namespace trailnav::perception {
 
+namespace {
+
+// Asks for the cache line of *p ahead of its use (a hint: no effect where
+// the compiler has no such builtin).
+inline void prefetch(const void* p, bool for_write) noexcept {
+#if defined(__GNUC__)
+  if (for_write) {
+    __builtin_prefetch(p, 1);
+  } else {
+    __builtin_prefetch(p, 0);
+  }
+#else
+  (void)p;
+  (void)for_write;
+#endif
+}
+
+}  // namespace
+
 ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
     : params_(params),
       model_(model),
@@ -161,16 +180,16 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
         continue;
       }
       const std::size_t offset = grid_.offset_from_origin(static_cast<std::int32_t>(lx), static_cast<std::int32_t>(ly));
-      __builtin_prefetch(&grid_.at_offset(offset), 1);
-      __builtin_prefetch(&occupancy_.at_offset(offset), 1);
-      if constexpr (M == FusionModel::pw) __builtin_prefetch(&hits_.at_offset(offset), 1);
+      prefetch(&grid_.at_offset(offset), true);
+      prefetch(&occupancy_.at_offset(offset), true);
+      if constexpr (M == FusionModel::pw) prefetch(&hits_.at_offset(offset), true);
       std::uint32_t toffset = kNoTerrain;
       if (tmap != nullptr) {
         const float tx = tox + cloud.x[k] * tfinv;
         const float ty = toy + cloud.y[k] * tfinv;
         if (tx >= 0.0f && tx < tsize_x && ty >= 0.0f && ty < tsize_y) {
           const std::size_t t = tmap->grid().offset_from_origin(static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty));
-          __builtin_prefetch(&tmap->grid().at_offset(t), 0);
+          prefetch(&tmap->grid().at_offset(t), false);
           toffset = static_cast<std::uint32_t>(t);
         }
       }
