@@ -1,7 +1,10 @@
 // `trailnav obstacles`: the obstacle pipeline offline, on a recording, a pcap
 // or KITTI scans: map pictures, raw probabilities, scores against a
 // simulated recording's truth and the KL comparison of the fusion models.
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +25,7 @@ struct ObstaclesCliOptions {
   std::string terrain;
   std::string terrain_model;
   std::optional<perception::RandomForest> forest;
+  std::string misses_file;
   bool quiet = false;
 };
 
@@ -112,6 +116,23 @@ int run(ObstaclesCliOptions& o) {
       return 2;
     }
   }
+  // --misses: every face cell a map missed, one CSV line per scored snapshot.
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> misses(nullptr, &std::fclose);
+  std::uint64_t miss_lines = 0;
+  if (!o.misses_file.empty()) {
+    misses.reset(std::fopen(o.misses_file.c_str(), "w"));
+    if (!misses) {
+      std::fprintf(stderr, "trailnav obstacles: --misses %s: cannot write: %s\n", o.misses_file.c_str(), std::strerror(errno));
+      return 2;
+    }
+    std::fprintf(misses.get(), "model,time_s,robot_x,robot_y,x,y,distance_m,side_seen_s,obstacle,probability,found_before\n");
+    o.run.on_face_miss = [&](const eval::FaceMiss& m) {
+      std::fprintf(misses.get(), "%s,%.1f,%.2f,%.2f,%.2f,%.2f,%.2f,%.1f,%s,%.3f,%d\n",
+                   std::string(perception::fusion_model_name(m.model)).c_str(), m.time_s, m.robot_x, m.robot_y, m.x, m.y,
+                   m.distance, m.side_seen_s, m.obstacle.c_str(), static_cast<double>(m.probability), m.found_before ? 1 : 0);
+      ++miss_lines;
+    };
+  }
   ProgressBar progress("obstacles", 100.0, "%");
   if (!o.quiet) o.run.progress = [&](double f) { progress.update(100.0 * f); };
   const eval::ObstacleRunReport r = eval::run_obstacles(o.run);
@@ -119,6 +140,17 @@ int run(ObstaclesCliOptions& o) {
   if (!r.error.empty()) {
     std::fprintf(stderr, "trailnav obstacles: %s\n", r.error.c_str());
     return 2;
+  }
+  if (misses) {
+    const bool written = std::ferror(misses.get()) == 0;
+    if (std::fclose(misses.release()) != 0 || !written) {
+      std::fprintf(stderr, "trailnav obstacles: --misses %s: writing failed\n", o.misses_file.c_str());
+      return 2;
+    }
+    if (!r.scored) {
+      std::fprintf(stderr, "trailnav obstacles: --misses needs a simulated recording (its truth says where the faces are); "
+                           "%s is empty\n", o.misses_file.c_str());
+    }
   }
   const auto& c = r.counters;
   const char* terrain = o.run.terrain == eval::TerrainMode::truth       ? "true classes (adaptive)"
@@ -163,6 +195,10 @@ int run(ObstaclesCliOptions& o) {
   for (const std::string& f : r.files) {
     if (f.find("-0") == std::string::npos) std::printf("  wrote %s\n", f.c_str());
   }
+  if (!o.misses_file.empty() && r.scored) {
+    std::printf("  wrote %s (%llu face cells missed, over all scored snapshots and maps)\n", o.misses_file.c_str(),
+                static_cast<unsigned long long>(miss_lines));
+  }
   return 0;
 }
 
@@ -198,6 +234,10 @@ void add_obstacles_command(CLI::App& app) {
   cmd->add_option("--score-every", o.run.score_every, "Score (and compare) the maps every N revolutions")
       ->capture_default_str();
   cmd->add_option("--radius", o.run.score_radius, "Score cells within this many metres of the robot")->capture_default_str();
+  cmd->add_option("--misses", o.misses_file,
+                  "Write every obstacle face cell a map missed to this CSV, per scored snapshot: when, where, how far, "
+                  "when its side was first seen, the map's P(o) there and whether it had been found before (simulated "
+                  "recordings)");
   cmd->add_option("--revolutions", o.run.max_revolutions, "Stop after N revolutions (0: all)")->capture_default_str();
   cmd->add_option("--calibration", o.run.calibration, "Lidar calibration file (default: the recording's or the model's)");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
+#include <unordered_set>
 
 #include "png.hpp"
 #include "revolution_source.hpp"
@@ -122,6 +124,8 @@ class TruthCells {
   bool side_sighted(std::size_t k, std::int64_t ms) const noexcept {
     return side_sighted_[k] != 0 && static_cast<std::int64_t>(side_sighted_[k]) <= ms + 1;
   }
+  // When (ms after the start) a side was first seen there; 0: never.
+  std::uint32_t side_sighted_ms(std::size_t k) const noexcept { return side_sighted_[k]; }
   double resolution() const noexcept { return res_; }
 
  private:
@@ -161,13 +165,13 @@ class Scorer {
  public:
   Scorer(const SimTruth& truth, const ObstacleRunOptions& o, double res)
       : truth_(truth), cells_(truth, res, o.tolerance_cells), radius_(o.score_radius), tolerance_(o.tolerance_cells),
-        shapes_(named_obstacles(truth.scenario)) {}
+        shapes_(named_obstacles(truth.scenario)), on_miss_(o.on_face_miss) {}
 
   void init(MapScore& s) const {
     for (const NamedShape& n : shapes_) s.named.push_back({n.name, 0, 0, {}});
   }
 
-  void score(const ObstacleMap& map, double rx, double ry, std::int64_t t_ns, MapScore& s) const {
+  void score(const ObstacleMap& map, double rx, double ry, std::int64_t t_ns, MapScore& s) {
     const auto& g = map.grid();
     const double res = g.resolution();
     const CellIndex c = g.world_to_index(rx, ry);
@@ -213,12 +217,33 @@ class Scorer {
         ++s.faces.cells;
         if (found) ++s.faces.found;
         const double wx = (x + 0.5) * res, wy = (y + 0.5) * res;
+        std::size_t named = shapes_.size();
         for (std::size_t n = 0; n < shapes_.size(); ++n) {
           if (std::hypot(shapes_[n].x - wx, shapes_[n].y - wy) > shapes_[n].radius + res) continue;
           ++s.named[n].faces.cells;
           if (found) ++s.named[n].faces.found;
+          named = n;
           break;
         }
+        if (!on_miss_) continue;
+        auto& found_once = found_once_[map.model()];
+        if (found) {
+          found_once.insert(k);
+          continue;
+        }
+        FaceMiss miss;
+        miss.model = map.model();
+        miss.time_s = 1e-3 * static_cast<double>(ms);
+        miss.robot_x = rx;
+        miss.robot_y = ry;
+        miss.x = wx;
+        miss.y = wy;
+        miss.distance = std::hypot(wx - rx, wy - ry);
+        miss.side_seen_s = 1e-3 * cells_.side_sighted_ms(k);
+        if (named < shapes_.size()) miss.obstacle = shapes_[named].name;
+        miss.probability = map.probability(cell);
+        miss.found_before = found_once.count(k) != 0;
+        on_miss_(miss);
       }
     }
     // Fake obstacles on the robot's next 4 m of true path, within 0.3 m of it.
@@ -273,6 +298,8 @@ class Scorer {
   double radius_;
   int tolerance_;
   std::vector<NamedShape> shapes_;
+  std::function<void(const FaceMiss&)> on_miss_;
+  std::map<FusionModel, std::unordered_set<std::size_t>> found_once_;  // face cells found at some snapshot, per map
 };
 
 // Mean per-cell KL(P || Q) in bits over the cells P has observed.

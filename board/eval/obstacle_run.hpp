@@ -25,6 +25,20 @@ enum class TerrainMode : std::uint8_t {
   estimated,  // adaptive, from the terrain analysis (§7.2) run alongside on the same recording
 };
 
+// A face cell (MapScore::faces) that a scored map did not find: where the
+// recall goes (`trailnav obstacles --misses`).
+struct FaceMiss {
+  perception::FusionModel model = perception::FusionModel::pc;
+  double time_s = 0.0;                // of the snapshot, since the recording's start
+  double robot_x = 0.0, robot_y = 0.0;
+  double x = 0.0, y = 0.0;            // the cell's centre
+  double distance = 0.0;              // m from the robot
+  double side_seen_s = 0.0;           // when the lidar first hit a side of the obstacle there
+  std::string obstacle;               // its name, when it is a named obstacle
+  float probability = 0.0f;           // the map's P(o) at the cell
+  bool found_before = false;          // found at an earlier snapshot, lost since
+};
+
 struct ObstacleRunOptions {
   std::vector<std::string> inputs;  // one recording directory or capture file, or KITTI .bin files
   perception::ObstacleConfig config;
@@ -46,6 +60,8 @@ struct ObstacleRunOptions {
   // Called after every revolution is processed (trailnavd's end-to-end test
   // compares the maps it publishes with these).
   std::function<void(const perception::ObstaclePipeline&)> on_processed;
+  // Called for every face cell a scored map misses, at every scored snapshot.
+  std::function<void(const FaceMiss&)> on_face_miss;
   // A simulated recording's true trajectory as the pose stream; false: no
   // pose stream (fixed orientation, the map stays where it started).
   bool truth_poses = true;
