@@ -38,6 +38,13 @@ void print_score(const char* model, const eval::MapScore& s) {
               static_cast<unsigned long long>(s.obstacles.cells), s.negative.recall(),
               static_cast<unsigned long long>(s.negative.cells), s.vegetation.recall(),
               static_cast<unsigned long long>(s.vegetation.cells));
+  if (s.faces.cells > s.faces.found) {
+    const std::uint64_t missed = s.faces.cells - s.faces.found;
+    std::printf("      faces missed %llu: %llu lost after an earlier snapshot found them, %llu never found (--misses lists "
+                "them)\n",
+                static_cast<unsigned long long>(missed), static_cast<unsigned long long>(s.faces_lost),
+                static_cast<unsigned long long>(missed - s.faces_lost));
+  }
   std::printf("      fake obstacles: all %.4f (%llu/%llu)", all.rate(), static_cast<unsigned long long>(all.fake),
               static_cast<unsigned long long>(all.free));
   for (int t = 0; t < perception::kTerrainClasses; ++t) {

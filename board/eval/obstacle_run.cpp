@@ -225,12 +225,14 @@ class Scorer {
           named = n;
           break;
         }
-        if (!on_miss_) continue;
         auto& found_once = found_once_[map.model()];
         if (found) {
           found_once.insert(k);
           continue;
         }
+        const bool lost = found_once.count(k) != 0;
+        if (lost) ++s.faces_lost;
+        if (!on_miss_) continue;
         FaceMiss miss;
         miss.model = map.model();
         miss.time_s = 1e-3 * static_cast<double>(ms);
@@ -242,7 +244,7 @@ class Scorer {
         miss.side_seen_s = 1e-3 * cells_.side_sighted_ms(k);
         if (named < shapes_.size()) miss.obstacle = shapes_[named].name;
         miss.probability = map.probability(cell);
-        miss.found_before = found_once.count(k) != 0;
+        miss.found_before = lost;
         on_miss_(miss);
       }
     }

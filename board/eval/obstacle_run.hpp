@@ -88,6 +88,7 @@ struct MapScore {
   FoundCells obstacles;   // solid obstacles >= 10 cm: every observed cell of their footprint
   FoundCells outlines;    // of them, the cells on the footprint's outline, where the height steps
   FoundCells faces;       // of those, the cells where the lidar has seen a side (side_sightings.u32)
+  std::uint64_t faces_lost = 0;  // of the faces not found, those found at an earlier snapshot
   FoundCells negative;    // ditches
   FoundCells vegetation;  // bushes, undergrowth
   std::array<ClassCells, perception::kTerrainClasses> classes;
