@@ -4,26 +4,9 @@
 #include <cmath>
 #include <limits>
 
+#include "trailnav/runtime/prefetch.hpp"
+
 namespace trailnav::perception {
-
-namespace {
-
-// Asks for the cache line of *p ahead of its use (a hint: no effect where
-// the compiler has no such builtin).
-inline void prefetch(const void* p, bool for_write) noexcept {
-#if defined(__GNUC__)
-  if (for_write) {
-    __builtin_prefetch(p, 1);
-  } else {
-    __builtin_prefetch(p, 0);
-  }
-#else
-  (void)p;
-  (void)for_write;
-#endif
-}
-
-}  // namespace
 
 ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
     : params_(params),
@@ -180,16 +163,16 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
         continue;
       }
       const std::size_t offset = grid_.offset_from_origin(static_cast<std::int32_t>(lx), static_cast<std::int32_t>(ly));
-      prefetch(&grid_.at_offset(offset), true);
-      prefetch(&occupancy_.at_offset(offset), true);
-      if constexpr (M == FusionModel::pw) prefetch(&hits_.at_offset(offset), true);
+      prefetch_for_write(&grid_.at_offset(offset));
+      prefetch_for_write(&occupancy_.at_offset(offset));
+      if constexpr (M == FusionModel::pw) prefetch_for_write(&hits_.at_offset(offset));
       std::uint32_t toffset = kNoTerrain;
       if (tmap != nullptr) {
         const float tx = tox + cloud.x[k] * tfinv;
         const float ty = toy + cloud.y[k] * tfinv;
         if (tx >= 0.0f && tx < tsize_x && ty >= 0.0f && ty < tsize_y) {
           const std::size_t t = tmap->grid().offset_from_origin(static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty));
-          prefetch(&tmap->grid().at_offset(t), false);
+          prefetch_for_read(&tmap->grid().at_offset(t));
           toffset = static_cast<std::uint32_t>(t);
         }
       }

@@ -1,7 +1,10 @@
 #include "trailnav/perception/terrain_mapper.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+
+#include "trailnav/runtime/prefetch.hpp"
 
 namespace trailnav::perception {
 
@@ -76,6 +79,24 @@ void TerrainMapper::register_cloud() noexcept {
   const double ref_x = cloud_.ref_x, ref_y = cloud_.ref_y;
   const auto ref_z = static_cast<float>(cloud_.ref_z);
   std::uint64_t registered = 0, outside = 0;
+  // In batches, as the obstacle map: first each point's cell is found and
+  // its sums are fetched ahead (the grid is megabytes; a cell's sums span two
+  // cache lines), then the batch is added.
+  constexpr std::size_t kBatch = 128;
+  struct Point {
+    std::uint32_t cell;
+    float x, y, z, r;
+  };
+  std::array<Point, kBatch> batch;
+  std::size_t n = 0;
+  const auto add_batch = [&]() noexcept {
+    for (std::size_t b = 0; b < n; ++b) {
+      const Point& p = batch[b];
+      work_.at_offset(p.cell).stats.add(p.x, p.y, p.z, p.r);
+    }
+    registered += n;
+    n = 0;
+  };
   for (int ring = 0; ring < cloud_.rings(); ++ring) {
     const std::size_t row = cloud_.index(ring, 0);
     for (int col = 0; col < cloud_.columns(); ++col) {
@@ -89,12 +110,16 @@ void TerrainMapper::register_cloud() noexcept {
         ++outside;
         continue;
       }
-      TerrainWorkCell& w = work_.at({ix, iy});
-      w.stats.add(static_cast<float>(wx - (ix + 0.5) * res), static_cast<float>(wy - (iy + 0.5) * res),
-                  cloud_.z[k] + ref_z, cloud_.intensity[k]);
-      ++registered;
+      const std::size_t offset = work_.offset_from_origin(ix - lo.x, iy - lo.y);
+      const auto* bytes = reinterpret_cast<const char*>(&work_.at_offset(offset).stats);
+      prefetch_for_write(bytes);
+      prefetch_for_write(bytes + sizeof(CellStats) - 1);
+      batch[n] = {static_cast<std::uint32_t>(offset), static_cast<float>(wx - (ix + 0.5) * res),
+                  static_cast<float>(wy - (iy + 0.5) * res), cloud_.z[k] + ref_z, cloud_.intensity[k]};
+      if (++n == kBatch) add_batch();
     }
   }
+  add_batch();
   counters_.points += registered;
   counters_.outside += outside;
 }
