@@ -134,9 +134,13 @@ int run(ObstaclesCliOptions& o) {
     }
     std::fprintf(misses.get(), "model,time_s,robot_x,robot_y,x,y,distance_m,side_seen_s,obstacle,probability,found_before\n");
     o.run.on_face_miss = [&](const eval::FaceMiss& m) {
+      // Names such as "trunk at (12.0, 3.5)" hold commas: quoted, quotes doubled.
+      std::string name = "\"";
+      for (const char ch : m.obstacle) name += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+      name += '"';
       std::fprintf(misses.get(), "%s,%.1f,%.2f,%.2f,%.2f,%.2f,%.2f,%.1f,%s,%.3f,%d\n",
                    std::string(perception::fusion_model_name(m.model)).c_str(), m.time_s, m.robot_x, m.robot_y, m.x, m.y,
-                   m.distance, m.side_seen_s, m.obstacle.c_str(), static_cast<double>(m.probability), m.found_before ? 1 : 0);
+                   m.distance, m.side_seen_s, name.c_str(), static_cast<double>(m.probability), m.found_before ? 1 : 0);
       ++miss_lines;
     };
   }

@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <map>
 #include <unordered_set>
 
 #include "png.hpp"
@@ -225,7 +224,7 @@ class Scorer {
           named = n;
           break;
         }
-        auto& found_once = found_once_[map.model()];
+        auto& found_once = found_once_[static_cast<std::size_t>(map.model())];
         if (found) {
           found_once.insert(k);
           continue;
@@ -301,7 +300,7 @@ class Scorer {
   int tolerance_;
   std::vector<NamedShape> shapes_;
   std::function<void(const FaceMiss&)> on_miss_;
-  std::map<FusionModel, std::unordered_set<std::size_t>> found_once_;  // face cells found at some snapshot, per map
+  std::array<std::unordered_set<std::size_t>, perception::kFusionModels> found_once_;  // face cells found at some snapshot, per map
 };
 
 // Mean per-cell KL(P || Q) in bits over the cells P has observed.
