@@ -183,8 +183,8 @@ int run(ObstaclesCliOptions& o) {
     const auto& b = *r.source_self_box;
     std::printf("  returns from the recording vehicle itself dropped (%s input: features.self_box [%.2f, %.2f, %.2f, %.2f, %.2f, "
                 "%.2f] in the sensor frame; give your own in --config)\n",
-                r.input_kind == "kitti" ? "KITTI" : r.input_kind.c_str(), static_cast<double>(b[0]), static_cast<double>(b[1]), static_cast<double>(b[2]), static_cast<double>(b[3]),
-                static_cast<double>(b[4]), static_cast<double>(b[5]));
+                r.input_kind.c_str(), static_cast<double>(b[0]), static_cast<double>(b[1]), static_cast<double>(b[2]),
+                static_cast<double>(b[3]), static_cast<double>(b[4]), static_cast<double>(b[5]));
   }
   std::printf("  time per revolution: align %.3f ms, smoothing + features %.3f ms, map update%s %.3f ms\n", r.align_ms,
               r.features_ms, r.kl ? " (PW + PS + PC)" : "", r.map_ms);

@@ -102,10 +102,11 @@ struct Best {
 };
 
 // Neighbour q of point p: true when the search in this direction ends here.
-// A neighbour farther from p than `reach2` (squared) lies on another surface,
-// behind or far below p, and counts as missing.
+// A neighbour exists where its range is above 0, the test the W-wide searches
+// make too. A neighbour farther from p than `reach2` (squared) lies on another
+// surface, behind or far below p, and counts as missing.
 inline bool consider(const View& v, std::size_t p, std::size_t q, float x2, float reach2, Best& best) noexcept {
-  if (v.st[q] == PointState::none) return false;
+  if (!(v.range[q] > 0.0f)) return false;
   const float dx = v.x[q] - v.x[p];
   const float dy = v.y[q] - v.y[p];
   const float dz = v.z[q] - v.z[p];

@@ -30,10 +30,11 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
   if (revolution_ == 1) first_ns_ = cloud.time_ns;
   last_ns_ = cloud.time_ns;
   const double period_s = revolution_ > 1 ? static_cast<double>(last_ns_ - first_ns_) * 1e-9 / (revolution_ - 1) : 0.1;
-  hold_revolutions_ =
-      static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_hold_s) / std::max(period_s, 1e-3)));
-  top_hold_revolutions_ =
-      static_cast<std::uint32_t>(std::lround(static_cast<double>(params_.dirac_top_hold_s) / std::max(period_s, 1e-3)));
+  const auto revolutions_in = [&](float seconds) {
+    return static_cast<std::uint32_t>(std::lround(static_cast<double>(seconds) / std::max(period_s, 1e-3)));
+  };
+  hold_revolutions_ = revolutions_in(params_.dirac_hold_s);
+  top_hold_revolutions_ = revolutions_in(params_.dirac_top_hold_s);
   counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
   occupancy_.move_to(cloud.robot_x, cloud.robot_y);
   if (model_ == FusionModel::pw) hits_.move_to(cloud.robot_x, cloud.robot_y);

@@ -5,8 +5,10 @@
 // Every cell is unknown until a point with features lands in it; unknown is
 // never reported as free. PW maps (Dirac model) keep a cell occupied for
 // `dirac_hold` seconds after its last obstacle point, whatever else is seen
-// there in that time (the thesis' workaround for 0/1 probabilities), and
-// free once a later revolution sees it without one.
+// there in that time (the thesis' workaround for 0/1 probabilities). After
+// that a free point clears it, at once when it lies below the obstacle
+// (`dirac_clear_depth`), at the obstacle's height only after
+// `dirac_top_hold` (MapParams).
 #pragma once
 
 #include <algorithm>
@@ -97,8 +99,9 @@ class ObstacleMap {
   RollingGrid<std::int8_t> occupancy_;  // percent() of every cell, -1 unknown; moves with grid_
   // PW: per cell, the revolution of its last obstacle point (0: none) and
   // the highest obstacle point since the cell turned occupied (odometry-frame
-  // z); moves with grid_. Apart from the cells so that PS and PC maps stay 8
-  // bytes a cell (one cell per point is a cache miss: the smaller, the fewer).
+  // z); moves with grid_. Apart from the cells so that the cells stay 4 bytes
+  // for every model (one cell per point is a cache miss: the smaller, the
+  // fewer).
   struct DiracHit {
     std::uint32_t revolution = 0;
     float top = 0.0f;
