@@ -1,7 +1,9 @@
 // `trailnav obstacles`: the obstacle pipeline offline, on a recording, a pcap
 // or KITTI scans: map pictures, raw probabilities, scores against a
 // simulated recording's truth and the KL comparison of the fusion models.
+#include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -26,17 +28,30 @@ struct ObstaclesCliOptions {
   std::string terrain_model;
   std::optional<perception::RandomForest> forest;
   std::string misses_file;
+  std::string points_file;
+  std::vector<double> points_box;
   bool quiet = false;
 };
 
+// A recall as text: "n/a" when no truth cell was observed (no obstacle of
+// that kind in range, or a recording without that truth), never a 1.0 that
+// nothing supports.
+std::string recall_text(const eval::FoundCells& f) {
+  if (f.cells == 0) return "n/a";
+  char text[16];
+  std::snprintf(text, sizeof text, "%.4f", f.recall());
+  return text;
+}
+
 void print_score(const char* model, const eval::MapScore& s) {
   const auto all = s.all_free();
-  std::printf("  %s: obstacle faces seen %llu/%llu cells found (recall %.4f); outlines seen anywhere %.4f (%llu), whole "
-              "footprints %.4f (%llu); ditches %.4f (%llu); bushes %.4f (%llu)\n",
+  std::printf("  %s: obstacle faces seen %llu/%llu cells found (recall %s); outlines seen anywhere %s (%llu), whole "
+              "footprints %s (%llu); ditches %s (%llu); bushes %s (%llu)\n",
               model, static_cast<unsigned long long>(s.faces.found), static_cast<unsigned long long>(s.faces.cells),
-              s.faces.recall(), s.outlines.recall(), static_cast<unsigned long long>(s.outlines.cells), s.obstacles.recall(),
-              static_cast<unsigned long long>(s.obstacles.cells), s.negative.recall(),
-              static_cast<unsigned long long>(s.negative.cells), s.vegetation.recall(),
+              recall_text(s.faces).c_str(), recall_text(s.outlines).c_str(),
+              static_cast<unsigned long long>(s.outlines.cells), recall_text(s.obstacles).c_str(),
+              static_cast<unsigned long long>(s.obstacles.cells), recall_text(s.negative).c_str(),
+              static_cast<unsigned long long>(s.negative.cells), recall_text(s.vegetation).c_str(),
               static_cast<unsigned long long>(s.vegetation.cells));
   if (s.faces.cells > s.faces.found) {
     const std::uint64_t missed = s.faces.cells - s.faces.found;
@@ -58,10 +73,10 @@ void print_score(const char* model, const eval::MapScore& s) {
               s.snapshots ? 100.0 * static_cast<double>(s.blocked) / static_cast<double>(s.snapshots) : 0.0);
   for (const auto& n : s.named) {
     if (n.snapshots == 0) continue;
-    std::printf("      %-28s detected in %llu of %llu snapshots within range; faces %llu/%llu cells (%.4f)\n",
+    std::printf("      %-28s detected in %llu of %llu snapshots within range; faces %llu/%llu cells (%s)\n",
                 n.name.c_str(), static_cast<unsigned long long>(n.detected), static_cast<unsigned long long>(n.snapshots),
                 static_cast<unsigned long long>(n.faces.found), static_cast<unsigned long long>(n.faces.cells),
-                n.faces.recall());
+                recall_text(n.faces).c_str());
   }
 }
 
@@ -144,6 +159,42 @@ int run(ObstaclesCliOptions& o) {
       ++miss_lines;
     };
   }
+  // --points: every point inside --points-box, per revolution.
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> points(nullptr, &std::fclose);
+  std::uint64_t point_lines = 0;
+  if (o.points_file.empty() != o.points_box.empty()) {
+    std::fprintf(stderr, "trailnav obstacles: --points and --points-box go together\n");
+    return 2;
+  }
+  if (!o.points_file.empty()) {
+    const auto& b = o.points_box;
+    if (!(b[0] < b[1]) || !(b[2] < b[3])) {
+      std::fprintf(stderr, "trailnav obstacles: --points-box %g,%g,%g,%g: give XMIN,XMAX,YMIN,YMAX with XMIN < XMAX and "
+                           "YMIN < YMAX\n", b[0], b[1], b[2], b[3]);
+      return 2;
+    }
+    points.reset(std::fopen(o.points_file.c_str(), "w"));
+    if (!points) {
+      std::fprintf(stderr, "trailnav obstacles: --points %s: cannot write: %s\n", o.points_file.c_str(), std::strerror(errno));
+      return 2;
+    }
+    o.run.points_box = std::array<double, 4>{b[0], b[1], b[2], b[3]};
+    std::fprintf(points.get(), "time_s,revolution,ring,column,x,y,z,range,state,step_height,incline_deg,terrain,"
+                               "terrain_known,dirac,smooth\n");
+    o.run.on_point = [&](const eval::PointRecord& p) {
+      const char* state = p.state == perception::PointState::measured ? "measured"
+                          : p.state == perception::PointState::flat   ? "flat"
+                          : p.state == perception::PointState::isolated ? "isolated"
+                                                                          : "valid";
+      const double incline = std::asin(std::clamp(static_cast<double>(p.sin_incline), 0.0, 1.0)) * 180.0 / M_PI;
+      std::fprintf(points.get(), "%.3f,%llu,%d,%d,%.3f,%.3f,%.3f,%.3f,%s,%.4f,%.2f,%s,%d,%d,%.4f\n", p.time_s,
+                   static_cast<unsigned long long>(p.revolution), p.ring, p.column, p.x, p.y, p.z,
+                   static_cast<double>(p.range), state, static_cast<double>(p.step_height), incline,
+                   std::string(perception::terrain_class_name(p.terrain)).c_str(), p.terrain_known ? 1 : 0,
+                   p.dirac ? 1 : 0, static_cast<double>(p.smooth));
+      ++point_lines;
+    };
+  }
   ProgressBar progress("obstacles", 100.0, "%");
   if (!o.quiet) o.run.progress = [&](double f) { progress.update(100.0 * f); };
   const eval::ObstacleRunReport r = eval::run_obstacles(o.run);
@@ -151,6 +202,13 @@ int run(ObstaclesCliOptions& o) {
   if (!r.error.empty()) {
     std::fprintf(stderr, "trailnav obstacles: %s\n", r.error.c_str());
     return 2;
+  }
+  if (points) {
+    const bool written = std::ferror(points.get()) == 0;
+    if (std::fclose(points.release()) != 0 || !written) {
+      std::fprintf(stderr, "trailnav obstacles: --points %s: writing failed\n", o.points_file.c_str());
+      return 2;
+    }
   }
   if (misses) {
     const bool written = std::ferror(misses.get()) == 0;
@@ -194,6 +252,9 @@ int run(ObstaclesCliOptions& o) {
   }
   if (r.scored) {
     std::printf("  scores against truth within %.0f m (tolerance %d cell):\n", o.run.score_radius, o.run.tolerance_cells);
+    if (!r.side_sightings)
+      std::printf("  (the recording has no truth/side_sightings.u32, so no face counts as seen: simulate it again with\n"
+                  "  this trailnav sim to score the faces)\n");
     for (int m = 0; m < perception::kFusionModels; ++m) {
       const auto& s = r.scores[static_cast<std::size_t>(m)];
       if (s) print_score(perception::fusion_model_name(static_cast<perception::FusionModel>(m)).data(), *s);
@@ -205,6 +266,10 @@ int run(ObstaclesCliOptions& o) {
   }
   for (const std::string& f : r.files) {
     if (f.find("-0") == std::string::npos) std::printf("  wrote %s\n", f.c_str());
+  }
+  if (!o.points_file.empty()) {
+    std::printf("  wrote %s (%llu points in the box, over all revolutions)\n", o.points_file.c_str(),
+                static_cast<unsigned long long>(point_lines));
   }
   if (!o.misses_file.empty() && r.scored) {
     std::printf("  wrote %s (%llu face cells missed, over all scored snapshots and maps)\n", o.misses_file.c_str(),
@@ -249,6 +314,14 @@ void add_obstacles_command(CLI::App& app) {
                   "Write every obstacle face cell a map missed to this CSV, per scored snapshot: when, where, how far, "
                   "when its side was first seen, the map's P(o) there and whether it had been found before (simulated "
                   "recordings)");
+  cmd->add_option("--points", o.points_file,
+                  "Write every point inside --points-box to this CSV, per revolution: ring, column, position, range, "
+                  "its features (stepHeight, incline; or flat, isolated), the terrain class it was fused with, and "
+                  "the Dirac (Eq. 7.11) and smooth (Eq. 7.12) models' answers; to see why a cell is or is not an obstacle");
+  cmd->add_option("--points-box", o.points_box, "XMIN,XMAX,YMIN,YMAX in the odometry frame (a simulated recording: the "
+                                                "world frame of its truth), m")
+      ->expected(4)
+      ->delimiter(',');
   cmd->add_option("--revolutions", o.run.max_revolutions, "Stop after N revolutions (0: all)")->capture_default_str();
   cmd->add_option("--calibration", o.run.calibration, "Lidar calibration file (default: the recording's or the model's)");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");

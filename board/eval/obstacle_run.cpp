@@ -324,6 +324,49 @@ double mean_kl(const ObstacleMap& p_map, const ObstacleMap& q_map) {
   return n ? sum / static_cast<double>(n) : 0.0;
 }
 
+
+// The points of the revolution just processed that lie in the box, with the
+// class the map update fused them with and what the class's models say.
+void report_points(const perception::ObstaclePipeline& pipeline, const perception::TerrainClassMap* classes,
+                   const std::array<double, 4>& box, std::uint64_t revolution, std::int64_t first_ns,
+                   const std::function<void(const PointRecord&)>& out) {
+  const perception::RevolutionCloud& c = pipeline.cloud();
+  const perception::ObstacleConfig& config = pipeline.config();
+  PointRecord r;
+  r.time_s = static_cast<double>(c.time_ns - first_ns) * 1e-9;
+  r.revolution = revolution;
+  for (int ring = 0; ring < c.rings(); ++ring) {
+    for (int col = 0; col < c.columns(); ++col) {
+      const std::size_t k = c.index(ring, col);
+      if (c.state[k] == perception::PointState::none) continue;
+      r.x = c.ref_x + static_cast<double>(c.x[k]);
+      r.y = c.ref_y + static_cast<double>(c.y[k]);
+      if (r.x < box[0] || r.x > box[1] || r.y < box[2] || r.y > box[3]) continue;
+      r.z = c.ref_z + static_cast<double>(c.z[k]);
+      r.ring = ring;
+      r.column = col;
+      r.range = c.range[k];
+      r.state = c.state[k];
+      const bool measured = r.state == perception::PointState::measured;
+      r.step_height = measured ? c.step_height[k] : 0.0f;
+      r.sin_incline = measured ? c.sin_incline[k] : 0.0f;
+      r.terrain = config.fixed_class.value_or(config.unknown_class);
+      r.terrain_known = false;
+      if (!config.fixed_class && classes != nullptr) {
+        const perception::TerrainCell* cell = classes->grid().find(r.x, r.y);
+        if (cell != nullptr && cell->known) {
+          r.terrain = cell->best;
+          r.terrain_known = true;
+        }
+      }
+      const int cls = static_cast<int>(r.terrain);
+      r.dirac = pipeline.models().dirac(cls, r.step_height, r.sin_incline);
+      r.smooth = pipeline.models().smooth(cls, r.step_height, r.sin_incline);
+      out(r);
+    }
+  }
+}
+
 }  // namespace
 
 Status write_obstacle_png(const std::string& path, const ObstacleMap& map, double robot_x, double robot_y) {
@@ -460,6 +503,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       if (write_obstacle_png(png, *map, pipeline.cloud().robot_x, pipeline.cloud().robot_y)) report.files.push_back(png);
     }
   };
+  std::int64_t first_ns = 0;  // PointRecord::time_s counts from here
   auto on_image = [&](const vel::RangeImage& image) {
     if (options.max_revolutions > 0 && report.revolutions >= static_cast<std::uint64_t>(options.max_revolutions)) return false;
     ++report.revolutions;
@@ -485,6 +529,10 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     pipeline.update_maps(classes);
     map_ms += ms_since(t0);
     if (options.on_processed) options.on_processed(pipeline);
+    if (options.points_box && options.on_point) {
+      if (first_ns == 0) first_ns = truth ? truth->scenario.start_utc_ns : pipeline.cloud().time_ns;
+      report_points(pipeline, classes, *options.points_box, report.revolutions, first_ns, options.on_point);
+    }
     const auto rev = report.revolutions;
     if (scorer && options.score_every > 0 && rev % static_cast<std::uint64_t>(options.score_every) == 0) {
       for (int m = 0; m < perception::kFusionModels; ++m) {

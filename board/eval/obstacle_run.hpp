@@ -39,6 +39,25 @@ struct FaceMiss {
   bool found_before = false;          // found at an earlier snapshot, lost since
 };
 
+// One aligned point of a revolution inside ObstacleRunOptions::points_box,
+// with what the pipeline made of it (`trailnav obstacles --points`): to see
+// why a cell is, or is not, an obstacle.
+struct PointRecord {
+  double time_s = 0.0;            // end of its revolution: since a simulated recording's start (as FaceMiss),
+                                  // else since the first revolution's end
+  std::uint64_t revolution = 0;   // 1-based
+  int ring = 0, column = 0;
+  double x = 0.0, y = 0.0, z = 0.0;  // odometry frame (a simulated recording: the world), m
+  float range = 0.0f;
+  perception::PointState state = perception::PointState::none;
+  float step_height = 0.0f;       // Eq. 7.5 (0 unless measured)
+  float sin_incline = 0.0f;       // Eq. 7.6
+  perception::TerrainClass terrain = perception::TerrainClass::other;  // the class its cell was fused with
+  bool terrain_known = false;     // false: the unknown class (or a fixed class) was used
+  bool dirac = false;             // Eq. 7.11 with that class's thresholds
+  float smooth = 0.0f;            // Eq. 7.12 with that class's alpha and beta
+};
+
 struct ObstacleRunOptions {
   std::vector<std::string> inputs;  // one recording directory or capture file, or KITTI .bin files
   perception::ObstacleConfig config;
@@ -62,6 +81,10 @@ struct ObstacleRunOptions {
   std::function<void(const perception::ObstaclePipeline&)> on_processed;
   // Called for every face cell a scored map misses, at every scored snapshot.
   std::function<void(const FaceMiss&)> on_face_miss;
+  // Every point whose x, y lie in [x_min, x_max] x [y_min, y_max] (odometry
+  // frame) goes to on_point after its revolution is processed.
+  std::optional<std::array<double, 4>> points_box;
+  std::function<void(const PointRecord&)> on_point;
   // A simulated recording's true trajectory as the pose stream; false: no
   // pose stream (fixed orientation, the map stays where it started).
   bool truth_poses = true;
@@ -114,6 +137,9 @@ struct ObstacleRunReport {
   // features.self_box because the config gave none.
   std::optional<std::array<float, 6>> source_self_box;
   bool scored = false;
+  // The truth has truth/side_sightings.u32 (recordings simulated before it
+  // was written do not): without it no obstacle face counts as seen.
+  bool side_sightings = false;
   std::uint64_t revolutions = 0;
   perception::PipelineCounters counters;
   std::array<std::optional<MapScore>, perception::kFusionModels> scores;

@@ -130,6 +130,56 @@ TEST_F(MeadowBlock, FaceMissesAddUpToTheFacesNotFound) {
   EXPECT_TRUE(sane);
 }
 
+// --points: every point in a box, with the features, the class it was fused
+// with and the two models' answers under that class's parameters.
+TEST_F(MeadowBlock, PointsInABoxCarryTheirFeaturesAndTheirClass) {
+  // The crate (0.8 m, at (36, -3.5), turned by -10 degrees): its north side
+  // faces the track.
+  const std::array<double, 4> box{35.5, 36.5, -3.3, -3.0};
+  for (const auto fixed : {std::optional<TerrainClass>{}, std::optional<TerrainClass>{TerrainClass::grass}}) {
+    ObstacleRunOptions o;
+    o.inputs = {dir_};
+    o.config.fixed_class = fixed;
+    o.terrain = fixed ? TerrainMode::config : TerrainMode::truth;
+    o.points_box = box;
+    std::size_t points = 0, obstacles = 0, other_obstacles = 0;
+    std::uint64_t last_revolution = 0;
+    bool inside = true, ordered = true, states = true, thresholds = true;
+    const auto& cls = o.config.classes;
+    o.on_point = [&](const PointRecord& p) {
+      ++points;
+      if (p.x < box[0] || p.x > box[1] || p.y < box[2] || p.y > box[3]) inside = false;
+      if (p.revolution < last_revolution || p.time_s < 0.0 || p.time_s > 32.5) ordered = false;
+      last_revolution = p.revolution;
+      if (p.state == perception::PointState::none || p.state == perception::PointState::valid) states = false;
+      if (p.state != perception::PointState::measured && (p.step_height != 0.0f || p.dirac)) states = false;
+      if (!p.dirac) return;
+      ++obstacles;
+      // An obstacle point exceeds both thresholds of the class it was fused with.
+      const auto& c = cls[static_cast<std::size_t>(p.terrain)];
+      if (!(p.step_height > c.max_step_height && static_cast<double>(p.sin_incline) > std::sin(static_cast<double>(c.max_incline_deg) * 3.14159265358979 / 180.0)))
+        thresholds = false;
+      if (p.terrain == TerrainClass::other && p.terrain_known) ++other_obstacles;
+    };
+    const ObstacleRunReport r = run_obstacles(o);
+    ASSERT_TRUE(r.error.empty()) << r.error;
+    EXPECT_GT(points, 100u);
+    EXPECT_TRUE(inside);
+    EXPECT_TRUE(ordered);
+    EXPECT_TRUE(states);
+    EXPECT_TRUE(thresholds);
+    if (fixed) {
+      // Grass parameters: every point counts as grass, and a 0.8 m crate side
+      // seen across 10 cm steps is no obstacle.
+      EXPECT_EQ(other_obstacles, 0u);
+    } else {
+      // True classes: the crate's cells are `other`, and its side is seen.
+      EXPECT_GT(other_obstacles, 10u);
+      EXPECT_EQ(other_obstacles, obstacles);
+    }
+  }
+}
+
 // The simulator says when the lidar first saw each solid-obstacle pixel; the
 // scorer counts an obstacle cell only from then on.
 TEST_F(MeadowBlock, SightingsMarkOnlySolidObstaclesTheLidarHit) {
