@@ -164,6 +164,10 @@ void add_subgoal_eval_command(CLI::App& app) {
   cmd->add_option("--corner-turn", c.options.navigator.aligner.corner_turn,
                   "Sigma of the turn of the route after a corner about that corner, rad (0: off)")
       ->capture_default_str();
+  cmd->add_option("--separation", c.options.navigator.aligner.separation,
+                  "A sample whose subgoals come closer than this many subgoal spacings to one two or more steps\n"
+                  "before them (and closer than the map's own) doubles back and is weighted out (0: off, the thesis)")
+      ->capture_default_str();
   cmd->add_option("--unknown-cells", c.unknown_cells,
                   "How a patch treats cells without observations: known-only (mean over the known cells) or other\n"
                   "(each costs unknown_cost, the thesis' reading)")

@@ -413,6 +413,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("plan_failures", s.navigator.plan_failures);
     m.value("plan_ms", s.navigator.last_plan_ms, 2);
     m.value("aligner_updates", s.navigator.updates);
+    m.value("aligner_catch_up_updates", s.navigator.catch_up_updates);
     m.value("terrain_maps", s.terrain_maps);
   }
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {

@@ -299,6 +299,67 @@ TEST_F(OnTestGraph, AlignsTheSubgoalsToTheStreetTheTerrainMapShows) {
   EXPECT_NEAR(raw, 2.5, 1e-6);
   EXPECT_LT(corrected, 0.6) << "raw " << raw;
   EXPECT_GT(nav.counters().updates, 180u);
+  EXPECT_EQ(nav.counters().catch_up_updates, 0u);  // one subgoal joins at a time
+}
+
+// Junction (a) of the `junctions` drives: an X crossing whose node
+// OpenStreetMap has 7 m too far along the straight-on road, so the mapped way
+// runs past the junction and comes back askew to the branch. As the robot
+// turns, its place on the mapped route jumps forward and several subgoals
+// join the aligner in one step; each push after the first is preceded by an
+// update (a catch-up update), so every subgoal leaves the window estimated
+// with newer ones behind it. The subgoals reached near the junction are all
+// corrected, and lie nearer the road the robot takes than the map has them.
+TEST(Navigator, CatchesUpWhenSubgoalsJoinTogetherAtAJunctionMappedTooFarAlong) {
+  //   A(0,0) -- N(47,1) -- E(90,0)   the straight-on road; N is 7 m too far
+  //             N -- P(41,20) -- Q(41,70)   the branch, askew from N
+  std::vector<osm::RoadVertex> v = {{kE0, kN0, 1},          {kE0 + 47, kN0 + 1, 2}, {kE0 + 90, kN0, 3},
+                                    {kE0 + 41, kN0 + 20, 4}, {kE0 + 41, kN0 + 70, 5}};
+  std::vector<osm::RoadWay> ways = {{10, "track", "straight on"}, {11, "track", "branch"}};
+  const osm::RoadGraph g = osm::RoadGraph::build(32, true, v, ways, {{0, 1, 2}, {1, 3, 4}}, {0, 0});
+  auto made = Navigator::create(g, config_to(g, 41.0, 70.0), {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  const Frames f;
+  // The real roads, 3 m wide: along n = 0, and north along e = 40.
+  auto roads = [](double e, double n) {
+    return std::abs(n - kN0) < 1.5 || (std::abs(e - kE0 - 40.0) < 1.5 && n > kN0 - 1.5);
+  };
+  const auto off_route = [](double e, double n) {
+    const double x = e - kE0, y = n - kN0;
+    const double east = x <= 40.0 ? std::abs(y) : std::hypot(x - 40.0, y);
+    const double north = y >= 0.0 ? std::abs(x - 40.0) : std::hypot(x - 40.0, y);
+    return std::min(east, north);
+  };
+  TerrainClassMap map;
+  pose::LocalPose local;
+  pose::UtmPose utm;
+  double t = 0.0, worst = 0.0, worst_raw = 0.0;
+  std::size_t near_junction = 0, most_reached = 0;
+  for (const auto& p : walk({{0, 0}, {40, 0}, {40, 75}}, 0.5)) {
+    poses(f, kE0 + p[0], kN0 + p[1], p[2], t += 0.25, local, utm);
+    paint(map, f, local.x, local.y, roads);  // a terrain map every half metre, the terrain thread's step
+    const StepResult r = nav.step(local, utm, &map);
+    most_reached = std::max(most_reached, r.reached_end - r.reached_begin);
+    for (std::size_t i = r.reached_begin; i < r.reached_end; ++i) {
+      if (p[0] < 32.0 || p[1] > 12.0) continue;  // the robot 8 m before to 12 m after the junction
+      EXPECT_TRUE(nav.is_corrected(i)) << i;
+      double e = 0, n = 0;
+      const subgoals::Vec2 q = nav.corrected(i);
+      f.to_utm(q.x, q.y, e, n);
+      worst = std::max(worst, off_route(e, n));
+      worst_raw = std::max(worst_raw, off_route(nav.subgoal_utm(i).x, nav.subgoal_utm(i).y));
+      ++near_junction;
+    }
+  }
+  std::printf("near the junction: %zu subgoals, farthest %.2f m from the route (raw %.2f m); %llu catch-up updates\n",
+              near_junction, worst, worst_raw, static_cast<unsigned long long>(nav.counters().catch_up_updates));
+  EXPECT_EQ(nav.state(), NavState::reached);
+  EXPECT_GE(near_junction, 5u);
+  EXPECT_GE(most_reached, 3u);  // the jump: several subgoals passed in one step
+  EXPECT_GT(nav.counters().catch_up_updates, 0u);
+  EXPECT_GT(worst_raw, 5.0);
+  EXPECT_LT(worst, 3.0);
 }
 
 TEST(NavigationTask, PlansAlignsAndPublishesWithoutAllocating) {
@@ -394,7 +455,7 @@ TEST(Navigator, PlansOnLiechtensteinLikeTheRouter) {
 TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   const std::string osm = std::filesystem::absolute(test::shared_data("osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf")).string();
   const ConfigNode ok = ConfigNode::parse("osm: " + osm + "\ngoal: [47.166, 9.51]\nhighways: [track, path]\nspacing: 3\n"
-                                          "aligner: {samples: 5000, sequence: 3, unknown_cells: known-only, along_prior: 0, corner_sigma: 4, corner_turn: 0.1}\n",
+                                          "aligner: {samples: 5000, sequence: 3, unknown_cells: known-only, along_prior: 0, corner_sigma: 4, corner_turn: 0.1, separation: 0.5}\n",
                                           "nav.yaml");
   const NavigationSection s = parse_navigation_section(ok);
   EXPECT_EQ(s.osm, osm);
@@ -406,6 +467,7 @@ TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   EXPECT_EQ(s.navigator.aligner.along_prior, 0.0);
   EXPECT_EQ(s.navigator.aligner.corner_sigma, 4.0);
   EXPECT_EQ(s.navigator.aligner.corner_turn, 0.1);
+  EXPECT_EQ(s.navigator.aligner.separation, 0.5);
   auto error_of = [&](const std::string& text) -> std::string {
     try {
       parse_navigation_section(ConfigNode::parse(text, "nav.yaml"));
@@ -420,6 +482,7 @@ TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nreach: 9\n").find("reach"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {samples: 60000}\n").find("samples"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {corner_sigma: -1}\n").find("corner_sigma"), std::string::npos);
+  EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {separation: 5}\n").find("separation"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {corner_turn: 2}\n").find("corner_turn"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nlookahed: 3\n").find("lookahed"), std::string::npos);
 }

@@ -79,6 +79,9 @@ TEST(SubgoalAligner, ChecksItsConfiguration) {
   c.along_prior = -1.0;
   EXPECT_NE(check_aligner_config(c).find("along_prior"), std::string::npos);
   c = {};
+  c.separation = 4.5;
+  EXPECT_NE(check_aligner_config(c).find("separation"), std::string::npos);
+  c = {};
   c.corner_angle = 0.0;
   EXPECT_NE(check_aligner_config(c).find("corner_angle"), std::string::npos);
   c = {};
@@ -212,6 +215,85 @@ TEST(SubgoalAligner, TakesTheRealTurnAtACrossingMappedTooFarAlong) {
   std::printf("farthest subgoal from the route: %.2f m with the corner model, %.2f m without\n", moved, thesis);
   EXPECT_LT(moved, 2.0);  // the junction criterion of eval-subgoals: within 0.5 m of the 3 m road's edge
   EXPECT_GT(thesis, 4.0);
+}
+
+// A route does not come back to where it was. Junction (a) of the
+// `junctions` drives: an X crossing at x = 20 whose node is mapped 7 m too
+// far along the straight-on road, so the mapped way runs on past the
+// junction and comes back askew to the branch. Samples that fit that spike
+// by running out along the straight-on road and back along it (on road all
+// the way) are weighted out; none that counts comes closer than a subgoal
+// spacing (or than the map's own subgoals) to where it was two or more steps
+// before. On a straight road and round a right-angled corner the rule
+// weighs out (next to) nothing.
+TEST(SubgoalAligner, WeighsOutSequencesThatDoubleBack) {
+  const double jx = 20.0;
+  const auto roads = [&](double x, double y) { return std::abs(y) < 1.5 || (std::abs(x - jx) < 1.5 && y > -1.5); };
+  // Raw subgoals every 4 m along a polyline, with its vertices as the route shape.
+  const auto along = [](const std::vector<Vec2>& way, std::vector<Vec2>& raw, std::vector<double>& raw_arc,
+                        std::vector<double>& way_arc) {
+    way_arc = {0.0};
+    for (std::size_t i = 1; i < way.size(); ++i)
+      way_arc.push_back(way_arc.back() + std::hypot(way[i].x - way[i - 1].x, way[i].y - way[i - 1].y));
+    for (double a = 0.0; a <= way_arc.back(); a += 4.0) {
+      std::size_t v = 0;
+      while (v + 2 < way.size() && way_arc[v + 1] < a) ++v;
+      const double f = (a - way_arc[v]) / (way_arc[v + 1] - way_arc[v]);
+      raw.push_back({way[v].x + f * (way[v + 1].x - way[v].x), way[v].y + f * (way[v + 1].y - way[v].y)});
+      raw_arc.push_back(a);
+    }
+  };
+  TerrainClassMap map;
+  paint(map, 20.0, 10.0, roads);
+  struct Outcome {
+    std::uint64_t doubled_back = 0;  // samples weighted out, summed over the updates
+    std::uint64_t samples = 0;       // samples scored, summed
+    bool kept_ones_keep_apart = true;
+  };
+  const auto run_on = [&](const std::vector<Vec2>& way, double separation) {
+    std::vector<Vec2> raw;
+    std::vector<double> raw_arc, way_arc;
+    along(way, raw, raw_arc, way_arc);
+    AlignerConfig c;
+    c.separation = separation;
+    SubgoalAligner aligner(c, map.shape());
+    const RouteShape shape{way, way_arc, raw_arc};
+    Outcome o;
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      EXPECT_TRUE(aligner.push(raw, shape));
+      aligner.update(map, raw, shape);
+      o.doubled_back += aligner.counters().last_doubled_back;
+      o.samples += c.samples;
+      const std::size_t begin = aligner.window_begin();
+      for (std::size_t j = 0; j < c.samples; ++j) {
+        if (aligner.weight(j) < 1e-9) continue;
+        for (std::size_t a = begin; a < aligner.count(); ++a) {
+          for (std::size_t b = a + 2; b < aligner.count(); ++b) {
+            const Vec2 p = aligner.sample(j, a), q = aligner.sample(j, b);
+            const double limit = std::min(4.0 * separation, std::hypot(raw[a].x - raw[b].x, raw[a].y - raw[b].y));
+            if (std::hypot(p.x - q.x, p.y - q.y) < limit - 1e-9) o.kept_ones_keep_apart = false;
+          }
+        }
+      }
+    }
+    return o;
+  };
+  const std::vector<Vec2> spike{{0.0, 0.0}, {27.0, 1.0}, {21.0, 13.0}, {21.0, 36.0}};
+  const Outcome on = run_on(spike, AlignerConfig{}.separation);
+  const Outcome off = run_on(spike, 0.0);
+  EXPECT_GT(on.doubled_back, on.samples / 100);  // the spike invites them
+  EXPECT_TRUE(on.kept_ones_keep_apart);
+  EXPECT_EQ(off.doubled_back, 0u);
+  // The real route, mapped where it is: east, then north at the junction.
+  const Outcome corner = run_on({{0.0, 0.0}, {jx, 0.0}, {jx, 36.0}}, AlignerConfig{}.separation);
+  EXPECT_LT(corner.doubled_back, corner.samples / 50);  // noise now and then: 5.7 m nominal against 4
+  EXPECT_TRUE(corner.kept_ones_keep_apart);
+  const Outcome straight_on = run_on({{0.0, 0.0}, {40.0, 0.0}}, AlignerConfig{}.separation);
+  EXPECT_EQ(straight_on.doubled_back, 0u);
+  std::printf("samples weighted out for doubling back: %.2f %% on the spike, %.3f %% round the corner, %.3f %% straight on\n",
+              100.0 * static_cast<double>(on.doubled_back) / static_cast<double>(on.samples),
+              100.0 * static_cast<double>(corner.doubled_back) / static_cast<double>(corner.samples),
+              100.0 * static_cast<double>(straight_on.doubled_back) / static_cast<double>(straight_on.samples));
 }
 
 // An X crossing at x = jx of a road along y = 0 and one along x = jx, the

@@ -245,13 +245,20 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     const subgoals::RouteShape shape{std::span<const subgoals::Vec2>(shape_points_.data(), np),
                                      std::span<const double>(shape_arc_.data(), np), subgoal_arc_};
     // Subgoals that join together (the robot's place on the route jumps where
-    // the map is off): before a push would retire a subgoal the aligner has
-    // never estimated, it aligns the window, so none leaves it unseen. That
-    // is one update per K pushes at most, none while the window fills.
+    // the map is off, as at a junction mapped too far along): once the window
+    // is full, each push after the first is preceded by an update, so every
+    // subgoal leaves the window estimated with the newer ones behind it, as
+    // one at a time would (not frozen where it was last the newest), and none
+    // leaves it unseen. None while the window fills.
     const std::size_t k = static_cast<std::size_t>(config_.aligner.sequence);
+    std::size_t pushed = 0;
     while (aligner_->count() < want) {
-      if (aligner_->count() >= k && !aligner_->estimated(aligner_->window_begin())) aligner_->update(*map, raw, shape);
+      if (aligner_->count() >= k && (pushed > 0 || !aligner_->estimated(aligner_->window_begin()))) {
+        aligner_->update(*map, raw, shape);
+        ++counters_.catch_up_updates;
+      }
       if (!aligner_->push(raw, shape)) break;
+      ++pushed;
     }
     aligner_->update(*map, raw, shape);
     ++counters_.updates;

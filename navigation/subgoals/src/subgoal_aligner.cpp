@@ -44,6 +44,7 @@ std::string check_aligner_config(const AlignerConfig& c) {
   if (!(c.corner_sigma >= 0.0 && c.corner_sigma <= 50.0)) return "corner_sigma must be 0..50 m (0: off)";
   if (!(c.corner_angle > 0.0 && c.corner_angle < 3.1416)) return "corner_angle must be in (0, pi) rad";
   if (!(c.corner_turn >= 0.0 && c.corner_turn <= 1.0)) return "corner_turn must be 0..1 rad (0: off)";
+  if (!(c.separation >= 0.0 && c.separation <= 4.0)) return "separation must be 0..4 subgoal spacings (0: off)";
   if (!(c.resample_below >= 0.0 && c.resample_below <= 1.0)) return "resample_below must be 0..1";
   if (c.max_subgoals < 2 || c.max_subgoals > 10000000) return "max_subgoals must be 2..10000000";
   return {};
@@ -131,6 +132,7 @@ void SubgoalAligner::draw_window(std::span<const Vec2> raw, const RouteShape& sh
   const auto sa = [&](std::size_t g) { return given ? shape.subgoal_arc[g] : arc[g - first]; };
   const double a_base = sa(base), a_new = sa(count_ - 1);
   const double spacing = count_ - 1 > base ? (a_new - a_base) / static_cast<double>(count_ - 1 - base) : 4.0;
+  spacing_ = spacing;
   // The first corner at the anchor or in the window: a vertex of the route
   // (one up to a subgoal spacing beyond the window's newest subgoal
   // included) where it turns by at least corner_angle. Failing that, the
@@ -351,6 +353,29 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
   draw_window(raw, shape);
   build_cost_table(map);
   const std::size_t begin = window_begin();
+  // A sample's route in order: its anchor, its window, its route beyond.
+  // Two points two or more steps apart must stay `separation` subgoal
+  // spacings apart, or as far apart as the raw subgoals they stand for when
+  // the map has those closer (a hairpin); the points beyond the window keep
+  // the plain limit.
+  constexpr std::size_t kRoute = 1 + 8 + kExtra;
+  const std::size_t first = begin > 0 ? begin - 1 : begin;
+  const std::size_t route_n = (count_ - first) + extra_count_;
+  std::array<double, kRoute * kRoute> limit2{};
+  const double sep = config_.separation * spacing_;
+  if (sep > 0.0) {
+    for (std::size_t a = 0; a < route_n; ++a) {
+      for (std::size_t b = a + 2; b < route_n; ++b) {
+        double l = sep;
+        if (first + b < count_ && first + b < raw.size()) {
+          const Vec2 ra = raw[first + a], rb = raw[first + b];
+          l = std::min(l, std::hypot(ra.x - rb.x, ra.y - rb.y));
+        }
+        limit2[a * kRoute + b] = l * l;
+      }
+    }
+  }
+  std::uint64_t doubled_back = 0;
   double best = -std::numeric_limits<double>::infinity();
   for (std::size_t j = 0; j < n_; ++j) {
     const Vec2* w = &window_[j * kk_];
@@ -360,10 +385,32 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
       c += patch_cost(q.x, q.y, config_.known_cells_only);
     }
     for (std::size_t e = 0; e < extra_count_; ++e) c += patch_cost(extra_[j * kExtra + e].x, extra_[j * kExtra + e].y, true);
-    const double lw = log_alpha_[j] - config_.lambda * c - prior_[j];  // Eq. 8.11, 8.14 (lambda^K cancels)
+    double lw = log_alpha_[j] - config_.lambda * c - prior_[j];  // Eq. 8.11, 8.14 (lambda^K cancels)
+    if (sep > 0.0 && route_n > 2) {
+      std::array<Vec2, kRoute> route{};
+      std::size_t m = 0;
+      if (begin > 0) route[m++] = anchor_[j];
+      for (std::size_t g = begin; g < count_; ++g) route[m++] = w[g % kk_];
+      for (std::size_t e = 0; e < extra_count_; ++e) route[m++] = extra_[j * kExtra + e];
+      bool back = false;
+      for (std::size_t a = 0; a + 2 < m && !back; ++a) {
+        for (std::size_t b = a + 2; b < m; ++b) {
+          const double dx = route[a].x - route[b].x, dy = route[a].y - route[b].y;
+          if (dx * dx + dy * dy < limit2[a * kRoute + b]) {
+            back = true;
+            break;
+          }
+        }
+      }
+      if (back) {
+        lw -= kDoubledBack;
+        ++doubled_back;
+      }
+    }
     log_weight_[j] = lw;
     best = std::max(best, lw);
   }
+  counters_.last_doubled_back = doubled_back;
   double sum = 0.0;
   for (std::size_t j = 0; j < n_; ++j) {
     weight_[j] = std::exp(log_weight_[j] - best);

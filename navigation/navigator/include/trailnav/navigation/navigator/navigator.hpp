@@ -71,6 +71,7 @@ struct NavigationCounters {
   std::uint64_t replans = 0;        // of them, because the robot left the route
   std::uint64_t plan_failures = 0;
   std::uint64_t updates = 0;        // aligner updates (one per new terrain map)
+  std::uint64_t catch_up_updates = 0;  // extra ones, between subgoals joining together
   std::uint64_t subgoals_reached = 0;
   std::uint64_t last_plan_expanded = 0;  // A*'s settled vertices
   double last_plan_ms = 0.0;

@@ -23,7 +23,8 @@
 // cost f^N(g) is the mean over the (2N+1)^2 cells around it; its likelihood
 // lambda exp(-lambda f^N(g)); a sequence's weight the anchor's weight times
 // the product over the window (times the along-street prior, see
-// AlignerConfig::along_prior). The estimate of each window subgoal is the
+// AlignerConfig::along_prior, and nearly zero for a route doubling back on
+// itself, AlignerConfig::separation). The estimate of each window subgoal is the
 // weighted mean (the expectation).
 //
 // Each update() re-draws every window from its anchor against the current
@@ -96,6 +97,16 @@ struct AlignerConfig {
   double corner_sigma = 12.0;        // m, 0: off
   double corner_angle = 0.45;        // rad
   double corner_turn = 0.3;          // rad, 0: the route after a corner keeps its direction
+  // separation: a route does not come back to where it was. A sample whose
+  // subgoals (its anchor, its window and its route scored beyond the window)
+  // come closer than separation x the subgoal spacing to one two or more
+  // steps before them, and closer than the map's own subgoals are to each
+  // other, is a route doubling back on itself: its weight is multiplied by
+  // exp(-kDoubledBack). Where a junction node is mapped metres too far along
+  // a crossing road, the mapped way runs past the junction and back; a
+  // sequence out along the straight-on road and back on it fits that spike
+  // on trail all the way, and without this it outweighs the real turn.
+  double separation = 1.0;           // x the subgoal spacing, 0: off
   double resample_below = 0.5;       // resample when n_eff < this x samples
   std::size_t max_subgoals = 65536;  // longest route, in subgoals
   std::uint64_t seed = 1;
@@ -109,6 +120,7 @@ struct AlignerCounters {
   std::uint64_t pushes = 0;
   std::uint64_t resamples = 0;
   double last_neff = 0.0;           // effective sample size after the last update
+  std::uint64_t last_doubled_back = 0;  // samples of the last update whose route came back on itself
   std::uint64_t cells_summed = 0;   // cells of the last update's cost table
 };
 
@@ -128,6 +140,7 @@ class SubgoalAligner {
  public:
   static constexpr std::size_t kShapePoints = 64;  // route vertices the corner model reads
   static constexpr std::size_t kAhead = 4;  // route subgoals beyond the window the corner model reads
+  static constexpr double kDoubledBack = 1000.0;  // -log weight factor of a route coming back on itself
   static constexpr std::size_t kExtra = 2;  // of those, scored with a corner window
   // How many subgoal spacings behind the anchor a mapped corner may lie and
   // still be moved forward past it (a junction mapped too early).
@@ -207,6 +220,7 @@ class SubgoalAligner {
   std::int32_t box_x0_ = 0, box_y0_ = 0, box_w_ = 0, box_h_ = 0;
   std::size_t box_capacity_ = 0;
   double min_x_ = 0, min_y_ = 0, max_x_ = 0, max_y_ = 0;
+  double spacing_ = 4.0;  // the raw subgoals' spacing at the last draw
 
   AlignerCounters counters_;
 };
