@@ -308,7 +308,7 @@ TEST_F(OnTestGraph, AlignsTheSubgoalsToTheStreetTheTerrainMapShows) {
 // turns, its place on the mapped route jumps forward and several subgoals
 // join the aligner in one step; each push after the first is preceded by an
 // update (a catch-up update), so every subgoal leaves the window estimated
-// with newer ones behind it. The subgoals reached near the junction are all
+// with newer ones after it. The subgoals reached near the junction are all
 // corrected, and lie nearer the road the robot takes than the map has them.
 TEST(Navigator, CatchesUpWhenSubgoalsJoinTogetherAtAJunctionMappedTooFarAlong) {
   //   A(0,0) -- N(47,1) -- E(90,0)   the straight-on road; N is 7 m too far

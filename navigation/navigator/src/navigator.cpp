@@ -247,9 +247,9 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     // Subgoals that join together (the robot's place on the route jumps where
     // the map is off, as at a junction mapped too far along): once the window
     // is full, each push after the first is preceded by an update, so every
-    // subgoal leaves the window estimated with the newer ones behind it, as
-    // one at a time would (not frozen where it was last the newest), and none
-    // leaves it unseen. None while the window fills.
+    // subgoal leaves the window estimated with newer ones after it, as one at
+    // a time would (not frozen where it was last the newest), and none leaves
+    // it unseen. None while the window fills.
     const std::size_t k = static_cast<std::size_t>(config_.aligner.sequence);
     std::size_t pushed = 0;
     while (aligner_->count() < want) {
