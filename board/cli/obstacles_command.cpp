@@ -33,6 +33,40 @@ struct ObstaclesCliOptions {
   bool quiet = false;
 };
 
+// A CSV file a command option asked for (--misses, --points): opened with
+// its header before the run, checked and closed after it. Errors name the
+// option and the file.
+class CsvOut {
+ public:
+  CsvOut(const char* option, const std::string& path) : option_(option), path_(path) {}
+  bool wanted() const noexcept { return !path_.empty(); }
+  std::FILE* get() const noexcept { return file_.get(); }
+  bool open(const char* header) {
+    file_.reset(std::fopen(path_.c_str(), "w"));
+    if (!file_) {
+      std::fprintf(stderr, "trailnav obstacles: %s %s: cannot write: %s\n", option_, path_.c_str(), std::strerror(errno));
+      return false;
+    }
+    std::fputs(header, file_.get());
+    return true;
+  }
+  // True when everything was written (or nothing was asked for).
+  bool close() {
+    if (!file_) return true;
+    const bool written = std::ferror(file_.get()) == 0;
+    if (std::fclose(file_.release()) != 0 || !written) {
+      std::fprintf(stderr, "trailnav obstacles: %s %s: writing failed\n", option_, path_.c_str());
+      return false;
+    }
+    return true;
+  }
+
+ private:
+  const char* option_;
+  std::string path_;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
+};
+
 // A recall as text: "n/a" when no truth cell was observed (no obstacle of
 // that kind in range, or a recording without that truth), never a 1.0 that
 // nothing supports.
@@ -139,15 +173,10 @@ int run(ObstaclesCliOptions& o) {
     }
   }
   // --misses: every face cell a map missed, one CSV line per scored snapshot.
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> misses(nullptr, &std::fclose);
+  CsvOut misses("--misses", o.misses_file);
   std::uint64_t miss_lines = 0;
-  if (!o.misses_file.empty()) {
-    misses.reset(std::fopen(o.misses_file.c_str(), "w"));
-    if (!misses) {
-      std::fprintf(stderr, "trailnav obstacles: --misses %s: cannot write: %s\n", o.misses_file.c_str(), std::strerror(errno));
-      return 2;
-    }
-    std::fprintf(misses.get(), "model,time_s,robot_x,robot_y,x,y,distance_m,side_seen_s,obstacle,probability,found_before\n");
+  if (misses.wanted()) {
+    if (!misses.open("model,time_s,robot_x,robot_y,x,y,distance_m,side_seen_s,obstacle,probability,found_before\n")) return 2;
     o.run.on_face_miss = [&](const eval::FaceMiss& m) {
       // Names such as "trunk at (12.0, 3.5)" hold commas: quoted, quotes doubled.
       std::string name = "\"";
@@ -160,27 +189,23 @@ int run(ObstaclesCliOptions& o) {
     };
   }
   // --points: every point inside --points-box, per revolution.
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> points(nullptr, &std::fclose);
+  CsvOut points("--points", o.points_file);
   std::uint64_t point_lines = 0;
   if (o.points_file.empty() != o.points_box.empty()) {
     std::fprintf(stderr, "trailnav obstacles: --points and --points-box go together\n");
     return 2;
   }
-  if (!o.points_file.empty()) {
+  if (points.wanted()) {
     const auto& b = o.points_box;
     if (!(b[0] < b[1]) || !(b[2] < b[3])) {
       std::fprintf(stderr, "trailnav obstacles: --points-box %g,%g,%g,%g: give XMIN,XMAX,YMIN,YMAX with XMIN < XMAX and "
                            "YMIN < YMAX\n", b[0], b[1], b[2], b[3]);
       return 2;
     }
-    points.reset(std::fopen(o.points_file.c_str(), "w"));
-    if (!points) {
-      std::fprintf(stderr, "trailnav obstacles: --points %s: cannot write: %s\n", o.points_file.c_str(), std::strerror(errno));
+    if (!points.open("time_s,revolution,ring,column,x,y,z,range,state,step_height,incline_deg,terrain,terrain_known,dirac,"
+                     "smooth\n"))
       return 2;
-    }
     o.run.points_box = std::array<double, 4>{b[0], b[1], b[2], b[3]};
-    std::fprintf(points.get(), "time_s,revolution,ring,column,x,y,z,range,state,step_height,incline_deg,terrain,"
-                               "terrain_known,dirac,smooth\n");
     o.run.on_point = [&](const eval::PointRecord& p) {
       const char* state = p.state == perception::PointState::measured ? "measured"
                           : p.state == perception::PointState::flat   ? "flat"
@@ -203,23 +228,10 @@ int run(ObstaclesCliOptions& o) {
     std::fprintf(stderr, "trailnav obstacles: %s\n", r.error.c_str());
     return 2;
   }
-  if (points) {
-    const bool written = std::ferror(points.get()) == 0;
-    if (std::fclose(points.release()) != 0 || !written) {
-      std::fprintf(stderr, "trailnav obstacles: --points %s: writing failed\n", o.points_file.c_str());
-      return 2;
-    }
-  }
-  if (misses) {
-    const bool written = std::ferror(misses.get()) == 0;
-    if (std::fclose(misses.release()) != 0 || !written) {
-      std::fprintf(stderr, "trailnav obstacles: --misses %s: writing failed\n", o.misses_file.c_str());
-      return 2;
-    }
-    if (!r.scored) {
-      std::fprintf(stderr, "trailnav obstacles: --misses needs a simulated recording (its truth says where the faces are); "
-                           "%s is empty\n", o.misses_file.c_str());
-    }
+  if (!points.close() || !misses.close()) return 2;
+  if (misses.wanted() && !r.scored) {
+    std::fprintf(stderr, "trailnav obstacles: --misses needs a simulated recording (its truth says where the faces are); "
+                         "%s is empty\n", o.misses_file.c_str());
   }
   const auto& c = r.counters;
   const char* terrain = o.run.terrain == eval::TerrainMode::truth       ? "true classes (adaptive)"

@@ -331,7 +331,7 @@ void report_points(const perception::ObstaclePipeline& pipeline, const perceptio
                    const std::array<double, 4>& box, std::uint64_t revolution, std::int64_t first_ns,
                    const std::function<void(const PointRecord&)>& out) {
   const perception::RevolutionCloud& c = pipeline.cloud();
-  const perception::ObstacleConfig& config = pipeline.config();
+  const perception::TerrainSource terrain = pipeline.terrain_source(classes);
   PointRecord r;
   r.time_s = static_cast<double>(c.time_ns - first_ns) * 1e-9;
   r.revolution = revolution;
@@ -350,15 +350,9 @@ void report_points(const perception::ObstaclePipeline& pipeline, const perceptio
       const bool measured = r.state == perception::PointState::measured;
       r.step_height = measured ? c.step_height[k] : 0.0f;
       r.sin_incline = measured ? c.sin_incline[k] : 0.0f;
-      r.terrain = config.fixed_class.value_or(config.unknown_class);
-      r.terrain_known = false;
-      if (!config.fixed_class && classes != nullptr) {
-        const perception::TerrainCell* cell = classes->grid().find(r.x, r.y);
-        if (cell != nullptr && cell->known) {
-          r.terrain = cell->best;
-          r.terrain_known = true;
-        }
-      }
+      const perception::TerrainCell* cell = terrain.known_cell(r.x, r.y);
+      r.terrain = cell != nullptr ? cell->best : terrain.fallback();
+      r.terrain_known = cell != nullptr;
       const int cls = static_cast<int>(r.terrain);
       r.dirac = pipeline.models().dirac(cls, r.step_height, r.sin_incline);
       r.smooth = pipeline.models().smooth(cls, r.step_height, r.sin_incline);

@@ -33,7 +33,7 @@ NavigationSection parse_navigation_section(const ConfigNode& n) {
   if (auto a = n.optional_map("aligner")) {
     subgoals::AlignerConfig& ac = c.aligner;
     ac.samples = static_cast<std::size_t>(a->integer("samples", 1, 50000, static_cast<std::int64_t>(ac.samples)));
-    ac.sequence = static_cast<int>(a->integer("sequence", 1, 8, ac.sequence));
+    ac.sequence = static_cast<int>(a->integer("sequence", 1, subgoals::kMaxSequence, ac.sequence));
     ac.neighbourhood = static_cast<int>(a->integer("neighbourhood", 0, 10, ac.neighbourhood));
     ac.lambda = a->number("lambda", 0.0, 100.0, ac.lambda);
     ac.sigma_d = a->number("sigma_d", 0.0, 10.0, ac.sigma_d);

@@ -30,7 +30,8 @@ std::uint64_t splitmix(std::uint64_t& s) noexcept {
 
 std::string check_aligner_config(const AlignerConfig& c) {
   if (c.samples < 1 || c.samples > 50000) return "samples must be 1..50000 (is " + std::to_string(c.samples) + ")";
-  if (c.sequence < 1 || c.sequence > 8) return "sequence (K) must be 1..8 (is " + std::to_string(c.sequence) + ")";
+  if (c.sequence < 1 || c.sequence > kMaxSequence)
+    return "sequence (K) must be 1.." + std::to_string(kMaxSequence) + " (is " + std::to_string(c.sequence) + ")";
   if (c.neighbourhood < 0 || c.neighbourhood > 10) return "neighbourhood (N) must be 0..10";
   if (!(c.lambda > 0.0 && c.lambda <= 100.0)) return "lambda must be in (0, 100]";
   if (!(c.sigma_d >= 0.0 && c.sigma_d <= 5.0)) return "sigma_d must be 0..5 m";
@@ -358,7 +359,7 @@ void SubgoalAligner::update(const perception::TerrainClassMap& map, std::span<co
   // spacings apart, or as far apart as the raw subgoals they stand for when
   // the map has those closer (a hairpin); the points beyond the window keep
   // the plain limit.
-  constexpr std::size_t kRoute = 1 + 8 + kExtra;
+  constexpr std::size_t kRoute = 1 + static_cast<std::size_t>(kMaxSequence) + kExtra;
   const std::size_t first = begin > 0 ? begin - 1 : begin;
   const std::size_t route_n = (count_ - first) + extra_count_;
   std::array<double, kRoute * kRoute> limit2{};

@@ -66,8 +66,8 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
   const auto size = static_cast<float>(grid_.size_x());
   const auto size_y = static_cast<float>(grid_.size_y());
 
-  const TerrainClassMap* tmap = terrain.fixed ? nullptr : terrain.map;
-  const int fixed_cls = static_cast<int>(terrain.fixed ? terrain.fixed_class : terrain.unknown_class);
+  const TerrainClassMap* tmap = terrain.adaptive_map();
+  const int fixed_cls = static_cast<int>(terrain.fallback());
   TerrainCell unknown_cell;
   unknown_cell.p[static_cast<std::size_t>(fixed_cls)] = 1.0f;
   unknown_cell.best = static_cast<TerrainClass>(fixed_cls);

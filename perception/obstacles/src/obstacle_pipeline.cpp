@@ -37,12 +37,17 @@ void ObstaclePipeline::features() noexcept {
   compute_features(cloud_, config_.features, feature_counters_);
 }
 
-void ObstaclePipeline::update_maps(const TerrainClassMap* terrain) noexcept {
+TerrainSource ObstaclePipeline::terrain_source(const TerrainClassMap* terrain) const noexcept {
   TerrainSource source;
   source.map = terrain;
   source.fixed = config_.fixed_class.has_value();
   if (source.fixed) source.fixed_class = *config_.fixed_class;
   source.unknown_class = config_.unknown_class;
+  return source;
+}
+
+void ObstaclePipeline::update_maps(const TerrainClassMap* terrain) noexcept {
+  const TerrainSource source = terrain_source(terrain);
   for (auto& m : maps_) {
     if (m) m->integrate(cloud_, models_, source);
   }

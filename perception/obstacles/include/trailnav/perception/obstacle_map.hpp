@@ -43,6 +43,20 @@ struct TerrainSource {
   bool fixed = false;                    // true: every cell is `fixed_class`
   TerrainClass fixed_class = TerrainClass::street;
   TerrainClass unknown_class = TerrainClass::other;  // cells `map` does not know
+
+  // The class of a point whose cell the map does not give: the fixed class,
+  // or the class for unknown terrain.
+  TerrainClass fallback() const noexcept { return fixed ? fixed_class : unknown_class; }
+  // The map to read classes from: none with a fixed class.
+  const TerrainClassMap* adaptive_map() const noexcept { return fixed ? nullptr : map; }
+  // The terrain map's cell under (x, y) when it knows it, else null (the
+  // point then takes fallback()).
+  const TerrainCell* known_cell(double x, double y) const noexcept {
+    const TerrainClassMap* m = adaptive_map();
+    if (m == nullptr) return nullptr;
+    const TerrainCell* c = m->grid().find(x, y);
+    return c != nullptr && c->known ? c : nullptr;
+  }
 };
 
 struct MapCounters {

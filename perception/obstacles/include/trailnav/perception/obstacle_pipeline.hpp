@@ -36,6 +36,8 @@ class ObstaclePipeline {
   void align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
   void features() noexcept;
   void update_maps(const TerrainClassMap* terrain) noexcept;
+  // Where update_maps(terrain) takes each point's terrain class from.
+  TerrainSource terrain_source(const TerrainClassMap* terrain) const noexcept;
 
   const ObstacleConfig& config() const noexcept { return config_; }
   const RevolutionCloud& cloud() const noexcept { return cloud_; }

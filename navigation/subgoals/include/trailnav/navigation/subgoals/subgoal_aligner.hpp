@@ -56,9 +56,11 @@ struct Vec2 {
   double x = 0.0, y = 0.0;
 };
 
+inline constexpr int kMaxSequence = 8;  // longest sequence K (AlignerConfig::sequence)
+
 struct AlignerConfig {
   std::size_t samples = 1000;        // 1 .. 50000
-  int sequence = 4;                  // K, subgoals sampled together, 1 .. 8
+  int sequence = 4;                  // K, subgoals sampled together, 1 .. kMaxSequence
   int neighbourhood = 2;             // N: (2N+1)^2 cells per subgoal
   double lambda = 4.0;               // Eq. 8.11
   double sigma_d = 0.5;              // m, Eq. 8.7
