@@ -154,6 +154,11 @@ TerrainRunReport run_terrain(const TerrainRunOptions& options) {
   return report;
 }
 
+namespace {
+constexpr const char* kCsvHeader = "max_remission,mean_remission,std_remission,roughness,slope,area_std_remission,class";
+constexpr const char* kOldCsvHeader = "max_remission,mean_remission,std_remission,roughness,slope,class";
+}  // namespace
+
 std::string load_labelled_csv(const std::string& path, perception::LabelledFeatures& out) {
   std::ifstream in(path);
   if (!in) return path + ": cannot open";
@@ -165,9 +170,13 @@ std::string load_labelled_csv(const std::string& path, perception::LabelledFeatu
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
     if (!header) {
-      if (line != "max_remission,mean_remission,std_remission,roughness,slope,class") {
+      if (line == kOldCsvHeader) {
         return path + ":" + std::to_string(line_no) +
-               ": expected the header 'max_remission,mean_remission,std_remission,roughness,slope,class'";
+               ": five features per line; cells need a sixth, area_std_remission (the remission spread over the "
+               "cells around; docs/terrain.md), before the class";
+      }
+      if (line != kCsvHeader) {
+        return path + ":" + std::to_string(line_no) + ": expected the header '" + kCsvHeader + "'";
       }
       header = true;
       continue;
@@ -176,7 +185,7 @@ std::string load_labelled_csv(const std::string& path, perception::LabelledFeatu
     perception::FeatureVector f{};
     std::string field;
     for (int k = 0; k < perception::kTerrainFeatures; ++k) {
-      if (!std::getline(ss, field, ',')) return path + ":" + std::to_string(line_no) + ": expected 6 fields";
+      if (!std::getline(ss, field, ',')) return path + ":" + std::to_string(line_no) + ": expected 7 fields";
       char* end = nullptr;
       const float v = std::strtof(field.c_str(), &end);
       if (field.empty() || end != field.c_str() + field.size() || !std::isfinite(v)) {
@@ -186,7 +195,7 @@ std::string load_labelled_csv(const std::string& path, perception::LabelledFeatu
       f[static_cast<std::size_t>(k)] = v;
     }
     if (!std::getline(ss, field) || field.find(',') != std::string::npos) {
-      return path + ":" + std::to_string(line_no) + ": expected 6 fields";
+      return path + ":" + std::to_string(line_no) + ": expected 7 fields";
     }
     const auto cls = perception::parse_terrain_class(field);
     if (!cls) {
@@ -202,11 +211,11 @@ std::string load_labelled_csv(const std::string& path, perception::LabelledFeatu
 Status save_labelled_csv(const std::string& path, const perception::LabelledFeatures& data) {
   std::FILE* f = std::fopen(path.c_str(), "w");
   if (f == nullptr) return Status::error("cannot write " + path);
-  std::fprintf(f, "max_remission,mean_remission,std_remission,roughness,slope,class\n");
+  std::fprintf(f, "%s\n", kCsvHeader);
   for (std::size_t i = 0; i < data.size(); ++i) {
     const auto& v = data.features[i];
-    std::fprintf(f, "%.9g,%.9g,%.9g,%.9g,%.9g,%s\n", static_cast<double>(v[0]), static_cast<double>(v[1]),
-                 static_cast<double>(v[2]), static_cast<double>(v[3]), static_cast<double>(v[4]),
+    std::fprintf(f, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%s\n", static_cast<double>(v[0]), static_cast<double>(v[1]),
+                 static_cast<double>(v[2]), static_cast<double>(v[3]), static_cast<double>(v[4]), static_cast<double>(v[5]),
                  std::string(perception::terrain_class_name(static_cast<perception::TerrainClass>(data.labels[i]))).c_str());
   }
   if (std::fclose(f) != 0) return Status::error("cannot write " + path);

@@ -56,7 +56,7 @@ struct TerrainRunReport {
 
 TerrainRunReport run_terrain(const TerrainRunOptions& options);
 
-// Labelled cells as CSV: a header line, then per cell the five features and a
+// Labelled cells as CSV: a header line, then per cell the six features and a
 // class name (docs/terrain.md). Appends to `out`; errors name file and line.
 std::string load_labelled_csv(const std::string& path, perception::LabelledFeatures& out);
 Status save_labelled_csv(const std::string& path, const perception::LabelledFeatures& data);

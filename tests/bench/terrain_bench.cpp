@@ -126,7 +126,7 @@ void BM_ForestPerCell(benchmark::State& state) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::vector<FeatureVector> cells(4096);
-  for (FeatureVector& f : cells) f = {20.0f + 40.0f * u(rng), 15.0f + 30.0f * u(rng), 2.0f + 8.0f * u(rng), 2e-3f * u(rng) * u(rng), 90.0f * u(rng) * u(rng)};
+  for (FeatureVector& f : cells) f = {20.0f + 40.0f * u(rng), 15.0f + 30.0f * u(rng), 2.0f + 8.0f * u(rng), 2e-3f * u(rng) * u(rng), 90.0f * u(rng) * u(rng), 3.0f + 12.0f * u(rng)};
   ClassDistribution out;
   std::size_t i = 0;
   for (auto _ : state) {

@@ -4,6 +4,7 @@
 // per-cell matrix counts each labelled cell once.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <string>
 
@@ -49,6 +50,44 @@ TEST(TerrainEval, MeadowGrassIsRecognisedAndEachCellCountsOnceInTheLastMatrix) {
   // Cells are observed at several steps; the last matrix has each once.
   EXPECT_GT(r.last.total(), 1000u);
   EXPECT_LT(2 * r.last.total(), r.integrated.total());
+}
+
+// The labelled-cell CSV of `terrain-train` and `--save-features`: what is
+// saved loads back the same, and bad files stop with file and line.
+TEST(TerrainEval, LabelledCellsCsvRoundTripsAndBadLinesAreNamed) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-labelled-csv-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string path = (dir / "cells.csv").string();
+  perception::LabelledFeatures saved;
+  saved.add({41.0f, 33.25f, 3.8f, 1.2e-5f, 1.3f, 6.5f}, TerrainClass::street);
+  saved.add({60.0f, 40.5f, 9.75f, 3e-4f, 4.0f, 13.0f}, TerrainClass::other);
+  ASSERT_TRUE(save_labelled_csv(path, saved));
+  perception::LabelledFeatures back;
+  ASSERT_EQ(load_labelled_csv(path, back), "");
+  EXPECT_EQ(back.features, saved.features);
+  EXPECT_EQ(back.labels, saved.labels);
+
+  const auto error_of = [&](const std::string& text) {
+    {
+      std::FILE* f = std::fopen(path.c_str(), "w");
+      std::fputs(text.c_str(), f);
+      std::fclose(f);
+    }
+    perception::LabelledFeatures out;
+    return load_labelled_csv(path, out);
+  };
+  const std::string header = "max_remission,mean_remission,std_remission,roughness,slope,area_std_remission,class\n";
+  EXPECT_EQ(error_of("# labelled by hand\n" + header + "41,33,3.8,1e-5,1.3,6,grass\n"), "");
+  // A file of the five-feature format says what it lacks.
+  std::string e = error_of("max_remission,mean_remission,std_remission,roughness,slope,class\n41,33,3.8,1e-5,1.3,grass\n");
+  EXPECT_EQ(e.rfind(path + ":1: five features per line", 0), 0u) << e;
+  e = error_of(header + "41,33,3.8,1e-5,1.3,grass\n");
+  EXPECT_EQ(e, path + ":2: 'grass' is not a number (area std remission)");
+  e = error_of(header + "41,33,3.8,1e-5,1.3,6,gras\n");
+  EXPECT_EQ(e.rfind(path + ":2: unknown class 'gras'", 0), 0u) << e;
+  e = error_of(header + "41,33,3.8,1e-5,1.3,6\n");
+  EXPECT_EQ(e, path + ":2: expected 7 fields");
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -459,10 +459,12 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   // move onto it and stay there: every one of the second half on the street
   // with half a metre to its edge, and on average in its middle half (the
   // scenario's streets are 6 and 7 m wide; runs measured second-half means
-  // of 0.6-1.0 m and maxima of 1.3-1.8 m from the centre).
+  // of 0.6-1.0 m and maxima of 1.3-1.8 m from the centre). The first half
+  // holds the raw subgoal but may be better than the second after it, so the
+  // second half is held against the raw offset, not the first half's mean.
   const double half_width = 0.5 * r.narrowest_trail;
   EXPECT_GT(e.front(), 3.0);
-  EXPECT_LT(second, first);
+  EXPECT_LT(second, 0.25 * e.front());
   EXPECT_LE(second, 0.5 * half_width);
   EXPECT_LE(second_max, half_width - 0.5);
   EXPECT_LE(r.subgoals_unmatched, 2u);

@@ -1,5 +1,5 @@
-// Terrain analysis (thesis §7.2): the five features from running sums, the
-// random forest's file format and its checks, training (separable data is
+// Terrain analysis (thesis §7.2): the features from running sums and the area
+// around a cell, the random forest's file format and its checks, training (separable data is
 // learnt; the same seed gives the same bytes), the Bayes update of Eq. 7.15
 // with frozen and re-opened cells, and the features of a real KITTI scan.
 #include <gtest/gtest.h>
@@ -223,8 +223,8 @@ TEST(RandomForest, ModelFileRoundTripsAndEveryCorruptionIsNamed) {
   fs::remove_all(dir);
 }
 
-// A model says which lidar's remissions it learnt; version 1 files (which
-// do not) are still read; the tools refuse a model for another lidar.
+// A model says which lidar's remissions it learnt; the tools refuse a model
+// for another lidar. Files of the five-feature versions are refused by name.
 TEST(RandomForest, ModelFileNamesItsLidarAndAnotherLidarIsRefused) {
   const fs::path dir = fs::temp_directory_path() / ("trailnav-forest-lidar-" + std::to_string(::getpid()));
   fs::create_directories(dir);
@@ -237,7 +237,7 @@ TEST(RandomForest, ModelFileNamesItsLidarAndAnotherLidarIsRefused) {
   EXPECT_EQ(f.lidar(), "");
   ASSERT_EQ(f.set_lidar("HDL-64E"), "");
   ASSERT_TRUE(f.save(path));
-  const auto v2 = file_bytes(path);
+  const auto saved = file_bytes(path);
   auto back = RandomForest::load(path);
   ASSERT_TRUE(back.forest) << back.error;
   EXPECT_EQ(back.forest->lidar(), "HDL-64E");
@@ -246,24 +246,21 @@ TEST(RandomForest, ModelFileNamesItsLidarAndAnotherLidarIsRefused) {
   EXPECT_EQ(e.rfind(path, 0), 0u) << e;
   EXPECT_NE(e.find("trained on HDL-64E returns, this lidar is VLP-16"), std::string::npos) << e;
 
-  // The same forest as version 1: no lidar field (16 bytes after the six
-  // header words), another checksum.
-  std::vector<std::uint8_t> v1(v2.begin(), v2.begin() + 32);
-  v1[8] = 1;
-  v1.insert(v1.end(), v2.begin() + 48, v2.end() - 4);
-  const auto crc = static_cast<std::uint32_t>(crc32(0L, v1.data(), static_cast<uInt>(v1.size())));
-  for (int i = 0; i < 4; ++i) v1.push_back(static_cast<std::uint8_t>(crc >> (8 * i)));
-  write_bytes(path, v1);
-  auto old = RandomForest::load(path);
-  ASSERT_TRUE(old.forest) << old.error;
-  EXPECT_EQ(old.forest->lidar(), "");
-  ClassDistribution a, b;
-  f.predict({0.5f, 0, 0, 0, 0}, a);
-  old.forest->predict({0.5f, 0, 0, 0, 0}, b);
-  EXPECT_EQ(a, b);
+  // A version 1 or 2 file holds a forest of the five per-cell features:
+  // refused, saying what to do.
+  for (const std::uint8_t old_version : {std::uint8_t{1}, std::uint8_t{2}}) {
+    auto old = saved;
+    old[8] = old_version;
+    old[12] = 5;
+    write_bytes(path, old);
+    const std::string why = RandomForest::load(path).error;
+    EXPECT_EQ(why.rfind(path + ": model format version " + std::to_string(old_version), 0), 0u) << why;
+    EXPECT_NE(why.find("five per-cell features"), std::string::npos) << why;
+    EXPECT_NE(why.find("trailnav terrain-train"), std::string::npos) << why;
+  }
 
   // Text after the field's terminating NUL is corruption, named.
-  auto bad = v2;
+  auto bad = saved;
   bad[32 + 10] = 'x';
   const auto bad_crc = static_cast<std::uint32_t>(crc32(0L, bad.data(), static_cast<uInt>(bad.size() - 4)));
   for (std::size_t i = 0; i < 4; ++i) bad[bad.size() - 4 + i] = static_cast<std::uint8_t>(bad_crc >> (8 * i));
@@ -285,7 +282,7 @@ LabelledFeatures separable(int n, std::uint32_t seed) {
   LabelledFeatures d;
   for (int i = 0; i < n; ++i) {
     const int c = i % 3;
-    FeatureVector f{u(rng) * 60.0f, 0.0f, u(rng) * 10.0f, 0.0f, u(rng) * 5.0f};
+    FeatureVector f{u(rng) * 60.0f, 0.0f, u(rng) * 10.0f, 0.0f, u(rng) * 5.0f, u(rng) * 10.0f};
     if (c == 0) f[kMeanR] = 40.0f + u(rng) * 10.0f, f[kRough] = u(rng) * 1e-4f;
     if (c == 1) f[kMeanR] = 15.0f + u(rng) * 10.0f, f[kRough] = 1e-3f + u(rng) * 1e-3f;
     if (c == 2) f[kMeanR] = 15.0f + u(rng) * 35.0f, f[kSlope] = 50.0f + u(rng) * 40.0f;
@@ -400,6 +397,65 @@ TEST(TerrainMapper, BayesUpdateFreezesAfterTenConfidentObservationsAndReopens) {
   EXPECT_EQ(m.cell(0.3, 0.3).best, TerrainClass::street);
   // A cell nobody saw is unknown, not classified.
   EXPECT_FALSE(m.cell(2.5, 2.5).known);
+}
+
+// The sixth feature: the spread of remission over all points of the 5 x 5
+// cells around a cell at this step, those with too few points for a feature
+// of their own included; a cell farther away does not count, and a cell
+// alone has its own spread.
+TEST(TerrainMapper, AreaRemissionSpreadPoolsThePointsOfTheCellsAround) {
+  struct Collect : TerrainObserver {
+    std::vector<std::pair<CellIndex, FeatureVector>> seen;
+    void observe(const TerrainObservation& o) override { seen.emplace_back(o.cell, o.feature); }
+  } collect;
+  FixedMapper m({0.6f, 0.1f, 0.1f, 0.1f, 0.1f});
+  m.mapper->set_observer(&collect);
+  const CellIndex o = m.mapper->work().origin();  // 20 x 20 cells
+  const CellIndex centre{o.x + 6, o.y + 6};
+  std::vector<double> area;  // every remission the centre's area holds
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int dy = -3; dy <= 3; ++dy) {
+    for (int dx = -3; dx <= 3; ++dx) {
+      const CellIndex i{centre.x + dx, centre.y + dy};
+      const int points = (dx + dy) % 2 == 0 ? 8 : 3;  // some cells below min_points (5)
+      // Far cells (3 away) are bright, so counting them would show.
+      const float base = std::abs(dx) == 3 || std::abs(dy) == 3 ? 200.0f : 20.0f + 4.0f * static_cast<float>(dx + 2 * dy);
+      TerrainWorkCell& w = m.mapper->work().at(i);
+      for (int k = 0; k < points; ++k) {
+        const float r = base + 10.0f * u(rng);
+        w.stats.add(0.02f * static_cast<float>(k % 3), 0.03f * static_cast<float>(k % 2), 0.001f * static_cast<float>(k), r);
+        if (std::abs(dx) <= 2 && std::abs(dy) <= 2) area.push_back(r);
+      }
+    }
+  }
+  // And a lone cell with nobody around.
+  const CellIndex lone{o.x + 16, o.y + 16};
+  ASSERT_TRUE(m.mapper->work().contains(lone));
+  for (int k = 0; k < 6; ++k) m.mapper->work().at(lone).stats.add(0.01f * static_cast<float>(k), 0.0f, 0.0f, 30.0f + 2.0f * static_cast<float>(k));
+  m.mapper->step(1'000'000'000);
+  double mean = 0.0, var = 0.0;
+  for (double r : area) mean += r;
+  mean /= static_cast<double>(area.size());
+  for (double r : area) var += (r - mean) * (r - mean);
+  const double expected = std::sqrt(var / static_cast<double>(area.size()));
+  constexpr int kArea = static_cast<int>(TerrainFeature::area_std_remission);
+  constexpr int kOwn = static_cast<int>(TerrainFeature::std_remission);
+  bool saw_centre = false, saw_lone = false;
+  for (const auto& [i, f] : collect.seen) {
+    if (i.x == centre.x && i.y == centre.y) {
+      saw_centre = true;
+      EXPECT_NEAR(f[kArea], expected, 1e-3 * expected);
+      EXPECT_GT(f[kArea], 3.0f * f[kOwn]);  // the area's gradient, which one cell does not see
+    }
+    if (i.x == lone.x && i.y == lone.y) {
+      saw_lone = true;
+      EXPECT_NEAR(f[kArea], f[kOwn], 1e-4f);
+      EXPECT_NEAR(f[kOwn], std::sqrt(35.0f / 3.0f), 1e-3f);  // 30, 32, ..., 40
+    }
+  }
+  EXPECT_TRUE(saw_centre);
+  EXPECT_TRUE(saw_lone);
 }
 
 TEST(TerrainMapper, ProbabilitiesStayAboveTheFloorSoEvidenceCanTurnACell) {

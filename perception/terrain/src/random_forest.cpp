@@ -186,8 +186,14 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   c.u32(skip);  // the magic
   std::uint32_t version = 0, features = 0, classes = 0, trees = 0, nodes = 0, leaves = 0;
   if (!c.u32(version)) return fail("truncated header");
-  if (version != 1 && version != kVersion) {
-    return fail("model format version " + std::to_string(version) + "; this build reads versions 1 and " +
+  if (version == 1 || version == 2) {
+    return fail("model format version " + std::to_string(version) +
+                ": a forest of the five per-cell features; this build's forests (version " + std::to_string(kVersion) +
+                ") also use the remission spread around the cell, so train the model again with trailnav "
+                "terrain-train (toolchain/train-terrain-model.sh rebuilds the shipped ones)");
+  }
+  if (version != kVersion) {
+    return fail("model format version " + std::to_string(version) + "; this build reads version " +
                 std::to_string(kVersion));
   }
   if (!c.u32(features) || !c.u32(classes) || !c.u32(trees) || !c.u32(nodes) || !c.u32(leaves)) return fail("truncated header");
@@ -196,8 +202,7 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
                 " classes; this build uses " + std::to_string(kTerrainFeatures) + " and " + std::to_string(kTerrainClasses));
   }
   if (trees == 0 || trees > kMaxTrees || nodes > kMaxNodes || leaves > kMaxNodes) return fail("implausible sizes in the header");
-  const std::size_t lidar_bytes = version >= 2 ? kLidarBytes : 0;
-  const std::size_t expected = c.pos() + lidar_bytes + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
+  const std::size_t expected = c.pos() + kLidarBytes + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
   if (data.size() != expected) {
     return fail("size " + std::to_string(data.size()) + " bytes, the header announces " + std::to_string(expected) +
                 " (truncated or corrupt)");
@@ -207,16 +212,16 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   for (std::size_t i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(data[data.size() - 4 + i]) << (8 * i);
   if (stored != crc) return fail("checksum mismatch: the file is corrupt");
   std::string lidar;
-  if (lidar_bytes > 0) {
+  {
     const std::uint8_t* f = data.data() + c.pos();
     std::size_t n = 0;
-    while (n < lidar_bytes && f[n] != 0) ++n;
-    for (std::size_t i = n; i < lidar_bytes; ++i) {
+    while (n < kLidarBytes && f[n] != 0) ++n;
+    for (std::size_t i = n; i < kLidarBytes; ++i) {
       if (f[i] != 0) return fail("malformed lidar field (text after its end)");
     }
     lidar.assign(reinterpret_cast<const char*>(f), n);
     std::uint32_t skip_lidar;
-    for (std::size_t i = 0; i < lidar_bytes / 4; ++i) c.u32(skip_lidar);
+    for (std::size_t i = 0; i < kLidarBytes / 4; ++i) c.u32(skip_lidar);
   }
   std::vector<std::uint32_t> roots(trees);
   for (auto& r : roots) c.u32(r);

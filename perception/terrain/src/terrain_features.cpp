@@ -17,6 +17,7 @@ std::string_view terrain_feature_name(TerrainFeature f) noexcept {
     case TerrainFeature::std_remission: return "std remission";
     case TerrainFeature::roughness: return "roughness";
     case TerrainFeature::slope: return "slope";
+    case TerrainFeature::area_std_remission: return "area std remission";
   }
   return "?";
 }
@@ -213,6 +214,7 @@ void compute_terrain_features(const std::array<const CellStats*, 4>& cells, std:
     f[static_cast<int>(TerrainFeature::std_remission)] = std_r[l];
     f[static_cast<int>(TerrainFeature::roughness)] = roughness[l];
     f[static_cast<int>(TerrainFeature::slope)] = slope[l];
+    f[static_cast<int>(TerrainFeature::area_std_remission)] = std_r[l];
   }
 }
 

@@ -34,7 +34,8 @@ TerrainMapper::TerrainMapper(const TerrainConfig& config, const MountParams& mou
       cloud_(CloudShape{shape.rings, shape.max_columns}),
       forest_(forest),
       work_(config.map.size_x, config.map.size_y, config.map.resolution),
-      map_(config.map) {}
+      map_(config.map),
+      area_(new AreaRemission[work_.cell_count()]) {}
 
 TerrainCounters TerrainMapper::counters() const noexcept {
   TerrainCounters c = counters_;
@@ -147,6 +148,21 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   step_ns_ = now_ns;
   ++counters_.steps;
   const CellIndex o = work_.origin();
+  // Each cell's remission mean and squared deviations, for the areas around
+  // the cells that get a feature (their sums are cleared as they are
+  // classified, so this comes first).
+  for (std::size_t k = 0; k < work_.cell_count(); ++k) {
+    const CellStats& s = work_.at_offset(k).stats;
+    AreaRemission& a = area_[k];
+    if (s.n == 0) {
+      a = {};
+      continue;
+    }
+    const auto n = static_cast<float>(s.n);
+    a.n = n;
+    a.mean = s.r0 + s.sr / n;
+    a.m2 = std::max(0.0f, s.srr - s.sr * s.sr / n);
+  }
   // Cells due for a feature are batched: their features are computed four at
   // a time on four-wide vectors, then the forest walks them one by one.
   std::uint64_t classified = 0, known = 0;
@@ -154,7 +170,7 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   work_.for_each_in_window(o, {o.x + work_.size_x(), o.y + work_.size_y()}, [&](CellIndex i, TerrainWorkCell& w) {
     TerrainCell& c = map_.grid().at(i);
     if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, now_ns)) {
-      batch_[pending++] = {&w, &c, i};
+      batch_[pending++] = {&w, &c, i, {}, area_std_remission(i)};
       if (pending == batch_.size()) {
         finish_batch(pending, now_ns, classified, known);
         pending = 0;
@@ -169,6 +185,35 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   counters_.known_cells = known;
   map_.sequence = counters_.steps;
   map_.time_ns = now_ns;
+}
+
+float TerrainMapper::area_std_remission(CellIndex i) const noexcept {
+  // The pooled spread of the area's points: each cell's squared deviations
+  // from its own mean, plus its points' offset from the area's mean (Chan's
+  // combination; no sum of squares of raw remissions, so no cancellation).
+  constexpr std::size_t kCells = (2 * kAreaRadius + 1) * (2 * kAreaRadius + 1);
+  std::array<const AreaRemission*, kCells> around{};
+  std::size_t count = 0;
+  float n = 0.0f, sum = 0.0f;
+  for (std::int32_t dy = -kAreaRadius; dy <= kAreaRadius; ++dy) {
+    for (std::int32_t dx = -kAreaRadius; dx <= kAreaRadius; ++dx) {
+      const CellIndex j{i.x + dx, i.y + dy};
+      if (!work_.contains(j)) continue;
+      const AreaRemission& a = area_[work_.offset_of(work_.at(j))];
+      if (a.n <= 0.0f) continue;
+      around[count++] = &a;
+      n += a.n;
+      sum += a.n * a.mean;
+    }
+  }
+  if (n <= 0.0f) return 0.0f;
+  const float mean = sum / n;
+  float m2 = 0.0f;
+  for (std::size_t k = 0; k < count; ++k) {
+    const float d = around[k]->mean - mean;
+    m2 += around[k]->m2 + around[k]->n * d * d;
+  }
+  return std::sqrt(m2 / n);
 }
 
 bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept {
@@ -198,7 +243,10 @@ void TerrainMapper::finish_batch(std::size_t count, std::int64_t now_ns, std::ui
     std::array<const CellStats*, 4> cells;
     for (std::size_t l = 0; l < 4; ++l) cells[l] = &batch_[std::min(k + l, count - 1)].work->stats;
     compute_terrain_features(cells, features);
-    for (std::size_t l = 0; l < 4 && k + l < count; ++l) batch_[k + l].feature = features[l];
+    for (std::size_t l = 0; l < 4 && k + l < count; ++l) {
+      batch_[k + l].feature = features[l];
+      batch_[k + l].feature[static_cast<int>(TerrainFeature::area_std_remission)] = batch_[k + l].area_std;
+    }
   }
   for (std::size_t k = 0; k < count; ++k) {
     Pending& b = batch_[k];

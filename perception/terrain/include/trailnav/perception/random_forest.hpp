@@ -8,11 +8,11 @@
 //
 // Model file (little-endian; docs/terrain.md):
 //   "TNTERRF\0"  magic (8 bytes)
-//   u32 version (2; 1 is read too), u32 features (5), u32 classes (5)
+//   u32 version (3; 1 and 2, five-feature forests, are refused by name),
+//   u32 features (6), u32 classes (5)
 //   u32 trees, u32 nodes, u32 leaves
 //   16 bytes: the lidar model the forest was trained for ("VLP-16",
 //             "HDL-64E", ...), ASCII, NUL-padded; all NUL: not said
-//             (version 2 only)
 //   trees  x u32 first node of each tree
 //   nodes  x { i16 feature (-1: leaf), u16 0, f32 threshold, i32 right child or leaf row }
 //   leaves x classes x f32 probability
@@ -45,7 +45,9 @@ using ClassDistribution = std::array<float, kTerrainClasses>;
 
 class RandomForest {
  public:
-  static constexpr std::uint32_t kVersion = 2;
+  // 3: six features (area_std_remission). 1 and 2 held forests of the five
+  // per-cell features, which this build cannot use; loading says so.
+  static constexpr std::uint32_t kVersion = 3;
   static constexpr std::size_t kLidarBytes = 16;  // the lidar field, NUL-padded
 
   struct Loaded;
@@ -85,7 +87,7 @@ class RandomForest {
   std::size_t leaves() const noexcept { return leaves_.size() / kTerrainClasses; }
   std::size_t max_depth() const noexcept { return max_depth_; }
   // The lidar model the forest was trained for (its remissions are that
-  // sensor's); empty: not said (a version 1 file, or mixed training data).
+  // sensor's); empty: not said (mixed training data).
   const std::string& lidar() const noexcept { return lidar_; }
   // Empty when `name` (printable ASCII, at most 15 characters) was taken,
   // else what is wrong with it.

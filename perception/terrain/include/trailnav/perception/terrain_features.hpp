@@ -1,5 +1,7 @@
-// The five-dimensional terrain feature of thesis §7.2.1, from running sums of
-// the points registered in one grid cell, so a cell never stores its points.
+// The terrain feature of a grid cell: the five dimensions of thesis §7.2.1,
+// from running sums of the points registered in the cell, so a cell never
+// stores its points, and a sixth, the spread of remission over the cells
+// around it (TerrainMapper computes it; kAreaRadius).
 //
 // Sums are kept relative to the first point of the cell (shifted data), which
 // keeps float sums of squares accurate however many points arrive.
@@ -11,7 +13,7 @@
 
 namespace trailnav::perception {
 
-inline constexpr int kTerrainFeatures = 5;
+inline constexpr int kTerrainFeatures = 6;
 
 enum class TerrainFeature : std::uint8_t {
   max_remission = 0,   // 0..255
@@ -19,7 +21,14 @@ enum class TerrainFeature : std::uint8_t {
   std_remission = 2,   // 0..255
   roughness = 3,       // m^2: smallest eigenvalue of the points' covariance
   slope = 4,           // degrees: angle between that eigenvector (the surface normal) and gravity
+  // 0..255: standard deviation of remission over the points of the
+  // (2 kAreaRadius + 1)^2 cells around the cell registered since the last
+  // step. A single cell's few points and 0.2 m of ground cannot tell whether
+  // the ground's reflectivity varies finely (paving, gravel) or evenly (dirt);
+  // a metre of ground can.
+  area_std_remission = 5,
 };
+inline constexpr int kAreaRadius = 2;  // cells each way: 5 x 5 cells, 1 m at the default 0.2 m
 std::string_view terrain_feature_name(TerrainFeature f) noexcept;
 
 using FeatureVector = std::array<float, kTerrainFeatures>;
@@ -60,7 +69,8 @@ struct CellStats {
 
 static_assert(sizeof(CellStats) == 68, "docs/terrain.md gives the cell's size");
 
-// The feature of a cell with at least three points.
+// The feature of a cell with at least three points; its area_std_remission is
+// the cell's own std_remission (the mapper replaces it with the area's).
 FeatureVector compute_terrain_feature(const CellStats& s) noexcept;
 // The same for four cells at once (four-wide vectors); the same results.
 void compute_terrain_features(const std::array<const CellStats*, 4>& cells, std::array<FeatureVector, 4>& out) noexcept;

@@ -1,6 +1,6 @@
 // The terrain analysis of thesis §7.2: lidar points registered with the local
-// odometry pose into a rolling grid of running sums, a five-dimensional
-// feature per cell every d metres driven, the random forest's P(t | f) and the
+// odometry pose into a rolling grid of running sums, a feature per cell every
+// d metres driven (terrain_features.hpp), the random forest's P(t | f) and the
 // Bayes update of the terrain-class map (Eq. 7.15) with classified cells
 // frozen and re-opened (§7.2.3). Everything is allocated by create().
 #pragma once
@@ -106,7 +106,14 @@ class TerrainMapper {
     TerrainCell* cell = nullptr;
     CellIndex index{};
     FeatureVector feature{};
+    float area_std = 0.0f;
   };
+  // A cell's remission at a step: points, mean, sum of squared deviations.
+  struct AreaRemission {
+    float n = 0.0f, mean = 0.0f, m2 = 0.0f;
+  };
+  // TerrainFeature::area_std_remission of cell i, from area_.
+  float area_std_remission(CellIndex i) const noexcept;
 
   TerrainConfig config_;
   CloudAligner aligner_;
@@ -116,6 +123,7 @@ class TerrainMapper {
   TerrainClassMap map_;
   TerrainObserver* observer_ = nullptr;
   std::array<Pending, 32> batch_{};
+  std::unique_ptr<AreaRemission[]> area_;  // per cell of work_, by storage offset
   TerrainCounters counters_;
   bool have_step_ = false;
   double step_x_ = 0.0, step_y_ = 0.0;
