@@ -476,6 +476,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   if (truth) {
     scorer.emplace(*truth, options, config.map.resolution);
     report.scored = true;
+    report.side_sightings = !truth->side_sightings.empty();
     for (int m = 0; m < perception::kFusionModels; ++m) {
       if (pipeline.map(static_cast<FusionModel>(m)) != nullptr) {
         report.scores[static_cast<std::size_t>(m)].emplace();

@@ -65,6 +65,7 @@ TEST_F(MeadowBlock, AdaptiveDetectionAvoidsBothFailures) {
   for (const auto* r : {&street, &grass, &adaptive}) {
     ASSERT_TRUE(r->error.empty()) << r->error;
     ASSERT_TRUE(r->scored);
+    EXPECT_TRUE(r->side_sightings);  // a fresh simulation has them; the tool says when not
     EXPECT_GT(r->revolutions, 300u);
     EXPECT_EQ(r->malformed_packets, 0u);
   }
