@@ -35,7 +35,9 @@ TerrainMapper::TerrainMapper(const TerrainConfig& config, const MountParams& mou
       forest_(forest),
       work_(config.map.size_x, config.map.size_y, config.map.resolution),
       map_(config.map),
-      area_(new AreaRemission[work_.cell_count()]) {}
+      area_cells_(new AreaSums[static_cast<std::size_t>(work_.size_x())]),
+      area_rows_(new AreaSums[static_cast<std::size_t>(work_.size_x()) * (2 * kAreaRadius + 1)]),
+      area_cols_(new AreaSums[static_cast<std::size_t>(work_.size_x())]) {}
 
 TerrainCounters TerrainMapper::counters() const noexcept {
   TerrainCounters c = counters_;
@@ -148,38 +150,38 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   step_ns_ = now_ns;
   ++counters_.steps;
   const CellIndex o = work_.origin();
-  // Each cell's remission mean and squared deviations, for the areas around
-  // the cells that get a feature (their sums are cleared as they are
-  // classified, so this comes first).
-  for (std::size_t k = 0; k < work_.cell_count(); ++k) {
-    const CellStats& s = work_.at_offset(k).stats;
-    AreaRemission& a = area_[k];
-    if (s.n == 0) {
-      a = {};
-      continue;
-    }
-    const auto n = static_cast<float>(s.n);
-    a.n = n;
-    a.mean = s.r0 + s.sr / n;
-    a.m2 = std::max(0.0f, s.srr - s.sr * s.sr / n);
-  }
+  const std::int32_t nx = work_.size_x(), ny = work_.size_y();
+  constexpr std::int32_t kR = kAreaRadius;
+  // One pass over the grid. Row y's remission sums enter the area sums kR
+  // rows before its cells are visited, so the areas of row y - kR are
+  // complete when it is; a cell's sums are cleared (when it gets its
+  // feature) only after they entered.
+  std::fill(area_cols_.get(), area_cols_.get() + nx, AreaSums{});
   // Cells due for a feature are batched: their features are computed four at
   // a time on four-wide vectors, then the forest walks them one by one.
   std::uint64_t classified = 0, known = 0;
   std::size_t pending = 0;
-  work_.for_each_in_window(o, {o.x + work_.size_x(), o.y + work_.size_y()}, [&](CellIndex i, TerrainWorkCell& w) {
-    TerrainCell& c = map_.grid().at(i);
-    if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, now_ns)) {
-      batch_[pending++] = {&w, &c, i, {}, area_std_remission(i)};
-      if (pending == batch_.size()) {
-        finish_batch(pending, now_ns, classified, known);
-        pending = 0;
+  for (std::int32_t y = 0; y < ny + kR; ++y) {
+    if (y < ny) add_area_row(y);
+    const std::int32_t row = y - kR;
+    if (row < 0) continue;
+    for (std::int32_t x = 0; x < nx; ++x) {
+      const CellIndex i{o.x + x, o.y + row};
+      TerrainWorkCell& w = work_.at(i);
+      TerrainCell& c = map_.grid().at(i);
+      if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, now_ns)) {
+        batch_[pending++] = {&w, &c, i, {}, area_std(x)};
+        if (pending == batch_.size()) {
+          finish_batch(pending, now_ns, classified, known);
+          pending = 0;
+        }
+        continue;
       }
-      return;
+      classified += w.frozen ? 1 : 0;
+      known += c.known ? 1 : 0;
     }
-    classified += w.frozen ? 1 : 0;
-    known += c.known ? 1 : 0;
-  });
+    if (row - kR >= 0) drop_area_row(row - kR);
+  }
   finish_batch(pending, now_ns, classified, known);
   counters_.classified_cells = classified;
   counters_.known_cells = known;
@@ -187,33 +189,68 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   map_.time_ns = now_ns;
 }
 
-float TerrainMapper::area_std_remission(CellIndex i) const noexcept {
-  // The pooled spread of the area's points: each cell's squared deviations
-  // from its own mean, plus its points' offset from the area's mean (Chan's
-  // combination; no sum of squares of raw remissions, so no cancellation).
-  constexpr std::size_t kCells = (2 * kAreaRadius + 1) * (2 * kAreaRadius + 1);
-  std::array<const AreaRemission*, kCells> around{};
-  std::size_t count = 0;
-  float n = 0.0f, sum = 0.0f;
-  for (std::int32_t dy = -kAreaRadius; dy <= kAreaRadius; ++dy) {
-    for (std::int32_t dx = -kAreaRadius; dx <= kAreaRadius; ++dx) {
-      const CellIndex j{i.x + dx, i.y + dy};
-      if (!work_.contains(j)) continue;
-      const AreaRemission& a = area_[work_.offset_of(work_.at(j))];
-      if (a.n <= 0.0f) continue;
-      around[count++] = &a;
-      n += a.n;
-      sum += a.n * a.mean;
+void TerrainMapper::add_area_row(std::int32_t y) noexcept {
+  constexpr std::int32_t kR = kAreaRadius;
+  const std::int32_t nx = work_.size_x();
+  const auto sx = static_cast<std::size_t>(nx);
+  AreaSums* cells = area_cells_.get();
+  AreaSums* cols = area_cols_.get();
+  // The storage row holds the window's row rotated: from the origin's column
+  // to its end, then from its start.
+  const std::size_t first = work_.offset_from_origin(0, y);
+  const std::size_t base = first / sx * sx;
+  std::size_t col = first - base;
+  for (std::int32_t x = 0; x < nx; ++x, col = col + 1 == sx ? 0 : col + 1) {
+    const CellStats& st = work_.at_offset(base + col).stats;
+    // The cell keeps its sums shifted by its first remission r0.
+    const double n = st.n, r0 = st.r0, sr = st.sr, srr = st.srr;
+    cells[x] = {n, n * r0 + sr, n * r0 * r0 + 2.0 * r0 * sr + srr};
+  }
+  // Sums along x over the kR cells each side, kept in the ring until the row
+  // leaves the column sums.
+  AreaSums* h = area_rows_.get() + static_cast<std::size_t>(y % (2 * kR + 1)) * sx;
+  AreaSums run{};
+  for (std::int32_t x = 0; x < std::min(kR, nx); ++x) {
+    run.n += cells[x].n;
+    run.s += cells[x].s;
+    run.q += cells[x].q;
+  }
+  for (std::int32_t x = 0; x < nx; ++x) {
+    if (x + kR < nx) {
+      run.n += cells[x + kR].n;
+      run.s += cells[x + kR].s;
+      run.q += cells[x + kR].q;
+    }
+    h[x] = run;
+    cols[x].n += run.n;
+    cols[x].s += run.s;
+    cols[x].q += run.q;
+    if (x - kR >= 0) {
+      run.n -= cells[x - kR].n;
+      run.s -= cells[x - kR].s;
+      run.q -= cells[x - kR].q;
     }
   }
-  if (n <= 0.0f) return 0.0f;
-  const float mean = sum / n;
-  float m2 = 0.0f;
-  for (std::size_t k = 0; k < count; ++k) {
-    const float d = around[k]->mean - mean;
-    m2 += around[k]->m2 + around[k]->n * d * d;
+}
+
+void TerrainMapper::drop_area_row(std::int32_t y) noexcept {
+  const auto sx = static_cast<std::size_t>(work_.size_x());
+  const AreaSums* h = area_rows_.get() + static_cast<std::size_t>(y % (2 * kAreaRadius + 1)) * sx;
+  AreaSums* cols = area_cols_.get();
+  for (std::size_t x = 0; x < sx; ++x) {
+    cols[x].n -= h[x].n;
+    cols[x].s -= h[x].s;
+    cols[x].q -= h[x].q;
   }
-  return std::sqrt(m2 / n);
+}
+
+float TerrainMapper::area_std(std::int32_t x) const noexcept {
+  const AreaSums& a = area_cols_[static_cast<std::size_t>(x)];
+  // Counts are whole numbers, exact in double; the other sums may keep a
+  // rounding residue of what left the box.
+  if (a.n < 0.5) return 0.0f;
+  const double mean = a.s / a.n;
+  return static_cast<float>(std::sqrt(std::max(0.0, a.q / a.n - mean * mean)));
 }
 
 bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept {

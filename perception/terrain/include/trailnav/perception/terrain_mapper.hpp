@@ -108,12 +108,18 @@ class TerrainMapper {
     FeatureVector feature{};
     float area_std = 0.0f;
   };
-  // A cell's remission at a step: points, mean, sum of squared deviations.
-  struct AreaRemission {
-    float n = 0.0f, mean = 0.0f, m2 = 0.0f;
+  // Remission sums of cells: points, sum, sum of squares (double: the
+  // pooled variance is a difference of large sums).
+  struct AreaSums {
+    double n = 0.0, s = 0.0, q = 0.0;
   };
-  // TerrainFeature::area_std_remission of cell i, from area_.
-  float area_std_remission(CellIndex i) const noexcept;
+  // TerrainFeature::area_std_remission by box sums over the
+  // (2 kAreaRadius + 1)^2 cells around: along x per row (add_area_row), then
+  // along y over a ring of such rows (area_cols_, which a row enters and
+  // leaves, drop_area_row), so a cell costs the same whatever the radius.
+  void add_area_row(std::int32_t y) noexcept;   // window row y
+  void drop_area_row(std::int32_t y) noexcept;
+  float area_std(std::int32_t x) const noexcept;  // window column x of the row whose area is complete
 
   TerrainConfig config_;
   CloudAligner aligner_;
@@ -123,7 +129,9 @@ class TerrainMapper {
   TerrainClassMap map_;
   TerrainObserver* observer_ = nullptr;
   std::array<Pending, 32> batch_{};
-  std::unique_ptr<AreaRemission[]> area_;  // per cell of work_, by storage offset
+  std::unique_ptr<AreaSums[]> area_cells_;  // one row of cells' own sums
+  std::unique_ptr<AreaSums[]> area_rows_;   // 2 kAreaRadius + 1 rows of sums along x
+  std::unique_ptr<AreaSums[]> area_cols_;   // their sums along y, per column
   TerrainCounters counters_;
   bool have_step_ = false;
   double step_x_ = 0.0, step_y_ = 0.0;
