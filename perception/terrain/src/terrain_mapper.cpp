@@ -165,21 +165,19 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
     if (y < ny) add_area_row(y);
     const std::int32_t row = y - kR;
     if (row < 0) continue;
-    for (std::int32_t x = 0; x < nx; ++x) {
-      const CellIndex i{o.x + x, o.y + row};
-      TerrainWorkCell& w = work_.at(i);
+    work_.for_each_in_window({o.x, o.y + row}, {o.x + nx, o.y + row + 1}, [&](CellIndex i, TerrainWorkCell& w) {
       TerrainCell& c = map_.grid().at(i);
       if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, now_ns)) {
-        batch_[pending++] = {&w, &c, i, {}, area_std(x)};
+        batch_[pending++] = {&w, &c, i, {}, area_std(i.x - o.x)};
         if (pending == batch_.size()) {
           finish_batch(pending, now_ns, classified, known);
           pending = 0;
         }
-        continue;
+        return;
       }
       classified += w.frozen ? 1 : 0;
       known += c.known ? 1 : 0;
-    }
+    });
     if (row - kR >= 0) drop_area_row(row - kR);
   }
   finish_batch(pending, now_ns, classified, known);
@@ -195,17 +193,12 @@ void TerrainMapper::add_area_row(std::int32_t y) noexcept {
   const auto sx = static_cast<std::size_t>(nx);
   AreaSums* cells = area_cells_.get();
   AreaSums* cols = area_cols_.get();
-  // The storage row holds the window's row rotated: from the origin's column
-  // to its end, then from its start.
-  const std::size_t first = work_.offset_from_origin(0, y);
-  const std::size_t base = first / sx * sx;
-  std::size_t col = first - base;
-  for (std::int32_t x = 0; x < nx; ++x, col = col + 1 == sx ? 0 : col + 1) {
-    const CellStats& st = work_.at_offset(base + col).stats;
+  const CellIndex o = work_.origin();
+  work_.for_each_in_window({o.x, o.y + y}, {o.x + nx, o.y + y + 1}, [&](CellIndex i, const TerrainWorkCell& w) {
     // The cell keeps its sums shifted by its first remission r0.
-    const double n = st.n, r0 = st.r0, sr = st.sr, srr = st.srr;
-    cells[x] = {n, n * r0 + sr, n * r0 * r0 + 2.0 * r0 * sr + srr};
-  }
+    const double n = w.stats.n, r0 = w.stats.r0, sr = w.stats.sr, srr = w.stats.srr;
+    cells[i.x - o.x] = {n, n * r0 + sr, n * r0 * r0 + 2.0 * r0 * sr + srr};
+  });
   // Sums along x over the kR cells each side, kept in the ring until the row
   // leaves the column sums.
   AreaSums* h = area_rows_.get() + static_cast<std::size_t>(y % (2 * kR + 1)) * sx;

@@ -140,9 +140,15 @@ class RollingGrid {
     const std::int32_t x1 = std::min(hi.x, origin_.x + size_x_);
     const std::int32_t y0 = std::max(lo.y, origin_.y);
     const std::int32_t y1 = std::min(hi.y, origin_.y + size_y_);
+    if (x0 >= x1) return;
+    const std::int32_t first = wrap(x0, size_x_);  // the storage column of x0; later ones follow, wrapping once
     for (std::int32_t y = y0; y < y1; ++y) {
       Cell* row = cells_.get() + static_cast<std::size_t>(wrap(y, size_y_)) * static_cast<std::size_t>(size_x_);
-      for (std::int32_t x = x0; x < x1; ++x) f(CellIndex{x, y}, row[wrap(x, size_x_)]);
+      std::int32_t column = first;
+      for (std::int32_t x = x0; x < x1; ++x) {
+        f(CellIndex{x, y}, row[column]);
+        if (++column == size_x_) column = 0;
+      }
     }
   }
 
