@@ -3,6 +3,7 @@
 // learnt; the same seed gives the same bytes), the Bayes update of Eq. 7.15
 // with frozen and re-opened cells, and the features of a real KITTI scan.
 #include <gtest/gtest.h>
+
 #include <zlib.h>
 
 #include <Eigen/Eigenvalues>
@@ -12,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <numbers>
 #include <random>
 
@@ -413,6 +415,7 @@ TEST(TerrainMapper, AreaRemissionSpreadPoolsThePointsOfTheCellsAround) {
   const CellIndex o = m.mapper->work().origin();  // 20 x 20 cells
   const CellIndex centre{o.x + 6, o.y + 6};
   std::vector<double> area;  // every remission the centre's area holds
+  std::map<std::pair<int, int>, std::vector<double>> by_cell;  // every remission, per cell
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   for (int dy = -3; dy <= 3; ++dy) {
@@ -426,6 +429,7 @@ TEST(TerrainMapper, AreaRemissionSpreadPoolsThePointsOfTheCellsAround) {
         const float r = base + 10.0f * u(rng);
         w.stats.add(0.02f * static_cast<float>(k % 3), 0.03f * static_cast<float>(k % 2), 0.001f * static_cast<float>(k), r);
         if (std::abs(dx) <= 2 && std::abs(dy) <= 2) area.push_back(r);
+        by_cell[{i.x, i.y}].push_back(r);
       }
     }
   }
@@ -456,6 +460,27 @@ TEST(TerrainMapper, AreaRemissionSpreadPoolsThePointsOfTheCellsAround) {
   }
   EXPECT_TRUE(saw_centre);
   EXPECT_TRUE(saw_lone);
+  // Every cell that got a feature, at the block's edges too, against the
+  // spread of every point within two cells of it.
+  std::size_t checked = 0;
+  for (const auto& [i, f] : collect.seen) {
+    if (i.x == lone.x && i.y == lone.y) continue;
+    std::vector<double> around;
+    for (int dy = -kAreaRadius; dy <= kAreaRadius; ++dy) {
+      for (int dx = -kAreaRadius; dx <= kAreaRadius; ++dx) {
+        const auto it = by_cell.find({i.x + dx, i.y + dy});
+        if (it != by_cell.end()) around.insert(around.end(), it->second.begin(), it->second.end());
+      }
+    }
+    double around_mean = 0.0, v = 0.0;
+    for (double r : around) around_mean += r;
+    around_mean /= static_cast<double>(around.size());
+    for (double r : around) v += (r - around_mean) * (r - around_mean);
+    const double want = std::sqrt(v / static_cast<double>(around.size()));
+    EXPECT_NEAR(f[kArea], want, 1e-3 * want + 1e-3) << "cell " << i.x - o.x << "," << i.y - o.y;
+    ++checked;
+  }
+  EXPECT_GE(checked, 20u);  // the cells of 8 points in the 7 x 7 block
 }
 
 TEST(TerrainMapper, ProbabilitiesStayAboveTheFloorSoEvidenceCanTurnACell) {

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <random>
 #include <utility>
@@ -121,6 +122,27 @@ TEST(RollingGrid, WindowIterationIsClippedToTheMap) {
   EXPECT_EQ(visited, 3 * 2);
   EXPECT_EQ(grid.at({2, 1}), 1);
   EXPECT_EQ(grid.at({3, 1}), 0);
+}
+
+// The window walk steps the storage column instead of wrapping each cell;
+// after the map has moved, every cell it hands over must still be the one
+// at() names, across the storage's wrap-around.
+TEST(RollingGrid, WindowIterationHandsOverTheCellOfEachIndexAfterMoves) {
+  RollingGrid<int> grid(7, 5, 1.0, 0);
+  for (const CellIndex origin : {CellIndex{0, 0}, CellIndex{4, 2}, CellIndex{-9, 13}, CellIndex{-3, -8}}) {
+    grid.move_origin_to(origin);
+    for (const auto& [lo, hi] : {std::pair{CellIndex{origin.x - 2, origin.y - 1}, CellIndex{origin.x + 9, origin.y + 7}},
+                                 std::pair{CellIndex{origin.x + 3, origin.y + 1}, CellIndex{origin.x + 6, origin.y + 4}}}) {
+      int visited = 0;
+      grid.for_each_in_window(lo, hi, [&](CellIndex c, int& cell) {
+        EXPECT_EQ(&cell, &grid.at(c)) << "origin " << origin.x << "," << origin.y << " cell " << c.x << "," << c.y;
+        ++visited;
+      });
+      const int w = std::min(hi.x, origin.x + 7) - std::max(lo.x, origin.x);
+      const int h = std::min(hi.y, origin.y + 5) - std::max(lo.y, origin.y);
+      EXPECT_EQ(visited, w * h);
+    }
+  }
 }
 
 }  // namespace

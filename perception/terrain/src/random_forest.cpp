@@ -211,18 +211,15 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   std::uint32_t stored = 0;
   for (std::size_t i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(data[data.size() - 4 + i]) << (8 * i);
   if (stored != crc) return fail("checksum mismatch: the file is corrupt");
-  std::string lidar;
-  {
-    const std::uint8_t* f = data.data() + c.pos();
-    std::size_t n = 0;
-    while (n < kLidarBytes && f[n] != 0) ++n;
-    for (std::size_t i = n; i < kLidarBytes; ++i) {
-      if (f[i] != 0) return fail("malformed lidar field (text after its end)");
-    }
-    lidar.assign(reinterpret_cast<const char*>(f), n);
-    std::uint32_t skip_lidar;
-    for (std::size_t i = 0; i < kLidarBytes / 4; ++i) c.u32(skip_lidar);
+  const std::uint8_t* lidar_field = data.data() + c.pos();
+  std::size_t lidar_chars = 0;
+  while (lidar_chars < kLidarBytes && lidar_field[lidar_chars] != 0) ++lidar_chars;
+  for (std::size_t i = lidar_chars; i < kLidarBytes; ++i) {
+    if (lidar_field[i] != 0) return fail("malformed lidar field (text after its end)");
   }
+  const std::string lidar(reinterpret_cast<const char*>(lidar_field), lidar_chars);
+  std::uint32_t skip_lidar;
+  for (std::size_t i = 0; i < kLidarBytes / 4; ++i) c.u32(skip_lidar);
   std::vector<std::uint32_t> roots(trees);
   for (auto& r : roots) c.u32(r);
   std::vector<ForestNode> table(nodes);
