@@ -153,6 +153,46 @@ TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
   EXPECT_EQ(rev(25, 0.0f, 0.0f), CellState::free);
 }
 
+TEST(ObstacleMap, TopHoldFollowsTheCellsTerrainClass) {
+  // A box's face, then only its flat top: a cell the terrain map calls
+  // `other` (a solid object) stays occupied; one it calls grass is cleared
+  // once the map's top hold is over; ground where the box stood clears both.
+  RevolutionCloud c = one_point(2.05f, 0.05f, 0.0f, 0.0f);
+  const std::size_t k = c.index(0, 0);
+  MapParams mp;
+  mp.dirac_hold_s = 0.5f;      // 5 revolutions at 10 Hz
+  mp.dirac_top_hold_s = 1.0f;  // 10
+  auto classes = default_class_params();
+  classes[static_cast<int>(TerrainClass::grass)].max_step_height = 0.1f;  // so the face counts on grass too
+  ObstacleModels models(classes, mp);
+  EXPECT_FLOAT_EQ(models.top_hold_s(static_cast<int>(TerrainClass::other)), kTopHoldForever);
+  EXPECT_FLOAT_EQ(models.top_hold_s(static_cast<int>(TerrainClass::grass)), 1.0f);
+  for (const TerrainClass cls : {TerrainClass::other, TerrainClass::grass}) {
+    TerrainClassMap terrain;
+    std::array<float, kTerrainClasses> dist{};
+    dist[static_cast<std::size_t>(cls)] = 1.0f;
+    terrain.grid().find(2.05, 0.05)->set(dist);
+    TerrainSource adaptive;
+    adaptive.map = &terrain;
+    ObstacleMap map(mp, FusionModel::pw);
+    auto rev = [&](int n, float step, float z) {
+      c.time_ns = n * 100'000'000LL;
+      c.step_height[k] = step;
+      c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
+      c.z[k] = z;
+      map.integrate(c, models, adaptive);
+      return map.state(*map.grid().find(2.05, 0.05));
+    };
+    EXPECT_EQ(rev(0, 0.3f, 0.3f), CellState::occupied);
+    for (int n = 1; n <= 10; ++n) EXPECT_EQ(rev(n, 0.0f, 0.32f), CellState::occupied) << n;
+    const bool held = cls == TerrainClass::other;
+    for (int n = 11; n <= 400; ++n) {
+      ASSERT_EQ(rev(n, 0.0f, 0.32f), held ? CellState::occupied : CellState::free) << terrain_class_name(cls) << " " << n;
+    }
+    EXPECT_EQ(rev(401, 0.0f, 0.0f), CellState::free) << terrain_class_name(cls);
+  }
+}
+
 TEST(ObstacleMap, TerrainClassesChangeTheVerdict) {
   // A 0.3 m vertical step: an obstacle on street, not on grass (PW, PS);
   // PC weighs the classes.
@@ -289,6 +329,14 @@ TEST(ObstacleConfig, DefaultsAreTheThesisAndErrorsNameTheLine) {
   const ObstacleConfig h = parse_obstacle_config(holds.map("obstacles"));
   EXPECT_FLOAT_EQ(h.map.dirac_top_hold_s, 10.0f);
   EXPECT_FLOAT_EQ(h.map.dirac_clear_depth, 0.15f);
+  EXPECT_FALSE(d.classes[static_cast<int>(TerrainClass::grass)].top_hold_s.has_value());
+  EXPECT_FLOAT_EQ(d.classes[static_cast<int>(TerrainClass::other)].top_hold_s.value_or(0.0f), kTopHoldForever);
+  const ConfigNode class_hold =
+      ConfigNode::parse("obstacles:\n  classes:\n    other: {top_hold: 30}\n    dirt: {top_hold: 4}\n", "robot.yaml");
+  const ObstacleConfig ch = parse_obstacle_config(class_hold.map("obstacles"));
+  EXPECT_FLOAT_EQ(ch.classes[static_cast<int>(TerrainClass::other)].top_hold_s.value_or(0.0f), 30.0f);
+  EXPECT_FLOAT_EQ(ch.classes[static_cast<int>(TerrainClass::dirt)].top_hold_s.value_or(0.0f), 4.0f);
+  expect_config_error("obstacles:\n  classes:\n    other:\n      top_hold: -1\n", 4, "top_hold");
   const ConfigNode range = ConfigNode::parse("obstacles:\n  features: {max_range: 80}\n", "robot.yaml");
   EXPECT_THROW(parse_obstacle_config(range.map("obstacles")), ConfigError);
   expect_config_error("obstacles:\n  mount:\n    translation: [0.2, 1.1]\n", 3, "three numbers");

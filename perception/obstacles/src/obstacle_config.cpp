@@ -26,11 +26,13 @@ std::optional<FusionModel> parse_fusion_model(std::string_view name) noexcept {
 
 std::array<ClassParams, kTerrainClasses> default_class_params() noexcept {
   std::array<ClassParams, kTerrainClasses> p{};
-  p[static_cast<int>(TerrainClass::street)] = {0.05f, 20.5f, 25.0f, 1.2f};
-  p[static_cast<int>(TerrainClass::dirt)] = {0.25f, 20.5f, 3.0f, 1.2f};
-  p[static_cast<int>(TerrainClass::grass)] = {0.50f, 20.5f, 10.0f, 1.2f};
-  p[static_cast<int>(TerrainClass::vegetation)] = {0.05f, 20.5f, 25.0f, 1.2f};
-  p[static_cast<int>(TerrainClass::other)] = {0.05f, 20.5f, 25.0f, 1.2f};
+  p[static_cast<int>(TerrainClass::street)] = {0.05f, 20.5f, 25.0f, 1.2f, std::nullopt};
+  p[static_cast<int>(TerrainClass::dirt)] = {0.25f, 20.5f, 3.0f, 1.2f, std::nullopt};
+  p[static_cast<int>(TerrainClass::grass)] = {0.50f, 20.5f, 10.0f, 1.2f, std::nullopt};
+  p[static_cast<int>(TerrainClass::vegetation)] = {0.05f, 20.5f, 25.0f, 1.2f, std::nullopt};
+  // Solid objects (boxes, cars, walls) are `other`: a flat top at their
+  // height says nothing about whether the face below it is still there.
+  p[static_cast<int>(TerrainClass::other)] = {0.05f, 20.5f, 25.0f, 1.2f, kTopHoldForever};
   return p;
 }
 
@@ -118,6 +120,7 @@ ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
         p.max_incline_deg = number_f(*e, "max_incline", 0.0, 90.0, p.max_incline_deg);
         p.alpha = number_f(*e, "alpha", 0.0, 1000.0, p.alpha);
         p.beta = number_f(*e, "beta", 0.0, 1000.0, p.beta);
+        if (e->has("top_hold")) p.top_hold_s = number_f(*e, "top_hold", 0.0, kTopHoldForever, 0.0f);
         e->reject_unknown_keys();
       }
     }

@@ -34,7 +34,7 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
     return static_cast<std::uint32_t>(std::lround(static_cast<double>(seconds) / std::max(period_s, 1e-3)));
   };
   hold_revolutions_ = revolutions_in(params_.dirac_hold_s);
-  top_hold_revolutions_ = revolutions_in(params_.dirac_top_hold_s);
+  for (int t = 0; t < kTerrainClasses; ++t) top_hold_revolutions_[static_cast<std::size_t>(t)] = revolutions_in(models.top_hold_s(t));
   counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
   occupancy_.move_to(cloud.robot_x, cloud.robot_y);
   if (model_ == FusionModel::pw) hits_.move_to(cloud.robot_x, cloud.robot_y);
@@ -54,7 +54,6 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
   const std::uint32_t now = revolution_;
   const std::uint32_t hold = hold_revolutions_;
   const float clear_depth = params_.dirac_clear_depth;
-  const std::uint32_t top_hold = top_hold_revolutions_;
   const auto ref_z = static_cast<float>(cloud.ref_z);
   // Cell coordinates relative to the map's origin: a point's cell is
   // (offset + x / resolution), so no per-point floor of a large number.
@@ -119,12 +118,14 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
       if constexpr (M == FusionModel::pw) {
         DiracHit& hit = hits_.at_offset(offset);
         const float z = ref_z + cloud.z[k];
-        if (models.dirac(static_cast<int>(tc->best), h, s)) {
+        const int cls = static_cast<int>(tc->best);
+        if (models.dirac(cls, h, s)) {
           hit.top = (before == hi && hit.revolution != 0) ? std::max(hit.top, z) : z;
           hit.revolution = now;
           cell.logit = hi;
         } else if (hit.revolution == 0 ||
-                   (now - hit.revolution > hold && (z < hit.top - clear_depth || now - hit.revolution > top_hold))) {
+                   (now - hit.revolution > hold && (z < hit.top - clear_depth ||
+                                                    now - hit.revolution > top_hold_revolutions_[static_cast<std::size_t>(cls)]))) {
           // Free ground below where the obstacle stood clears it once the hold
           // is over; the flat top of a box (as high as its faces) does not.
           cell.logit = lo;

@@ -20,6 +20,7 @@ ObstacleModels::ObstacleModels(const std::array<ClassParams, kTerrainClasses>& c
   for (std::size_t t = 0; t < classes.size(); ++t) {
     const ClassParams& c = classes[t];
     max_step_[t] = c.max_step_height;
+    top_hold_s_[t] = c.top_hold_s.value_or(map.dirac_top_hold_s);
     max_sin_[t] = static_cast<float>(std::sin(static_cast<double>(c.max_incline_deg) * std::numbers::pi / 180.0));
     for (int i = 0; i < kStepBins; ++i) {
       const double h = i / static_cast<double>(kStepScale);

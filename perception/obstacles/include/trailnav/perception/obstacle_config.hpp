@@ -22,12 +22,20 @@ inline constexpr int kFusionModels = 3;
 std::string_view fusion_model_name(FusionModel m) noexcept;  // "PW", "PS", "PC"
 std::optional<FusionModel> parse_fusion_model(std::string_view name) noexcept;  // case-insensitive
 
+// The longest top hold (an hour): as long as the map keeps the cell.
+inline constexpr float kTopHoldForever = 3600.0f;
+
 // P(o | g, t) for one terrain class.
 struct ClassParams {
   float max_step_height = 0.05f;  // m (Dirac)
   float max_incline_deg = 20.5f;  // degrees (Dirac)
   float alpha = 25.0f;            // 1/m (smooth)
   float beta = 1.2f;              // (smooth)
+  // PW: how long free points at an obstacle's height (see MapParams) leave a
+  // cell of this class occupied after its last obstacle point, in seconds;
+  // unset: map.dirac_top_hold. `other` (solid objects) holds for the hour of
+  // kTopHoldForever; the rest as the thesis' hold.
+  std::optional<float> top_hold_s;
 };
 
 // Table 7.1; vegetation, which the table lacks, is treated like other.
@@ -63,8 +71,9 @@ struct MapParams {
   // it lies more than dirac_clear_depth below the cell's highest obstacle
   // point (ground where the obstacle stood); a free point at the obstacle's
   // height (a box's flat top, or grass tops) clears it only dirac_top_hold
-  // after the last obstacle point. With dirac_top_hold <= dirac_hold (the
-  // default) every free point clears after the hold, as in the thesis.
+  // after the last obstacle point (a class's own top_hold first). With
+  // dirac_top_hold <= dirac_hold (the default) every free point clears after
+  // the hold, as in the thesis.
   float dirac_clear_depth = 0.1f;
   float dirac_top_hold_s = 2.0f;
   float occupied = 0.5f;        // P above this is an obstacle (PNGs, scores, planners' 0-100)

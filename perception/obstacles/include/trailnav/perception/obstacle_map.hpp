@@ -125,7 +125,7 @@ class ObstacleMap {
   float prior_logit_;
   std::uint32_t revolution_ = 0;
   std::uint32_t hold_revolutions_ = 0;
-  std::uint32_t top_hold_revolutions_ = 0;
+  std::array<std::uint32_t, kTerrainClasses> top_hold_revolutions_{};  // per terrain class
   std::int64_t first_ns_ = 0;
   std::int64_t last_ns_ = 0;
   MapCounters counters_;

@@ -59,6 +59,9 @@ class ObstacleModels {
     return incline_[static_cast<std::size_t>(index) * kClassStride + static_cast<std::size_t>(cls)];
   }
 
+  // PW: the class's top hold in seconds (ClassParams::top_hold_s, else the map's).
+  float top_hold_s(int cls) const noexcept { return top_hold_s_[static_cast<std::size_t>(cls)]; }
+
   // logit(clamp(p, measurement_min, measurement_max)) - logit(prior): the
   // increment of Eq. 7.10, from a table over p.
   float increment(float p) const noexcept {
@@ -70,6 +73,7 @@ class ObstacleModels {
  private:
   std::array<float, kTerrainClasses> max_step_{};
   std::array<float, kTerrainClasses> max_sin_{};
+  std::array<float, kTerrainClasses> top_hold_s_{};
   std::vector<float> step_;
   std::vector<float> incline_;
   std::vector<float> increment_;
