@@ -308,8 +308,8 @@ void add_obstacles_command(CLI::App& app) {
   static ObstaclesCliOptions o;
   cmd->add_option("inputs", o.run.inputs, "A recording directory, a pcap file, or KITTI .bin files")->required();
   cmd->add_option("--config", o.config_file, "YAML file with an `obstacles:` section (docs/obstacles.md)");
-  cmd->add_option("--model", o.model, "Fusion model of the main map: PW (Dirac, most likely class), PS (smooth, most "
-                                      "likely class) or PC (smooth, full class distribution; default)");
+  cmd->add_option("--model", o.model, "Fusion model of the main map: PW (Dirac, most likely class; default), PS (smooth, "
+                                      "most likely class) or PC (smooth, full class distribution)");
   cmd->add_option("--terrain", o.terrain,
                   "Terrain classes: truth (a simulated recording's true classes), estimated (the terrain analysis "
                   "with --terrain-model), adaptive (no terrain map: unknown class), or one class for every cell: "

@@ -92,7 +92,9 @@ struct ObstacleConfig {
   std::array<ClassParams, kTerrainClasses> classes = default_class_params();
   MapParams map;
   MountParams mount;
-  FusionModel model = FusionModel::pc;
+  // PW by default: what the thesis' robot drove with (§7.4.3), and the one
+  // that finds a box standing in grass (docs/obstacles.md, "Which model").
+  FusionModel model = FusionModel::pw;
   // Terrain source: adaptive (a terrain-class map) or one fixed class for all
   // cells (the basic approach of §7.1.3).
   std::optional<TerrainClass> fixed_class;
