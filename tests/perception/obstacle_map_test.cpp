@@ -119,9 +119,21 @@ TEST(ObstacleMap, LogOddsFollowEquation710) {
   }
 }
 
+// Revolution n (10 Hz) of a cloud made by one_point(2.05, 0.05, ...): its
+// point at height z, a vertical step of `step` (0: flat). The PW cell's state after.
+CellState dirac_revolution(ObstacleMap& map, RevolutionCloud& c, const ObstacleModels& models,
+                           const TerrainSource& terrain, int n, float step, float z) {
+  const std::size_t k = c.index(0, 0);
+  c.time_ns = n * 100'000'000LL;
+  c.step_height[k] = step;
+  c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
+  c.z[k] = z;
+  map.integrate(c, models, terrain);
+  return map.state(*map.grid().find(2.05, 0.05));
+}
+
 TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
   RevolutionCloud c = one_point(2.05f, 0.05f, 0.0f, 0.0f);
-  const std::size_t k = c.index(0, 0);
   MapParams mp;
   mp.dirac_hold_s = 0.5f;      // 5 revolutions at 10 Hz
   mp.dirac_top_hold_s = 1.5f;  // 15
@@ -129,15 +141,7 @@ TEST(ObstacleMap, DiracHoldKeepsObstaclesForTheConfiguredTime) {
   TerrainSource street;
   street.fixed = true;
   ObstacleMap map(mp, FusionModel::pw);
-  // One point a revolution in the cell at height z, an obstacle point or not.
-  auto rev = [&](int n, float step, float z) {
-    c.time_ns = n * 100'000'000LL;
-    c.step_height[k] = step;
-    c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
-    c.z[k] = z;
-    map.integrate(c, models, street);
-    return map.state(*map.grid().find(2.05, 0.05));
-  };
+  auto rev = [&](int n, float step, float z) { return dirac_revolution(map, c, models, street, n, step, z); };
   EXPECT_EQ(rev(0, 0.0f, 0.0f), CellState::free);
   // A box's face seen at 0.3 and 0.4 m, then only its flat top at 0.42 m.
   EXPECT_EQ(rev(1, 0.2f, 0.3f), CellState::occupied);
@@ -158,7 +162,6 @@ TEST(ObstacleMap, TopHoldFollowsTheCellsTerrainClass) {
   // `other` (a solid object) stays occupied; one it calls grass is cleared
   // once the map's top hold is over; ground where the box stood clears both.
   RevolutionCloud c = one_point(2.05f, 0.05f, 0.0f, 0.0f);
-  const std::size_t k = c.index(0, 0);
   MapParams mp;
   mp.dirac_hold_s = 0.5f;      // 5 revolutions at 10 Hz
   mp.dirac_top_hold_s = 1.0f;  // 10
@@ -175,14 +178,7 @@ TEST(ObstacleMap, TopHoldFollowsTheCellsTerrainClass) {
     TerrainSource adaptive;
     adaptive.map = &terrain;
     ObstacleMap map(mp, FusionModel::pw);
-    auto rev = [&](int n, float step, float z) {
-      c.time_ns = n * 100'000'000LL;
-      c.step_height[k] = step;
-      c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
-      c.z[k] = z;
-      map.integrate(c, models, adaptive);
-      return map.state(*map.grid().find(2.05, 0.05));
-    };
+    auto rev = [&](int n, float step, float z) { return dirac_revolution(map, c, models, adaptive, n, step, z); };
     EXPECT_EQ(rev(0, 0.3f, 0.3f), CellState::occupied);
     for (int n = 1; n <= 10; ++n) EXPECT_EQ(rev(n, 0.0f, 0.32f), CellState::occupied) << n;
     const bool held = cls == TerrainClass::other;
