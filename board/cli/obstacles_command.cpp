@@ -28,12 +28,13 @@ struct ObstaclesCliOptions {
   std::string terrain_model;
   std::optional<perception::RandomForest> forest;
   std::string misses_file;
+  std::string blocked_file;
   std::string points_file;
   std::vector<double> points_box;
   bool quiet = false;
 };
 
-// A CSV file a command option asked for (--misses, --points): opened with
+// A CSV file a command option asked for (--misses, --blocked, --points): opened with
 // its header before the run, checked and closed after it. Errors name the
 // option and the file.
 class CsvOut {
@@ -102,9 +103,10 @@ void print_score(const char* model, const eval::MapScore& s) {
     std::printf("; %s %.4f", std::string(perception::terrain_class_name(static_cast<perception::TerrainClass>(t))).c_str(),
                 c.rate());
   }
-  std::printf("\n      path blocked by fake obstacles in %llu of %llu snapshots (%.1f %%)\n",
+  std::printf("\n      path blocked by fake obstacles in %llu of %llu snapshots (%.1f %%)%s\n",
               static_cast<unsigned long long>(s.blocked), static_cast<unsigned long long>(s.snapshots),
-              s.snapshots ? 100.0 * static_cast<double>(s.blocked) / static_cast<double>(s.snapshots) : 0.0);
+              s.snapshots ? 100.0 * static_cast<double>(s.blocked) / static_cast<double>(s.snapshots) : 0.0,
+              s.blocked ? " (--blocked lists them)" : "");
   for (const auto& n : s.named) {
     if (n.snapshots == 0) continue;
     std::printf("      %-28s detected in %llu of %llu snapshots within range; faces %llu/%llu cells (%s)\n",
@@ -188,6 +190,21 @@ int run(ObstaclesCliOptions& o) {
       ++miss_lines;
     };
   }
+  // --blocked: every scored snapshot whose path a map blocks, with the first
+  // fake obstacle cell on the path.
+  CsvOut blocked("--blocked", o.blocked_file);
+  std::uint64_t blocked_lines = 0;
+  if (blocked.wanted()) {
+    if (!blocked.open("model,time_s,robot_x,robot_y,x,y,ahead_m,true_class,probability\n")) return 2;
+    o.run.on_blocked = [&](const eval::BlockedPath& b) {
+      const bool known = static_cast<int>(b.truth_class) < perception::kTerrainClasses;
+      std::fprintf(blocked.get(), "%s,%.1f,%.2f,%.2f,%.2f,%.2f,%.2f,%s,%.3f\n",
+                   std::string(perception::fusion_model_name(b.model)).c_str(), b.time_s, b.robot_x, b.robot_y, b.x, b.y,
+                   b.ahead, known ? std::string(perception::terrain_class_name(b.truth_class)).c_str() : "none",
+                   static_cast<double>(b.probability));
+      ++blocked_lines;
+    };
+  }
   // --points: every point inside --points-box, per revolution.
   CsvOut points("--points", o.points_file);
   std::uint64_t point_lines = 0;
@@ -228,7 +245,11 @@ int run(ObstaclesCliOptions& o) {
     std::fprintf(stderr, "trailnav obstacles: %s\n", r.error.c_str());
     return 2;
   }
-  if (!points.close() || !misses.close()) return 2;
+  if (!points.close() || !misses.close() || !blocked.close()) return 2;
+  if (blocked.wanted() && !r.scored) {
+    std::fprintf(stderr, "trailnav obstacles: --blocked needs a simulated recording (its truth says where the path and "
+                         "the obstacles are); %s is empty\n", o.blocked_file.c_str());
+  }
   if (misses.wanted() && !r.scored) {
     std::fprintf(stderr, "trailnav obstacles: --misses needs a simulated recording (its truth says where the faces are); "
                          "%s is empty\n", o.misses_file.c_str());
@@ -283,6 +304,10 @@ int run(ObstaclesCliOptions& o) {
     std::printf("  wrote %s (%llu points in the box, over all revolutions)\n", o.points_file.c_str(),
                 static_cast<unsigned long long>(point_lines));
   }
+  if (!o.blocked_file.empty() && r.scored) {
+    std::printf("  wrote %s (%llu blocked snapshots, over all maps)\n", o.blocked_file.c_str(),
+                static_cast<unsigned long long>(blocked_lines));
+  }
   if (!o.misses_file.empty() && r.scored) {
     std::printf("  wrote %s (%llu face cells missed, over all scored snapshots and maps)\n", o.misses_file.c_str(),
                 static_cast<unsigned long long>(miss_lines));
@@ -326,6 +351,10 @@ void add_obstacles_command(CLI::App& app) {
                   "Write every obstacle face cell a map missed to this CSV, per scored snapshot: when, where, how far, "
                   "when its side was first seen, the map's P(o) there and whether it had been found before (simulated "
                   "recordings)");
+  cmd->add_option("--blocked", o.blocked_file,
+                  "Write every scored snapshot whose map blocks the robot's path to this CSV: when, where the robot "
+                  "was, the first fake obstacle cell within 0.3 m of its next 4 m of true path, how far along the path, "
+                  "the cell's true terrain class and the map's P(o) there (simulated recordings)");
   cmd->add_option("--points", o.points_file,
                   "Write every point inside --points-box to this CSV, per revolution: ring, column, position, range, "
                   "its features (stepHeight, incline; or flat, isolated), the terrain class it was fused with, and "

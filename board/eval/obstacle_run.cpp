@@ -164,7 +164,7 @@ class Scorer {
  public:
   Scorer(const SimTruth& truth, const ObstacleRunOptions& o, double res)
       : truth_(truth), cells_(truth, res, o.tolerance_cells), radius_(o.score_radius), tolerance_(o.tolerance_cells),
-        shapes_(named_obstacles(truth.scenario)), on_miss_(o.on_face_miss) {}
+        shapes_(named_obstacles(truth.scenario)), on_miss_(o.on_face_miss), on_blocked_(o.on_blocked) {}
 
   void init(MapScore& s) const {
     for (const NamedShape& n : shapes_) s.named.push_back({n.name, 0, 0, {}});
@@ -268,7 +268,22 @@ class Scorer {
           const std::int32_t x = pc.x + dx, y = pc.y + dy;
           if (!cells_.contains(x, y)) continue;
           const std::size_t k = cells_.index(x, y);
-          if (cells_.code(k) == 0 && !cells_.near(k) && occupied(x, y)) blocked = true;
+          if (cells_.code(k) == 0 && !cells_.near(k) && occupied(x, y)) {
+            blocked = true;
+            if (on_blocked_) {
+              BlockedPath b;
+              b.model = map.model();
+              b.time_s = 1e-9 * static_cast<double>(t_ns - truth_.scenario.start_utc_ns);
+              b.robot_x = rx;
+              b.robot_y = ry;
+              b.x = (x + 0.5) * res;
+              b.y = (y + 0.5) * res;
+              b.ahead = travelled;
+              b.truth_class = static_cast<perception::TerrainClass>(cells_.cls(k));
+              b.probability = map.probability(g.at({x, y}));
+              on_blocked_(b);
+            }
+          }
         }
       }
     }
@@ -300,6 +315,7 @@ class Scorer {
   int tolerance_;
   std::vector<NamedShape> shapes_;
   std::function<void(const FaceMiss&)> on_miss_;
+  std::function<void(const BlockedPath&)> on_blocked_;
   std::array<std::unordered_set<std::size_t>, perception::kFusionModels> found_once_;  // face cells found at some snapshot, per map
 };
 

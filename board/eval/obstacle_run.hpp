@@ -39,6 +39,19 @@ struct FaceMiss {
   bool found_before = false;          // found at an earlier snapshot, lost since
 };
 
+// A scored snapshot whose map has a fake obstacle on the robot's next 4 m of
+// true path (MapScore::blocked): the first such cell along the path
+// (`trailnav obstacles --blocked`).
+struct BlockedPath {
+  perception::FusionModel model = perception::FusionModel::pw;
+  double time_s = 0.0;                // of the snapshot, since the recording's start
+  double robot_x = 0.0, robot_y = 0.0;
+  double x = 0.0, y = 0.0;            // the fake obstacle cell's centre
+  double ahead = 0.0;                 // m along the true path from the robot to where it blocks
+  perception::TerrainClass truth_class = perception::TerrainClass::other;  // the cell's true terrain
+  float probability = 0.0f;           // the map's P(o) at the cell
+};
+
 // One aligned point of a revolution inside ObstacleRunOptions::points_box,
 // with what the pipeline made of it (`trailnav obstacles --points`): to see
 // why a cell is, or is not, an obstacle.
@@ -81,6 +94,8 @@ struct ObstacleRunOptions {
   std::function<void(const perception::ObstaclePipeline&)> on_processed;
   // Called for every face cell a scored map misses, at every scored snapshot.
   std::function<void(const FaceMiss&)> on_face_miss;
+  // Called for every scored snapshot whose path a map blocks.
+  std::function<void(const BlockedPath&)> on_blocked;
   // Every point whose x, y lie in [x_min, x_max] x [y_min, y_max] (odometry
   // frame) goes to on_point after its revolution is processed.
   std::optional<std::array<double, 4>> points_box;

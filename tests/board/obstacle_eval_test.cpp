@@ -142,6 +142,38 @@ TEST_F(MeadowBlock, FaceMissesAddUpToTheFacesNotFound) {
   }
 }
 
+// --blocked: every snapshot a map's fake obstacles block the path is reported
+// once, with a fake obstacle cell on the robot's next 4 m of true path.
+TEST_F(MeadowBlock, BlockedSnapshotsNameAFakeObstacleOnThePath) {
+  ObstacleRunOptions o;
+  o.inputs = {dir_};
+  o.config.fixed_class = TerrainClass::street;  // the basic approach: blocked in the meadow
+  o.terrain = TerrainMode::config;
+  std::array<std::uint64_t, perception::kFusionModels> blocked{};
+  std::array<double, perception::kFusionModels> last_time{};
+  bool sane = true, in_grass = true;
+  o.on_blocked = [&](const BlockedPath& b) {
+    const auto m = static_cast<std::size_t>(b.model);
+    ++blocked[m];
+    // Within 0.3 m (and half a cell) of a point of the path at most 4 m (and
+    // one 0.1 m check step) ahead, occupied, one per snapshot.
+    if (!(b.ahead >= 0.0 && b.ahead <= 4.1 && std::hypot(b.x - b.robot_x, b.y - b.robot_y) <= b.ahead + 0.38 &&
+          b.probability > 0.5f && b.time_s > last_time[m])) {
+      sane = false;
+    }
+    last_time[m] = b.time_s;
+    if (b.truth_class != TerrainClass::grass) in_grass = false;
+  };
+  const ObstacleRunReport r = run_obstacles(o);
+  ASSERT_TRUE(r.error.empty()) << r.error;
+  for (int m = 0; m < perception::kFusionModels; ++m) {
+    EXPECT_EQ(blocked[static_cast<std::size_t>(m)], r.scores[static_cast<std::size_t>(m)]->blocked) << m;
+  }
+  EXPECT_GT(blocked[static_cast<std::size_t>(FusionModel::pw)], 10u);
+  EXPECT_TRUE(sane);
+  EXPECT_TRUE(in_grass);  // the meadow and its mown track are all grass
+}
+
 // --points: every point in a box, with the features, the class it was fused
 // with and the two models' answers under that class's parameters.
 TEST_F(MeadowBlock, PointsInABoxCarryTheirFeaturesAndTheirClass) {
