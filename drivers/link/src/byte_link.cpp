@@ -5,6 +5,7 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <termios.h>
 #include <unistd.h>
@@ -291,6 +292,28 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
         ++counters_.truncated;
         n = static_cast<ssize_t>(limit);
       }
+    } else if (options_.kind == LinkKind::serial) {
+      // Only what the line discipline already holds. A read (or poll) of an
+      // empty tty first waits for the kernel worker that moves bytes from the
+      // driver into it (n_tty's flush of the port's buffer work); a CPU that
+      // keeps that worker waiting kept this task in read() for seconds
+      // (docs/imu.md, "Byte links"). FIONREAD does not wait, and on a hung-up
+      // tty (the pseudo-terminal's master closed, a USB adapter unplugged) it
+      // fails with EIO.
+      int available = 0;
+      if (::ioctl(fd_, FIONREAD, &available) != 0) {
+        const int err = errno;
+        if (err == EIO) {
+          fail(now, "hung up:", 0);
+        } else {
+          ++counters_.read_errors;
+          fail(now, "read", err);
+        }
+        break;
+      }
+      if (available <= 0) break;
+      n = ::read(fd_, buffer_.get() + got,
+                 std::min(options_.buffer_bytes - got, static_cast<std::size_t>(available)));
     } else {
       n = ::read(fd_, buffer_.get() + got, options_.buffer_bytes - got);
     }
@@ -302,16 +325,7 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
       fail(now, "connection closed by", 0);
       break;
     }
-    if (n == 0 && options_.kind == LinkKind::serial) {
-      // A raw tty (VMIN = VTIME = 0) returns 0 both when it is merely empty
-      // and when it was hung up (USB adapter unplugged, pseudo-terminal's
-      // master closed); poll() tells them apart.
-      pollfd p{fd_, POLLIN, 0};
-      if (::poll(&p, 1, 0) > 0 && (p.revents & (POLLHUP | POLLERR | POLLNVAL)) != 0) {
-        fail(now, "hung up:", 0);
-      }
-      break;
-    }
+    if (n == 0 && options_.kind == LinkKind::serial) break;  // FIONREAD said more was there
     if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
       ++counters_.read_errors;
       fail(now, "read", errno);  // EIO: the pseudo-terminal's other end or the USB adapter went away
