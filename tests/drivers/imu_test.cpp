@@ -222,6 +222,13 @@ TEST(ImuLine, RoundTripAndChecks) {
   EXPECT_EQ(parse_imu_line("$TNIMU,1,0,x,0,0,0,9.8", back), LineError::bad_number);
   EXPECT_EQ(parse_imu_line("$TNIMU,1,0,,0,0,0,9.8", back), LineError::bad_number);
   EXPECT_EQ(parse_imu_line("$TNIMU,1,0,inf,0,0,0,9.8", back), LineError::bad_number);
+  // A time too large to be a clock (the fuzzer's 1e200 could not be written
+  // back in a line); the largest accepted one can.
+  EXPECT_EQ(parse_imu_line("$TNIMU,1e200,0,0,0,0,0,9.8", back), LineError::bad_number);
+  EXPECT_EQ(parse_imu_line("$TNIMU,-1.5e12,0,0,0,0,0,9.8", back), LineError::bad_number);
+  ASSERT_EQ(parse_imu_line("$TNIMU,-1e12,-1.23456789e+300,0,0,0,0,9.8,1,0,0,0", back), LineError::none);
+  char wide[200];
+  EXPECT_GT(format_imu_line(back, wide, sizeof wide), 0u);
   EXPECT_EQ(parse_imu_line("$TNIMU,1,0,0,0,0,0,9.8,2,0,0,0", back), LineError::bad_quaternion);
   for (std::size_t e = 0; e < kLineErrors; ++e) EXPECT_STRNE(line_error_name(static_cast<LineError>(e)), "unknown");
 }

@@ -58,6 +58,9 @@ LineError parse_imu_line(std::string_view line, ImuSample& sample) noexcept {
     body.remove_prefix(comma + 1);
   }
   if (n != 7 && n != 11) return LineError::field_count;
+  // A device clock beyond 10^12 s (31,700 years) is a corrupt field, and
+  // format_imu_line could not write it back in a line.
+  if (std::abs(v[0]) > kMaxSampleTime) return LineError::bad_number;
   std::uint32_t fields = kSampleTime | kRateOfTurn | kAcceleration;
   if (n == 11) {
     const double norm = std::sqrt(v[7] * v[7] + v[8] * v[8] + v[9] * v[9] + v[10] * v[10]);

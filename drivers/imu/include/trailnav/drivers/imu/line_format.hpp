@@ -23,10 +23,12 @@ enum class LineError : std::uint8_t {
   not_imu,          // not a $TNIMU line
   bad_checksum,
   field_count,      // neither 7 nor 11 numbers
-  bad_number,       // a field that is not a finite decimal number
+  bad_number,       // a field that is not a finite decimal number, or a time beyond kMaxSampleTime
   bad_quaternion,   // norm far from 1
 };
 inline constexpr std::size_t kLineErrors = 6;
+// The largest device clock a line may carry, s (about 31,700 years).
+inline constexpr double kMaxSampleTime = 1e12;
 const char* line_error_name(LineError e) noexcept;
 
 // Fills time, rate of turn, acceleration and, when given, orientation;
