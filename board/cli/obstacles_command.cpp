@@ -199,8 +199,8 @@ int run(ObstaclesCliOptions& o) {
     o.run.on_blocked = [&](const eval::BlockedPath& b) {
       const bool known = static_cast<int>(b.truth_class) < perception::kTerrainClasses;
       std::fprintf(blocked.get(), "%s,%.1f,%.2f,%.2f,%.2f,%.2f,%.2f,%s,%.3f\n",
-                   std::string(perception::fusion_model_name(b.model)).c_str(), b.time_s, b.robot_x, b.robot_y, b.x, b.y,
-                   b.ahead, known ? std::string(perception::terrain_class_name(b.truth_class)).c_str() : "none",
+                   std::string(perception::fusion_model_name(b.model)).c_str(), b.time_s, b.robot_x, b.robot_y, b.x,
+                   b.y, b.ahead, known ? std::string(perception::terrain_class_name(b.truth_class)).c_str() : "none",
                    static_cast<double>(b.probability));
       ++blocked_lines;
     };

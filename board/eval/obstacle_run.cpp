@@ -174,6 +174,8 @@ class Scorer {
     const auto& g = map.grid();
     const double res = g.resolution();
     const CellIndex c = g.world_to_index(rx, ry);
+    // The snapshot's time since the recording's start, as the truth rasters count it.
+    const std::int64_t ms = (t_ns - truth_.scenario.start_utc_ns) / 1'000'000;
     const auto r = static_cast<std::int32_t>(std::ceil(radius_ / res));
     auto occupied = [&](std::int32_t x, std::int32_t y) {
       const CellIndex i{x, y};
@@ -197,7 +199,6 @@ class Scorer {
         }
         // A solid obstacle counts once the lidar has seen it (simulated
         // recordings say when), not when grass around it was seen.
-        const std::int64_t ms = (t_ns - truth_.scenario.start_utc_ns) / 1'000'000;
         if (code == 1 && cells_.has_sightings() && !cells_.sighted(k, ms)) continue;
         FoundCells& f = code == 1 ? s.obstacles : code == 2 ? s.negative : s.vegetation;
         ++f.cells;
@@ -273,7 +274,7 @@ class Scorer {
             if (on_blocked_) {
               BlockedPath b;
               b.model = map.model();
-              b.time_s = 1e-9 * static_cast<double>(t_ns - truth_.scenario.start_utc_ns);
+              b.time_s = 1e-3 * static_cast<double>(ms);
               b.robot_x = rx;
               b.robot_y = ry;
               b.x = (x + 0.5) * res;

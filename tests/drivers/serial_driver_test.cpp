@@ -166,6 +166,9 @@ TEST(ByteLink, SerialPortOnAPtyReadsReopensAfterLossAndBacksOff) {
   }
   EXPECT_EQ(l.state(), link::LinkState::closed);
   EXPECT_EQ(l.counters().closes, 1u);
+  // Within 50 ms, far inside the 0.2 s silence timeout: FIONREAD's EIO said so.
+  EXPECT_NE(std::string(l.last_error()).find("hung up"), std::string::npos) << l.last_error();
+  EXPECT_EQ(l.counters().silences, 0u);
   // Reopen attempts fail, with a growing back-off: 50, 100, 200, 200 ms.
   const std::uint64_t before = l.counters().open_failures;
   for (int i = 0; i < 700; ++i) l.poll(now += ms(1));

@@ -183,7 +183,8 @@ TEST(ObstacleMap, TopHoldFollowsTheCellsTerrainClass) {
     for (int n = 1; n <= 10; ++n) EXPECT_EQ(rev(n, 0.0f, 0.32f), CellState::occupied) << n;
     const bool held = cls == TerrainClass::other;
     for (int n = 11; n <= 400; ++n) {
-      ASSERT_EQ(rev(n, 0.0f, 0.32f), held ? CellState::occupied : CellState::free) << terrain_class_name(cls) << " " << n;
+      ASSERT_EQ(rev(n, 0.0f, 0.32f), held ? CellState::occupied : CellState::free)
+          << terrain_class_name(cls) << " " << n;
     }
     EXPECT_EQ(rev(401, 0.0f, 0.0f), CellState::free) << terrain_class_name(cls);
   }

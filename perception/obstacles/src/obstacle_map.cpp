@@ -34,7 +34,9 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
     return static_cast<std::uint32_t>(std::lround(static_cast<double>(seconds) / std::max(period_s, 1e-3)));
   };
   hold_revolutions_ = revolutions_in(params_.dirac_hold_s);
-  for (int t = 0; t < kTerrainClasses; ++t) top_hold_revolutions_[static_cast<std::size_t>(t)] = revolutions_in(models.top_hold_s(t));
+  for (int t = 0; t < kTerrainClasses; ++t) {
+    top_hold_revolutions_[static_cast<std::size_t>(t)] = revolutions_in(models.top_hold_s(t));
+  }
   counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
   occupancy_.move_to(cloud.robot_x, cloud.robot_y);
   if (model_ == FusionModel::pw) hits_.move_to(cloud.robot_x, cloud.robot_y);
@@ -124,8 +126,9 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
           hit.revolution = now;
           cell.logit = hi;
         } else if (hit.revolution == 0 ||
-                   (now - hit.revolution > hold && (z < hit.top - clear_depth ||
-                                                    now - hit.revolution > top_hold_revolutions_[static_cast<std::size_t>(cls)]))) {
+                   (now - hit.revolution > hold &&
+                    (z < hit.top - clear_depth ||
+                     now - hit.revolution > top_hold_revolutions_[static_cast<std::size_t>(cls)]))) {
           // Free ground below where the obstacle stood clears it once the hold
           // is over; the flat top of a box (as high as its faces) does not.
           cell.logit = lo;
