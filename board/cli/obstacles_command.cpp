@@ -80,10 +80,11 @@ std::string recall_text(const eval::FoundCells& f) {
 
 void print_score(const char* model, const eval::MapScore& s) {
   const auto all = s.all_free();
-  std::printf("  %s: obstacle faces seen %llu/%llu cells found (recall %s); outlines seen anywhere %s (%llu), whole "
-              "footprints %s (%llu); ditches %s (%llu); bushes %s (%llu)\n",
+  std::printf("  %s: obstacle faces seen %llu/%llu cells found (recall %s); faces hit at all, grazing or over grass "
+              "%s (%llu); outlines seen anywhere %s (%llu), whole footprints %s (%llu); ditches %s (%llu); bushes %s (%llu)\n",
               model, static_cast<unsigned long long>(s.faces.found), static_cast<unsigned long long>(s.faces.cells),
-              recall_text(s.faces).c_str(), recall_text(s.outlines).c_str(),
+              recall_text(s.faces).c_str(), recall_text(s.faces_hit).c_str(),
+              static_cast<unsigned long long>(s.faces_hit.cells), recall_text(s.outlines).c_str(),
               static_cast<unsigned long long>(s.outlines.cells), recall_text(s.obstacles).c_str(),
               static_cast<unsigned long long>(s.obstacles.cells), recall_text(s.negative).c_str(),
               static_cast<unsigned long long>(s.negative.cells), recall_text(s.vegetation).c_str(),
@@ -286,8 +287,9 @@ int run(ObstaclesCliOptions& o) {
   if (r.scored) {
     std::printf("  scores against truth within %.0f m (tolerance %d cell):\n", o.run.score_radius, o.run.tolerance_cells);
     if (!r.side_sightings)
-      std::printf("  (the recording has no truth/side_sightings.u32, so no face counts as seen: simulate it again with\n"
-                  "  this trailnav sim to score the faces)\n");
+      std::printf("  (the recording has no truth/side_hits.u32: it was simulated before the simulator said which side\n"
+                  "  returns show their face, so no face counts as seen; simulate it again with this trailnav sim to\n"
+                  "  score the faces)\n");
     for (int m = 0; m < perception::kFusionModels; ++m) {
       const auto& s = r.scores[static_cast<std::size_t>(m)];
       if (s) print_score(perception::fusion_model_name(static_cast<perception::FusionModel>(m)).data(), *s);
@@ -349,7 +351,7 @@ void add_obstacles_command(CLI::App& app) {
   cmd->add_option("--radius", o.run.score_radius, "Score cells within this many metres of the robot")->capture_default_str();
   cmd->add_option("--misses", o.misses_file,
                   "Write every obstacle face cell a map missed to this CSV, per scored snapshot: when, where, how far, "
-                  "when its side was first seen, the map's P(o) there and whether it had been found before (simulated "
+                  "when a return first showed its side, the map's P(o) there and whether it had been found before (simulated "
                   "recordings)");
   cmd->add_option("--blocked", o.blocked_file,
                   "Write every scored snapshot whose map blocks the robot's path to this CSV: when, where the robot "

@@ -54,6 +54,7 @@ class TruthCells {
     near_.assign(n, 0);
     outline_.assign(n, 0);
     sighted_.assign(truth.sightings.empty() ? 0 : n, 0);
+    side_hit_.assign(truth.side_hits.empty() ? 0 : n, 0);
     side_sighted_.assign(truth.side_sightings.empty() ? 0 : n, 0);
     std::vector<std::array<std::uint16_t, perception::kTerrainClasses>> counts(n);
     for (int j = 0; j < o.height; ++j) {
@@ -63,13 +64,10 @@ class TruthCells {
         const std::size_t src = static_cast<std::size_t>(j) * static_cast<std::size_t>(o.width) + static_cast<std::size_t>(i);
         const std::uint8_t c = std::min<std::uint8_t>(o.data[src], 3);
         if (sim::truth_rank(c) > sim::truth_rank(code_[k])) code_[k] = c;
-        if (!truth.sightings.empty() && o.data[src] == 1 && truth.sightings[src] != 0) {
-          std::uint32_t& first = sighted_[k];
-          first = first == 0 ? truth.sightings[src] : std::min(first, truth.sightings[src]);
-        }
-        if (!truth.side_sightings.empty() && o.data[src] == 1 && truth.side_sightings[src] != 0) {
-          std::uint32_t& first = side_sighted_[k];
-          first = first == 0 ? truth.side_sightings[src] : std::min(first, truth.side_sightings[src]);
+        if (o.data[src] == 1) {
+          earliest(truth.sightings, sighted_, src, k);
+          earliest(truth.side_hits, side_hit_, src, k);
+          earliest(truth.side_sightings, side_sighted_, src, k);
         }
         const std::uint8_t t = truth.terrain.data[src];
         if (t < perception::kTerrainClasses) ++counts[k][t];
@@ -119,6 +117,10 @@ class TruthCells {
     return sighted_[k] != 0 && static_cast<std::int64_t>(sighted_[k]) <= ms + 1;
   }
   bool has_side_sightings() const noexcept { return !side_sighted_.empty(); }
+  // Has any return from a side come from within 20 m, grazing or clipping the top edge included?
+  bool side_hit(std::size_t k, std::int64_t ms) const noexcept {
+    return !side_hit_.empty() && side_hit_[k] != 0 && static_cast<std::int64_t>(side_hit_[k]) <= ms + 1;
+  }
   // ... from one of its sides (a vertical face), not only its top?
   bool side_sighted(std::size_t k, std::int64_t ms) const noexcept {
     return side_sighted_[k] != 0 && static_cast<std::int64_t>(side_sighted_[k]) <= ms + 1;
@@ -134,7 +136,15 @@ class TruthCells {
   double res_;
   std::int32_t ix0_ = 0, iy0_ = 0, nx_ = 0, ny_ = 0;
   std::vector<std::uint8_t> code_, cls_, near_, outline_;
-  std::vector<std::uint32_t> sighted_, side_sighted_;
+  std::vector<std::uint32_t> sighted_, side_hit_, side_sighted_;
+
+  // A truth pixel's first sighting into its map cell: the earliest of its pixels'.
+  static void earliest(const std::vector<std::uint32_t>& pixels, std::vector<std::uint32_t>& cells, std::size_t src,
+                       std::size_t k) noexcept {
+    if (pixels.empty() || pixels[src] == 0) return;
+    std::uint32_t& first = cells[k];
+    first = first == 0 ? pixels[src] : std::min(first, pixels[src]);
+  }
 };
 
 struct NamedShape {
@@ -210,6 +220,10 @@ class Scorer {
         if (code != 1 || !cells_.outline(k)) continue;
         ++s.outlines.cells;
         if (found) ++s.outlines.found;
+        if (cells_.side_hit(k, ms)) {
+          ++s.faces_hit.cells;
+          if (found) ++s.faces_hit.found;
+        }
         // Of the outline, the cells where the lidar has seen a side of the
         // obstacle: a step the geometry can show (a box's back edge seen
         // only on its top cannot).

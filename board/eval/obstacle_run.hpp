@@ -33,7 +33,7 @@ struct FaceMiss {
   double robot_x = 0.0, robot_y = 0.0;
   double x = 0.0, y = 0.0;            // the cell's centre
   double distance = 0.0;              // m from the robot
-  double side_seen_s = 0.0;           // when the lidar first hit a side of the obstacle there
+  double side_seen_s = 0.0;           // when a lidar return first showed a side of the obstacle there
   std::string obstacle;               // its name, when it is a named obstacle
   float probability = 0.0f;           // the map's P(o) at the cell
   bool found_before = false;          // found at an earlier snapshot, lost since
@@ -125,7 +125,8 @@ struct NamedObstacle {
 struct MapScore {
   FoundCells obstacles;   // solid obstacles >= 10 cm: every observed cell of their footprint
   FoundCells outlines;    // of them, the cells on the footprint's outline, where the height steps
-  FoundCells faces;       // of those, the cells where the lidar has seen a side (side_sightings.u32)
+  FoundCells faces_hit;   // of those, the cells where any return from a side came from within 20 m (side_hits.u32)
+  FoundCells faces;       // of those, the cells where a side return showed the face (side_sightings.u32)
   std::uint64_t faces_lost = 0;  // of the faces not found, those found at an earlier snapshot
   FoundCells negative;    // ditches
   FoundCells vegetation;  // bushes, undergrowth
@@ -152,8 +153,9 @@ struct ObstacleRunReport {
   // features.self_box because the config gave none.
   std::optional<std::array<float, 6>> source_self_box;
   bool scored = false;
-  // The truth has truth/side_sightings.u32 (recordings simulated before it
-  // was written do not): without it no obstacle face counts as seen.
+  // The truth says which side returns show their face (side_sightings.u32
+  // next to side_hits.u32; recordings simulated before do not): without it
+  // no obstacle face counts as seen.
   bool side_sightings = false;
   std::uint64_t revolutions = 0;
   perception::PipelineCounters counters;

@@ -78,7 +78,8 @@ SimTruthResult load_sim_truth(const std::string& dir) {
     return {std::nullopt, st.message()};
   }
   const auto n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
-  for (auto [file, out] : {std::pair{"sightings.u32", &t.sightings}, std::pair{"side_sightings.u32", &t.side_sightings}}) {
+  for (auto [file, out] : {std::pair{"sightings.u32", &t.sightings}, std::pair{"side_hits.u32", &t.side_hits},
+                           std::pair{"side_sightings.u32", &t.side_sightings}}) {
     const fs::path sight = fs::path(dir) / file;
     if (!fs::exists(sight)) continue;
     std::ifstream s(sight, std::ios::binary);
@@ -89,6 +90,13 @@ SimTruthResult load_sim_truth(const std::string& dir) {
     }
     out->resize(n);
     for (std::size_t i = 0; i < n; ++i) (*out)[i] = velodyne::read_u32(bytes.data() + i * 4);  // little-endian
+  }
+  // Simulated before side_hits.u32 existed, side_sightings.u32 held every side
+  // return within 20 m, which is what side_hits.u32 holds now: no face counts
+  // as shown.
+  if (t.side_hits.empty()) {
+    t.side_hits = std::move(t.side_sightings);
+    t.side_sightings.clear();
   }
   const std::string traj = (fs::path(dir) / "trajectory.csv").string();
   std::ifstream in(traj);

@@ -47,7 +47,10 @@ struct SimTruth {
   // recordings made before the simulator wrote sightings.u32.
   std::vector<std::uint32_t> sightings;
   // The same for returns from an obstacle's side (a vertical face), not its
-  // top (side_sightings.u32); empty for older recordings.
+  // top, within 20 m (side_hits.u32), and for those of them that show the
+  // face (side_sightings.u32: not clipping the top edge, not grazing; see
+  // board/sim/truth.hpp); empty for older recordings.
+  std::vector<std::uint32_t> side_hits;
   std::vector<std::uint32_t> side_sightings;
   std::vector<TruthPose> trajectory;
 };

@@ -83,6 +83,7 @@ class LidarSim {
     }
     mount_ = s.robot.lidar_mount;
     sighted_.any.assign(static_cast<std::size_t>(world.width()) * static_cast<std::size_t>(world.height()), 0);
+    sighted_.side_hit.assign(sighted_.any.size(), 0);
     sighted_.side.assign(sighted_.any.size(), 0);
   }
 
@@ -182,7 +183,10 @@ class LidarSim {
               // inside the face is the one seen.
               const Vec3 in = at + R * ds * 0.03;
               mark(sighted_.any, in);
-              if (hit.distance <= kSideSightingRange) mark(sighted_.side, in);
+              if (hit.distance <= kSideSightingRange) {
+                mark(sighted_.side_hit, in);
+                if (side_shown(hit)) mark(sighted_.side, in);
+              }
             }
           }
           double intensity = hit.reflectivity * (0.55 + 0.45 * hit.cos_incidence) + 2.0 * gaussian(hash(key, 0xD2));
@@ -222,8 +226,8 @@ class LidarSim {
 
   std::uint64_t rays() const { return rays_; }
   // Per truth pixel: milliseconds after the start (plus one) of the first
-  // return that came from a solid obstacle in it (any part; or a side, from
-  // within kSideSightingRange); 0: never seen.
+  // return that came from a solid obstacle in it (any part; or a side, shown
+  // as truth.hpp says); 0: never seen.
   Sightings take_sightings() { return std::move(sighted_); }
   std::uint64_t returns() const { return returns_; }
 

@@ -9,6 +9,13 @@
 #include "png.hpp"
 
 namespace trailnav::sim {
+
+bool side_shown(const Hit& hit) noexcept {
+  static const double min_sine = std::sin(kSideSightingAngle * std::numbers::pi / 180.0);
+  return hit.kind == HitKind::object && hit.side && hit.below_top >= kSideSightingDepth &&
+         hit.cos_incidence >= min_sine;
+}
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -127,9 +134,11 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
   if (Status st = write_raster(dir + "/terrain.png", world, world.terrain_raster()); !st) return st;
   if (Status st = write_raster(dir + "/obstacles.png", world, world.obstacle_raster()); !st) return st;
   const bool sighted = sightings.any.size() == world.obstacle_raster().size() &&
+                       sightings.side_hit.size() == world.obstacle_raster().size() &&
                        sightings.side.size() == world.obstacle_raster().size();
   if (sighted) {
     if (Status st = write_u32_raster(dir + "/sightings.u32", sightings.any); !st) return st;
+    if (Status st = write_u32_raster(dir + "/side_hits.u32", sightings.side_hit); !st) return st;
     if (Status st = write_u32_raster(dir + "/side_sightings.u32", sightings.side); !st) return st;
   }
   f = std::fopen((dir + "/rasters.yaml").c_str(), "w");
@@ -151,9 +160,12 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
     std::fprintf(f,
                  "sightings.u32: {type: uint32 little-endian, rows: south_up, value: \"ms after the start + 1 of the first "
                  "lidar return from a solid obstacle in the pixel; 0: never\"}\n"
-                 "side_sightings.u32: {type: uint32 little-endian, rows: south_up, value: \"the same for returns from an "
-                 "obstacle's side (a vertical face, not its top) within %.0f m of the sensor\"}\n",
-                 kSideSightingRange);
+                 "side_hits.u32: {type: uint32 little-endian, rows: south_up, value: \"the same for returns from an "
+                 "obstacle's side (a vertical face, not its top) within %.0f m of the sensor\"}\n"
+                 "side_sightings.u32: {type: uint32 little-endian, rows: south_up, value: \"the same for the side returns "
+                 "that show the face: at least %.2f m below the obstacle's top, meeting the face at %.0f degrees or "
+                 "more\"}\n",
+                 kSideSightingRange, kSideSightingDepth, kSideSightingAngle);
   }
   std::fclose(f);
 

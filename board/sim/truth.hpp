@@ -16,13 +16,27 @@
 namespace trailnav::sim {
 
 // Per pixel of the obstacle raster: ms after the start + 1 of the first lidar
-// return from a solid obstacle there (`any`: its top included, from any
-// range; `side`: from one of its vertical faces, within kSideSightingRange of
-// the sensor, the radius obstacle recall is scored in); 0: never. Empty when
-// no lidar was simulated.
+// return from a solid obstacle there; 0: never. Empty when no lidar was
+// simulated.
+//  - `any`: from any part of it (its top included), from any range;
+//  - `side_hit`: from one of its vertical faces, within kSideSightingRange of
+//    the sensor (the radius obstacle recall is scored in);
+//  - `side`: of those, the returns that show the face (side_shown below).
 inline constexpr double kSideSightingRange = 20.0;  // m
+// A side return shows its face when it lies at least kSideSightingDepth below
+// the obstacle's top, so that the face above it is itself an obstacle the
+// recall scores (over tall grass, a ray may clip the top edge and show a few
+// centimetres of face), and meets the face at kSideSightingAngle or more
+// rather than running along it (a ray that grazes a face passes within
+// millimetres of its corner, and the ring above and below it land metres
+// away: no geometric detector sees a step there).
+inline constexpr double kSideSightingDepth = 0.10;  // m
+inline constexpr double kSideSightingAngle = 10.0;  // degrees between the ray and the face
+bool side_shown(const Hit& hit) noexcept;
+
 struct Sightings {
   std::vector<std::uint32_t> any;
+  std::vector<std::uint32_t> side_hit;
   std::vector<std::uint32_t> side;
 };
 

@@ -497,6 +497,7 @@ bool World::intersect(const Primitive& p, const Vec3& o, const Vec3& d, double t
       hit.distance = t0;
       hit.cos_incidence = std::abs(ld[axis]);
       hit.side = axis < 2;
+      hit.below_top = p.z1 - (o.z() + t0 * d.z());
       break;
     }
     case Primitive::Shape::cylinder: {
@@ -535,6 +536,7 @@ bool World::intersect(const Primitive& p, const Vec3& o, const Vec3& d, double t
       const double ny = (oy + t_in * d.y()) / p.radius;
       hit.cos_incidence = std::abs(nx * d.x() + ny * d.y());
       hit.side = true;
+      hit.below_top = p.z1 - z;
       break;
     }
     case Primitive::Shape::ellipsoid: {

@@ -31,6 +31,7 @@ struct Hit {
   HitKind kind = HitKind::ground;
   bool through_medium = false;  // the ray passed through grass or leaves before the hit
   bool side = false;            // a solid primitive's side (a vertical face), not its top
+  double below_top = 0.0;       // a side's hit: m below the primitive's top
 };
 
 // Codes of the obstacle truth raster.

@@ -87,9 +87,12 @@ TEST_F(MeadowBlock, AdaptiveDetectionAvoidsBothFailures) {
   EXPECT_GT(a.outlines.cells, 0u);
   EXPECT_LE(a.outlines.cells, a.obstacles.cells);
   EXPECT_GE(a.outlines.recall(), s.outlines.recall() * 0.9);
-  // Of the outline, the cells whose side the lidar saw within 20 m.
+  // Of the outline, the cells whose side any return within 20 m hit, and
+  // of those the cells where a return showed the face.
   EXPECT_GT(a.faces.cells, 0u);
-  EXPECT_LE(a.faces.cells, a.outlines.cells);
+  EXPECT_LE(a.faces.cells, a.faces_hit.cells);
+  EXPECT_LE(a.faces.found, a.faces_hit.found);
+  EXPECT_LE(a.faces_hit.cells, a.outlines.cells);
   EXPECT_GE(a.faces.recall(), s.faces.recall() * 0.9);
   EXPECT_EQ(g.faces.found, 0u);
   // The smooth models differ from PC only through the class distribution.
@@ -267,6 +270,18 @@ TEST_F(MeadowBlock, SightingsMarkOnlySolidObstaclesTheLidarHit) {
   }
   EXPECT_GT(crate_sides, 10u);
   EXPECT_LT(sides, sighted);  // tops are not sides
+
+  // Every side that showed its face was hit there, never later; over the tall
+  // grass many more side returns only clip a top edge or graze a side.
+  ASSERT_EQ(t.side_hits.size(), t.obstacles.data.size());
+  std::size_t hits = 0;
+  for (std::size_t i = 0; i < t.side_hits.size(); ++i) {
+    if (t.side_hits[i] != 0) ++hits;
+    if (t.side_sightings[i] == 0) continue;
+    EXPECT_NE(t.side_hits[i], 0u) << "pixel " << i;
+    EXPECT_LE(t.side_hits[i], t.side_sightings[i]) << "pixel " << i;
+  }
+  EXPECT_GT(hits, sides + sides / 4);
 }
 
 // KITTI scans bring their recording car's box as the self box when the

@@ -24,6 +24,7 @@
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/calibration.hpp"
 #include "trailnav/drivers/velodyne/decoder.hpp"
+#include "truth.hpp"
 #include "world.hpp"
 
 namespace {
@@ -363,6 +364,66 @@ TEST(Simulator, ScenarioErrorsNameFileLineAndKey) {
   o.lidar = "VLS-9000";
   o.out = temp_dir("bad");
   EXPECT_NE(run_simulation(o).error.find("VLS-9000"), std::string::npos);
+}
+
+// Which side returns show their face (truth.hpp): a ray square on to a
+// box's side well below its top does; one that clips the top edge, or one
+// that runs along the side, hits it and shows nothing a detector could see.
+TEST(Simulator, SideReturnsShowTheirFaceBelowTheTopEdgeAndNotGrazing) {
+  const auto parsed = parse_scenario(
+      "format: trailnav-scenario\nversion: 1\nname: box\norigin: {lat: 48, lon: 7}\n"
+      "world: {extent: [-5, -10, 20, 10], background: street}\n"
+      "trails:\n  - name: a\n    class: street\n    points: [[-4, 8], [19, 8]]\n"
+      "obstacles:\n  - {type: box, name: b, center: [10, 0], size: [2, 1, 0.5], yaw: 0}\n"
+      "route: [{trail: a}]\n",
+      "box.yaml");
+  ASSERT_TRUE(parsed.scenario) << parsed.error;
+  const RoadNetwork roads = *build_roads(*parsed.scenario, 1).roads;
+  const auto world = World::build(*parsed.scenario, roads, 1);
+  // The box stands on the lowest ground under its corners and centre.
+  double base = world->ground(10, 0);
+  for (double x : {9.0, 11.0}) {
+    for (double y : {-0.5, 0.5}) base = std::min(base, world->ground(x, y));
+  }
+  const double top = base + 0.5;
+  const auto cast = [&](const Vec3& at, const Vec3& dir) {
+    const Vec3 d = dir.normalized();
+    return world->cast(at - 8.0 * d, d, 0.5, 50.0, 7);
+  };
+  constexpr double kDeg = std::numbers::pi / 180.0;
+
+  // Square on to the west side, 25 cm below the top: shown.
+  Hit h = cast({9.0, 0.0, top - 0.25}, {1, 0, 0});
+  ASSERT_TRUE(h.hit);
+  EXPECT_EQ(h.kind, HitKind::object);
+  EXPECT_TRUE(h.side);
+  EXPECT_NEAR(h.distance, 8.0, 1e-6);
+  EXPECT_NEAR(h.below_top, 0.25, 1e-6);
+  EXPECT_TRUE(side_shown(h));
+
+  // The same side 3 cm below the top edge: a side hit that shows 3 cm of face.
+  h = cast({9.0, 0.2, top - 0.03}, {1, 0, 0});
+  ASSERT_TRUE(h.hit && h.side);
+  EXPECT_NEAR(h.below_top, 0.03, 1e-6);
+  EXPECT_FALSE(side_shown(h));
+
+  // The south side, met at 5 degrees (the ray passes south of the west side's
+  // corner and runs along the south side): a side hit, not shown. At 30
+  // degrees: shown.
+  for (const double deg : {5.0, 30.0}) {
+    h = cast({10.5, -0.5, top - 0.25}, {std::cos(deg * kDeg), std::sin(deg * kDeg), 0});
+    ASSERT_TRUE(h.hit && h.side) << deg;
+    EXPECT_NEAR(h.distance, 8.0, 1e-6) << deg;
+    EXPECT_NEAR(h.cos_incidence, std::sin(deg * kDeg), 1e-9) << deg;
+    EXPECT_EQ(side_shown(h), deg > kSideSightingAngle) << deg;
+  }
+
+  // From above onto the top: no side at all.
+  h = cast({10.0, 0.0, top}, {1, 0, -1});
+  ASSERT_TRUE(h.hit);
+  EXPECT_EQ(h.kind, HitKind::object);
+  EXPECT_FALSE(h.side);
+  EXPECT_FALSE(side_shown(h));
 }
 
 TEST(Simulator, EveryBuiltInScenarioBuildsWithJunctionsWhereTheRouteTurns) {
