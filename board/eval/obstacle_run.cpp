@@ -113,18 +113,12 @@ class TruthCells {
   bool outline(std::size_t k) const noexcept { return outline_[k] != 0; }
   bool has_sightings() const noexcept { return !sighted_.empty(); }
   // Has a lidar return come from the solid obstacle in this cell by `ms` after the start?
-  bool sighted(std::size_t k, std::int64_t ms) const noexcept {
-    return sighted_[k] != 0 && static_cast<std::int64_t>(sighted_[k]) <= ms + 1;
-  }
+  bool sighted(std::size_t k, std::int64_t ms) const noexcept { return by(sighted_, k, ms); }
   bool has_side_sightings() const noexcept { return !side_sighted_.empty(); }
-  // Has any return from a side come from within 20 m, grazing or clipping the top edge included?
-  bool side_hit(std::size_t k, std::int64_t ms) const noexcept {
-    return !side_hit_.empty() && side_hit_[k] != 0 && static_cast<std::int64_t>(side_hit_[k]) <= ms + 1;
-  }
-  // ... from one of its sides (a vertical face), not only its top?
-  bool side_sighted(std::size_t k, std::int64_t ms) const noexcept {
-    return side_sighted_[k] != 0 && static_cast<std::int64_t>(side_sighted_[k]) <= ms + 1;
-  }
+  // ... from one of its sides within 20 m, grazing or clipping the top edge included?
+  bool side_hit(std::size_t k, std::int64_t ms) const noexcept { return by(side_hit_, k, ms); }
+  // ... from one of its sides, showing the face (board/sim/truth.hpp)?
+  bool side_sighted(std::size_t k, std::int64_t ms) const noexcept { return by(side_sighted_, k, ms); }
   // When (ms after the start) a side was first seen there; 0: never.
   std::uint32_t side_sighted_ms(std::size_t k) const noexcept { return side_sighted_[k]; }
   double resolution() const noexcept { return res_; }
@@ -138,6 +132,10 @@ class TruthCells {
   std::vector<std::uint8_t> code_, cls_, near_, outline_;
   std::vector<std::uint32_t> sighted_, side_hit_, side_sighted_;
 
+  // Was the cell's first return of that kind (ms after the start + 1; 0: never) by `ms`?
+  static bool by(const std::vector<std::uint32_t>& first, std::size_t k, std::int64_t ms) noexcept {
+    return !first.empty() && first[k] != 0 && static_cast<std::int64_t>(first[k]) <= ms + 1;
+  }
   // A truth pixel's first sighting into its map cell: the earliest of its pixels'.
   static void earliest(const std::vector<std::uint32_t>& pixels, std::vector<std::uint32_t>& cells, std::size_t src,
                        std::size_t k) noexcept {

@@ -10,10 +10,14 @@
 
 namespace trailnav::sim {
 
+namespace {
+// cos_incidence is the cosine to the face's normal: the sine to the face.
+const double kSideSightingSine = std::sin(kSideSightingAngle * std::numbers::pi / 180.0);
+}  // namespace
+
 bool side_shown(const Hit& hit) noexcept {
-  static const double min_sine = std::sin(kSideSightingAngle * std::numbers::pi / 180.0);
   return hit.kind == HitKind::object && hit.side && hit.below_top >= kSideSightingDepth &&
-         hit.cos_incidence >= min_sine;
+         hit.cos_incidence >= kSideSightingSine;
 }
 
 namespace {
