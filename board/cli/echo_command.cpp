@@ -15,6 +15,7 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "tf2_msgs.h"
 #include "trailnav_msgs.h"
 #include "map_png.hpp"
 #include "trailnav/runtime/histogram.hpp"
@@ -95,6 +96,25 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
       std::printf(" from (%.2f, %.2f) to (%.2f, %.2f)", a.x, a.y, b.x, b.y);
     }
     std::printf("\n");
+  } else if (r.type == &tf2_msgs_msg_dds__TFMessage__desc) {
+    const auto& m = *static_cast<const tf2_msgs_msg_dds__TFMessage_*>(r.sample);
+    std::printf("%s  %u transforms\n", head, m.transforms._length);
+    for (std::uint32_t i = 0; i < m.transforms._length; ++i) {
+      const auto& t = m.transforms._buffer[i];
+      const auto& q = t.transform.rotation;
+      const double yaw = std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+      std::printf("    stamp %.3f  %s -> %s: x %.3f y %.3f z %.3f m, yaw %.2f deg\n", stamp_s(t.header.stamp),
+                  t.header.frame_id, t.child_frame_id, t.transform.translation.x, t.transform.translation.y,
+                  t.transform.translation.z, yaw * 180.0 / M_PI);
+    }
+  } else if (r.type == &nav_msgs_msg_dds__Odometry__desc) {
+    const auto& o = *static_cast<const nav_msgs_msg_dds__Odometry_*>(r.sample);
+    const auto& q = o.pose.pose.orientation;
+    const double yaw = std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z));
+    std::printf("%s  stamp %.3f  %s -> %s x %.3f y %.3f m, yaw %.1f deg, speed %.2f m/s, yaw rate %.3f rad/s, sigma %.2f m\n",
+                head, stamp_s(o.header.stamp), o.header.frame_id, o.child_frame_id, o.pose.pose.position.x,
+                o.pose.pose.position.y, yaw * 180.0 / M_PI, o.twist.twist.linear.x, o.twist.twist.angular.z,
+                std::sqrt(o.pose.covariance[0]));
   } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
     const auto& t = *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample);
     std::uint64_t counts[6] = {};

@@ -182,6 +182,22 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   Daemon* self = d.get();
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
   dds::PublisherOptions popt = config.dds.publisher;
+  // tf_static: where each sensor sits on the robot (the config's mounts).
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  if (config.lidar) {
+    const perception::MountParams m = config.obstacles ? config.obstacles->mount : perception::MountParams{};
+    popt.static_frames.push_back({popt.frames.lidar,
+                                  {m.translation[0], m.translation[1], m.translation[2], m.rotation_deg[0] * kDeg,
+                                   m.rotation_deg[1] * kDeg, m.rotation_deg[2] * kDeg}});
+  }
+  if (config.imu) {
+    popt.static_frames.push_back({popt.frames.imu, {config.imu_position[0], config.imu_position[1], config.imu_position[2]}});
+  }
+  if (config.gps && config.pose) {
+    const auto& a = config.pose->utm.antenna;
+    popt.static_frames.push_back({popt.fix_frame, {a[0], a[1], a[2]}});
+  }
+  popt.map_instant_tf = config.obstacles && config.pose && config.obstacles_use_pose;
   if (config.obstacles) popt.occupied_percent = static_cast<int>(config.obstacles->map.occupied * 100.0f);
   auto pub = dds::DdsPublisher::create(*d->domain_, d->clock_, popt, std::move(inputs));
   if (!pub.publisher) return fail("dds: " + pub.error);
@@ -327,6 +343,12 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("kernel_drops", c.data.kernel_drops);
     m.value("position_packets", c.position_packets);
     m.value("time_source", velodyne::time_source_name(c.time_source));
+    // The lidar's clock against the reference clock (docs/dds.md, "One clock").
+    m.value("clock_offset_s", static_cast<double>(c.reference.offset_ns) * 1e-9, 6);
+    m.value("clock_spread_ms", static_cast<double>(c.reference.spread_ns) * 1e-6, 3);
+    m.value("clock_max_spread_ms", static_cast<double>(c.reference.max_spread_ns) * 1e-6, 3);
+    m.value("clock_settled", c.reference.settled ? std::string_view("true") : std::string_view("false"));
+    m.value("clock_steps", c.reference.steps);
   }
   if (gps_) {
     const gps::GpsDriverStatus s = gps_->status();
@@ -375,6 +397,11 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("sigma_m", s.utm.position_valid ? s.utm.sigma_position() : 0.0, 2);
     m.value("distance_m", s.local.distance, 2);
     m.value("queue_drops", s.pose_queue_drops);
+    // IMU and wheels are stamped with their host receive times (offset 0 by
+    // construction); GPS fixes at the receiver's UTC when it agrees with the host.
+    m.value("gps_fixes_at_utc", s.gps_fixes_at_utc);
+    m.value("gps_fixes_at_receive", s.gps_fixes_at_receive);
+    if (s.gps_has_utc) m.value("gps_receive_minus_utc_s", static_cast<double>(s.gps_receive_minus_utc_ns) * 1e-9, 3);
   }
   if (obstacles_) {
     const perception::ObstacleTaskCounters c = obstacles_->status();

@@ -93,8 +93,11 @@ gps::GpsDriverOptions parse_gps(const ConfigNode& n) {
   return o;
 }
 
-imu::ImuDriverOptions parse_imu(const ConfigNode& n) {
+imu::ImuDriverOptions parse_imu(const ConfigNode& n, std::array<double, 3>& position) {
   imu::ImuDriverOptions o;
+  // Where the IMU sits, for tf_static only: its axes are taken to be the
+  // robot's (the driver does not rotate readings).
+  position = vec3(n, "position", position);
   o.link = link_options(n);
   o.protocol = n.choice("protocol", {"xsens", "line"}, "xsens") == "xsens" ? imu::ImuProtocol::xsens : imu::ImuProtocol::line;
   o.xsens_start = n.boolean("xsens_start", false);
@@ -176,10 +179,27 @@ DdsSection parse_dds(const ConfigNode& n) {
     topic("subgoal", p.topics.subgoal);
     topic("subgoal_path", p.topics.subgoal_path);
     topic("health", p.topics.health);
+    topic("tf", p.topics.tf);
+    topic("tf_static", p.topics.tf_static);
+    topic("odometry", p.topics.odometry);
     t->reject_unknown_keys();
   }
   p.odom_frame = n.string("odom_frame", p.odom_frame);
   p.fix_frame = n.string("fix_frame", p.fix_frame);
+  p.publish_tf = n.boolean("publish_tf", p.publish_tf);
+  if (auto f = n.optional_map("frames")) {
+    auto frame = [&](std::string_view key, std::string& out) {
+      out = f->string(key, out);
+      if (out.empty() || out.front() == '/' || out.find(' ') != std::string::npos) {
+        f->fail(key, "'" + out + "' is not a frame name (tf2 style, no leading '/', e.g. base_link)");
+      }
+    };
+    frame("map", p.frames.map);
+    frame("base_link", p.frames.base_link);
+    frame("lidar", p.frames.lidar);
+    frame("imu", p.frames.imu);
+    f->reject_unknown_keys();
+  }
   p.pose_rate_hz = n.number("pose_rate_hz", 0.0, 1000.0, p.pose_rate_hz);
   p.health_period = n.number("health_period_s", 0.05, 60.0, p.health_period);
   p.stale_after = n.number("stale_after_s", 0.05, 60.0, p.stale_after);
@@ -199,7 +219,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   c.runtime = parse_runtime_settings(root.map("runtime"));
   if (auto n = root.optional_map("lidar")) c.lidar = parse_lidar(*n);
   if (auto n = root.optional_map("gps")) c.gps = parse_gps(*n);
-  if (auto n = root.optional_map("imu")) c.imu = parse_imu(*n);
+  if (auto n = root.optional_map("imu")) c.imu = parse_imu(*n, c.imu_position);
   if (auto n = root.optional_map("can")) c.can = parse_can(*n);
   if (auto n = root.optional_map("gpio")) c.gpio = parse_gpio(*n);
   if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose, c.terrain_use_pose);

@@ -4,6 +4,7 @@
 // file, the line and the key (docs/trailnavd.md lists every key).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -50,6 +51,7 @@ struct RobotConfig {
   std::optional<LidarSection> lidar;
   std::optional<gps::GpsDriverOptions> gps;
   std::optional<imu::ImuDriverOptions> imu;
+  std::array<double, 3> imu_position{0.0, 0.0, 0.0};  // m, robot frame (tf_static only)
   std::optional<CanSection> can;
   std::optional<gpio::GpioDriverOptions> gpio;
   std::optional<pose::PoseEstimatorOptions> pose;

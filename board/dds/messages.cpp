@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <numbers>
 
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 #include "trailnav/navigation/pose/utm_alignment.hpp"
@@ -196,6 +197,81 @@ bool PathMessage::add(std::int64_t utc_ns, double x, double y, double yaw) noexc
   return true;
 }
 
+// --- TFMessage ---
+
+TfMessage::TfMessage(std::size_t capacity) : names_(capacity), transforms_(capacity) {
+  for (std::size_t i = 0; i < capacity; ++i) {
+    transforms_[i].header.frame_id = names_[i].parent.c_str();
+    transforms_[i].child_frame_id = names_[i].child.c_str();
+    transforms_[i].transform.rotation.w = 1.0;
+  }
+  msg_.transforms._buffer = transforms_.data();
+  msg_.transforms._maximum = static_cast<std::uint32_t>(transforms_.size());
+  msg_.transforms._length = 0;
+  msg_.transforms._release = false;
+}
+
+void TfMessage::clear() noexcept { msg_.transforms._length = 0; }
+
+bool TfMessage::add(std::int64_t utc_ns, std::string_view parent, std::string_view child,
+                    const RigidTransform& t) noexcept {
+  if (msg_.transforms._length >= transforms_.size()) return false;
+  const std::size_t i = msg_.transforms._length++;
+  names_[i].parent.set(parent);
+  names_[i].child.set(child);
+  geometry_msgs_msg_dds__TransformStamped_& s = transforms_[i];
+  s.header.stamp = to_time(utc_ns);
+  s.transform.translation = {t.x, t.y, t.z};
+  s.transform.rotation = to_quaternion(t.roll, t.pitch, t.yaw);
+  return true;
+}
+
+RigidTransform utm_to_odom(const pose::LocalPose& local, const pose::UtmPose& utm) noexcept {
+  // utm = Rz(theta) * odom + (e, n): the robot's two positions of one instant give both.
+  RigidTransform t;
+  t.yaw = std::remainder(utm.yaw - local.yaw, 2.0 * std::numbers::pi);
+  const double c = std::cos(t.yaw), s = std::sin(t.yaw);
+  t.x = utm.easting - (c * local.x - s * local.y);
+  t.y = utm.northing - (s * local.x + c * local.y);
+  t.z = utm.altitude - local.z;
+  return t;
+}
+
+// --- Odometry ---
+
+OdometryMessage::OdometryMessage(std::string_view frame_id, std::string_view child_frame_id, const OdometryNoise& noise)
+    : noise_(noise) {
+  frame_.set(frame_id);
+  child_.set(child_frame_id);
+  msg_.header.frame_id = frame_.c_str();
+  msg_.child_frame_id = child_.c_str();
+  msg_.pose.pose.orientation.w = 1.0;
+}
+
+void OdometryMessage::fill(const pose::LocalPose& p) noexcept {
+  msg_.header.stamp = to_time(p.time_ns);
+  msg_.pose.pose.position = {p.x, p.y, p.z};
+  msg_.pose.pose.orientation = to_quaternion(p.roll, p.pitch, p.yaw);
+  // Row-major 6x6 over (x, y, z, roll, pitch, yaw): the drift model grows
+  // with the distance driven; z is held by the gravity-aligned odometry no
+  // better than the position.
+  std::fill(std::begin(msg_.pose.covariance), std::end(msg_.pose.covariance), 0.0);
+  const double sp = noise_.position_sigma_min + noise_.position_sigma_per_m * p.distance;
+  const double sy = noise_.attitude_sigma + noise_.yaw_sigma_per_m * p.distance;
+  msg_.pose.covariance[0] = msg_.pose.covariance[7] = msg_.pose.covariance[14] = sp * sp;
+  msg_.pose.covariance[21] = msg_.pose.covariance[28] = noise_.attitude_sigma * noise_.attitude_sigma;
+  msg_.pose.covariance[35] = sy * sy;
+  // The twist in the robot frame (REP 105: child_frame_id).
+  msg_.twist.twist.linear = {p.speed, 0.0, 0.0};
+  msg_.twist.twist.angular = {0.0, 0.0, p.yaw_rate};
+  std::fill(std::begin(msg_.twist.covariance), std::end(msg_.twist.covariance), 0.0);
+  const double lat = noise_.lateral_sigma * noise_.lateral_sigma;
+  msg_.twist.covariance[0] = noise_.speed_sigma * noise_.speed_sigma;
+  msg_.twist.covariance[7] = msg_.twist.covariance[14] = lat;
+  msg_.twist.covariance[21] = msg_.twist.covariance[28] = noise_.yaw_rate_sigma * noise_.yaw_rate_sigma;
+  msg_.twist.covariance[35] = noise_.yaw_rate_sigma * noise_.yaw_rate_sigma;
+}
+
 // --- TerrainClassMap ---
 
 TerrainClassMapMessage::TerrainClassMapMessage(std::int32_t width, std::int32_t height, std::string_view frame_id)
@@ -231,7 +307,7 @@ void TerrainClassMapMessage::set_header(std::int64_t utc_ns, double resolution, 
 
 void TerrainClassMapMessage::fill(const perception::TerrainClassMap& map) noexcept {
   const auto& g = map.grid();
-  set_header(map.time_ns, g.resolution(), g.origin().x * g.resolution(), g.origin().y * g.resolution());
+  set_header(map.time_ns + map.clock_offset_ns, g.resolution(), g.origin().x * g.resolution(), g.origin().y * g.resolution());
   map.export_classes(class_id_, confidence_);
 }
 

@@ -18,6 +18,7 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "tf2_msgs.h"
 #include "trailnav/perception/terrain_class_map.hpp"
 #include "trailnav_msgs.h"
 
@@ -100,6 +101,68 @@ class UtmFixMessages {
   FixedString<64> fix_frame_;
   geometry_msgs_msg_dds__PoseWithCovarianceStamped_ utm_{};
   sensor_msgs_msg_dds__NavSatFix_ fix_{};
+};
+
+// A rigid transform parent -> child as REP 105 and tf2 mean it: the child
+// frame's origin and axes expressed in the parent frame.
+struct RigidTransform {
+  double x = 0.0, y = 0.0, z = 0.0;           // m
+  double roll = 0.0, pitch = 0.0, yaw = 0.0;  // rad, R = Rz(yaw) Ry(pitch) Rx(roll)
+};
+
+// tf2_msgs/TFMessage with room for `capacity` transforms, each with its own
+// frame names (cut to 63 characters).
+class TfMessage {
+ public:
+  explicit TfMessage(std::size_t capacity);
+  TfMessage(const TfMessage&) = delete;
+  TfMessage& operator=(const TfMessage&) = delete;
+  void clear() noexcept;
+  // False when full.
+  bool add(std::int64_t utc_ns, std::string_view parent, std::string_view child, const RigidTransform& t) noexcept;
+  std::size_t size() const noexcept { return msg_.transforms._length; }
+  tf2_msgs_msg_dds__TFMessage_& sample() noexcept { return msg_; }
+
+ private:
+  struct Names {
+    FixedString<64> parent, child;
+  };
+  std::vector<Names> names_;
+  std::vector<geometry_msgs_msg_dds__TransformStamped_> transforms_;
+  tf2_msgs_msg_dds__TFMessage_ msg_{};
+};
+
+// The transform utm_<zone> -> odom from a pose snapshot's two frames of one
+// instant: the rotation is the UTM yaw minus the odometry yaw; z puts the
+// robot at its UTM altitude.
+RigidTransform utm_to_odom(const pose::LocalPose& local, const pose::UtmPose& utm) noexcept;
+
+// Variances trailnavd states for its odometry (docs/dds.md, "Odometry"): the
+// pose thread has no covariance of its own, so these model what
+// docs/pose.md measured.
+struct OdometryNoise {
+  double position_sigma_per_m = 0.06;  // m per m driven: the measured drift (4-9 % per 100 m)
+  double position_sigma_min = 0.01;    // m
+  double yaw_sigma_per_m = 0.002;      // rad per m driven
+  double attitude_sigma = 0.005;       // rad, roll and pitch from gravity (0.13 deg RMS measured, with margin)
+  double speed_sigma = 0.05;           // m/s, forward speed (wheel speeds)
+  double yaw_rate_sigma = 0.01;        // rad/s, yaw rate (gyro)
+  double lateral_sigma = 0.01;         // m/s, sideways and vertical speed: zero by the vehicle's kinematics
+};
+
+// nav_msgs/Odometry: the pose in `odom`, the twist in the robot frame.
+class OdometryMessage {
+ public:
+  OdometryMessage(std::string_view frame_id, std::string_view child_frame_id, const OdometryNoise& noise = {});
+  OdometryMessage(const OdometryMessage&) = delete;
+  OdometryMessage& operator=(const OdometryMessage&) = delete;
+  void fill(const pose::LocalPose& pose) noexcept;
+  nav_msgs_msg_dds__Odometry_& sample() noexcept { return msg_; }
+
+ private:
+  FixedString<64> frame_, child_;
+  OdometryNoise noise_;
+  nav_msgs_msg_dds__Odometry_ msg_{};
 };
 
 // nav_msgs/Path with room for `capacity` poses.

@@ -1,6 +1,7 @@
 #include "publisher.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <ctime>
 
 namespace trailnav::dds {
@@ -28,7 +29,9 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     // own slot can be looked at before the writer starts.
     const perception::ObstacleSnapshot& shape = p->inputs_.obstacles->last_read();
     p->grid_.emplace(shape.size_x, shape.size_y, options.odom_frame);
-    make(p->map_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.obstacle_map, {true, 1});
+    // Transient local: offered durability at least what is requested, so both
+    // volatile readers and the transient-local ones map consumers use match.
+    make(p->map_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.obstacle_map, {true, 1, Durability::transient_local});
   }
   if (p->inputs_.terrain != nullptr) {
     const perception::TerrainClassMap& shape = p->inputs_.terrain->last_read();
@@ -49,6 +52,18 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     make(p->path_writer_, nav_msgs_msg_dds__Path__desc, options.topics.subgoal_path, {true, 1, Durability::transient_local});
   }
   make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
+  if (options.publish_tf) {
+    // As ROS 2's tf2 does: rt/tf reliable, volatile, keep last 100;
+    // rt/tf_static reliable, transient local, keep last 1 (one message holds
+    // every static transform, so a late joiner gets them all).
+    make(p->tf_writer_, tf2_msgs_msg_dds__TFMessage__desc, options.topics.tf, {true, 100});
+    make(p->tf_static_writer_, tf2_msgs_msg_dds__TFMessage__desc, options.topics.tf_static, {true, 1, Durability::transient_local});
+    p->tf_static_msg_.emplace(std::max<std::size_t>(options.static_frames.size(), 1));
+    if (p->inputs_.poses != nullptr) {
+      p->odometry_msg_.emplace(options.odom_frame, options.frames.base_link);
+      make(p->odometry_writer_, nav_msgs_msg_dds__Odometry__desc, options.topics.odometry, {true, 10});
+    }
+  }
   if (!result.error.empty()) return result;
   result.publisher = std::move(p);
   return result;
@@ -58,6 +73,7 @@ DdsPublisher::~DdsPublisher() { stop(); }
 
 void DdsPublisher::start() {
   if (running_.exchange(true)) return;
+  publish_static_frames();
   thread_ = std::thread([this] { loop(); });
 }
 
@@ -78,6 +94,8 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.write_failures = failures_.load(std::memory_order_relaxed);
   s.subgoals = subgoals_.load(std::memory_order_relaxed);
   s.paths = paths_.load(std::memory_order_relaxed);
+  s.transforms = transforms_.load(std::memory_order_relaxed);
+  s.odometry = odometry_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
   return s;
 }
@@ -98,12 +116,70 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
     health_msg_.value("subgoals", s.subgoals);
     health_msg_.value("paths", s.paths);
   }
+  if (tf_writer_) {
+    health_msg_.value("tf_messages", s.transforms);
+    health_msg_.value("odometry", s.odometry);
+  }
   health_msg_.value("write_failures", s.write_failures);
   if (health_writer_->write(&health_msg_.sample())) {
     health_.fetch_add(1, std::memory_order_relaxed);
   } else {
     failures_.fetch_add(1, std::memory_order_relaxed);
   }
+}
+
+void DdsPublisher::count(bool written, std::atomic<std::uint64_t>& counter) noexcept {
+  (written ? counter : failures_).fetch_add(1, std::memory_order_relaxed);
+}
+
+void DdsPublisher::publish_static_frames() noexcept {
+  if (!tf_static_writer_) return;
+  // Stamped once, at start-up: static transforms hold for every time.
+  const std::int64_t now = wall_clock_ns();
+  tf_static_msg_->clear();
+  for (const StaticFrame& f : options_.static_frames) {
+    tf_static_msg_->add(now, options_.frames.base_link, f.frame, f.transform);
+  }
+  if (tf_static_msg_->size() > 0) count(tf_static_writer_->write(&tf_static_msg_->sample()), transforms_);
+}
+
+void DdsPublisher::publish_pose(const pose::PoseSnapshot& p) noexcept {
+  if (p.local.source != pose::PoseSource::none) {
+    pose_msg_.fill(p.local);
+    count(pose_writer_->write(&pose_msg_.sample()), poses_);
+    if (odometry_writer_) {
+      odometry_msg_->fill(p.local);
+      count(odometry_writer_->write(&odometry_msg_->sample()), odometry_);
+    }
+    if (tf_writer_) {
+      // odom -> base_link at the pose's time; map (UTM) -> odom of the same
+      // instant once the GPS alignment has a position and a heading.
+      tf_msg_.clear();
+      tf_msg_.add(p.local.time_ns, options_.odom_frame, options_.frames.base_link,
+                  {p.local.x, p.local.y, p.local.z, p.local.roll, p.local.pitch, p.local.yaw});
+      if (p.utm.position_valid && p.utm.heading_valid) {
+        if (options_.frames.map == "utm") {
+          std::snprintf(map_frame_.data(), map_frame_.size(), "utm_%d%c", p.utm.zone, p.utm.north ? 'N' : 'S');
+        } else {
+          std::snprintf(map_frame_.data(), map_frame_.size(), "%s", options_.frames.map.c_str());
+        }
+        tf_msg_.add(p.local.time_ns, map_frame_.data(), options_.odom_frame, utm_to_odom(p.local, p.utm));
+      }
+      count(tf_writer_->write(&tf_msg_.sample()), transforms_);
+    }
+  }
+  if (utm_msg_.fill(p.utm)) {
+    const bool a = utm_writer_->write(&utm_msg_.utm());
+    const bool b = fix_writer_->write(&utm_msg_.fix());
+    count(a && b, fixes_);
+  }
+}
+
+void DdsPublisher::publish_map_instant(const perception::ObstacleSnapshot& s) noexcept {
+  tf_msg_.clear();
+  tf_msg_.add(s.time_ns, options_.odom_frame, options_.frames.base_link,
+              {s.robot_x, s.robot_y, s.robot_z, s.robot_roll, s.robot_pitch, s.robot_yaw});
+  count(tf_writer_->write(&tf_msg_.sample()), transforms_);
 }
 
 void DdsPublisher::publish_navigation(const nav::NavigationSnapshot& n) noexcept {
@@ -154,6 +230,7 @@ void DdsPublisher::loop() noexcept {
         } else {
           failures_.fetch_add(1, std::memory_order_relaxed);
         }
+        if (tf_writer_ && options_.map_instant_tf) publish_map_instant(*snap);
         any_map = true;
         last_map = now;
         lidar_stale_.store(false, std::memory_order_relaxed);
@@ -182,17 +259,7 @@ void DdsPublisher::loop() noexcept {
     }
     if (pose_writer_ && now >= next_pose) {
       next_pose = std::max(next_pose + pose_period, now);
-      if (const pose::PoseSnapshot* p = inputs_.poses->try_read()) {
-        if (p->local.source != pose::PoseSource::none) {
-          pose_msg_.fill(p->local);
-          if (pose_writer_->write(&pose_msg_.sample())) poses_.fetch_add(1, std::memory_order_relaxed);
-        }
-        if (utm_msg_.fill(p->utm)) {
-          const bool a = utm_writer_->write(&utm_msg_.utm());
-          const bool b = fix_writer_->write(&utm_msg_.fix());
-          if (a && b) fixes_.fetch_add(1, std::memory_order_relaxed);
-        }
-      }
+      if (const pose::PoseSnapshot* p = inputs_.poses->try_read()) publish_pose(*p);
     }
     if (now >= next_health) {
       next_health = std::max(next_health + health_period, now);

@@ -22,6 +22,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "dds.hpp"
 #include "messages.hpp"
@@ -46,12 +47,37 @@ struct TopicNames {
   std::string subgoal = "trailnav/subgoal";
   std::string subgoal_path = "trailnav/subgoal_path";
   std::string health = "diagnostics";
+  std::string tf = "tf";                // tf2's topics: rt/tf and rt/tf_static
+  std::string tf_static = "tf_static";
+  std::string odometry = "odom";        // nav_msgs/Odometry, Nav2's default
+};
+
+// REP 105 frame names (docs/dds.md, "Frames"). `map`: the frame of the GPS
+// alignment; "utm" names it after the zone (utm_32N), anything else is used
+// as it is (e.g. map).
+struct FrameNames {
+  std::string map = "utm";
+  std::string base_link = "base_link";
+  std::string lidar = "velodyne";
+  std::string imu = "imu_link";
+};
+
+// A sensor's place on the robot: published once on tf_static, base_link -> frame.
+struct StaticFrame {
+  std::string frame;
+  RigidTransform transform;
 };
 
 struct PublisherOptions {
   TopicNames topics;
   std::string odom_frame = "odom";
-  std::string fix_frame = "gps";
+  std::string fix_frame = "gps";        // the GPS antenna's frame (NavSatFix)
+  FrameNames frames;
+  bool publish_tf = true;               // rt/tf, rt/tf_static and odometry
+  // Each obstacle map's own odom -> base_link (the pose it was placed with, at
+  // its stamp) also goes out on tf; only when the map moves with the pose.
+  bool map_instant_tf = false;
+  std::vector<StaticFrame> static_frames;  // set by trailnavd from the config's mounts
   double pose_rate_hz = 20.0;
   double health_period = 1.0;  // s
   double stale_after = 0.5;    // s without a new obstacle map before the lidar counts as silent
@@ -75,6 +101,7 @@ struct PublisherInputs {
 struct PublisherStats {
   std::uint64_t maps = 0, stale_maps = 0, terrain_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
   std::uint64_t subgoals = 0, paths = 0;
+  std::uint64_t transforms = 0, odometry = 0;  // TFMessages on rt/tf, Odometry samples
   bool lidar_stale = false;
 };
 
@@ -96,6 +123,10 @@ class DdsPublisher {
   void loop() noexcept;
   void publish_health(Nanos now) noexcept;
   void publish_navigation(const nav::NavigationSnapshot& snapshot) noexcept;
+  void publish_pose(const pose::PoseSnapshot& p) noexcept;
+  void publish_map_instant(const perception::ObstacleSnapshot& s) noexcept;
+  void publish_static_frames() noexcept;
+  void count(bool written, std::atomic<std::uint64_t>& counter) noexcept;
 
   Clock& clock_;
   PublisherOptions options_;
@@ -103,6 +134,11 @@ class DdsPublisher {
   Wakeup wakeup_;
   std::unique_ptr<Writer> map_writer_, terrain_writer_, cost_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
   std::unique_ptr<Writer> subgoal_writer_, path_writer_;
+  std::unique_ptr<Writer> tf_writer_, tf_static_writer_, odometry_writer_;
+  TfMessage tf_msg_{2};
+  std::optional<TfMessage> tf_static_msg_;
+  std::optional<OdometryMessage> odometry_msg_;
+  std::array<char, 64> map_frame_{};  // the GPS alignment's frame
   std::optional<OccupancyGridMessage> grid_;
   std::optional<TerrainClassMapMessage> terrain_msg_;
   std::optional<OccupancyGridMessage> cost_msg_;
@@ -116,7 +152,7 @@ class DdsPublisher {
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
-  std::atomic<std::uint64_t> subgoals_{0}, paths_{0};
+  std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0};
   std::atomic<bool> lidar_stale_{false};
 };
 

@@ -11,6 +11,7 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "tf2_msgs.h"
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav_msgs.h"
 
@@ -50,7 +51,8 @@ const dds_topic_descriptor_t* known_type(const std::string& name) noexcept {
       &nav_msgs_msg_dds__OccupancyGrid__desc,       &nav_msgs_msg_dds__Path__desc,
       &geometry_msgs_msg_dds__PoseStamped__desc,    &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc,
       &sensor_msgs_msg_dds__NavSatFix__desc,        &diagnostic_msgs_msg_dds__DiagnosticArray__desc,
-      &trailnav_msgs_msg_dds__TerrainClassMap__desc};
+      &trailnav_msgs_msg_dds__TerrainClassMap__desc, &tf2_msgs_msg_dds__TFMessage__desc,
+      &nav_msgs_msg_dds__Odometry__desc};
   for (const dds_topic_descriptor_t* t : kTypes) {
     if (name == t->m_typename) return t;
   }
@@ -86,7 +88,11 @@ Subscriber::Created Subscriber::create(const Domain& domain, const std::string& 
   dds_qos_t* q = dds_create_qos();
   dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
   dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 32);
-  if (transient_local || type == &nav_msgs_msg_dds__Path__desc) dds_qset_durability(q, DDS_DURABILITY_TRANSIENT_LOCAL);
+  // Paths and tf_static are offered transient local by their writers (tf2's
+  // convention for tf_static): a late subscriber then still gets them.
+  if (transient_local || type == &nav_msgs_msg_dds__Path__desc || s->topic_ == "rt/tf_static") {
+    dds_qset_durability(q, DDS_DURABILITY_TRANSIENT_LOCAL);
+  }
   s->reader_ = dds_create_reader(domain.participant(), s->topic_entity_, q, nullptr);
   dds_delete_qos(q);
   if (s->reader_ < 0) {

@@ -14,9 +14,15 @@
 // how two threads happen to interleave; offline (`trailnav obstacles
 // --terrain estimated`) the two run in lockstep.
 //
-// The daemon's pose moves neither map (pose.feed_obstacles / feed_terrain:
-// false): its pose comes from host receive times, which no two runs share,
-// while the lidar's time comes from the recording's GPS time (position packets).
+// The daemon's pose moves neither map here (pose.feed_obstacles /
+// feed_terrain: false): its pose comes from host receive times, which no two
+// runs share. The lidar's time comes from the recording's GPS time (position
+// packets), months before the host's; trailnavd relates it to the host clock
+// (one time base, docs/dds.md) and stamps maps on the host clock, so a map
+// is matched to its offline twin through the lidar clock offset that health
+// reports, and every map's stamp lies within a few milliseconds of the poses
+// that arrive with it. With navigation the obstacle map moves with the pose,
+// and each map's own odom -> base_link goes out on rt/tf at its stamp.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -26,6 +32,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -49,6 +56,7 @@
 #include "sim_truth.hpp"
 #include "simulator.hpp"
 #include "subscriber.hpp"
+#include "tf2_msgs.h"
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/runtime/histogram.hpp"
 #include "trailnav_msgs.h"
@@ -70,6 +78,15 @@ struct DaemonRun {
   double narrowest_trail = 0.0;        // m, the scenario's narrowest trail
   std::size_t paths = 0, last_path_poses = 0, late_subgoals = 0, late_paths = 0;
   std::size_t subgoals_unmatched = 0;  // no odometry pose near its stamp: not checked
+  // One clock: map stamp minus the newest pose stamp received before it.
+  std::vector<double> map_minus_pose_ms;
+  std::int64_t lidar_clock_offset_ns = 0;  // as health reported it last
+  // TF: messages on rt/tf and rt/tf_static, odometry samples, and per map
+  // the distance between its own odom -> base_link and the pose-rate
+  // transforms interpolated at its stamp.
+  std::size_t tf = 0, tf_static_frames = 0, odometry = 0, maps_with_tf = 0;
+  std::vector<double> map_tf_vs_pose_m;
+  bool utm_to_odom = false;
   DurationSummary latency;  // last packet of a revolution -> subscriber
   long rss_start_kb = 0, rss_end_kb = 0;  // after the warm-up (a third of the drive, at least 4 s), at its end
   long rss_after_kb = 0;                  // after the silence and the late subscribers (Cyclone's discovery allocates)
@@ -140,7 +157,8 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       << "can: {transport: tunnel, tunnel: 127.0.0.1:" << base + 2 << ", dbc: " << fs::absolute("board/sim/trailnav-robot.dbc").string()
       << ", left: WHEEL_SPEEDS.SpeedLeft, right: WHEEL_SPEEDS.SpeedRight, track: 0.6}\n"
       << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
-      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: false, feed_terrain: " << (navigation ? "true" : "false") << "}\n"
+      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: " << (navigation ? "true" : "false")
+      << ", feed_terrain: " << (navigation ? "true" : "false") << "}\n"
       << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
       << "terrain: {model: " << fs::absolute("board/models/terrain-sim.tnrf").string() << ", max_step_interval: 1.0}\n"
       << "dds: {domain: " << domain << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5}\n"
@@ -187,6 +205,12 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   auto subgoal = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal", &geometry_msgs_msg_dds__PoseStamped__desc, 0, true);
   auto subgoal_path = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal_path", &nav_msgs_msg_dds__Path__desc, 0);
   EXPECT_TRUE(subgoal.subscriber && subgoal_path.subscriber);
+  auto tf = dds::Subscriber::create(*dds_domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0);
+  auto odometry = dds::Subscriber::create(*dds_domain.domain, "odom", &nav_msgs_msg_dds__Odometry__desc, 0);
+  EXPECT_TRUE(tf.subscriber && odometry.subscriber);
+  // odom -> base_link transforms by stamp (pose-rate ones and each map's own).
+  std::map<std::int64_t, std::array<double, 2>> base_tf;
+  std::int64_t newest_pose_ns = 0;
 
   // trailnavd itself, as systemd would run it (stderr to a file).
   const std::string err_path = (dir / "trailnavd.err").string();
@@ -247,6 +271,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       }
       received[stamp].assign(g.data._buffer, g.data._buffer + g.data._length);
       latency.record(r.receive_ns - r.source_ns);
+      if (newest_pose_ns > 0) out.map_minus_pose_ms.push_back(static_cast<double>(stamp - newest_pose_ns) * 1e-6);
     });
     terrain.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& t = *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample);
@@ -258,6 +283,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
       ++out.poses;
+      newest_pose_ns = std::max(newest_pose_ns, stamp_ns(p.header));
       trail_check.add_odometry_pose(stamp_ns(p.header), p.pose.position.x, p.pose.position.y,
                                     2.0 * std::atan2(p.pose.orientation.z, p.pose.orientation.w));
     });
@@ -269,7 +295,29 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       ++out.paths;
       out.last_path_poses = static_cast<const nav_msgs_msg_dds__Path_*>(r.sample)->poses._length;
     });
-    health.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.health; });
+    health.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      ++out.health;
+      const auto& a = *static_cast<const diagnostic_msgs_msg_dds__DiagnosticArray_*>(r.sample);
+      for (std::uint32_t i = 0; i < a.status._length; ++i) {
+        if (std::strcmp(a.status._buffer[i].name, "trailnavd: lidar") != 0) continue;
+        for (std::uint32_t k = 0; k < a.status._buffer[i].values._length; ++k) {
+          const auto& kv = a.status._buffer[i].values._buffer[k];
+          if (std::strcmp(kv.key, "clock_offset_s") == 0) out.lidar_clock_offset_ns = std::llround(std::stod(kv.value) * 1e9);
+        }
+      }
+    });
+    tf.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      ++out.tf;
+      const auto& m = *static_cast<const tf2_msgs_msg_dds__TFMessage_*>(r.sample);
+      for (std::uint32_t i = 0; i < m.transforms._length; ++i) {
+        const auto& t = m.transforms._buffer[i];
+        if (std::strcmp(t.header.frame_id, "odom") == 0 && std::strcmp(t.child_frame_id, "base_link") == 0) {
+          base_tf[stamp_ns(t.header)] = {t.transform.translation.x, t.transform.translation.y};
+        }
+        if (std::strncmp(t.header.frame_id, "utm_", 4) == 0 && std::strcmp(t.child_frame_id, "odom") == 0) out.utm_to_odom = true;
+      }
+    });
+    odometry.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.odometry; });
   };
   // The first RSS reading after the warm-up (the first plans, paths and
   // samples of each size fault in their pages during the first ~15 s).
@@ -296,6 +344,16 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       late_path.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.late_paths; });
     }
   }
+  {
+    // A late joiner gets the sensors' places (transient local).
+    auto tf_static = dds::Subscriber::create(*dds_domain.domain, "tf_static", &tf2_msgs_msg_dds__TFMessage__desc, 5.0);
+    EXPECT_TRUE(tf_static.subscriber) << tf_static.error;
+    for (int i = 0; i < 20 && tf_static.subscriber && out.tf_static_frames == 0; ++i) {
+      tf_static.subscriber->take(0.1, [&](const dds::ReceivedSample& r) {
+        out.tf_static_frames = static_cast<const tf2_msgs_msg_dds__TFMessage_*>(r.sample)->transforms._length;
+      });
+    }
+  }
   out.rss_after_kb = rss_kb(pid);
   ::kill(pid, SIGTERM);
   int status = 0;
@@ -304,6 +362,25 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   out.stderr_text = read_file(err_path);
   out.maps = received.size();
   out.latency = latency.summary();
+  // Each map's own transform against the pose-rate ones around its stamp
+  // (those not at a map's stamp), interpolated linearly.
+  for (const auto& [stamp, data] : received) {
+    const auto own = base_tf.find(stamp);
+    if (own == base_tf.end()) continue;
+    ++out.maps_with_tf;
+    auto after = std::next(own);
+    while (after != base_tf.end() && received.count(after->first) != 0) ++after;
+    auto before = own;
+    while (before != base_tf.begin()) {
+      --before;
+      if (received.count(before->first) == 0) break;
+    }
+    if (after == base_tf.end() || before == own || received.count(before->first) != 0) continue;
+    const double f = static_cast<double>(stamp - before->first) / static_cast<double>(after->first - before->first);
+    const double x = before->second[0] + f * (after->second[0] - before->second[0]);
+    const double y = before->second[1] + f * (after->second[1] - before->second[1]);
+    out.map_tf_vs_pose_m.push_back(std::hypot(x - own->second[0], y - own->second[1]));
+  }
   if (navigation) {
     if (!truth.trajectory.empty()) trail_check.set_offset(replay_start_ns - truth.trajectory.front().utc_ns);
     for (const Stamped& g : subgoals_received) {
@@ -335,8 +412,11 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   EXPECT_EQ(report.error, "");
   out.offline = offline.size();
   for (const auto& [stamp, data] : received) {
-    const auto it = offline.find(stamp);
-    if (it == offline.end()) continue;
+    // The offline twin: its lidar-clock time plus the offset health reported
+    // (provisional offsets of the first revolutions differ by microseconds).
+    const std::int64_t sensor = stamp - out.lidar_clock_offset_ns;
+    auto it = offline.lower_bound(sensor - 5'000'000);
+    if (it == offline.end() || it->first > sensor + 5'000'000) continue;
     ++out.matched;
     if (it->second == data) {
       ++out.identical;
@@ -372,8 +452,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     out.terrain = terrain_received.size();
     out.terrain_offline = terrain_offline.size();
     for (const auto& [stamp, data] : terrain_received) {
-      const auto it = terrain_offline.find(stamp);
-      if (it == terrain_offline.end()) continue;
+      const std::int64_t sensor = stamp - out.lidar_clock_offset_ns;
+      const auto it = terrain_offline.lower_bound(sensor - 5'000'000);
+      if (it == terrain_offline.end() || it->first > sensor + 5'000'000) continue;
       ++out.terrain_matched;
       if (it->second == data) ++out.terrain_identical;
     }
@@ -387,7 +468,24 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   return out;
 }
 
+// The largest absolute value, or -1 when empty.
+double max_abs(const std::vector<double>& v) {
+  double m = -1.0;
+  for (double x : v) m = std::max(m, std::abs(x));
+  return m;
+}
+
+void report_clock(const DaemonRun& r) {
+  std::printf("[ trailnavd clock ] lidar clock offset %.6f s; map stamp minus newest pose stamp over %zu maps: max |%.1f| ms; "
+              "tf messages %zu, odometry %zu, tf_static frames %zu, maps with their own transform %zu, "
+              "their distance from the pose-rate transforms at the same stamp max %.3f m (%zu checked), utm -> odom %s\n",
+              static_cast<double>(r.lidar_clock_offset_ns) * 1e-9, r.map_minus_pose_ms.size(), max_abs(r.map_minus_pose_ms), r.tf,
+              r.odometry, r.tf_static_frames, r.maps_with_tf, max_abs(r.map_tf_vs_pose_m), r.map_tf_vs_pose_m.size(),
+              r.utm_to_odom ? "seen" : "not seen");
+}
+
 void report(const DaemonRun& r, const char* what) {
+  report_clock(r);
   const auto ms = [](Nanos v) { return nanos_to_seconds(v) * 1e3; };
   std::printf("[ trailnavd %s ] maps %zu (offline %zu, same stamp %zu, identical %zu), stale resent %zu, poses %zu, health %zu; "
               "latency last packet -> subscriber p50 %.2f ms p99 %.2f ms max %.2f ms; RSS %ld -> %ld kB over the drive, %ld kB after the late subscribers; "
@@ -428,6 +526,21 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   EXPECT_GE(r.terrain_matched, r.terrain_offline - 1);
   EXPECT_EQ(r.terrain_identical, r.terrain_matched);
   EXPECT_GT(r.terrain_known, 1000u);
+  // One time base: the recording's GPS time lies months before the host's,
+  // yet every map is stamped close to the poses arriving with it. A pose is
+  // published every 50 ms with the newest IMU or wheel reading's time and a
+  // map a few ms after its last packet, so on an idle machine the two differ
+  // by up to about 60 ms (88 ms seen); the bound leaves room for a loaded
+  // machine delaying the publisher, and is still 10^7 times smaller than
+  // the clocks' offset. (Same instant to the millisecond: the navigation
+  // test's map-instant transforms.)
+  EXPECT_GT(r.lidar_clock_offset_ns, 86'400'000'000'000LL);  // more than a day
+  ASSERT_GE(r.map_minus_pose_ms.size(), 60u);
+  EXPECT_LE(max_abs(r.map_minus_pose_ms), 1000.0);
+  // TF and odometry at the pose rate, the three sensors' places on tf_static.
+  EXPECT_GE(r.tf, 100u);
+  EXPECT_GE(r.odometry, 100u);
+  EXPECT_EQ(r.tf_static_frames, 3u);
 }
 
 // The navigation task in the daemon: planned on the recording's OpenStreetMap
@@ -449,6 +562,7 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
               "and %zu path(s)\n%s",
               e.size(), e.empty() ? 0.0 : e.front(), first, second, second_max, r.narrowest_trail, r.paths, r.last_path_poses, r.late_subgoals,
               r.late_paths, r.stderr_text.c_str());
+  report_clock(r);
   std::printf("[ trailnavd navigation ] each subgoal's distance [m]:");
   for (double v : e) std::printf(" %.2f", v);
   std::printf("\n");
@@ -473,6 +587,15 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   EXPECT_GE(r.late_subgoals, 1u);
   EXPECT_GE(r.late_paths, 1u);
   EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
+  // The obstacle map moves with the pose here: every map's own odom ->
+  // base_link is on rt/tf at its stamp, and it is where the pose-rate
+  // transforms put the robot at that instant (same clock; a map whose pose
+  // was the newest sample rather than an interpolation is off by at most
+  // the distance driven in one pose period of 10 ms).
+  EXPECT_GE(r.maps_with_tf, r.maps - 2);
+  ASSERT_GE(r.map_tf_vs_pose_m.size(), 100u);
+  EXPECT_LE(max_abs(r.map_tf_vs_pose_m), 0.10);
+  EXPECT_TRUE(r.utm_to_odom);
 }
 
 // The 60 s measurement of the issue: latency percentiles, RSS, overruns.

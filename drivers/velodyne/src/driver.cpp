@@ -44,7 +44,10 @@ VelodyneDriver::VelodyneDriver(PacketDecoder decoder, const DriverOptions& optio
       shape_(shape),
       revolutions_(static_cast<std::size_t>(std::max(1, options.revolution_readers)), shape),
       sink_(revolutions_),
-      clock_(options.clock) {}
+      clock_(options.clock),
+      reference_(options.reference) {
+  sink_.reference = &reference_;
+}
 
 std::optional<udp::Endpoint> VelodyneDriver::position_endpoint() const noexcept {
   if (!position_) return std::nullopt;
@@ -53,6 +56,7 @@ std::optional<udp::Endpoint> VelodyneDriver::position_endpoint() const noexcept 
 
 void VelodyneDriver::Sink::complete(RangeImage& image) noexcept {
   image.completed_receive_ns = receive_ns;
+  image.clock_offset_ns = reference != nullptr ? reference->offset_ns() : 0;
   mailbox.publish();
   if (event != nullptr) event->signal(run_started);
 }
@@ -98,6 +102,8 @@ void VelodyneDriver::run(const TaskTick& tick) {
       const std::int64_t t = clock_.resolve(read_u32(d.payload.data() + kTimestampOffset), d.receive_ns);
       sink_.receive_ns = d.receive_ns;
       assembler_->add_packet(d.payload, t, sink_);
+      // The packet leaves the sensor after its last firing.
+      reference_.add(assembler_->last_firing_ns(), d.receive_ns);
       local_.last_packet_ns = d.receive_ns;
     }
     if (batch.size() < static_cast<std::size_t>(data_->options().batch)) break;
@@ -112,6 +118,7 @@ void VelodyneDriver::publish_counters() noexcept {
   local_.time_source = clock_.source();
   local_.time_steps = clock_.steps();
   local_.time_clamped = clock_.clamped();
+  local_.reference = reference_.state();
   shared_.post(local_);
 }
 

@@ -56,6 +56,15 @@ void PoseTask::run(const TaskTick& tick) {
   if (gps_ != nullptr) {
     if (const gps::GpsReading* g = gps_->try_read()) {
       ++local_.gps_fixes;
+      if (estimator_.fix_time(g->fix, g->receive_ns) == g->fix.utc_ns && g->fix.has_date) {
+        ++local_.gps_fixes_at_utc;
+      } else {
+        ++local_.gps_fixes_at_receive;
+      }
+      if (g->fix.has_date) {
+        local_.gps_has_utc = true;
+        local_.gps_receive_minus_utc_ns = g->receive_ns - g->fix.utc_ns;
+      }
       estimator_.add_gps(g->fix, g->receive_ns);
       changed = true;
     }

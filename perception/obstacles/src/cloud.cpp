@@ -78,6 +78,7 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   out.reset(columns);
   out.sequence = image.sequence;
   out.time_ns = image.end_ns;
+  out.clock_offset_ns = image.clock_offset_ns;
   out.full_turn = true;
 
   double mount_r[9];
@@ -87,7 +88,8 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   // The reference: the sensor at the end of the revolution.
   Pose end{};
   if (moving) {
-    poses->at(image.end_ns, end);
+    // Poses are on the reference clock (docs/dds.md, "One clock").
+    poses->at(image.reference_end_ns(), end);
   } else {
     end.roll = fixed_roll_;
     end.pitch = fixed_pitch_;
@@ -102,6 +104,9 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   out.robot_x = end.x;
   out.robot_y = end.y;
   out.robot_yaw = end.yaw;
+  out.robot_z = end.z;
+  out.robot_roll = end.roll;
+  out.robot_pitch = end.pitch;
 
   // Each column's sensor -> reference transform (rotation row-major, then
   // translation), computed once per column; the points are then read ring
@@ -123,7 +128,7 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
     float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
     if (image.column_state(c) != velodyne::ColumnState::received) continue;
     if (moving) {
-      const auto when = image.start_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns);
+      const auto when = image.start_ns + image.clock_offset_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns);
       Pose p{};
       if (poses->at(when, p) == PoseLookup::interpolated) {
         ++counters_.pose_interpolated;

@@ -14,7 +14,11 @@ void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, Obstacl
   out.robot_x = cloud.robot_x;
   out.robot_y = cloud.robot_y;
   out.robot_yaw = cloud.robot_yaw;
-  out.time_ns = cloud.time_ns;
+  out.robot_z = cloud.robot_z;
+  out.robot_roll = cloud.robot_roll;
+  out.robot_pitch = cloud.robot_pitch;
+  out.time_ns = cloud.time_ns + cloud.clock_offset_ns;
+  out.sensor_time_ns = cloud.time_ns;
   out.received_ns = 0;
   out.revolution = cloud.sequence;
   map.export_occupancy(out.occupancy);

@@ -37,6 +37,7 @@ void TerrainClassMap::copy_from(const TerrainClassMap& other) noexcept {
   grid_.assign_from(other.grid_);
   sequence = other.sequence;
   time_ns = other.time_ns;
+  clock_offset_ns = other.clock_offset_ns;
 }
 
 void TerrainClassMap::export_classes(std::span<std::uint8_t> class_id, std::span<std::uint8_t> confidence) const noexcept {

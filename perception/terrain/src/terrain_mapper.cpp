@@ -185,6 +185,7 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   counters_.known_cells = known;
   map_.sequence = counters_.steps;
   map_.time_ns = now_ns;
+  map_.clock_offset_ns = cloud_.clock_offset_ns;
 }
 
 void TerrainMapper::add_area_row(std::int32_t y) noexcept {

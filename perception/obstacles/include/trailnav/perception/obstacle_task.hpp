@@ -33,10 +33,12 @@ struct ObstacleSnapshot {
   double resolution = 0.0;
   double origin_x = 0.0;  // odometry frame, m: the lower-left corner of cell (0, 0)
   double origin_y = 0.0;
-  double robot_x = 0.0;
+  double robot_x = 0.0;  // the pose the revolution was placed with (odometry frame, at time_ns)
   double robot_y = 0.0;
   double robot_yaw = 0.0;
-  std::int64_t time_ns = 0;           // end of the revolution
+  double robot_z = 0.0, robot_roll = 0.0, robot_pitch = 0.0;
+  std::int64_t time_ns = 0;           // end of the revolution, reference clock (what the map is stamped with)
+  std::int64_t sensor_time_ns = 0;    // the same instant on the lidar's clock
   std::int64_t received_ns = 0;       // host receive time of the packet that completed it (0 offline)
   std::uint64_t revolution = 0;       // the range image's sequence number
   std::uint64_t terrain_sequence = 0; // terrain map used (0: none)

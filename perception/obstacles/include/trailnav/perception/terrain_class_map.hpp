@@ -75,7 +75,8 @@ class TerrainClassMap {
   void export_classes(std::span<std::uint8_t> class_id, std::span<std::uint8_t> confidence) const noexcept;
 
   std::uint64_t sequence = 0;   // snapshot number
-  std::int64_t time_ns = 0;     // when the snapshot was taken
+  std::int64_t time_ns = 0;     // when the snapshot was taken (the revolution's end, lidar clock)
+  std::int64_t clock_offset_ns = 0;  // reference clock minus the lidar's at that revolution
 
  private:
   TerrainMapShape shape_;

@@ -14,6 +14,7 @@
 #include "trailnav/drivers/velodyne/range_image.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 #include "trailnav/runtime/broadcast.hpp"
+#include "trailnav/runtime/clock_relation.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/status_board.hpp"
@@ -26,6 +27,7 @@ struct DriverOptions {
   std::optional<udp::ReceiverOptions> position;  // 8308; none: no position packets
   AssemblerOptions assembler;
   SensorClockOptions clock;
+  ClockRelationOptions reference;  // the sensor clock against the host's (runtime/clock_relation.hpp)
   int max_batches_per_run = 32;  // bounds one run's work; the rest waits for the next run
   int revolution_readers = 1;    // threads that read revolutions (obstacles, terrain): one slot each
 
@@ -57,6 +59,9 @@ struct DriverCounters {
   std::uint64_t time_clamped = 0;
   TimeSource time_source = TimeSource::none;
   std::int64_t last_packet_ns = 0;        // receive time of the newest data packet
+  // The packets' times (last firing of each) against their host receive
+  // times: the offset that puts revolutions on the reference clock.
+  ClockRelationState reference;
 };
 
 class VelodyneDriver final : public Task {
@@ -97,6 +102,7 @@ class VelodyneDriver final : public Task {
     void complete(RangeImage& image) noexcept override;
     Broadcast<RangeImage>& mailbox;
     TaskEvent* event = nullptr;
+    const ClockRelation* reference = nullptr;
     std::int64_t receive_ns = 0;  // of the packet being added
     Nanos run_started = 0;        // the driver's current run (scheduler clock)
   };
@@ -106,6 +112,7 @@ class VelodyneDriver final : public Task {
   Sink sink_;
   Mailbox<PositionSnapshot> positions_;
   SensorClock clock_;
+  ClockRelation reference_;
   std::unique_ptr<udp::UdpReceiver> data_;
   std::unique_ptr<udp::UdpReceiver> position_;
   DriverCounters local_;  // the task thread's own

@@ -82,6 +82,13 @@ class RangeImage {
   // Host receive time (CLOCK_REALTIME ns) of the packet that completed this
   // revolution, set by the driver task (0 offline): where latency is measured from.
   std::int64_t completed_receive_ns = 0;
+  // trailnavd's reference clock (host CLOCK_REALTIME) minus the sensor's
+  // clock that start_ns and end_ns are on, when the revolution was published
+  // (runtime/clock_relation.hpp; 0 offline). The times above stay on the
+  // sensor's clock so that a recording always gives the same revolutions;
+  // whatever relates them to poses or stamps them for others adds this.
+  std::int64_t clock_offset_ns = 0;
+  std::int64_t reference_end_ns() const noexcept { return end_ns + clock_offset_ns; }
 
   // Clears the first `columns` columns (no allocation). Used by the assembler.
   void reset(int columns) noexcept;
@@ -158,6 +165,8 @@ class RevolutionAssembler {
   // first firing (see SensorClock). Completed revolutions go to `sink`.
   // Returns the decoder's verdict; a rejected packet changes nothing.
   PacketError add_packet(std::span<const std::uint8_t> payload, std::int64_t packet_time_ns, RevolutionSink& sink) noexcept;
+  // The time of the newest firing placed so far (sensor clock).
+  std::int64_t last_firing_ns() const noexcept { return last_firing_ns_; }
 
   const AssemblerCounters& counters() const noexcept { return counters_; }
 

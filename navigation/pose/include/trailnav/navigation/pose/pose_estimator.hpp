@@ -66,6 +66,13 @@ struct PoseTaskStatus {
   std::uint64_t imu_readings = 0, wheel_readings = 0, gps_fixes = 0;
   std::uint64_t published = 0;
   std::uint64_t pose_queue_drops = 0;  // samples the perception threads' queue had no room for
+  // The GPS receiver's clock against the reference (host) clock: fixes placed
+  // at the receiver's UTC (within gps_time_tolerance of their receive time)
+  // or at their receive time minus gps_latency, and receive minus UTC of the
+  // newest fix that carried a date (its transfer latency plus any offset).
+  std::uint64_t gps_fixes_at_utc = 0, gps_fixes_at_receive = 0;
+  std::int64_t gps_receive_minus_utc_ns = 0;
+  bool gps_has_utc = false;
   LocalPose local;
   UtmPose utm;
   GyroOdometryCounters odometry_counters;
