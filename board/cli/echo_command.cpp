@@ -14,7 +14,9 @@
 #include "diagnostic_msgs.h"
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
+#include "geographic_msgs.h"
 #include "sensor_msgs.h"
+#include "std_msgs.h"
 #include "tf2_msgs.h"
 #include "trailnav_msgs.h"
 #include "map_png.hpp"
@@ -115,6 +117,23 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
                 head, stamp_s(o.header.stamp), o.header.frame_id, o.child_frame_id, o.pose.pose.position.x,
                 o.pose.pose.position.y, yaw * 180.0 / M_PI, o.twist.twist.linear.x, o.twist.twist.angular.z,
                 std::sqrt(o.pose.covariance[0]));
+  } else if (r.type == &trailnav_msgs_msg_dds__NavigationStatus__desc) {
+    const auto& s = *static_cast<const trailnav_msgs_msg_dds__NavigationStatus_*>(r.sample);
+    std::printf("%s  stamp %.3f  %s", head, stamp_s(s.header.stamp), s.state_name);
+    if (s.has_goal) {
+      std::printf(", goal %.7f %.7f (%s %.1f %.1f), %.1f of %.1f m to go, subgoal %u of %u", s.goal.latitude, s.goal.longitude,
+                  s.header.frame_id, s.goal_easting, s.goal_northing, s.distance_remaining, s.route_length, s.active_subgoal,
+                  s.subgoals);
+    }
+    std::printf("; goals %llu (refused %llu), cancels %llu, plans %llu%s%s\n", static_cast<unsigned long long>(s.goals_received),
+                static_cast<unsigned long long>(s.goals_refused), static_cast<unsigned long long>(s.cancels),
+                static_cast<unsigned long long>(s.plans), s.message[0] != '\0' ? "\n    " : "", s.message);
+  } else if (r.type == &geographic_msgs_msg_dds__GeoPoseStamped__desc) {
+    const auto& g = *static_cast<const geographic_msgs_msg_dds__GeoPoseStamped_*>(r.sample);
+    std::printf("%s  stamp %.3f  lat %.7f lon %.7f alt %.2f m\n", head, stamp_s(g.header.stamp), g.pose.position.latitude,
+                g.pose.position.longitude, g.pose.position.altitude);
+  } else if (r.type == &std_msgs_msg_dds__Empty__desc) {
+    std::printf("%s  (empty)\n", head);
   } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
     const auto& t = *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample);
     std::uint64_t counts[6] = {};

@@ -1,5 +1,6 @@
 #include "daemon.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 
@@ -36,6 +37,13 @@ std::string build_navigation(const RobotConfig& config, std::optional<osm::RoadG
 
 // One line on the loaded network and where the goal lies on it.
 std::string navigation_summary(const nav::NavigationSection& n, const osm::RoadGraph& g) {
+  if (std::isnan(n.navigator.goal_lat)) {
+    char text[300];
+    std::snprintf(text, sizeof text,
+                  "navigation: %s: %zu vertices, %zu segments, UTM zone %d%c; no goal yet: idle until one arrives on DDS",
+                  n.osm.c_str(), g.vertex_count(), g.segments().size(), g.zone(), g.north() ? 'N' : 'S');
+    return text;
+  }
   double gx = 0.0, gy = 0.0;
   g.to_utm(n.navigator.goal_lat, n.navigator.goal_lon, gx, gy);
   const auto goal = g.project(gx, gy);
@@ -179,6 +187,10 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     inputs.unknown_cost = config.terrain->unknown_cost;
   }
   inputs.navigation = d->navigation_out_.get();
+  if (d->navigation_) {
+    d->answers_ = std::make_unique<nav::NavStatusQueue>();
+    inputs.navigation_answers = d->answers_.get();
+  }
   Daemon* self = d.get();
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
   dds::PublisherOptions popt = config.dds.publisher;
@@ -202,6 +214,19 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   auto pub = dds::DdsPublisher::create(*d->domain_, d->clock_, popt, std::move(inputs));
   if (!pub.publisher) return fail("dds: " + pub.error);
   d->publisher_ = std::move(pub.publisher);
+  if (d->navigation_) {
+    // Orders from outside: read off the real-time path, checked by the navigator.
+    d->commands_ = std::make_unique<nav::NavCommandQueue>();
+    dds::CommandReaderOptions copt = config.dds.commands;
+    copt.odom_frame = popt.odom_frame;
+    copt.map_frame = popt.frames.map;
+    copt.zone = d->graph_->zone();
+    copt.north = d->graph_->north();
+    auto reader = dds::CommandReader::create(*d->domain_, copt, *d->commands_);
+    if (!reader.reader) return fail("dds: " + reader.error);
+    d->command_reader_ = std::move(reader.reader);
+    d->navigation_->set_commands(d->commands_.get(), d->answers_.get());
+  }
   if (d->obstacles_) d->obstacles_->set_notify(&d->publisher_->wakeup());
   if (d->terrain_) d->terrain_->set_notify(&d->publisher_->wakeup());
   if (d->navigation_) d->navigation_->set_notify(&d->publisher_->wakeup());
@@ -230,6 +255,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
 
 Status Daemon::start() {
   publisher_->start();
+  if (command_reader_) command_reader_->start();
   if (Status st = scheduler_->start(); !st) {
     publisher_->stop();
     return st;
@@ -243,6 +269,7 @@ Status Daemon::start() {
 
 void Daemon::stop() {
   if (gpio_) gpio_->set_ready(false);
+  if (command_reader_) command_reader_->stop();
   if (scheduler_ && scheduler_->running()) scheduler_->stop();
   if (publisher_) publisher_->stop();
   if (armed_) {
@@ -426,10 +453,21 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   }
   if (navigation_) {
     const nav::NavigationTaskStatus s = navigation_->status();
-    const bool bad = s.state == nav::NavState::no_route;
-    m.begin(bad ? L::error : (s.state == nav::NavState::waiting_for_pose ? L::warn : L::ok), "trailnavd: navigation",
-            bad && s.message[0] != '\0' ? s.message : nav::nav_state_name(s.state), config_.navigation->osm);
+    const bool bad = s.state == nav::NavState::failed;
+    const char* text = bad && s.message[0] != '\0' ? s.message : (s.refusal[0] != '\0' ? s.refusal.data() : nav::nav_state_name(s.state));
+    m.begin(bad ? L::error : (s.state == nav::NavState::planning || s.refusal[0] != '\0' ? L::warn : L::ok),
+            "trailnavd: navigation", text, config_.navigation->osm);
     m.value("state", nav::nav_state_name(s.state));
+    m.value("goals", s.navigator.goals);
+    m.value("goals_refused", s.navigator.goals_refused);
+    m.value("cancels", s.navigator.cancels);
+    m.value("remaining_m", s.remaining, 1);
+    if (command_reader_) {
+      const dds::CommandReaderStats c = command_reader_->stats();
+      m.value("goal_samples", c.goals + c.geo_goals);
+      m.value("cancel_samples", c.cancels);
+      m.value("orders_dropped", c.queue_full);
+    }
     m.value("subgoals", static_cast<std::uint64_t>(s.subgoals));
     m.value("active", static_cast<std::uint64_t>(s.active));
     m.value("route_m", s.route_length, 1);

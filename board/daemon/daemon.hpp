@@ -6,7 +6,9 @@
 //   obstacles                             -- real-time task, woken per revolution
 //   terrain                               -- real-time task: the terrain-class map
 //   navigation                            -- real-time task: route, subgoals, alignment
-//   publisher                             -- plain thread, the only one that calls DDS
+//   publisher                             -- plain thread, the only one that writes to DDS
+//   command reader                        -- plain thread: goals and cancels in (DDS readers),
+//                                            queued for the navigation task
 //
 // Real-time tasks hand snapshots through mailboxes and queues and never
 // allocate once the runtime is armed; the publisher may (Cyclone serialises
@@ -17,6 +19,7 @@
 #include <optional>
 #include <string>
 
+#include "commands.hpp"
 #include "dds.hpp"
 #include "publisher.hpp"
 #include "robot_config.hpp"
@@ -102,6 +105,9 @@ class Daemon {
   std::unique_ptr<nav::NavigationTask> navigation_;
   std::unique_ptr<dds::Domain> domain_;
   std::unique_ptr<dds::DdsPublisher> publisher_;
+  std::unique_ptr<nav::NavCommandQueue> commands_;
+  std::unique_ptr<nav::NavStatusQueue> answers_;
+  std::unique_ptr<dds::CommandReader> command_reader_;
   std::vector<std::uint64_t> last_runs_;
   bool armed_ = false;
 };

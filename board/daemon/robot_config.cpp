@@ -182,6 +182,10 @@ DdsSection parse_dds(const ConfigNode& n) {
     topic("tf", p.topics.tf);
     topic("tf_static", p.topics.tf_static);
     topic("odometry", p.topics.odometry);
+    topic("navigation_status", p.topics.navigation_status);
+    topic("goal", d.commands.topics.goal);
+    topic("geo_goal", d.commands.topics.geo_goal);
+    topic("cancel", d.commands.topics.cancel);
     t->reject_unknown_keys();
   }
   p.odom_frame = n.string("odom_frame", p.odom_frame);

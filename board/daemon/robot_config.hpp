@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "commands.hpp"
 #include "publisher.hpp"
 #include "trailnav/drivers/can/can_driver.hpp"
 #include "trailnav/drivers/gpio/gpio_driver.hpp"
@@ -41,6 +42,7 @@ struct DdsSection {
   std::string cyclone_config;  // file; empty: the built-in loopback configuration
   std::string cyclone_xml;     // its text
   dds::PublisherOptions publisher;
+  dds::CommandReaderOptions commands;  // topics; frames and zone are set at start-up
 };
 
 struct RobotConfig {

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <numbers>
 
+#include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 #include "trailnav/navigation/pose/utm_alignment.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
@@ -166,6 +167,40 @@ bool UtmFixMessages::fill(const pose::UtmPose& u) noexcept {
   fix_.position_covariance[8] = std::max(c(0, 0), c(1, 1)) * 4.0;
   fix_.position_covariance_type = 3;  // COVARIANCE_TYPE_KNOWN
   return true;
+}
+
+// --- NavigationStatus ---
+
+NavigationStatusMessage::NavigationStatusMessage() {
+  frame_.set("");
+  state_.set("");
+  message_.set("");
+  msg_.header.frame_id = frame_.c_str();
+  msg_.state_name = state_.c_str();
+  msg_.message = message_.c_str();
+}
+
+void NavigationStatusMessage::fill(const nav::NavigationStatusReport& n, std::string_view map_frame) noexcept {
+  frame_.set(map_frame);
+  msg_.header.stamp = to_time(n.time_ns);
+  msg_.state = static_cast<std::uint8_t>(n.state);
+  state_.set(nav::nav_state_name(n.state));
+  // The newest refusal first (the robot kept its route), else why planning failed.
+  message_.set(n.refusal[0] != '\0' ? std::string_view(n.refusal.data()) : std::string_view(n.message));
+  msg_.has_goal = n.has_goal;
+  msg_.goal.latitude = n.goal_lat;
+  msg_.goal.longitude = n.goal_lon;
+  msg_.goal.altitude = 0.0;
+  msg_.goal_easting = n.goal_easting;
+  msg_.goal_northing = n.goal_northing;
+  msg_.distance_remaining = n.remaining;
+  msg_.route_length = n.route_length;
+  msg_.subgoals = static_cast<std::uint32_t>(n.subgoals);
+  msg_.active_subgoal = static_cast<std::uint32_t>(n.active);
+  msg_.goals_received = n.counters.goals;
+  msg_.goals_refused = n.counters.goals_refused;
+  msg_.cancels = n.counters.cancels;
+  msg_.plans = n.counters.plans;
 }
 
 // --- Path ---

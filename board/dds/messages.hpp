@@ -29,6 +29,9 @@ struct UtmPose;
 namespace trailnav::perception {
 struct ObstacleSnapshot;
 }  // namespace trailnav::perception
+namespace trailnav::nav {
+struct NavigationStatusReport;
+}  // namespace trailnav::nav
 
 namespace trailnav::dds {
 
@@ -163,6 +166,22 @@ class OdometryMessage {
   FixedString<64> frame_, child_;
   OdometryNoise noise_;
   nav_msgs_msg_dds__Odometry_ msg_{};
+};
+
+// trailnav_msgs/NavigationStatus from a navigation snapshot.
+class NavigationStatusMessage {
+ public:
+  NavigationStatusMessage();
+  NavigationStatusMessage(const NavigationStatusMessage&) = delete;
+  NavigationStatusMessage& operator=(const NavigationStatusMessage&) = delete;
+  void fill(const nav::NavigationStatusReport& report, std::string_view map_frame) noexcept;
+  trailnav_msgs_msg_dds__NavigationStatus_& sample() noexcept { return msg_; }
+
+ private:
+  FixedString<64> frame_;
+  FixedString<16> state_;
+  FixedString<200> message_;
+  trailnav_msgs_msg_dds__NavigationStatus_ msg_{};
 };
 
 // nav_msgs/Path with room for `capacity` poses.

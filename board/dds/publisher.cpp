@@ -50,6 +50,8 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     p->path_msg_.emplace(p->inputs_.navigation->last_read().path.size(), options.odom_frame);
     make(p->subgoal_writer_, geometry_msgs_msg_dds__PoseStamped__desc, options.topics.subgoal, {true, 1, Durability::transient_local});
     make(p->path_writer_, nav_msgs_msg_dds__Path__desc, options.topics.subgoal_path, {true, 1, Durability::transient_local});
+    make(p->status_writer_, trailnav_msgs_msg_dds__NavigationStatus__desc, options.topics.navigation_status,
+         {true, 1, Durability::transient_local});
   }
   make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
   if (options.publish_tf) {
@@ -96,6 +98,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.paths = paths_.load(std::memory_order_relaxed);
   s.transforms = transforms_.load(std::memory_order_relaxed);
   s.odometry = odometry_.load(std::memory_order_relaxed);
+  s.statuses = statuses_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
   return s;
 }
@@ -115,6 +118,7 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
   if (subgoal_writer_) {
     health_msg_.value("subgoals", s.subgoals);
     health_msg_.value("paths", s.paths);
+    health_msg_.value("navigation_statuses", s.statuses);
   }
   if (tf_writer_) {
     health_msg_.value("tf_messages", s.transforms);
@@ -182,7 +186,19 @@ void DdsPublisher::publish_map_instant(const perception::ObstacleSnapshot& s) no
   count(tf_writer_->write(&tf_msg_.sample()), transforms_);
 }
 
+void DdsPublisher::publish_status(const nav::NavigationStatusReport& r) noexcept {
+  if (options_.frames.map == "utm") {
+    std::snprintf(map_frame_.data(), map_frame_.size(), "utm_%d%c", r.zone, r.north ? 'N' : 'S');
+  } else {
+    std::snprintf(map_frame_.data(), map_frame_.size(), "%s", options_.frames.map.c_str());
+  }
+  status_msg_.fill(r, map_frame_.data());
+  count(status_writer_->write(&status_msg_.sample()), statuses_);
+}
+
 void DdsPublisher::publish_navigation(const nav::NavigationSnapshot& n) noexcept {
+  // The status with every snapshot (each is a change: state, goal, subgoal or path).
+  publish_status(n.report);
   // Stamped with the pose's time, like the pose topic.
   if (n.has_active && n.active_revision != last_active_revision_) {
     last_active_revision_ = n.active_revision;
@@ -255,6 +271,10 @@ void DdsPublisher::loop() noexcept {
       }
     }
     if (subgoal_writer_) {
+      // The answer to each order first, then the newest state.
+      if (inputs_.navigation_answers != nullptr) {
+        while (inputs_.navigation_answers->try_pop(answer_)) publish_status(answer_);
+      }
       if (const nav::NavigationSnapshot* n = inputs_.navigation->try_read()) publish_navigation(*n);
     }
     if (pose_writer_ && now >= next_pose) {

@@ -26,6 +26,7 @@
 
 #include "dds.hpp"
 #include "messages.hpp"
+#include "trailnav/navigation/navigator/navigation_task.hpp"
 #include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
@@ -50,6 +51,7 @@ struct TopicNames {
   std::string tf = "tf";                // tf2's topics: rt/tf and rt/tf_static
   std::string tf_static = "tf_static";
   std::string odometry = "odom";        // nav_msgs/Odometry, Nav2's default
+  std::string navigation_status = "trailnav/navigation_status";
 };
 
 // REP 105 frame names (docs/dds.md, "Frames"). `map`: the frame of the GPS
@@ -94,6 +96,8 @@ struct PublisherInputs {
   float unknown_cost = 1.0f;
   // The navigation thread's snapshots (their path capacity gives the Path's).
   Mailbox<nav::NavigationSnapshot>* navigation = nullptr;
+  // The navigation task's answer to each order (a status each), may be null.
+  nav::NavStatusQueue* navigation_answers = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
   std::function<void(DiagnosticsMessage&, Nanos now)> health;
 };
@@ -102,6 +106,7 @@ struct PublisherStats {
   std::uint64_t maps = 0, stale_maps = 0, terrain_maps = 0, poses = 0, fixes = 0, health = 0, write_failures = 0;
   std::uint64_t subgoals = 0, paths = 0;
   std::uint64_t transforms = 0, odometry = 0;  // TFMessages on rt/tf, Odometry samples
+  std::uint64_t statuses = 0;                  // navigation status samples
   bool lidar_stale = false;
 };
 
@@ -123,6 +128,7 @@ class DdsPublisher {
   void loop() noexcept;
   void publish_health(Nanos now) noexcept;
   void publish_navigation(const nav::NavigationSnapshot& snapshot) noexcept;
+  void publish_status(const nav::NavigationStatusReport& report) noexcept;
   void publish_pose(const pose::PoseSnapshot& p) noexcept;
   void publish_map_instant(const perception::ObstacleSnapshot& s) noexcept;
   void publish_static_frames() noexcept;
@@ -134,7 +140,9 @@ class DdsPublisher {
   Wakeup wakeup_;
   std::unique_ptr<Writer> map_writer_, terrain_writer_, cost_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
   std::unique_ptr<Writer> subgoal_writer_, path_writer_;
-  std::unique_ptr<Writer> tf_writer_, tf_static_writer_, odometry_writer_;
+  std::unique_ptr<Writer> tf_writer_, tf_static_writer_, odometry_writer_, status_writer_;
+  NavigationStatusMessage status_msg_;
+  nav::NavigationStatusReport answer_;
   TfMessage tf_msg_{2};
   std::optional<TfMessage> tf_static_msg_;
   std::optional<OdometryMessage> odometry_msg_;
@@ -152,7 +160,7 @@ class DdsPublisher {
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
-  std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0};
+  std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0}, statuses_{0};
   std::atomic<bool> lidar_stale_{false};
 };
 

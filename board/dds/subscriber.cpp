@@ -11,6 +11,8 @@
 #include "geometry_msgs.h"
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
+#include "geographic_msgs.h"
+#include "std_msgs.h"
 #include "tf2_msgs.h"
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav_msgs.h"
@@ -52,7 +54,8 @@ const dds_topic_descriptor_t* known_type(const std::string& name) noexcept {
       &geometry_msgs_msg_dds__PoseStamped__desc,    &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc,
       &sensor_msgs_msg_dds__NavSatFix__desc,        &diagnostic_msgs_msg_dds__DiagnosticArray__desc,
       &trailnav_msgs_msg_dds__TerrainClassMap__desc, &tf2_msgs_msg_dds__TFMessage__desc,
-      &nav_msgs_msg_dds__Odometry__desc};
+      &nav_msgs_msg_dds__Odometry__desc,            &trailnav_msgs_msg_dds__NavigationStatus__desc,
+      &geographic_msgs_msg_dds__GeoPoseStamped__desc, &std_msgs_msg_dds__Empty__desc};
   for (const dds_topic_descriptor_t* t : kTypes) {
     if (name == t->m_typename) return t;
   }

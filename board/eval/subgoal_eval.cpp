@@ -198,11 +198,11 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
       report.seconds_aligning += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       ++report.updates;
       const nav::Navigator& first = *runs.front().navigator;
-      if (first.state() == nav::NavState::no_route) {
+      if (first.state() == nav::NavState::failed) {
         plan_error = rec + ": no route on world.osm from the robot's GPS position to the route's end";
         return;
       }
-      if (!planned && first.state() != nav::NavState::waiting_for_pose) {
+      if (!planned && first.state() != nav::NavState::planning) {
         planned = true;
         report.route_length += first.route_length();
       }

@@ -8,13 +8,17 @@
 #include <dds/ddsi/ddsi_serdata.h>
 
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "commands.hpp"
 #include "dds.hpp"
 #include "messages.hpp"
+#include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 #include "trailnav/navigation/pose/utm_alignment.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
@@ -287,4 +291,159 @@ TEST_F(DdsTypes, TerrainClassMapIsTheDocumentedLayout) {
   c.put(std::uint32_t{4});
   for (std::uint8_t v : conf) c.put(v);
   EXPECT_EQ(got, c.payload());
+}
+
+// tf2_msgs/TFMessage: TransformStamped[] transforms; each: Header header,
+// string child_frame_id, Transform transform (Vector3 translation,
+// Quaternion rotation).
+TEST_F(DdsTypes, TfMessageIsXcdr1AsRos2WritesIt) {
+  dds::TfMessage m(2);
+  m.add(1'700'000'000'250'000'000LL, "odom", "base_link", {1.0, 2.0, 0.5, 0.0, 0.0, 0.5});
+  m.add(1'700'000'000'250'000'000LL, "utm_32N", "odom", {412345.5, 5312345.25, 271.0, 0.0, 0.0, -1.0});
+  EXPECT_FALSE(m.add(0, "a", "b", {}));  // full
+  const auto got = wire_bytes(*domain_, tf2_msgs_msg_dds__TFMessage__desc, "t/tf", &m.sample());
+  Cdr c;
+  c.put(std::uint32_t{2});
+  header(c, 1'700'000'000, 250'000'000u, "odom");
+  c.string("base_link");
+  put_pose(c, {1.0, 2.0, 0.5, 0.0, 0.0, std::sin(0.25), std::cos(0.25)});
+  header(c, 1'700'000'000, 250'000'000u, "utm_32N");
+  c.string("odom");
+  put_pose(c, {412345.5, 5312345.25, 271.0, 0.0, 0.0, std::sin(-0.5), std::cos(-0.5)});
+  EXPECT_EQ(got, c.payload());
+  EXPECT_STREQ(tf2_msgs_msg_dds__TFMessage__desc.m_typename, "tf2_msgs::msg::dds_::TFMessage_");
+}
+
+// The utm -> odom transform puts the robot's odometry position on its UTM one.
+TEST_F(DdsTypes, UtmToOdomMapsTheOdometryPoseOntoTheUtmPose) {
+  pose::LocalPose local;
+  local.x = 12.0;
+  local.y = -3.0;
+  local.z = 0.4;
+  local.yaw = 0.3;
+  pose::UtmPose utm;
+  utm.easting = 412000.0;
+  utm.northing = 5312000.0;
+  utm.altitude = 270.0;
+  utm.yaw = 1.2;
+  const dds::RigidTransform t = dds::utm_to_odom(local, utm);
+  EXPECT_NEAR(t.yaw, 0.9, 1e-12);
+  EXPECT_NEAR(t.x + std::cos(t.yaw) * local.x - std::sin(t.yaw) * local.y, utm.easting, 1e-6);
+  EXPECT_NEAR(t.y + std::sin(t.yaw) * local.x + std::cos(t.yaw) * local.y, utm.northing, 1e-6);
+  EXPECT_NEAR(t.z + local.z, utm.altitude, 1e-9);
+}
+
+// nav_msgs/Odometry: Header header, string child_frame_id,
+// PoseWithCovariance pose, TwistWithCovariance twist.
+TEST_F(DdsTypes, OdometryIsXcdr1AsRos2WritesIt) {
+  dds::OdometryMessage m("odom", "base_link");
+  pose::LocalPose p;
+  p.time_ns = 1'700'000'001'000'000'500LL;
+  p.x = 3.0;
+  p.y = 4.0;
+  p.yaw = 0.5;
+  p.speed = 1.25;
+  p.yaw_rate = -0.1;
+  p.distance = 10.0;
+  m.fill(p);
+  const auto got = wire_bytes(*domain_, nav_msgs_msg_dds__Odometry__desc, "t/odom", &m.sample());
+  Cdr c;
+  header(c, 1'700'000'001, 500u, "odom");
+  c.string("base_link");
+  put_pose(c, {3.0, 4.0, 0.0, 0.0, 0.0, std::sin(0.25), std::cos(0.25)});
+  const double sp = 0.01 + 0.06 * 10.0, sy = 0.005 + 0.002 * 10.0;
+  for (int i = 0; i < 36; ++i) {
+    const double diag[6] = {sp * sp, sp * sp, sp * sp, 0.005 * 0.005, 0.005 * 0.005, sy * sy};
+    c.put(i % 7 == 0 ? diag[i / 7] : 0.0);
+  }
+  for (double v : {1.25, 0.0, 0.0, 0.0, 0.0, -0.1}) c.put(v);
+  for (int i = 0; i < 36; ++i) {
+    const double diag[6] = {0.05 * 0.05, 1e-4, 1e-4, 1e-4, 1e-4, 1e-4};
+    c.put(i % 7 == 0 ? diag[i / 7] : 0.0);
+  }
+  EXPECT_EQ(got, c.payload());
+  EXPECT_STREQ(nav_msgs_msg_dds__Odometry__desc.m_typename, "nav_msgs::msg::dds_::Odometry_");
+}
+
+// trailnav_msgs/NavigationStatus, the layout docs/dds.md gives.
+TEST_F(DdsTypes, NavigationStatusIsTheDocumentedLayout) {
+  nav::NavigationStatusReport r;
+  r.time_ns = 1'700'000'002'000'000'000LL;
+  r.state = nav::NavState::following;
+  r.has_goal = true;
+  r.goal_lat = 48.03;
+  r.goal_lon = 7.81;
+  r.goal_easting = 412000.5;
+  r.goal_northing = 5320000.25;
+  r.remaining = 150.5;
+  r.route_length = 190.0;
+  r.subgoals = 48;
+  r.active = 10;
+  r.zone = 32;
+  r.north = true;
+  r.counters.goals = 3;
+  r.counters.goals_refused = 1;
+  r.counters.cancels = 0;
+  r.counters.plans = 2;
+  std::snprintf(r.refusal.data(), r.refusal.size(), "goal refused: why");
+  dds::NavigationStatusMessage m;
+  m.fill(r, "utm_32N");
+  const auto got = wire_bytes(*domain_, trailnav_msgs_msg_dds__NavigationStatus__desc, "t/status", &m.sample());
+  Cdr c;
+  header(c, 1'700'000'002, 0u, "utm_32N");
+  c.put(std::uint8_t{2});
+  c.string("following");
+  c.string("goal refused: why");
+  c.put(std::uint8_t{1});
+  for (double v : {48.03, 7.81, 0.0, 412000.5, 5320000.25, 150.5, 190.0}) c.put(v);
+  c.put(std::uint32_t{48});
+  c.put(std::uint32_t{10});
+  for (std::uint64_t v : {3u, 1u, 0u, 2u}) c.put(std::uint64_t{v});
+  EXPECT_EQ(got, c.payload());
+}
+
+// The order types trailnavd reads: what ROS 2 names them.
+TEST_F(DdsTypes, OrderTypesAreTheOnesRos2Uses) {
+  EXPECT_STREQ(geographic_msgs_msg_dds__GeoPoseStamped__desc.m_typename, "geographic_msgs::msg::dds_::GeoPoseStamped_");
+  EXPECT_STREQ(std_msgs_msg_dds__Empty__desc.m_typename, "std_msgs::msg::dds_::Empty_");
+  geographic_msgs_msg_dds__GeoPoseStamped_ g{};
+  char frame[] = "";
+  g.header.frame_id = frame;
+  g.pose.position = {48.0, 7.8, 300.0};
+  g.pose.orientation.w = 1.0;
+  const auto got = wire_bytes(*domain_, geographic_msgs_msg_dds__GeoPoseStamped__desc, "t/geo", &g);
+  Cdr c;
+  header(c, 0, 0u, "");
+  put_pose(c, {48.0, 7.8, 300.0, 0.0, 0.0, 0.0, 1.0});
+  EXPECT_EQ(got, c.payload());
+}
+
+// A PoseStamped goal's frame decides how it is read.
+TEST(CommandReader, APoseGoalsFrameNamesItsKind) {
+  dds::CommandReaderOptions o;
+  o.zone = 32;
+  o.north = true;
+  geometry_msgs_msg_dds__PoseStamped_ p{};
+  std::string frame = "odom";
+  p.header.frame_id = frame.data();
+  p.pose.position.x = 1.0;
+  p.pose.position.y = 2.0;
+  EXPECT_EQ(dds::goal_from_pose(p, o).goal.frame, nav::GoalFrame::odom);
+  frame = "utm_32N";
+  p.header.frame_id = frame.data();
+  EXPECT_EQ(dds::goal_from_pose(p, o).goal.frame, nav::GoalFrame::utm);
+  frame = "utm_33N";
+  p.header.frame_id = frame.data();
+  EXPECT_EQ(dds::goal_from_pose(p, o).goal.frame, nav::GoalFrame::unknown);
+  o.map_frame = "map";
+  frame = "map";
+  p.header.frame_id = frame.data();
+  EXPECT_EQ(dds::goal_from_pose(p, o).goal.frame, nav::GoalFrame::utm);
+  p.header.frame_id = nullptr;  // as a C sample may have it
+  const nav::NavCommand none = dds::goal_from_pose(p, o);
+  EXPECT_EQ(none.goal.frame, nav::GoalFrame::unknown);
+  EXPECT_EQ(none.goal.frame_id[0], '\0');
+  std::string longer(100, 'x');
+  p.header.frame_id = longer.data();
+  EXPECT_EQ(std::string(dds::goal_from_pose(p, o).goal.frame_id.data()), std::string(47, 'x'));
 }

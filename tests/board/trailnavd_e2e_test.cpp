@@ -33,10 +33,13 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <random>
 #include <limits>
 #include <map>
 #include <span>
@@ -55,8 +58,12 @@
 #include "robot_config.hpp"
 #include "sim_truth.hpp"
 #include "simulator.hpp"
+#include "geographic_msgs.h"
+#include "std_msgs.h"
 #include "subscriber.hpp"
 #include "tf2_msgs.h"
+#include "trailnav/navigation/osm/road_graph.hpp"
+#include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/runtime/histogram.hpp"
 #include "trailnav_msgs.h"
@@ -87,6 +94,25 @@ struct DaemonRun {
   std::size_t tf = 0, tf_static_frames = 0, odometry = 0, maps_with_tf = 0;
   std::vector<double> map_tf_vs_pose_m;
   bool utm_to_odom = false;
+  // Orders: every navigation status received (with the test's clock), the
+  // newest utm -> odom transform, every subgoal path's last pose through the
+  // utm -> odom transform newest when it arrived (UTM), and health's counts.
+  struct Status {
+    double at_s = 0.0;
+    std::uint8_t state = 0;
+    std::string message;
+    double goal_lat = 0.0, goal_lon = 0.0;
+    std::uint64_t plans = 0, goals = 0, refused = 0;
+  };
+  std::vector<Status> statuses;
+  struct PathEnd {
+    double at_s = 0.0;
+    double e = 0.0, n = 0.0;  // UTM
+    std::size_t poses = 0;
+  };
+  std::vector<PathEnd> path_ends;
+  std::uint64_t goal_samples = 0, orders_dropped = 0;  // health's newest
+  std::vector<double> navigation_health_s;              // when health with the navigation status arrived
   DurationSummary latency;  // last packet of a revolution -> subscriber
   long rss_start_kb = 0, rss_end_kb = 0;  // after the warm-up (a third of the drive, at least 4 s), at its end
   long rss_after_kb = 0;                  // after the silence and the late subscribers (Cyclone's discovery allocates)
@@ -114,13 +140,18 @@ std::string read_file(const fs::path& p) {
 // With `navigation`, trailnavd also plans on the recording's world.osm to
 // where the drive ends and publishes corrected subgoals; the terrain map is
 // then registered with the pose (so the offline comparisons are skipped).
-DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool navigation = false) {
+// `orders(elapsed_s, domain)` runs on the test's thread about every 50 ms of
+// the replay (and once after it): where a test sends goals.
+using Orders = std::function<void(double elapsed_s, const dds::Domain& domain)>;
+
+DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool navigation = false,
+                     const std::string& scenario = "urban", const Orders& orders = {}) {
   DaemonRun out;
   const fs::path dir = fs::temp_directory_path() / ("trailnav-e2e-" + tag + "-" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   sim::SimOptions so;
-  so.scenario = "urban";
+  so.scenario = scenario;
   so.seed = 5;
   so.duration = seconds;
   so.out = (dir / "rec").string();
@@ -205,6 +236,13 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   auto subgoal = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal", &geometry_msgs_msg_dds__PoseStamped__desc, 0, true);
   auto subgoal_path = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal_path", &nav_msgs_msg_dds__Path__desc, 0);
   EXPECT_TRUE(subgoal.subscriber && subgoal_path.subscriber);
+  auto nav_status = dds::Subscriber::create(*dds_domain.domain, "trailnav/navigation_status",
+                                           &trailnav_msgs_msg_dds__NavigationStatus__desc, 0);
+  EXPECT_TRUE(nav_status.subscriber);
+  std::array<double, 3> utm_odom{0.0, 0.0, 0.0};  // translation and yaw of utm -> odom
+  bool have_utm_odom = false;
+  const auto t_start = std::chrono::steady_clock::now();
+  auto elapsed_s = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count(); };
   auto tf = dds::Subscriber::create(*dds_domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0);
   auto odometry = dds::Subscriber::create(*dds_domain.domain, "odom", &nav_msgs_msg_dds__Odometry__desc, 0);
   EXPECT_TRUE(tf.subscriber && odometry.subscriber);
@@ -293,16 +331,31 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     });
     subgoal_path.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       ++out.paths;
-      out.last_path_poses = static_cast<const nav_msgs_msg_dds__Path_*>(r.sample)->poses._length;
+      const auto& path = *static_cast<const nav_msgs_msg_dds__Path_*>(r.sample);
+      out.last_path_poses = path.poses._length;
+      if (path.poses._length > 0 && have_utm_odom) {
+        // odom -> UTM: utm = R(yaw) odom + t.
+        const auto& p = path.poses._buffer[path.poses._length - 1].pose.position;
+        const double c = std::cos(utm_odom[2]), s = std::sin(utm_odom[2]);
+        out.path_ends.push_back({elapsed_s(), utm_odom[0] + c * p.x - s * p.y, utm_odom[1] + s * p.x + c * p.y, path.poses._length});
+      }
+    });
+    nav_status.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& s = *static_cast<const trailnav_msgs_msg_dds__NavigationStatus_*>(r.sample);
+      out.statuses.push_back({elapsed_s(), s.state, s.message, s.goal.latitude, s.goal.longitude, s.plans, s.goals_received,
+                              s.goals_refused});
     });
     health.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       ++out.health;
       const auto& a = *static_cast<const diagnostic_msgs_msg_dds__DiagnosticArray_*>(r.sample);
       for (std::uint32_t i = 0; i < a.status._length; ++i) {
-        if (std::strcmp(a.status._buffer[i].name, "trailnavd: lidar") != 0) continue;
+        const bool navigation_status = std::strcmp(a.status._buffer[i].name, "trailnavd: navigation") == 0;
+        if (navigation_status) out.navigation_health_s.push_back(elapsed_s());
         for (std::uint32_t k = 0; k < a.status._buffer[i].values._length; ++k) {
           const auto& kv = a.status._buffer[i].values._buffer[k];
           if (std::strcmp(kv.key, "clock_offset_s") == 0) out.lidar_clock_offset_ns = std::llround(std::stod(kv.value) * 1e9);
+          if (navigation_status && std::strcmp(kv.key, "goal_samples") == 0) out.goal_samples = std::stoull(kv.value);
+          if (navigation_status && std::strcmp(kv.key, "orders_dropped") == 0) out.orders_dropped = std::stoull(kv.value);
         }
       }
     });
@@ -314,7 +367,13 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
         if (std::strcmp(t.header.frame_id, "odom") == 0 && std::strcmp(t.child_frame_id, "base_link") == 0) {
           base_tf[stamp_ns(t.header)] = {t.transform.translation.x, t.transform.translation.y};
         }
-        if (std::strncmp(t.header.frame_id, "utm_", 4) == 0 && std::strcmp(t.child_frame_id, "odom") == 0) out.utm_to_odom = true;
+        if (std::strncmp(t.header.frame_id, "utm_", 4) == 0 && std::strcmp(t.child_frame_id, "odom") == 0) {
+          out.utm_to_odom = true;
+          const auto& q = t.transform.rotation;
+          utm_odom = {t.transform.translation.x, t.transform.translation.y,
+                      std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))};
+          have_utm_odom = true;
+        }
       }
     });
     odometry.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.odometry; });
@@ -326,6 +385,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   const auto warm = std::chrono::duration<double>(std::max(4.0, seconds / 3.0));
   while (replaying) {
     take_all(0.05);
+    if (orders) orders(elapsed_s(), *dds_domain.domain);
     if (!rss_taken && std::chrono::steady_clock::now() - t0 > warm) {
       out.rss_start_kb = rss_kb(pid);
       rss_taken = true;
@@ -334,6 +394,10 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   player.join();
   out.rss_end_kb = rss_kb(pid);
   for (int i = 0; i < 15; ++i) take_all(0.1);  // and 1.5 s of silence
+  if (orders) {
+    orders(-1.0, *dds_domain.domain);  // the replay is over
+    for (int i = 0; i < 15; ++i) take_all(0.1);
+  }
   if (navigation) {
     // A planner that joins late still gets the active subgoal and the path (transient-local).
     auto late = dds::Subscriber::create(*dds_domain.domain, "trailnav/subgoal", nullptr, 5.0);
@@ -596,6 +660,184 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   ASSERT_GE(r.map_tf_vs_pose_m.size(), 100u);
   EXPECT_LE(max_abs(r.map_tf_vs_pose_m), 0.10);
   EXPECT_TRUE(r.utm_to_odom);
+}
+
+// Orders over DDS while the robot drives the `junctions` scenario: a new
+// geographic goal is planned at once and the subgoal path then ends at it;
+// impossible goals of each kind are refused with their reason on the
+// navigation status while the route is kept; a burst of random samples on
+// every order topic leaves the daemon running and counted; cancel stops it.
+TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
+  // The recording is made inside run_daemon; its world.osm is the same for
+  // every seed of the scenario, so the new goal is chosen from a copy.
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-orders-osm-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  sim::SimOptions so;
+  so.scenario = "junctions";
+  so.seed = 5;
+  so.duration = 1.0;
+  so.out = (dir / "rec").string();
+  ASSERT_EQ(sim::run_simulation(so).error, "");
+  auto loaded = eval::load_sim_truth(so.out + "/truth");
+  ASSERT_TRUE(loaded.truth) << loaded.error;
+  auto graph = osm::load_road_graph(so.out + "/world.osm");
+  ASSERT_TRUE(graph.graph) << graph.error;
+  const osm::RoadGraph& g = *graph.graph;
+  // The new goal: the network's vertex farthest from where the drive starts
+  // that a route reaches from there.
+  double se = 0.0, sn = 0.0;
+  ASSERT_TRUE(g.to_utm(loaded.truth->trajectory.front().lat, loaded.truth->trajectory.front().lon, se, sn));
+  const auto start = g.project(se, sn);
+  ASSERT_TRUE(start);
+  osm::Router router(g);
+  std::vector<osm::Point2> path;
+  double best = -1.0, goal_e = 0.0, goal_n = 0.0;
+  for (const osm::RoadVertex& v : g.vertices()) {
+    const double d = std::hypot(v.x - se, v.y - sn);
+    const auto to = g.project(v.x, v.y);
+    if (d <= best || !to || !router.route(*start, *to, path).found) continue;
+    best = d;
+    goal_e = v.x;
+    goal_n = v.y;
+  }
+  ASSERT_GT(best, 100.0);
+  double goal_lat = 0.0, goal_lon = 0.0;
+  ASSERT_TRUE(g.to_latlon(goal_e, goal_n, goal_lat, goal_lon));
+  const auto goal_on_network = g.project(goal_e, goal_n);
+  fs::remove_all(dir);
+
+  struct Sent {
+    bool goal = false, bad = false, fuzz = false, cancel = false;
+    std::uint64_t samples = 0;  // goal samples sent
+    double goal_at = 0.0, fuzz_done_at = 0.0;
+  } sent;
+  std::unique_ptr<dds::Writer> geo, pose, cancel;
+  auto write_geo = [&](double lat, double lon) {
+    geographic_msgs_msg_dds__GeoPoseStamped_ m{};
+    char frame[] = "";
+    m.header.frame_id = frame;
+    m.pose.position.latitude = lat;
+    m.pose.position.longitude = lon;
+    m.pose.orientation.w = 1.0;
+    EXPECT_TRUE(geo->write(&m));
+    ++sent.samples;
+  };
+  auto write_pose = [&](const char* frame_id, double x, double y) {
+    geometry_msgs_msg_dds__PoseStamped_ m{};
+    std::string frame = frame_id;
+    m.header.frame_id = frame.data();
+    m.pose.position.x = x;
+    m.pose.position.y = y;
+    m.pose.orientation.w = 1.0;
+    EXPECT_TRUE(pose->write(&m));
+    ++sent.samples;
+  };
+  std::mt19937_64 rng(35);
+  auto random_double = [&]() {
+    static const double kSpecial[] = {std::nan(""), std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+                                      1e308, -1e308, 0.0, -0.0, 4.9e-324};
+    switch (rng() % 4) {
+      case 0: return kSpecial[rng() % 8];
+      case 1: return std::uniform_real_distribution<double>(-200.0, 200.0)(rng);
+      case 2: return std::bit_cast<double>(rng());
+      default: return std::uniform_real_distribution<double>(-1e7, 1e7)(rng);
+    }
+  };
+  const Orders orders = [&](double t, const dds::Domain& domain) {
+    if (!geo) {
+      dds::EndpointQos q;
+      q.depth = 64;
+      geo = dds::Writer::create(domain, geographic_msgs_msg_dds__GeoPoseStamped__desc, "trailnav/geo_goal", q).writer;
+      pose = dds::Writer::create(domain, geometry_msgs_msg_dds__PoseStamped__desc, "trailnav/goal", q).writer;
+      cancel = dds::Writer::create(domain, std_msgs_msg_dds__Empty__desc, "trailnav/cancel", q).writer;
+      ASSERT_TRUE(geo && pose && cancel);
+    }
+    if (!sent.goal && t >= 12.0) {
+      write_geo(goal_lat, goal_lon);
+      sent.goal = true;
+      sent.goal_at = t;
+    } else if (!sent.bad && t >= 18.0) {
+      write_geo(std::nan(""), goal_lon);                   // not a number
+      write_geo(goal_lat + 0.02, goal_lon);                // 2.2 km north of the network
+      write_geo(-33.87, 151.21);                           // another zone, another hemisphere
+      write_pose("base_link", 1.0, 2.0);                   // a frame goals are not given in
+      sent.bad = true;
+    } else if (!sent.fuzz && t >= 24.0) {
+      // Random samples on both goal topics: 200 in bursts of 10 (the
+      // reader's history holds 16, the navigation task's queue 64).
+      static const char* const kFrames[] = {"odom", "utm_32N", "utm_33N", "", "map", "base_link", "\x7f\x01odom", "utm_"};
+      for (int burst = 0; burst < 20; ++burst) {
+        for (int i = 0; i < 10; ++i) {
+          if (rng() % 2 == 0) {
+            write_geo(random_double(), random_double());
+          } else {
+            write_pose(kFrames[rng() % 8], random_double(), random_double());
+          }
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+      sent.fuzz = true;
+      sent.fuzz_done_at = t;
+    } else if (!sent.cancel && t < 0.0) {
+      std_msgs_msg_dds__Empty_ e{};
+      EXPECT_TRUE(cancel->write(&e));
+      sent.cancel = true;
+    }
+  };
+  const DaemonRun r = run_daemon(34.0, "orders", false, true, "junctions", orders);
+  std::printf("[ trailnavd orders ] new goal %.7f, %.7f (%.0f m from the start) sent at %.1f s; %zu statuses, %zu paths; "
+              "goal samples sent %llu, counted by trailnavd %llu, dropped %llu\n%s",
+              goal_lat, goal_lon, best, sent.goal_at, r.statuses.size(), r.path_ends.size(),
+              static_cast<unsigned long long>(sent.samples), static_cast<unsigned long long>(r.goal_samples),
+              static_cast<unsigned long long>(r.orders_dropped), r.stderr_text.c_str());
+  for (const auto& s : r.statuses) {
+    if (!s.message.empty()) std::printf("  status at %.1f s: state %u, %s\n", s.at_s, s.state, s.message.c_str());
+  }
+  EXPECT_EQ(r.exit_code, 0);
+  ASSERT_TRUE(sent.goal && sent.bad && sent.fuzz && sent.cancel);
+  // The new goal: accepted, planned, and the paths after it end at its place
+  // on the network. A path's end is taken to UTM through the newest utm ->
+  // odom transform received before it, which the GPS alignment may have
+  // moved by up to a metre since the navigator's own pose pair (1.03 m seen
+  // while the filter settles); the old goal lies 190 m away.
+  const auto taken = std::find_if(r.statuses.begin(), r.statuses.end(), [&](const DaemonRun::Status& s) {
+    return s.at_s >= sent.goal_at && std::abs(s.goal_lat - goal_lat) < 1e-9 && s.state == 2;  // following
+  });
+  ASSERT_NE(taken, r.statuses.end()) << "no status following the new goal";
+  EXPECT_LE(taken->at_s - sent.goal_at, 2.0);
+  std::size_t ends = 0, ends_at_goal = 0;
+  for (const auto& e : r.path_ends) {
+    if (e.at_s < taken->at_s + 0.5 || e.at_s > sent.fuzz_done_at) continue;
+    ++ends;
+    const double d = std::hypot(e.e - goal_on_network->x, e.n - goal_on_network->y);
+    if (d < 2.5) {
+      ++ends_at_goal;
+    } else {
+      std::printf("  path at %.2f s (%zu poses) ends %.2f m from the new goal\n", e.at_s, e.poses, d);
+    }
+  }
+  EXPECT_GE(ends, 5u);
+  EXPECT_EQ(ends_at_goal, ends);
+  // Each impossible goal refused with its reason, the new goal kept.
+  for (const char* reason : {"not finite", "max_snap", "outside the map's UTM zone", "frame 'base_link'"}) {
+    const bool found = std::any_of(r.statuses.begin(), r.statuses.end(), [&](const DaemonRun::Status& s) {
+      return s.message.find(reason) != std::string::npos && std::abs(s.goal_lat - goal_lat) < 1e-9;
+    });
+    EXPECT_TRUE(found) << "no refusal naming '" << reason << "'";
+  }
+  // The random samples: every one taken by the reader, and every one the
+  // queue did not drop offered to the navigator (its goal count also has
+  // the config's goal); the daemon still reporting after them.
+  EXPECT_EQ(r.goal_samples, sent.samples);
+  ASSERT_FALSE(r.statuses.empty());
+  EXPECT_EQ(r.statuses.back().goals, 1 + r.goal_samples - r.orders_dropped);
+  EXPECT_GE(std::count_if(r.navigation_health_s.begin(), r.navigation_health_s.end(),
+                          [&](double t) { return t > sent.fuzz_done_at + 1.0; }),
+            2);
+  // Cancelled at the end.
+  ASSERT_FALSE(r.statuses.empty());
+  EXPECT_EQ(r.statuses.back().state, 5);
+  EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
 }
 
 // The 60 s measurement of the issue: latency percentiles, RSS, overruns.

@@ -316,16 +316,30 @@ TEST(GpsDriver, RealReceiverLogThroughAPtyGivesTheOfflineFixes) {
   Nanos now = ms(1);
   tick(d, now);
   EXPECT_EQ(d.status().health, gps::GpsHealth::no_data);
-  // Line by line, as a receiver would send them; the driver polls every 10 ms.
+  // Line by line, as a receiver would send them, 1 ms apart on the driver's
+  // clock. The pseudo-terminal may hand a line over late when the machine is
+  // busy; the driver's clock waits for it (a microsecond a poll), so no
+  // silence of epoch_gap ever falls inside an epoch and the epochs are the
+  // offline decoder's whatever the load (a late line on the driver's clock
+  // would end the epoch early: a fix split in two).
   std::vector<gps::GpsFix> got;
   std::size_t start = 0;
+  gps::LineFramer written_framer;
+  std::uint64_t lines_written = 0;
   while (start < log.size()) {
     std::size_t end = log.find('\n', start);
     end = end == std::string::npos ? log.size() : end + 1;
-    pty.write(std::string_view(log).substr(start, end - start));
+    const std::string_view chunk = std::string_view(log).substr(start, end - start);
+    pty.write(chunk);
+    written_framer.feed({reinterpret_cast<const std::uint8_t*>(chunk.data()), chunk.size()}, [&](std::string_view) { ++lines_written; });
     start = end;
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
     tick(d, now += ms(1));
+    for (int spin = 0; spin < 25000 && d.status().gps.lines < lines_written; ++spin) {  // at most 5 s
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+      tick(d, now += 1000);
+      if (const gps::GpsReading* r = d.fixes().try_read()) got.push_back(r->fix);
+    }
+    ASSERT_EQ(d.status().gps.lines, lines_written) << "the pseudo-terminal did not deliver a line within 5 s";
     if (const gps::GpsReading* r = d.fixes().try_read()) got.push_back(r->fix);
   }
   for (int i = 0; i < 100; ++i) {

@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <functional>
 
 #include "../drivers/test_data.hpp"
@@ -101,6 +103,14 @@ class OnTestGraph : public ::testing::Test {
     navigator = std::move(made.navigator);
     return *navigator;
   }
+  // Heading for D, planned and following from 50 m along the main road at t = 1 s.
+  bool following_to_d() {
+    make(200.0, 200.0);
+    if (!navigator) return false;
+    at(50.0, 0.0, 0.0, 1.0);
+    navigator->step(local, utm, nullptr);
+    return navigator->state() == NavState::following;
+  }
   // The robot at (de, dn) m heading `yaw` (grid), at time t s.
   void at(double de, double dn, double yaw, double t) { poses(f, kE0 + de, kN0 + dn, yaw, t, local, utm); }
 
@@ -113,6 +123,11 @@ class OnTestGraph : public ::testing::Test {
 
 TEST(Navigator, ChecksItsConfiguration) {
   NavigatorConfig c;
+  EXPECT_EQ(check_navigator_config(c), "");  // no goal: idle until one is ordered
+  c.goal_lat = 47.0;
+  EXPECT_NE(check_navigator_config(c).find("goal"), std::string::npos);  // half a goal
+  c.goal_lat = 95.0;
+  c.goal_lon = 9.0;
   EXPECT_NE(check_navigator_config(c).find("goal"), std::string::npos);
   c.goal_lat = 47.0;
   c.goal_lon = 9.0;
@@ -143,7 +158,7 @@ TEST_F(OnTestGraph, FollowsTheRouteActivatesEachSubgoalAndReachesTheGoal) {
   at(0.0, 0.0, 0.0, 0.0);
   utm.heading_valid = false;
   nav.step(local, utm, nullptr);
-  EXPECT_EQ(nav.state(), NavState::waiting_for_pose);
+  EXPECT_EQ(nav.state(), NavState::planning);
 
   const auto path = walk({{0, 0}, {200, 0}, {200, 200}}, 0.5);
   std::size_t reached = 0, last_active = 0;
@@ -248,13 +263,191 @@ TEST_F(OnTestGraph, SaysWhenTheGoalCannotBeReachedAndRetries) {
     at(10.0, 0.0, 0.0, 0.25 * i);
     nav.step(local, utm, nullptr);
   }
-  EXPECT_EQ(nav.state(), NavState::no_route);
+  EXPECT_EQ(nav.state(), NavState::failed);
   EXPECT_EQ(nav.counters().plan_failures, 3u);  // at 0, 5 and 10 s
   EXPECT_NE(std::string(nav.message()).find("no route"), std::string::npos);
   NavigationSnapshot snap(8);
   nav.snapshot(snap);
   EXPECT_FALSE(snap.has_active);
   EXPECT_EQ(snap.path_count, 0u);
+}
+
+// Orders from outside (the DDS goal topics): a goal in each frame, taken
+// and planned at the next step; the impossible ones refused with their
+// reason while the robot keeps the route it follows.
+GoalRequest geo_goal(const osm::RoadGraph& g, double de, double dn) {
+  GoalRequest r;
+  r.frame = GoalFrame::geographic;
+  EXPECT_TRUE(g.to_latlon(kE0 + de, kN0 + dn, r.a, r.b));
+  return r;
+}
+
+TEST_F(OnTestGraph, WithoutAGoalItIdlesUntilOneIsOrdered) {
+  auto made = Navigator::create(g, NavigatorConfig{}, {});
+  ASSERT_TRUE(made.navigator) << made.error;
+  Navigator& nav = *made.navigator;
+  at(10.0, 0.0, 0.0, 1.0);
+  nav.step(local, utm, nullptr);
+  EXPECT_EQ(nav.state(), NavState::idle);
+  NavigationSnapshot snap(8);
+  nav.snapshot(snap);
+  EXPECT_FALSE(snap.report.has_goal);
+  EXPECT_FALSE(snap.has_active);
+  ASSERT_TRUE(nav.set_goal(geo_goal(g, 200.0, 200.0)));
+  EXPECT_EQ(nav.state(), NavState::planning);
+  at(10.5, 0.0, 0.0, 1.1);
+  const StepResult r = nav.step(local, utm, nullptr);
+  EXPECT_TRUE(r.planned);
+  EXPECT_EQ(nav.state(), NavState::following);
+  EXPECT_NEAR(nav.route_length(), 190.0 - 0.5 + 200.0, 1e-6);
+  nav.snapshot(snap);
+  EXPECT_TRUE(snap.report.has_goal);
+  EXPECT_NEAR(snap.report.goal_easting, kE0 + 200.0, 1e-6);
+  EXPECT_NEAR(snap.report.goal_northing, kN0 + 200.0, 1e-6);
+  EXPECT_NEAR(snap.report.remaining, 389.5, 1e-6);
+  EXPECT_EQ(snap.counters.goals, 1u);
+  EXPECT_EQ(snap.report.refusal[0], '\0');
+}
+
+TEST_F(OnTestGraph, ANewGoalReplansAtOnceInEachFrame) {
+  ASSERT_TRUE(following_to_d());
+  Navigator& nav = *navigator;
+  // Geographic: down the side road to S. Planned at the next step, though
+  // replan_interval (5 s) has not passed since the first plan.
+  ASSERT_TRUE(nav.set_goal(geo_goal(g, 100.0, -150.0)));
+  at(51.0, 0.0, 0.0, 1.2);
+  EXPECT_TRUE(nav.step(local, utm, nullptr).planned);
+  EXPECT_EQ(nav.state(), NavState::following);
+  EXPECT_NEAR(nav.route_length(), 49.0 + 150.0, 1e-6);
+  EXPECT_NEAR(nav.route().back().x, kE0 + 100.0, 1e-6);
+  EXPECT_NEAR(nav.route().back().y, kN0 - 150.0, 1e-6);
+  // UTM: back to A.
+  GoalRequest u;
+  u.frame = GoalFrame::utm;
+  u.a = kE0 + 2.0;
+  u.b = kN0 + 1.0;  // a metre off the road: projected onto it
+  ASSERT_TRUE(nav.set_goal(u));
+  at(52.0, 0.0, M_PI, 1.4);
+  EXPECT_TRUE(nav.step(local, utm, nullptr).planned);
+  EXPECT_NEAR(nav.route().back().x, kE0 + 2.0, 1e-6);
+  EXPECT_NEAR(nav.route().back().y, kN0, 1e-6);
+  // Odometry frame: C, given in the robot's local frame.
+  GoalRequest o;
+  o.frame = GoalFrame::odom;
+  f.to_local(kE0 + 200.0, kN0, o.a, o.b);
+  ASSERT_TRUE(nav.set_goal(o));
+  at(52.5, 0.0, 0.0, 1.6);
+  EXPECT_TRUE(nav.step(local, utm, nullptr).planned);
+  EXPECT_NEAR(nav.route().back().x, kE0 + 200.0, 1e-6);
+  EXPECT_NEAR(nav.route().back().y, kN0, 1e-6);
+  EXPECT_NEAR(nav.route_length(), 147.5, 1e-6);
+  EXPECT_EQ(nav.counters().goals, 4u);  // the config's and three orders
+  EXPECT_EQ(nav.counters().goals_refused, 0u);
+  EXPECT_EQ(nav.counters().plans, 4u);
+}
+
+TEST_F(OnTestGraph, ImpossibleGoalsAreRefusedWithTheirReasonAndTheRouteIsKept) {
+  ASSERT_TRUE(following_to_d());
+  Navigator& nav = *navigator;
+  const double length = nav.route_length();
+  NavigationSnapshot snap(8);
+  auto refused = [&](const GoalRequest& r, const char* reason) {
+    const std::uint64_t revision = [&] { nav.snapshot(snap); return snap.goal_revision; }();
+    EXPECT_FALSE(nav.set_goal(r));
+    nav.snapshot(snap);
+    EXPECT_NE(std::string(snap.report.refusal.data()).find(reason), std::string::npos) << snap.report.refusal.data();
+    EXPECT_GT(snap.goal_revision, revision);
+    EXPECT_EQ(nav.state(), NavState::following);
+    EXPECT_NEAR(nav.route_length(), length, 1e-9);
+    EXPECT_NEAR(snap.report.goal_easting, kE0 + 200.0, 1e-6);  // the goal in use is still D
+  };
+  GoalRequest nan = geo_goal(g, 10.0, 0.0);
+  nan.a = std::nan("");
+  refused(nan, "not finite");
+  GoalRequest inf;
+  inf.frame = GoalFrame::odom;
+  inf.a = std::numeric_limits<double>::infinity();
+  refused(inf, "not finite");
+  refused(geo_goal(g, 500.0, 500.0), "max_snap");  // 300 m from the nearest road
+  GoalRequest far;  // Sydney: another zone and hemisphere
+  far.a = -33.87;
+  far.b = 151.21;
+  refused(far, "outside the map's UTM zone 32N (it is in 56S)");
+  GoalRequest pole;
+  pole.a = 89.0;
+  pole.b = 9.0;
+  refused(pole, "no position UTM covers");
+  GoalRequest frame;
+  frame.frame = GoalFrame::unknown;
+  std::snprintf(frame.frame_id.data(), frame.frame_id.size(), "base_link");
+  refused(frame, "frame 'base_link'");
+  // The island: valid, near a road, but no route leads there. Refused at
+  // the next step, when A* finds no way; the robot keeps following.
+  ASSERT_TRUE(nav.set_goal(geo_goal(g, 1050.0, 1000.0)));
+  at(51.0, 0.0, 0.0, 1.2);
+  EXPECT_FALSE(nav.step(local, utm, nullptr).planned);
+  nav.snapshot(snap);
+  EXPECT_NE(std::string(snap.report.refusal.data()).find("no route"), std::string::npos) << snap.report.refusal.data();
+  EXPECT_EQ(nav.state(), NavState::following);
+  EXPECT_NEAR(snap.report.goal_easting, kE0 + 200.0, 1e-6);
+  EXPECT_NEAR(nav.route_length(), length, 1e-9);
+  EXPECT_EQ(snap.counters.goals, 8u);  // the config's and seven orders
+  EXPECT_EQ(snap.counters.goals_refused, 7u);
+  EXPECT_TRUE(snap.has_active);
+  // A good goal after them clears the refusal.
+  ASSERT_TRUE(nav.set_goal(geo_goal(g, 100.0, -150.0)));
+  nav.snapshot(snap);
+  EXPECT_EQ(snap.report.refusal[0], '\0');
+}
+
+TEST_F(OnTestGraph, AnOdometryGoalNeedsAPoseFirst) {
+  auto made = Navigator::create(g, NavigatorConfig{}, {});
+  ASSERT_TRUE(made.navigator);
+  GoalRequest o;
+  o.frame = GoalFrame::odom;
+  EXPECT_FALSE(made.navigator->set_goal(o));
+  EXPECT_NE(std::string(made.navigator->refusal()).find("no UTM pose yet"), std::string::npos);
+  EXPECT_EQ(made.navigator->state(), NavState::idle);
+}
+
+TEST_F(OnTestGraph, AnUnroutableGoalWithNoRouteToKeepFailsAndIsRetried) {
+  auto made = Navigator::create(g, NavigatorConfig{}, {});
+  ASSERT_TRUE(made.navigator);
+  Navigator& nav = *made.navigator;
+  ASSERT_TRUE(nav.set_goal(geo_goal(g, 1050.0, 1000.0)));
+  for (int i = 0; i <= 24; ++i) {  // 6 s
+    at(10.0, 0.0, 0.0, 1.0 + 0.25 * i);
+    nav.step(local, utm, nullptr);
+  }
+  EXPECT_EQ(nav.state(), NavState::failed);
+  EXPECT_EQ(nav.counters().plan_failures, 2u);  // at once, and replan_interval (5 s) later
+  NavigationSnapshot snap(8);
+  nav.snapshot(snap);
+  EXPECT_TRUE(snap.report.has_goal);
+  EXPECT_FALSE(snap.has_active);
+}
+
+TEST_F(OnTestGraph, CancelDropsTheRouteUntilTheNextGoal) {
+  ASSERT_TRUE(following_to_d());
+  Navigator& nav = *navigator;
+  nav.cancel();
+  EXPECT_EQ(nav.state(), NavState::cancelled);
+  for (int i = 0; i < 30; ++i) {  // 7.5 s: no re-plan, no subgoal
+    at(50.0 + 0.5 * i, 0.0, 0.0, 1.25 + 0.25 * i);
+    nav.step(local, utm, nullptr);
+  }
+  NavigationSnapshot snap(8);
+  nav.snapshot(snap);
+  EXPECT_EQ(snap.state, NavState::cancelled);
+  EXPECT_FALSE(snap.has_active);
+  EXPECT_EQ(snap.path_count, 0u);
+  EXPECT_EQ(snap.counters.plans, 1u);
+  EXPECT_EQ(snap.counters.cancels, 1u);
+  ASSERT_TRUE(nav.set_goal(geo_goal(g, 0.0, 0.0)));
+  at(65.0, 0.0, M_PI, 9.0);
+  EXPECT_TRUE(nav.step(local, utm, nullptr).planned);
+  EXPECT_EQ(nav.state(), NavState::following);
+  EXPECT_NEAR(nav.route_length(), 65.0, 1e-6);
 }
 
 // Street cells where `street(e, n)` (UTM), grass elsewhere, over the map
@@ -485,6 +678,66 @@ TEST(NavigationSection, ParsesAndRejectsWithFileAndLine) {
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {separation: 5}\n").find("separation"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\naligner: {corner_turn: 2}\n").find("corner_turn"), std::string::npos);
   EXPECT_NE(error_of("osm: " + osm + "\ngoal: [47, 9]\nlookahed: 3\n").find("lookahed"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace trailnav::nav
+
+namespace trailnav::nav {
+namespace {
+
+// Orders through the task's queue, as the DDS command reader hands them
+// over: taken before the step, answered in the published snapshot, and no
+// heap use on the task's thread.
+TEST(NavigationTask, TakesOrdersFromItsQueueWithoutAllocating) {
+  ASSERT_TRUE(alloc_guard::hook_installed());
+  const osm::RoadGraph g = test_graph();
+  auto made = Navigator::create(g, NavigatorConfig{}, {});  // no goal: idle
+  ASSERT_TRUE(made.navigator) << made.error;
+  Mailbox<pose::PoseSnapshot> poses_in;
+  Mailbox<NavigationSnapshot> out(made.navigator->config().path_poses);
+  NavCommandQueue commands;
+  NavigationTask task(*made.navigator, poses_in, nullptr, out);
+  task.set_commands(&commands);
+  const Frames f;
+  NavCommand go;
+  go.goal = geo_goal(g, 200.0, 200.0);
+  NavCommand bad;
+  bad.goal.a = std::nan("");
+  NavCommand stop;
+  stop.kind = NavCommand::Kind::cancel;
+
+  alloc_guard::set_fatal(false);
+  alloc_guard::reset_counters();
+  alloc_guard::mark_realtime_thread("navigation-orders-test");
+  ASSERT_TRUE(alloc_guard::arm());
+  auto run_at = [&](double e, double t) {
+    pose::PoseSnapshot& s = poses_in.write_slot();
+    poses(f, kE0 + e, kN0, 0.0, t, s.local, s.utm);
+    poses_in.publish();
+    task.run({});
+  };
+  run_at(10.0, 1.0);
+  const NavState idle = task.status().state;  // nothing changed: nothing published
+  EXPECT_TRUE(commands.try_push(go));
+  run_at(10.5, 1.1);
+  const NavState following = out.try_read() != nullptr ? out.last_read().state : NavState::idle;
+  EXPECT_TRUE(commands.try_push(bad));
+  run_at(11.0, 1.2);
+  const bool refused = out.try_read() != nullptr && out.last_read().report.refusal[0] != '\0';
+  const NavState still = out.last_read().state;
+  EXPECT_TRUE(commands.try_push(stop));
+  task.run({});  // an order alone, without a new pose, is answered too
+  const NavState cancelled = out.try_read() != nullptr ? out.last_read().state : NavState::idle;
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  EXPECT_EQ(idle, NavState::idle);
+  EXPECT_EQ(following, NavState::following);
+  EXPECT_TRUE(refused);
+  EXPECT_EQ(still, NavState::following);
+  EXPECT_EQ(cancelled, NavState::cancelled);
+  EXPECT_EQ(task.status().commands, 3u);
 }
 
 }  // namespace

@@ -10,11 +10,14 @@ NavigationSection parse_navigation_section(const ConfigNode& n) {
   const std::filesystem::path p(osm);
   s.osm = p.is_absolute() || n.file().empty() ? osm : (std::filesystem::path(n.file()).parent_path() / p).lexically_normal().string();
   if (!std::filesystem::exists(s.osm)) n.fail("osm", "no such file: " + s.osm);
-  const auto goal = n.number_list("goal", -180.0, 180.0);
-  if (goal.size() != 2 || std::abs(goal[0]) > 84.0) n.fail("goal", "needs [latitude, longitude] in degrees (latitude within +-84)");
   NavigatorConfig& c = s.navigator;
-  c.goal_lat = goal[0];
-  c.goal_lon = goal[1];
+  // Optional: without it trailnavd waits, idle, for a goal over DDS.
+  if (n.has("goal")) {
+    const auto goal = n.number_list("goal", -180.0, 180.0);
+    if (goal.size() != 2 || std::abs(goal[0]) > 84.0) n.fail("goal", "needs [latitude, longitude] in degrees (latitude within +-84)");
+    c.goal_lat = goal[0];
+    c.goal_lon = goal[1];
+  }
   if (n.has("highways")) {
     s.profile.highways = n.string_list("highways");
     if (s.profile.highways.empty()) n.fail("highways", "names no highway type: the robot could drive nowhere");

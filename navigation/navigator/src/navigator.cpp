@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <optional>
 
 namespace trailnav::nav {
 
@@ -16,7 +19,9 @@ bool finite(double v) noexcept { return std::isfinite(v); }
 }  // namespace
 
 std::string check_navigator_config(const NavigatorConfig& c) {
-  if (!finite(c.goal_lat) || !finite(c.goal_lon) || std::abs(c.goal_lat) > 84.0 || std::abs(c.goal_lon) > 180.0) {
+  const bool no_goal = std::isnan(c.goal_lat) && std::isnan(c.goal_lon);
+  if (!no_goal &&
+      (!finite(c.goal_lat) || !finite(c.goal_lon) || std::abs(c.goal_lat) > 84.0 || std::abs(c.goal_lon) > 180.0)) {
     return "goal: needs [latitude, longitude] in degrees (latitude within +-84)";
   }
   if (!(c.spacing >= 0.5 && c.spacing <= 100.0)) return "spacing: must be 0.5 .. 100 m";
@@ -35,10 +40,22 @@ std::string check_navigator_config(const NavigatorConfig& c) {
 
 const char* nav_state_name(NavState state) noexcept {
   switch (state) {
-    case NavState::waiting_for_pose: return "waiting for a UTM pose";
-    case NavState::no_route: return "no route";
-    case NavState::following: return "following the route";
-    case NavState::reached: return "goal reached";
+    case NavState::idle: return "idle";
+    case NavState::planning: return "planning";
+    case NavState::following: return "following";
+    case NavState::reached: return "reached";
+    case NavState::failed: return "failed";
+    case NavState::cancelled: return "cancelled";
+  }
+  return "?";
+}
+
+const char* goal_frame_name(GoalFrame frame) noexcept {
+  switch (frame) {
+    case GoalFrame::geographic: return "geographic";
+    case GoalFrame::utm: return "utm";
+    case GoalFrame::odom: return "odom";
+    case GoalFrame::unknown: return "unknown";
   }
   return "?";
 }
@@ -54,27 +71,41 @@ Navigator::Created Navigator::create(const osm::RoadGraph& graph, const Navigato
     out.error = "the road network is empty";
     return out;
   }
+  const bool has_goal = !std::isnan(config.goal_lat);
   double gx = 0.0, gy = 0.0;
-  if (!graph.to_utm(config.goal_lat, config.goal_lon, gx, gy)) {
-    out.error = "goal: cannot be projected to UTM";
-    return out;
-  }
-  const auto goal = graph.project(gx, gy);
-  if (!goal || goal->distance > config.max_snap) {
-    char text[200];
-    std::snprintf(text, sizeof text, "goal: %.6f, %.6f lies %.0f m from the nearest routable way (max_snap %.0f m)",
-                  config.goal_lat, config.goal_lon, goal ? goal->distance : 0.0, config.max_snap);
-    out.error = text;
-    return out;
+  std::optional<osm::RoadProjection> goal;
+  if (has_goal) {
+    if (!graph.to_utm(config.goal_lat, config.goal_lon, gx, gy)) {
+      out.error = "goal: cannot be projected to UTM";
+      return out;
+    }
+    goal = graph.project(gx, gy);
+    if (!goal || goal->distance > config.max_snap) {
+      char text[200];
+      std::snprintf(text, sizeof text, "goal: %.6f, %.6f lies %.0f m from the nearest routable way (max_snap %.0f m)",
+                    config.goal_lat, config.goal_lon, goal ? goal->distance : 0.0, config.max_snap);
+      out.error = text;
+      return out;
+    }
   }
   // The longest simple path uses every segment once at most.
   double total = 0.0;
   for (std::uint32_t s = 0; s < graph.segments().size(); ++s) total += graph.segment_length(s);
   const std::size_t capacity = static_cast<std::size_t>(std::ceil(total / config.spacing)) + 8;
   std::unique_ptr<Navigator> n(new Navigator(graph, config, map_shape, capacity));
-  n->goal_ = *goal;
-  n->goal_x_ = gx;
-  n->goal_y_ = gy;
+  if (has_goal) {
+    n->goal_ = *goal;
+    n->goal_x_ = gx;
+    n->goal_y_ = gy;
+    n->goal_lat_ = config.goal_lat;
+    n->goal_lon_ = config.goal_lon;
+    n->has_goal_ = true;
+    n->state_ = NavState::planning;
+    ++n->counters_.goals;
+    ++n->goal_revision_;
+  } else {
+    n->state_ = NavState::idle;
+  }
   out.navigator = std::move(n);
   return out;
 }
@@ -85,6 +116,7 @@ Navigator::Navigator(const osm::RoadGraph& graph, const NavigatorConfig& config,
   config_.aligner.max_subgoals = subgoal_capacity;
   aligner_ = std::make_unique<subgoals::SubgoalAligner>(config_.aligner, shape);
   router_.reserve_path(route_);
+  router_.reserve_path(candidate_);
   route_arc_.reserve(route_.capacity());
   subgoals_.reserve(subgoal_capacity);
   subgoal_arc_.reserve(subgoal_capacity);
@@ -111,7 +143,25 @@ double Navigator::nearest_on_route(double x, double y, double lo, double hi, dou
   return best;
 }
 
-bool Navigator::plan(const pose::UtmPose& utm, std::int64_t now) noexcept {
+void Navigator::clear_route() noexcept {
+  route_.clear();
+  route_arc_.clear();
+  subgoals_.clear();
+  subgoal_arc_.clear();
+  aligner_->reset();
+  active_ = 0;
+  robot_arc_ = 0.0;
+  ++active_revision_;
+  ++path_revision_;
+}
+
+void Navigator::refuse(const char* why) noexcept {
+  std::snprintf(refusal_text_, sizeof refusal_text_, "%s", why);
+  ++counters_.goals_refused;
+  ++goal_revision_;
+}
+
+bool Navigator::plan(const pose::UtmPose& utm, std::int64_t now, const osm::RoadProjection& goal) noexcept {
   last_plan_ns_ = now;
   off_route_since_ = -1;
   const auto t0 = std::chrono::steady_clock::now();
@@ -119,22 +169,19 @@ bool Navigator::plan(const pose::UtmPose& utm, std::int64_t now) noexcept {
   if (!from || from->distance > config_.max_snap) {
     message_ = "the robot is farther than max_snap from every routable way";
     ++counters_.plan_failures;
-    state_ = NavState::no_route;
     return false;
   }
-  const osm::RouteStats st = router_.route(*from, goal_, route_);
+  // Into its own buffer: a new goal that cannot be routed leaves the route
+  // being followed as it is.
+  const osm::RouteStats st = router_.route(*from, goal, candidate_);
   counters_.last_plan_expanded = st.expanded;
   counters_.last_plan_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  if (!st.found || route_.empty()) {
+  if (!st.found || candidate_.empty()) {
     message_ = "no route from the robot's position to the goal (disconnected network or one-way streets)";
     ++counters_.plan_failures;
-    state_ = NavState::no_route;
-    route_.clear();
-    route_arc_.clear();
-    subgoals_.clear();
-    subgoal_arc_.clear();
     return false;
   }
+  route_.swap(candidate_);  // both reserved alike: no allocation
   route_arc_.clear();
   route_arc_.push_back(0.0);
   for (std::size_t i = 1; i < route_.size(); ++i) {
@@ -185,14 +232,47 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
   local_yaw_ = local.yaw;
   utm_e_ = utm.easting;
   utm_n_ = utm.northing;
+  have_pose_ = true;
   const std::int64_t now = local.time_ns;
   const auto interval_ns = static_cast<std::int64_t>(config_.replan_interval * 1e9);
 
-  if (state_ == NavState::waiting_for_pose || (state_ == NavState::no_route && now - last_plan_ns_ >= interval_ns)) {
-    result.planned = plan(utm, now);
-    if (!result.planned) return result;
+  if (replan_now_) {
+    // A new goal from outside: taken if it can be routed from here.
+    replan_now_ = false;
+    const bool had_route = state_ == NavState::following || state_ == NavState::reached;
+    const bool planned = plan(utm, now, pending_goal_);
+    if (planned || !had_route) {
+      goal_ = pending_goal_;
+      goal_x_ = pending_x_;
+      goal_y_ = pending_y_;
+      goal_lat_ = pending_lat_;
+      goal_lon_ = pending_lon_;
+      has_goal_ = true;
+    }
+    if (planned) {
+      result.planned = true;
+    } else {
+      refuse(message_);
+      if (!had_route) {
+        // Nothing to keep: the goal stays and is tried again every
+        // replan_interval from where the robot gets to.
+        clear_route();
+        state_ = NavState::failed;
+        return result;
+      }
+      message_ = "";  // the route being followed is fine
+    }
   }
-  if (state_ == NavState::no_route) return result;
+  if (state_ == NavState::idle || state_ == NavState::cancelled) return result;
+  if (state_ == NavState::planning || (state_ == NavState::failed && now - last_plan_ns_ >= interval_ns)) {
+    result.planned = plan(utm, now, goal_);
+    if (!result.planned) {
+      if (state_ != NavState::failed) clear_route();
+      state_ = NavState::failed;
+      return result;
+    }
+  }
+  if (state_ == NavState::failed) return result;
 
   // Where the robot is along the route.
   double arc = robot_arc_;
@@ -202,8 +282,12 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     if (static_cast<double>(now - off_route_since_) * 1e-9 >= config_.leave_time && now - last_plan_ns_ >= interval_ns &&
         state_ != NavState::reached) {
       ++counters_.replans;
-      result.planned = plan(utm, now);
-      if (!result.planned) return result;
+      result.planned = plan(utm, now, goal_);
+      if (!result.planned) {
+        clear_route();
+        state_ = NavState::failed;
+        return result;
+      }
       cross_track_ = nearest_on_route(utm.easting, utm.northing, 0.0, kAhead, arc);
     }
   } else {
@@ -282,8 +366,114 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
   return result;
 }
 
+bool Navigator::set_goal(const GoalRequest& g) noexcept {
+  ++counters_.goals;
+  char why[160];
+  if (g.frame == GoalFrame::unknown) {
+    std::snprintf(why, sizeof why, "goal refused: frame '%.*s' is neither the odometry frame nor the map frame",
+                  static_cast<int>(strnlen(g.frame_id.data(), g.frame_id.size())), g.frame_id.data());
+    refuse(why);
+    return false;
+  }
+  if (!finite(g.a) || !finite(g.b)) {
+    std::snprintf(why, sizeof why, "goal refused: its %s coordinates are not finite numbers", goal_frame_name(g.frame));
+    refuse(why);
+    return false;
+  }
+  double x = g.a, y = g.b, lat = 0.0, lon = 0.0;
+  switch (g.frame) {
+    case GoalFrame::geographic: {
+      lat = g.a;
+      lon = g.b;
+      const int zone = osm::standard_utm_zone(lat, lon);
+      const int dz = zone == 0 ? 99 : std::min(std::abs(zone - graph_.zone()), 60 - std::abs(zone - graph_.zone()));
+      // A neighbouring zone is fine (the network is projected across its
+      // edge, and max_snap below decides whether the goal is near it).
+      if (dz > 1 || (lat >= 0.0) != graph_.north()) {
+        if (zone == 0) {
+          std::snprintf(why, sizeof why, "goal refused: %.6f, %.6f is no position UTM covers (latitude within +-84, longitude within +-180)", lat, lon);
+        } else {
+          std::snprintf(why, sizeof why, "goal refused: %.6f, %.6f lies outside the map's UTM zone %d%c (it is in %d%c)", lat, lon,
+                        graph_.zone(), graph_.north() ? 'N' : 'S', zone, lat >= 0.0 ? 'N' : 'S');
+        }
+        refuse(why);
+        return false;
+      }
+      if (!graph_.to_utm(lat, lon, x, y)) {
+        refuse("goal refused: cannot be projected to UTM");
+        return false;
+      }
+      break;
+    }
+    case GoalFrame::utm:
+      graph_.to_latlon(x, y, lat, lon);
+      break;
+    case GoalFrame::unknown:
+      return false;  // refused above
+    case GoalFrame::odom: {
+      if (!have_pose_) {
+        refuse("goal refused: in the odometry frame, but there is no UTM pose yet to place it");
+        return false;
+      }
+      // The inverse of to_local through the newest pose pair.
+      const double dx = g.a - local_x_, dy = g.b - local_y_;
+      x = utm_e_ + cos_ * dx + sin_ * dy;
+      y = utm_n_ - sin_ * dx + cos_ * dy;
+      graph_.to_latlon(x, y, lat, lon);
+      break;
+    }
+  }
+  const auto projected = graph_.project(x, y);
+  if (!projected || projected->distance > config_.max_snap) {
+    std::snprintf(why, sizeof why, "goal refused: %.6f, %.6f lies %.0f m from the nearest routable way (max_snap %.0f m)", lat,
+                  lon, projected ? projected->distance : 0.0, config_.max_snap);
+    refuse(why);
+    return false;
+  }
+  pending_goal_ = *projected;
+  pending_x_ = x;
+  pending_y_ = y;
+  pending_lat_ = lat;
+  pending_lon_ = lon;
+  replan_now_ = true;
+  refusal_text_[0] = '\0';
+  ++goal_revision_;
+  if (state_ == NavState::idle || state_ == NavState::cancelled) state_ = NavState::planning;
+  return true;
+}
+
+void Navigator::cancel() noexcept {
+  ++counters_.cancels;
+  ++goal_revision_;
+  replan_now_ = false;
+  if (state_ == NavState::idle) return;
+  clear_route();
+  state_ = NavState::cancelled;
+}
+
+void Navigator::report(NavigationStatusReport& out) const noexcept {
+  out.time_ns = time_ns_;
+  out.state = state_;
+  out.has_goal = has_goal_;
+  out.goal_easting = goal_x_;
+  out.goal_northing = goal_y_;
+  out.goal_lat = goal_lat_;
+  out.goal_lon = goal_lon_;
+  out.remaining = state_ == NavState::following ? std::max(0.0, route_length() - robot_arc_) : 0.0;
+  out.route_length = route_length();
+  out.subgoals = subgoals_.size();
+  out.active = active_;
+  out.zone = graph_.zone();
+  out.north = graph_.north();
+  out.counters = counters_;
+  out.message = message_;
+  std::memcpy(out.refusal.data(), refusal_text_, out.refusal.size());
+}
+
 void Navigator::snapshot(NavigationSnapshot& out) const noexcept {
   out.state = state_;
+  out.goal_revision = goal_revision_;
+  report(out.report);
   out.time_ns = time_ns_;
   out.plan = counters_.plans;
   out.active_revision = active_revision_;

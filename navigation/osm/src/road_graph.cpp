@@ -1,6 +1,7 @@
 #include "trailnav/navigation/osm/road_graph.hpp"
 
 #include <GeographicLib/TransverseMercator.hpp>
+#include <GeographicLib/UTMUPS.hpp>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -44,6 +45,15 @@ double RoadGraph::segment_length(std::uint32_t s) const noexcept {
   const RoadVertex& a = vertices_[segments_[s].a];
   const RoadVertex& b = vertices_[segments_[s].b];
   return std::hypot(b.x - a.x, b.y - a.y);
+}
+
+int standard_utm_zone(double lat, double lon) noexcept {
+  if (!std::isfinite(lat) || !std::isfinite(lon) || std::abs(lat) > 84.0 || std::abs(lon) > 180.0) return 0;
+  try {
+    return GeographicLib::UTMUPS::StandardZone(lat, lon);
+  } catch (...) {
+    return 0;
+  }
 }
 
 bool utm_in_zone(int zone, bool north, double lat, double lon, double& x, double& y) noexcept {

@@ -20,6 +20,13 @@
 //             `leave_time` seconds (it took another way), from where it is
 //             now; at most every `replan_interval` seconds
 //   goal      within `goal_tolerance` of the route's end: reached
+//   orders    a new goal (geographic, UTM or in the odometry frame) is
+//             checked at once (finite, within a zone of the map's, within
+//             `max_snap` of a routable way) and planned at the next step;
+//             one that cannot be routed from the robot is refused there. A
+//             refused goal leaves the robot on its current route (or, with
+//             none, idle); `cancel` drops the route and the robot stops.
+//             Without a goal in the config the navigator starts idle.
 //
 // Everything is allocated by create(): the router's work arrays, the route
 // and subgoal buffers sized by the network's total length, the aligner.
@@ -59,11 +66,30 @@ struct NavigatorConfig {
   subgoals::AlignerConfig aligner;  // its max_subgoals is set from the network by create()
 };
 
-// Empty when usable, else what is wrong.
+// Empty when usable, else what is wrong. The goal may be absent (both NaN).
 std::string check_navigator_config(const NavigatorConfig& config);
 
-enum class NavState : std::uint8_t { waiting_for_pose, no_route, following, reached };
+// The navigation status' states, by these names on DDS (docs/dds.md):
+//   idle       no goal
+//   planning   a goal, waiting for a UTM pose certain enough to plan from
+//   following  a route to the goal
+//   reached    within goal_tolerance of the route's end
+//   failed     the goal cannot be routed from where the robot is (re-tried every replan_interval)
+//   cancelled  the route was cancelled: no subgoal
+enum class NavState : std::uint8_t { idle, planning, following, reached, failed, cancelled };
 const char* nav_state_name(NavState state) noexcept;
+
+// A goal as it arrives from outside (DDS): in degrees WGS84, or metres in the
+// map's UTM zone, or metres in the odometry frame (converted through the
+// newest pose pair).
+// `unknown`: a frame neither of these (refused, naming `frame_id`).
+enum class GoalFrame : std::uint8_t { geographic, utm, odom, unknown };
+struct GoalRequest {
+  GoalFrame frame = GoalFrame::geographic;
+  double a = 0.0, b = 0.0;  // latitude, longitude (deg) | easting, northing (m) | x, y (m)
+  std::array<char, 48> frame_id{};  // as it arrived (for the refusal of an unknown frame)
+};
+const char* goal_frame_name(GoalFrame frame) noexcept;
 
 struct NavigationCounters {
   std::uint64_t steps = 0;
@@ -75,6 +101,9 @@ struct NavigationCounters {
   std::uint64_t subgoals_reached = 0;
   std::uint64_t last_plan_expanded = 0;  // A*'s settled vertices
   double last_plan_ms = 0.0;
+  std::uint64_t goals = 0;          // goals offered (config and orders)
+  std::uint64_t goals_refused = 0;  // of them, refused (invalid, off the network, not routable)
+  std::uint64_t cancels = 0;
 };
 
 // One subgoal of the published path, in the local odometry frame.
@@ -83,12 +112,31 @@ struct PathPose {
   bool corrected = false;  // the aligner's estimate (else the raw OSM position)
 };
 
+// The navigation status as trailnavd publishes it (trailnav_msgs/NavigationStatus):
+// with every snapshot, and once for every order taken, so that each refusal
+// is seen even when several orders arrive between two snapshots.
+struct NavigationStatusReport {
+  std::int64_t time_ns = 0;        // the pose's time
+  NavState state = NavState::idle;
+  bool has_goal = false;           // the goal in use (after a cancel: the cancelled one)
+  double goal_easting = 0.0, goal_northing = 0.0;  // UTM, as given (before projection onto the network)
+  double goal_lat = 0.0, goal_lon = 0.0;
+  double remaining = 0.0;          // m along the route to its end (0 unless following)
+  double route_length = 0.0;       // m
+  std::size_t subgoals = 0, active = 0;
+  int zone = 0;
+  bool north = true;
+  NavigationCounters counters;
+  const char* message = "";        // why planning failed, or "" (a literal)
+  std::array<char, 160> refusal{};  // why the newest goal was refused, or empty (a copy: other threads read it)
+};
+
 // What the navigation task hands the publisher. Constructed with the path's
 // capacity at start-up (a Mailbox slot); snapshot() fills it without allocating.
 struct NavigationSnapshot {
   explicit NavigationSnapshot(std::size_t path_capacity = 0) : path(path_capacity) {}
 
-  NavState state = NavState::waiting_for_pose;
+  NavState state = NavState::planning;
   std::int64_t time_ns = 0;        // the pose's time
   std::uint64_t plan = 0;          // number of the plan the subgoals belong to
   std::uint64_t active_revision = 0;  // changes whenever the active subgoal or its position changes
@@ -97,6 +145,8 @@ struct NavigationSnapshot {
   std::size_t active = 0;          // index of the active subgoal
   bool has_active = false;
   PathPose active_pose;            // odometry frame
+  std::uint64_t goal_revision = 0; // changes with every goal offered, accepted or not, and every cancel
+  NavigationStatusReport report;
   double active_easting = 0.0, active_northing = 0.0;  // its raw OSM position, UTM
   int zone = 0;
   bool north = true;
@@ -132,6 +182,14 @@ class Navigator {
 
   // Fills `out` (its path capacity is honoured). Never allocates.
   void snapshot(NavigationSnapshot& out) const noexcept;
+  void report(NavigationStatusReport& out) const noexcept;
+
+  // A new goal: checked now (false and refusal() says why: the current
+  // route stays), planned at the next step. Never allocates.
+  bool set_goal(const GoalRequest& goal) noexcept;
+  // Drops the route: no subgoal until the next goal.
+  void cancel() noexcept;
+  const char* refusal() const noexcept { return refusal_text_; }
 
   NavState state() const noexcept { return state_; }
   const NavigationCounters& counters() const noexcept { return counters_; }
@@ -160,7 +218,9 @@ class Navigator {
  private:
   Navigator(const osm::RoadGraph& graph, const NavigatorConfig& config, const perception::TerrainMapShape& shape,
             std::size_t subgoal_capacity);
-  bool plan(const pose::UtmPose& utm, std::int64_t now) noexcept;
+  bool plan(const pose::UtmPose& utm, std::int64_t now, const osm::RoadProjection& goal) noexcept;
+  void clear_route() noexcept;
+  void refuse(const char* why) noexcept;
   // Distance of (x, y) to the route and its arc, over route segments whose
   // arcs meet [lo, hi].
   double nearest_on_route(double x, double y, double lo, double hi, double& arc) const noexcept;
@@ -172,7 +232,16 @@ class Navigator {
   osm::RoadProjection goal_;
   double goal_x_ = 0.0, goal_y_ = 0.0;
 
-  NavState state_ = NavState::waiting_for_pose;
+  NavState state_ = NavState::planning;
+  bool has_goal_ = false;
+  bool have_pose_ = false;       // a pose pair has been seen (for odometry-frame goals)
+  bool replan_now_ = false;      // a new goal: plan at the next step whatever replan_interval says
+  std::vector<osm::Point2> candidate_;  // a new goal's route, kept apart until it is found
+  osm::RoadProjection pending_goal_;
+  double pending_x_ = 0.0, pending_y_ = 0.0, pending_lat_ = 0.0, pending_lon_ = 0.0;
+  double goal_lat_ = 0.0, goal_lon_ = 0.0;
+  std::uint64_t goal_revision_ = 0;
+  char refusal_text_[160] = {};
   std::vector<osm::Point2> route_;
   std::vector<double> route_arc_;
   std::vector<osm::Point2> subgoals_;

@@ -144,6 +144,10 @@ RoadGraphResult load_road_graph(const std::string& path, const RoutingProfile& p
 RoadGraphResult parse_road_graph(std::span<const char> data, const std::string& name, const RoutingProfile& profile = {},
                                  int zone = 0);
 
+// The UTM zone a position belongs to (GeographicLib's standard zone, with the
+// Norway and Svalbard exceptions); 0 beyond the UTM latitudes or for NaN.
+int standard_utm_zone(double lat, double lon) noexcept;
+
 // WGS84 to UTM in the given zone and hemisphere, for points inside or
 // beyond the zone (transverse Mercator about its central meridian).
 bool utm_in_zone(int zone, bool north, double lat, double lon, double& x, double& y) noexcept;
