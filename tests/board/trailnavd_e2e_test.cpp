@@ -60,6 +60,7 @@
 #include "simulator.hpp"
 #include "geographic_msgs.h"
 #include "std_msgs.h"
+#include "bench_daemon.hpp"
 #include "subscriber.hpp"
 #include "tf2_msgs.h"
 #include "trailnav/navigation/osm/road_graph.hpp"
@@ -120,22 +121,6 @@ struct DaemonRun {
   std::string stderr_text;
 };
 
-long rss_kb(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  }
-  return 0;
-}
-
-std::string read_file(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 // Everything of one run; `seconds` of simulated driving.
 // With `navigation`, trailnavd also plans on the recording's world.osm to
 // where the drive ends and publishes corrected subgoals; the terrain map is
@@ -147,67 +132,27 @@ using Orders = std::function<void(double elapsed_s, const dds::Domain& domain)>;
 DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool navigation = false,
                      const std::string& scenario = "urban", const Orders& orders = {}) {
   DaemonRun out;
-  const fs::path dir = fs::temp_directory_path() / ("trailnav-e2e-" + tag + "-" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  sim::SimOptions so;
-  so.scenario = scenario;
-  so.seed = 5;
-  so.duration = seconds;
-  so.out = (dir / "rec").string();
-  const sim::SimReport sr = sim::run_simulation(so);
-  EXPECT_EQ(sr.error, "");
+  test::BenchDaemonOptions bo;
+  bo.scenario = scenario;
+  bo.seconds = seconds;
+  bo.tag = "e2e-" + tag;
+  bo.realtime = realtime;
+  bo.navigation = navigation;
+  std::string error;
+  const auto bench = test::BenchDaemon::start(TRAILNAVD_BINARY, bo, error);
+  EXPECT_TRUE(bench) << error;
+  if (!bench) return out;
+  const int domain = static_cast<int>(bench->domain());
 
   // With navigation: the goal is where the drive ends, and the subgoals
   // (odometry frame) are checked against the true trail through the robot's
   // odometry and true poses of their instant.
   sim::Polyline trail;
-  eval::SimTruth truth;
+  const eval::SimTruth& truth = bench->truth();
   if (navigation) {
-    auto loaded = eval::load_sim_truth(so.out + "/truth");
-    EXPECT_TRUE(loaded.truth) << loaded.error;
-    if (!loaded.truth || loaded.truth->trajectory.empty()) return out;
-    truth = std::move(*loaded.truth);
     out.narrowest_trail = std::numeric_limits<double>::max();
     for (const auto& t : truth.scenario.trails) out.narrowest_trail = std::min(out.narrowest_trail, t.width);
-    EXPECT_EQ(eval::load_true_route(so.out + "/truth", trail), "");
-  }
-
-  // The bench config, on this test's own ports and DDS domain.
-  const int base = 21000 + (::getpid() % 400) * 10;
-  const int domain = 100 + ::getpid() % 100;
-  const fs::path config = dir / "robot.yaml";
-  {
-    std::ofstream c(config);
-    c << "runtime: {realtime: " << (realtime ? "best_effort, lock_memory: true" : "off, lock_memory: false")
-      << ", log_level: warn, log_sink: stderr}\n"
-      << "lidar: {model: VLP-16, calibration: builtin, data: 127.0.0.1:" << base << ", position: 127.0.0.1:" << base + 1
-      << ", rpm: 600}\n"
-      << "gps: {link: 'serial:" << (dir / "gps").string() << "@115200'}\n"
-      << "imu: {link: 'serial:" << (dir / "imu").string() << "@921600', protocol: xsens}\n"
-      << "can: {transport: tunnel, tunnel: 127.0.0.1:" << base + 2 << ", dbc: " << fs::absolute("board/sim/trailnav-robot.dbc").string()
-      << ", left: WHEEL_SPEEDS.SpeedLeft, right: WHEEL_SPEEDS.SpeedRight, track: 0.6}\n"
-      << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
-      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: " << (navigation ? "true" : "false")
-      << ", feed_terrain: " << (navigation ? "true" : "false") << "}\n"
-      << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
-      << "terrain: {model: " << fs::absolute("board/models/terrain-sim.tnrf").string() << ", max_step_interval: 1.0}\n"
-      << "dds: {domain: " << domain << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5}\n"
-      << "tasks:\n"
-      << "  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 1.0}\n"
-      << "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 2.0}\n"
-      << "  - {name: can, kind: periodic, rate_hz: 200, budget_ms: 1.0}\n"
-      << "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1.0}\n"
-      << "  - {name: gpio, kind: periodic, rate_hz: 200, budget_ms: 1.0}\n"
-      << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1.0}\n"
-      << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n"
-      << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
-    if (navigation) {
-      char goal[120];
-      std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", truth.trajectory.back().lat, truth.trajectory.back().lon);
-      c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n"
-        << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
-    }
+    EXPECT_EQ(eval::load_true_route(bench->recording() + "/truth", trail), "");
   }
   eval::TrailCheck trail_check(truth, trail, 0);
   struct Stamped {
@@ -215,11 +160,10 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     double x, y;
   };
   std::vector<Stamped> subgoals_received;
-  std::atomic<std::int64_t> replay_start_ns{0};
   auto stamp_ns = [](const auto& header) {
     return static_cast<std::int64_t>(header.stamp.sec) * 1'000'000'000 + static_cast<std::int64_t>(header.stamp.nanosec);
   };
-  auto robot = daemon::load_robot_config(config.string());
+  auto robot = daemon::load_robot_config(bench->config_path().string());
   EXPECT_TRUE(robot.config) << robot.error;
   if (!robot.config) return out;
 
@@ -250,46 +194,10 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   std::map<std::int64_t, std::array<double, 2>> base_tf;
   std::int64_t newest_pose_ns = 0;
 
-  // trailnavd itself, as systemd would run it (stderr to a file).
-  const std::string err_path = (dir / "trailnavd.err").string();
-  std::vector<std::string> args = {TRAILNAVD_BINARY, "--config", config.string(), "--duration", "600"};
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  pid_t pid = 0;
-  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  EXPECT_EQ(rc, 0);
-  if (rc != 0) return out;
-
-  replay::ReplayOptions ro;
-  ro.udp_targets["lidar"] = {0x7F000001u, static_cast<std::uint16_t>(base)};
-  ro.udp_targets["lidar-position"] = {0x7F000001u, static_cast<std::uint16_t>(base + 1)};
-  ro.can_tunnel = {0x7F000001u, static_cast<std::uint16_t>(base + 2)};
-  ro.gpio_tunnel = {0x7F000001u, static_cast<std::uint16_t>(base + 3)};
-  ro.serial_links["gps"] = (dir / "gps").string();
-  ro.serial_links["imu"] = (dir / "imu").string();
-  auto replayer = replay::Replayer::create(so.out, ro);
-  EXPECT_TRUE(replayer.replayer) << replayer.error;
-  if (!replayer.replayer) {
-    ::kill(pid, SIGTERM);
-    ::waitpid(pid, nullptr, 0);
-    return out;
-  }
-
   std::map<std::int64_t, std::vector<std::int8_t>> received;
   std::map<std::int64_t, std::vector<std::uint8_t>> terrain_received;  // class ids then confidences
   DurationHistogram latency;
-  std::atomic<bool> replaying{true};
-  std::thread player([&] {
-    std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the daemon opens its links and discovery settles
-    replay_start_ns = wall_clock_ns();
-    replayer.replayer->run();
-    replaying = false;
-  });
+  bench->start_replay(1.5);  // the daemon opens its links and discovery settles meanwhile
   auto take_all = [&](double wait) {
     maps.subscriber->take(wait, [&](const dds::ReceivedSample& r) {
       const auto& g = *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample);
@@ -383,16 +291,16 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   bool rss_taken = false;
   const auto t0 = std::chrono::steady_clock::now();
   const auto warm = std::chrono::duration<double>(std::max(4.0, seconds / 3.0));
-  while (replaying) {
+  while (bench->replaying()) {
     take_all(0.05);
     if (orders) orders(elapsed_s(), *dds_domain.domain);
     if (!rss_taken && std::chrono::steady_clock::now() - t0 > warm) {
-      out.rss_start_kb = rss_kb(pid);
+      out.rss_start_kb = bench->rss_kb();
       rss_taken = true;
     }
   }
-  player.join();
-  out.rss_end_kb = rss_kb(pid);
+  bench->join_replay();
+  out.rss_end_kb = bench->rss_kb();
   for (int i = 0; i < 15; ++i) take_all(0.1);  // and 1.5 s of silence
   if (orders) {
     orders(-1.0, *dds_domain.domain);  // the replay is over
@@ -418,12 +326,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       });
     }
   }
-  out.rss_after_kb = rss_kb(pid);
-  ::kill(pid, SIGTERM);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  out.stderr_text = read_file(err_path);
+  out.rss_after_kb = bench->rss_kb();
+  out.exit_code = bench->stop();
+  out.stderr_text = bench->stderr_text();
   out.maps = received.size();
   out.latency = latency.summary();
   // Each map's own transform against the pose-rate ones around its stamp
@@ -446,7 +351,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     out.map_tf_vs_pose_m.push_back(std::hypot(x - own->second[0], y - own->second[1]));
   }
   if (navigation) {
-    if (!truth.trajectory.empty()) trail_check.set_offset(replay_start_ns - truth.trajectory.front().utc_ns);
+    if (!truth.trajectory.empty()) trail_check.set_offset(bench->replay_start_ns() - truth.trajectory.front().utc_ns);
     for (const Stamped& g : subgoals_received) {
       const double d = trail_check.distance(g.t, g.x, g.y);
       if (std::isnan(d)) {
@@ -456,13 +361,12 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
         out.subgoal_errors.push_back(d);
       }
     }
-    fs::remove_all(dir);
     return out;
   }
 
   // The offline pipeline on the same recording, same obstacle config, no pose stream.
   eval::ObstacleRunOptions oo;
-  oo.inputs = {so.out};
+  oo.inputs = {bench->recording()};
   oo.config = *robot.config->obstacles;
   oo.calibration = "builtin";
   oo.truth_poses = false;
@@ -494,7 +398,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   }
 
   // The offline terrain analysis on the same revolutions, same config, no pose stream.
-  auto source = eval::RevolutionSource::open({so.out}, "builtin");
+  auto source = eval::RevolutionSource::open({bench->recording()}, "builtin");
   EXPECT_TRUE(source.source) << source.error;
   auto forest = perception::RandomForest::load(robot.config->terrain->model);
   EXPECT_TRUE(forest.forest) << forest.error;
@@ -528,7 +432,6 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
                                                                  [](std::uint8_t c) { return c < perception::kTerrainClasses; }));
     }
   }
-  fs::remove_all(dir);
   return out;
 }
 

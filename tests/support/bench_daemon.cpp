@@ -1,0 +1,167 @@
+#include "bench_daemon.hpp"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "replayer.hpp"
+#include "simulator.hpp"
+#include "trailnav/runtime/clock.hpp"
+
+extern char** environ;
+
+namespace trailnav::test {
+
+namespace fs = std::filesystem;
+
+std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary, const BenchDaemonOptions& options,
+                                                std::string& error) {
+  std::unique_ptr<BenchDaemon> b(new BenchDaemon());
+  b->options_ = options;
+  b->dir_ = fs::temp_directory_path() / ("trailnav-" + options.tag + "-" + std::to_string(::getpid()));
+  fs::remove_all(b->dir_);
+  fs::create_directories(b->dir_);
+  sim::SimOptions so;
+  so.scenario = options.scenario;
+  so.seed = options.seed;
+  so.duration = options.seconds;
+  so.out = (b->dir_ / "rec").string();
+  b->recording_ = so.out;
+  if (const sim::SimReport sr = sim::run_simulation(so); !sr.error.empty()) {
+    error = "simulation: " + sr.error;
+    return nullptr;
+  }
+  if (options.navigation) {
+    auto loaded = eval::load_sim_truth(so.out + "/truth");
+    if (!loaded.truth || loaded.truth->trajectory.empty()) {
+      error = "truth: " + loaded.error;
+      return nullptr;
+    }
+    b->truth_ = std::move(*loaded.truth);
+  }
+
+  // The bench config, on this test's own ports and DDS domain.
+  b->base_port_ = 21000 + (::getpid() % 400) * 10;
+  b->domain_ = static_cast<std::uint32_t>(100 + ::getpid() % 100);
+  const int base = b->base_port_;
+  b->config_ = b->dir_ / "robot.yaml";
+  {
+    std::ofstream c(b->config_);
+    const char* nav = options.navigation ? "true" : "false";
+    c << "runtime: {realtime: " << (options.realtime ? "best_effort, lock_memory: true" : "off, lock_memory: false")
+      << ", log_level: warn, log_sink: stderr}\n"
+      << "lidar: {model: VLP-16, calibration: builtin, data: 127.0.0.1:" << base << ", position: 127.0.0.1:" << base + 1
+      << ", rpm: 600}\n"
+      << "gps: {link: 'serial:" << (b->dir_ / "gps").string() << "@115200'}\n"
+      << "imu: {link: 'serial:" << (b->dir_ / "imu").string() << "@921600', protocol: xsens}\n"
+      << "can: {transport: tunnel, tunnel: 127.0.0.1:" << base + 2
+      << ", dbc: " << fs::absolute("board/sim/trailnav-robot.dbc").string()
+      << ", left: WHEEL_SPEEDS.SpeedLeft, right: WHEEL_SPEEDS.SpeedRight, track: 0.6}\n"
+      << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
+      << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: " << nav << ", feed_terrain: " << nav << "}\n"
+      << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
+      << "terrain: {model: " << fs::absolute("board/models/terrain-sim.tnrf").string() << ", max_step_interval: 1.0}\n"
+      << "dds: {domain: " << b->domain_ << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5"
+      << options.dds_yaml << "}\n"
+      << "tasks:\n"
+      << "  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 1.0}\n"
+      << "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 2.0}\n"
+      << "  - {name: can, kind: periodic, rate_hz: 200, budget_ms: 1.0}\n"
+      << "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1.0}\n"
+      << "  - {name: gpio, kind: periodic, rate_hz: 200, budget_ms: 1.0}\n"
+      << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1.0}\n"
+      << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n"
+      << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
+    if (options.navigation) {
+      char goal[120];
+      std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", b->truth_.trajectory.back().lat, b->truth_.trajectory.back().lon);
+      c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n"
+        << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
+    }
+    c << options.extra_yaml;
+  }
+
+  // trailnavd itself, as systemd would run it (stderr to a file).
+  b->stderr_path_ = (b->dir_ / "trailnavd.err").string();
+  std::vector<std::string> args = {daemon_binary, "--config", b->config_.string(), "--duration", "600"};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 2, b->stderr_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  const int rc = posix_spawn(&b->pid_, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) {
+    b->pid_ = 0;
+    error = "cannot start " + daemon_binary;
+    return nullptr;
+  }
+  return b;
+}
+
+BenchDaemon::~BenchDaemon() {
+  join_replay();
+  stop();
+  fs::remove_all(dir_);
+}
+
+void BenchDaemon::start_replay(double delay_s) {
+  replay::ReplayOptions ro;
+  const auto port = [&](int k) { return static_cast<std::uint16_t>(base_port_ + k); };
+  ro.udp_targets["lidar"] = {0x7F000001u, port(0)};
+  ro.udp_targets["lidar-position"] = {0x7F000001u, port(1)};
+  ro.can_tunnel = {0x7F000001u, port(2)};
+  ro.gpio_tunnel = {0x7F000001u, port(3)};
+  ro.serial_links["gps"] = (dir_ / "gps").string();
+  ro.serial_links["imu"] = (dir_ / "imu").string();
+  replaying_ = true;
+  player_ = std::thread([this, ro, delay_s] {
+    auto replayer = replay::Replayer::create(recording_, ro);
+    if (!replayer.replayer) {
+      std::fprintf(stderr, "bench daemon: replay: %s\n", replayer.error.c_str());
+      replaying_ = false;
+      return;
+    }
+    std::this_thread::sleep_for(std::chrono::duration<double>(delay_s));
+    replay_start_ns_ = wall_clock_ns();
+    replayer.replayer->run();
+    replaying_ = false;
+  });
+}
+
+void BenchDaemon::join_replay() {
+  if (player_.joinable()) player_.join();
+}
+
+int BenchDaemon::stop() {
+  if (pid_ <= 0) return -1;
+  ::kill(pid_, SIGTERM);
+  int status = 0;
+  ::waitpid(pid_, &status, 0);
+  pid_ = 0;
+  std::ifstream in(stderr_path_);
+  std::stringstream s;
+  s << in.rdbuf();
+  stderr_text_ = s.str();
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+long BenchDaemon::rss_kb() const {
+  std::ifstream in("/proc/" + std::to_string(pid_) + "/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+  }
+  return 0;
+}
+
+}  // namespace trailnav::test

@@ -1,0 +1,81 @@
+// trailnavd on a bench, for end-to-end tests: a simulated recording, a robot
+// config on this test's own ports and DDS domain (every sensor and DDS on
+// loopback), the daemon spawned as systemd would run it (stderr to a file),
+// and the recording replayed into it in real time on a thread (lidar and
+// GPIO over UDP, GPS and IMU through pseudo-terminals, CAN through its
+// tunnel). Knows no DDS: tests subscribe with whichever DDS they test.
+#pragma once
+
+#include <sys/types.h>
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "sim_truth.hpp"
+
+namespace trailnav::test {
+
+struct BenchDaemonOptions {
+  std::string scenario = "urban";
+  std::uint64_t seed = 5;
+  double seconds = 8.0;       // of simulated driving
+  std::string tag = "bench";  // names the temporary folder
+  bool realtime = false;      // SCHED_FIFO and mlockall where permitted
+  // With navigation the daemon plans on the recording's world.osm to where
+  // the drive ends, and the pose moves the obstacle and terrain maps.
+  bool navigation = false;
+  std::string extra_yaml;     // appended to the config (e.g. more dds keys go in `dds_yaml`)
+  std::string dds_yaml;       // appended inside the dds section's braces, e.g. ", topics: {...}"
+};
+
+class BenchDaemon {
+ public:
+  // Simulates, writes the config and spawns trailnavd (`daemon_binary`);
+  // null with `error` when any of it fails.
+  static std::unique_ptr<BenchDaemon> start(const std::string& daemon_binary, const BenchDaemonOptions& options,
+                                            std::string& error);
+  ~BenchDaemon();
+  BenchDaemon(const BenchDaemon&) = delete;
+  BenchDaemon& operator=(const BenchDaemon&) = delete;
+
+  // Replays the recording on a thread after `delay_s` (the daemon opens its
+  // links and DDS discovery settles meanwhile).
+  void start_replay(double delay_s = 1.5);
+  bool replaying() const noexcept { return replaying_.load(); }
+  void join_replay();
+  // Host time (CLOCK_REALTIME ns) the replay started; 0 before.
+  std::int64_t replay_start_ns() const noexcept { return replay_start_ns_.load(); }
+
+  // SIGTERM, wait; the exit code (-1 when killed) and the daemon's stderr.
+  int stop();
+  const std::string& stderr_text() const noexcept { return stderr_text_; }
+  long rss_kb() const;
+
+  std::uint32_t domain() const noexcept { return domain_; }
+  const std::string& recording() const noexcept { return recording_; }
+  const std::filesystem::path& config_path() const noexcept { return config_; }
+  // The simulated truth (loaded with navigation only).
+  const eval::SimTruth& truth() const noexcept { return truth_; }
+  pid_t pid() const noexcept { return pid_; }
+
+ private:
+  BenchDaemon() = default;
+
+  BenchDaemonOptions options_;
+  std::filesystem::path dir_, config_;
+  std::string recording_;
+  std::uint32_t domain_ = 0;
+  int base_port_ = 0;
+  eval::SimTruth truth_;
+  pid_t pid_ = 0;
+  std::string stderr_path_, stderr_text_;
+  std::atomic<bool> replaying_{false};
+  std::atomic<std::int64_t> replay_start_ns_{0};
+  std::thread player_;
+};
+
+}  // namespace trailnav::test
