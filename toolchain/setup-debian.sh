@@ -20,6 +20,9 @@ packages=(
   libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libsystemd-dev
+  # the cross-vendor test: eProsima Fast DDS (ROS 2's default middleware) and
+  # its IDL generator (Java, from Debian)
+  libfastrtps-dev fastddsgen
   # bench tools: SocketCAN utilities, network namespaces
   can-utils iproute2
 )

@@ -39,11 +39,21 @@ struct EchoOptions {
   unsigned domain = 0;
   std::string cyclone_config;
   bool quiet = false;
+  bool digest = false;
 };
+
+// FNV-1a, 64 bits: a fingerprint of a map's cells to compare what two
+// subscribers (or two DDS implementations) received.
+std::uint64_t fnv1a(const void* data, std::size_t n) noexcept {
+  std::uint64_t h = 14695981039346656037ull;
+  const auto* p = static_cast<const std::uint8_t*>(data);
+  for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  return h;
+}
 
 double stamp_s(const builtin_interfaces_msg_dds__Time_& t) { return t.sec + 1e-9 * t.nanosec; }
 
-void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_ms) {
+void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_ms, bool digest) {
   char head[96];
   std::snprintf(head, sizeof head, "#%llu %7.1f kB %7.2f ms", static_cast<unsigned long long>(n),
                 static_cast<double>(r.wire_bytes) / 1000.0, latency_ms);
@@ -64,6 +74,10 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
                 head, stamp_s(g.header.stamp), g.info.width, g.info.height, static_cast<double>(g.info.resolution),
                 g.info.origin.position.x, g.info.origin.position.y, g.header.frame_id, static_cast<unsigned long long>(occ),
                 static_cast<unsigned long long>(fr), static_cast<unsigned long long>(unk));
+    if (digest) {
+      std::printf("    digest stamp %d.%09u cells %016llx\n", g.header.stamp.sec, g.header.stamp.nanosec,
+                  static_cast<unsigned long long>(fnv1a(g.data._buffer, g.data._length)));
+    }
   } else if (r.type == &geometry_msgs_msg_dds__PoseStamped__desc) {
     const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
     const auto& q = p.pose.orientation;
@@ -195,7 +209,7 @@ int run_echo(const EchoOptions& o) {
       last_ns = r.receive_ns;
       const double latency_ms = static_cast<double>(r.receive_ns - r.source_ns) * 1e-6;
       latencies.record(r.receive_ns - r.source_ns);
-      if (!o.quiet) print_sample(r, n, latency_ms);
+      if (!o.quiet) print_sample(r, n, latency_ms, o.digest);
       if (!o.png_dir.empty()) {
         char name[64];
         std::snprintf(name, sizeof name, "-%06llu.png", static_cast<unsigned long long>(n));
@@ -235,8 +249,10 @@ void add_echo_command(CLI::App& app) {
   auto* cmd = app.add_subcommand("echo",
                                  "Print what arrives on a trailnavd topic (DDS, ROS 2 naming): one line per sample with "
                                  "its size and latency, then rate and latency percentiles; save maps as PNG.\n"
-                                 "Topics of the bench config: trailnav/obstacle_map, trailnav/pose, trailnav/utm_pose, "
-                                 "trailnav/fix, diagnostics (docs/dds.md). Exit 1 when nothing arrived.");
+                                 "Topics: trailnav/obstacle_map, trailnav/terrain_map, trailnav/terrain_cost, trailnav/pose, "
+                                 "trailnav/utm_pose, trailnav/fix, trailnav/subgoal, trailnav/subgoal_path, "
+                                 "trailnav/navigation_status, tf, tf_static, odom, diagnostics; and the order topics "
+                                 "trailnav/goal, trailnav/geo_goal, trailnav/cancel (docs/dds.md). Exit 1 when nothing arrived.");
   cmd->add_option("topic", o->topic, "Topic name without the rt/ prefix, e.g. trailnav/obstacle_map")->required();
   cmd->add_option("--png", o->png_dir, "Save every map (obstacle map, terrain map) as DIR/<topic>-<n>.png");
   cmd->add_option("--count", o->count, "Stop after this many samples (0: until Ctrl-C or silence)")->check(CLI::NonNegativeNumber);
@@ -246,6 +262,8 @@ void add_echo_command(CLI::App& app) {
   cmd->add_option("--cyclone-config", o->cyclone_config,
                   "Cyclone DDS XML configuration (default: loopback only: interface lo, no multicast)");
   cmd->add_flag("--quiet", o->quiet, "Only the summary at the end");
+  cmd->add_flag("--digest", o->digest,
+                "Occupancy grids: also print the stamp and an FNV-1a 64 fingerprint of the cells (to compare subscribers)");
   cmd->callback([o] {
     const int rc = run_echo(*o);
     if (rc != 0) std::exit(rc);

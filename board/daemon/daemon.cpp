@@ -187,6 +187,14 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     inputs.unknown_cost = config.terrain->unknown_cost;
   }
   inputs.navigation = d->navigation_out_.get();
+  if (d->obstacles_ && config.dds.publisher.points_rate_hz > 0.0) {
+    // Viewers' points: every point a revolution can have, allocated now.
+    const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
+    const auto capacity = static_cast<std::size_t>(shape.rings) * static_cast<std::size_t>(shape.max_columns);
+    d->points_out_ = std::make_unique<Mailbox<perception::PointsSnapshot>>(capacity);
+    d->obstacles_->set_points(d->points_out_.get(), static_cast<std::int64_t>(1e9 / config.dds.publisher.points_rate_hz));
+    inputs.points = d->points_out_.get();
+  }
   if (d->navigation_) {
     d->answers_ = std::make_unique<nav::NavStatusQueue>();
     inputs.navigation_answers = d->answers_.get();
@@ -210,7 +218,10 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     popt.static_frames.push_back({popt.fix_frame, {a[0], a[1], a[2]}});
   }
   popt.map_instant_tf = config.obstacles && config.pose && config.obstacles_use_pose;
-  if (config.obstacles) popt.occupied_percent = static_cast<int>(config.obstacles->map.occupied * 100.0f);
+  if (config.obstacles) {
+    popt.occupied_percent = static_cast<int>(config.obstacles->map.occupied * 100.0f);
+    popt.map_resolution = config.obstacles->map.resolution;
+  }
   auto pub = dds::DdsPublisher::create(*d->domain_, d->clock_, popt, std::move(inputs));
   if (!pub.publisher) return fail("dds: " + pub.error);
   d->publisher_ = std::move(pub.publisher);

@@ -93,6 +93,7 @@ class Daemon {
   std::unique_ptr<perception::PoseQueue> pose_queue_;
   std::unique_ptr<perception::ObstaclePipeline> pipeline_;
   std::unique_ptr<Mailbox<perception::ObstacleSnapshot>> obstacle_out_;
+  std::unique_ptr<Mailbox<perception::PointsSnapshot>> points_out_;
   std::unique_ptr<perception::ObstacleTask> obstacles_;
   std::optional<perception::RandomForest> forest_;
   std::unique_ptr<perception::TerrainMapper> terrain_mapper_;

@@ -183,6 +183,8 @@ DdsSection parse_dds(const ConfigNode& n) {
     topic("tf_static", p.topics.tf_static);
     topic("odometry", p.topics.odometry);
     topic("navigation_status", p.topics.navigation_status);
+    topic("coarse_map", p.topics.coarse_map);
+    topic("points", p.topics.points);
     topic("goal", d.commands.topics.goal);
     topic("geo_goal", d.commands.topics.geo_goal);
     topic("cancel", d.commands.topics.cancel);
@@ -191,6 +193,15 @@ DdsSection parse_dds(const ConfigNode& n) {
   p.odom_frame = n.string("odom_frame", p.odom_frame);
   p.fix_frame = n.string("fix_frame", p.fix_frame);
   p.publish_tf = n.boolean("publish_tf", p.publish_tf);
+  if (auto pts = n.optional_map("points")) {
+    p.points_rate_hz = pts->number("rate_hz", 0.1, 20.0);
+    pts->reject_unknown_keys();
+  }
+  if (auto c = n.optional_map("coarse_map")) {
+    p.coarse_factor = static_cast<int>(c->integer("factor", 1, 20));
+    p.coarse_window = c->number("window_m", 0.0, 1000.0, 0.0);
+    c->reject_unknown_keys();
+  }
   if (auto f = n.optional_map("frames")) {
     auto frame = [&](std::string_view key, std::string& out) {
       out = f->string(key, out);

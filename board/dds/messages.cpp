@@ -169,6 +169,58 @@ bool UtmFixMessages::fill(const pose::UtmPose& u) noexcept {
   return true;
 }
 
+// --- PointCloud2 ---
+
+PointCloudMessage::PointCloudMessage(std::size_t capacity, std::string_view frame_id) : data_(capacity * kPointStep) {
+  frame_.set(frame_id);
+  msg_.header.frame_id = frame_.c_str();
+  struct Field {
+    const char* name;
+    std::uint32_t offset;
+    std::uint8_t datatype;
+  };
+  static constexpr Field kFields[] = {{"x", 0, 7},         {"y", 4, 7},      {"z", 8, 7},
+                                      {"intensity", 12, 7}, {"time", 16, 7},  {"p_obstacle", 20, 7},
+                                      {"ring", 24, 4},      {"obstacle", 26, 2}, {"terrain", 27, 2}};
+  static_assert(std::size(kFields) == 9);
+  for (std::size_t i = 0; i < fields_.size(); ++i) {
+    names_[i].set(kFields[i].name);
+    fields_[i].name = names_[i].c_str();
+    fields_[i].offset = kFields[i].offset;
+    fields_[i].datatype = kFields[i].datatype;
+    fields_[i].count = 1;
+  }
+  msg_.fields._buffer = fields_.data();
+  msg_.fields._length = msg_.fields._maximum = static_cast<std::uint32_t>(fields_.size());
+  msg_.fields._release = false;
+  msg_.height = 1;
+  msg_.is_bigendian = false;
+  msg_.point_step = kPointStep;
+  msg_.is_dense = true;
+  msg_.data._buffer = data_.data();
+  msg_.data._maximum = static_cast<std::uint32_t>(data_.size());
+  msg_.data._length = 0;
+  msg_.data._release = false;
+}
+
+void PointCloudMessage::fill(const perception::PointsSnapshot& s) noexcept {
+  msg_.header.stamp = to_time(s.time_ns);
+  const std::size_t step = msg_.point_step;
+  const std::size_t n = std::min(s.count, data_.size() / step);
+  for (std::size_t i = 0; i < n; ++i) {
+    const perception::CloudPoint& p = s.points[i];
+    std::uint8_t* d = data_.data() + i * step;
+    const float f[6] = {p.x, p.y, p.z, p.intensity, p.time, p.p_obstacle};
+    std::memcpy(d, f, sizeof f);  // this machine is little endian, as the message says
+    std::memcpy(d + 24, &p.ring, 2);
+    d[26] = p.obstacle;
+    d[27] = p.terrain;
+  }
+  msg_.width = static_cast<std::uint32_t>(n);
+  msg_.row_step = static_cast<std::uint32_t>(n * step);
+  msg_.data._length = static_cast<std::uint32_t>(n * step);
+}
+
 // --- NavigationStatus ---
 
 NavigationStatusMessage::NavigationStatusMessage() {
@@ -230,6 +282,39 @@ bool PathMessage::add(std::int64_t utc_ns, double x, double y, double yaw) noexc
   p.pose.position = {x, y, 0.0};
   p.pose.orientation = to_quaternion(0.0, 0.0, yaw);
   return true;
+}
+
+void OccupancyGridMessage::fill_coarse(const perception::ObstacleSnapshot& s, int factor, bool stale,
+                                       int occupied_percent) noexcept {
+  msg_.header.stamp = to_time(s.time_ns);
+  msg_.info.map_load_time = msg_.header.stamp;
+  const double res = s.resolution;
+  msg_.info.resolution = static_cast<float>(res * factor);
+  // Cell indices in the odometry frame's grid (the snapshot's origin is a
+  // whole number of cells), and the robot's block.
+  const auto ox = static_cast<std::int64_t>(std::llround(s.origin_x / res));
+  const auto oy = static_cast<std::int64_t>(std::llround(s.origin_y / res));
+  const auto block = [&](double v) { return static_cast<std::int64_t>(std::floor(v / (res * factor))); };
+  const auto w = static_cast<std::int64_t>(msg_.info.width), h = static_cast<std::int64_t>(msg_.info.height);
+  const std::int64_t bx0 = block(s.robot_x) - w / 2, by0 = block(s.robot_y) - h / 2;
+  msg_.info.origin.position.x = static_cast<double>(bx0 * factor) * res;
+  msg_.info.origin.position.y = static_cast<double>(by0 * factor) * res;
+  msg_.info.origin.position.z = 0.0;
+  for (std::int64_t j = 0; j < h; ++j) {
+    for (std::int64_t i = 0; i < w; ++i) {
+      std::int8_t best = -1;
+      for (std::int64_t fy = (by0 + j) * factor - oy, ey = fy + factor; fy < ey; ++fy) {
+        if (fy < 0 || fy >= s.size_y) continue;
+        for (std::int64_t fx = (bx0 + i) * factor - ox, ex = fx + factor; fx < ex; ++fx) {
+          if (fx < 0 || fx >= s.size_x) continue;
+          const std::int8_t v = s.occupancy[static_cast<std::size_t>(fy * s.size_x + fx)];
+          if (stale && v <= occupied_percent) continue;  // free cells of a stale map are unknown
+          best = std::max(best, v);
+        }
+      }
+      data_[static_cast<std::size_t>(j * w + i)] = best;
+    }
+  }
 }
 
 // --- TFMessage ---

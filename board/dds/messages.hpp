@@ -28,6 +28,7 @@ struct UtmPose;
 }  // namespace trailnav::pose
 namespace trailnav::perception {
 struct ObstacleSnapshot;
+struct PointsSnapshot;
 }  // namespace trailnav::perception
 namespace trailnav::nav {
 struct NavigationStatusReport;
@@ -58,6 +59,13 @@ class OccupancyGridMessage {
   // free become unknown (-1), obstacles stay.
   // `occupied_percent`: values above it are obstacles.
   void fill(const perception::ObstacleSnapshot& snapshot, bool stale, int occupied_percent = 50) noexcept;
+  // A coarser map for planners that want less: blocks of `factor` x `factor`
+  // cells, each the largest known value among them (an obstacle anywhere in
+  // the block makes the block an obstacle; unknown only when every cell is),
+  // over this message's width x height blocks centred on the robot. Blocks
+  // are aligned to the odometry frame's cell grid, so a block keeps its
+  // place as the map rolls. Stale: as fill().
+  void fill_coarse(const perception::ObstacleSnapshot& snapshot, int factor, bool stale, int occupied_percent = 50) noexcept;
   // The terrain cost layer (§8.1.2): each cell's expected class cost as 0..100,
   // -1 where no class is known. The map must have this message's size.
   void fill_cost(const perception::TerrainClassMap& map, const std::array<float, perception::kTerrainClasses>& cost,
@@ -166,6 +174,26 @@ class OdometryMessage {
   FixedString<64> frame_, child_;
   OdometryNoise noise_;
   nav_msgs_msg_dds__Odometry_ msg_{};
+};
+
+// sensor_msgs/PointCloud2 of one revolution's points (docs/dds.md, "Points"):
+// x, y, z, intensity, time, p_obstacle (float32), ring (uint16), obstacle,
+// terrain (uint8); 28 bytes a point, little endian, one row.
+class PointCloudMessage {
+ public:
+  static constexpr std::uint32_t kPointStep = 28;
+  PointCloudMessage(std::size_t capacity, std::string_view frame_id);
+  PointCloudMessage(const PointCloudMessage&) = delete;
+  PointCloudMessage& operator=(const PointCloudMessage&) = delete;
+  void fill(const perception::PointsSnapshot& points) noexcept;
+  sensor_msgs_msg_dds__PointCloud2_& sample() noexcept { return msg_; }
+
+ private:
+  FixedString<64> frame_;
+  std::array<FixedString<16>, 9> names_;
+  std::array<sensor_msgs_msg_dds__PointField_, 9> fields_{};
+  std::vector<std::uint8_t> data_;
+  sensor_msgs_msg_dds__PointCloud2_ msg_{};
 };
 
 // trailnav_msgs/NavigationStatus from a navigation snapshot.

@@ -52,6 +52,8 @@ struct TopicNames {
   std::string tf_static = "tf_static";
   std::string odometry = "odom";        // nav_msgs/Odometry, Nav2's default
   std::string navigation_status = "trailnav/navigation_status";
+  std::string coarse_map = "trailnav/obstacle_map_coarse";
+  std::string points = "trailnav/points";
 };
 
 // REP 105 frame names (docs/dds.md, "Frames"). `map`: the frame of the GPS
@@ -84,6 +86,13 @@ struct PublisherOptions {
   double health_period = 1.0;  // s
   double stale_after = 0.5;    // s without a new obstacle map before the lidar counts as silent
   int occupied_percent = 50;
+  // The coarse obstacle map (topics.coarse_map): `coarse_factor` cells per
+  // block side (0: not published), over a window of `coarse_window` m
+  // around the robot (0: the whole map).
+  int coarse_factor = 0;
+  double coarse_window = 0.0;
+  double map_resolution = 0.1;  // m, of the obstacle map (set by trailnavd from the config)
+  double points_rate_hz = 0.0;  // revolutions a second on topics.points (0: off); the obstacle task hands them over
 };
 
 struct PublisherInputs {
@@ -96,6 +105,8 @@ struct PublisherInputs {
   float unknown_cost = 1.0f;
   // The navigation thread's snapshots (their path capacity gives the Path's).
   Mailbox<nav::NavigationSnapshot>* navigation = nullptr;
+  // Revolutions as points for viewers (its slots give the capacity), may be null.
+  Mailbox<perception::PointsSnapshot>* points = nullptr;
   // The navigation task's answer to each order (a status each), may be null.
   nav::NavStatusQueue* navigation_answers = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
@@ -107,6 +118,7 @@ struct PublisherStats {
   std::uint64_t subgoals = 0, paths = 0;
   std::uint64_t transforms = 0, odometry = 0;  // TFMessages on rt/tf, Odometry samples
   std::uint64_t statuses = 0;                  // navigation status samples
+  std::uint64_t point_clouds = 0;
   bool lidar_stale = false;
 };
 
@@ -147,7 +159,10 @@ class DdsPublisher {
   std::optional<TfMessage> tf_static_msg_;
   std::optional<OdometryMessage> odometry_msg_;
   std::array<char, 64> map_frame_{};  // the GPS alignment's frame
-  std::optional<OccupancyGridMessage> grid_;
+  std::optional<OccupancyGridMessage> grid_, coarse_;
+  std::unique_ptr<Writer> coarse_writer_, points_writer_;
+  std::optional<PointCloudMessage> points_msg_;
+  void publish_coarse(const perception::ObstacleSnapshot& snapshot, bool stale) noexcept;
   std::optional<TerrainClassMapMessage> terrain_msg_;
   std::optional<OccupancyGridMessage> cost_msg_;
   PoseStampedMessage pose_msg_;
@@ -160,7 +175,7 @@ class DdsPublisher {
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
-  std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0}, statuses_{0};
+  std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0}, statuses_{0}, point_clouds_{0};
   std::atomic<bool> lidar_stale_{false};
 };
 

@@ -379,12 +379,11 @@ void report_points(const perception::ObstaclePipeline& pipeline, const perceptio
       const bool measured = r.state == perception::PointState::measured;
       r.step_height = measured ? c.step_height[k] : 0.0f;
       r.sin_incline = measured ? c.sin_incline[k] : 0.0f;
-      const perception::TerrainCell* cell = terrain.known_cell(r.x, r.y);
-      r.terrain = cell != nullptr ? cell->best : terrain.fallback();
-      r.terrain_known = cell != nullptr;
-      const int cls = static_cast<int>(r.terrain);
-      r.dirac = pipeline.models().dirac(cls, r.step_height, r.sin_incline);
-      r.smooth = pipeline.models().smooth(cls, r.step_height, r.sin_incline);
+      const perception::ObstaclePipeline::PointAnswer a = pipeline.answer(terrain, k);
+      r.terrain = a.terrain;
+      r.terrain_known = a.terrain_known;
+      r.dirac = a.dirac;
+      r.smooth = a.smooth;
       out(r);
     }
   }

@@ -447,3 +447,38 @@ TEST(CommandReader, APoseGoalsFrameNamesItsKind) {
   p.header.frame_id = longer.data();
   EXPECT_EQ(std::string(dds::goal_from_pose(p, o).goal.frame_id.data()), std::string(47, 'x'));
 }
+
+// The coarse map: blocks aligned to the odometry frame's cell grid around the
+// robot, an obstacle anywhere in a block makes it one, unknown only when all
+// of a block is; a stale map forgets free blocks.
+TEST(CoarseMap, BlocksKeepTheirObstaclesAndFollowTheRobot) {
+  perception::ObstacleSnapshot snap(8, 8);
+  snap.resolution = 0.5;
+  snap.origin_x = -2.0;  // cells -4 .. 3 of the odometry grid
+  snap.origin_y = 1.0;   // cells 2 .. 9
+  snap.robot_x = 0.1;
+  snap.robot_y = 3.2;
+  std::fill(snap.occupancy.begin(), snap.occupancy.end(), std::int8_t{-1});
+  auto at = [&](int x, int y) -> std::int8_t& { return snap.occupancy[static_cast<std::size_t>(y * 8 + x)]; };
+  at(4, 4) = 10;   // grid cell (0, 6): block (0, 3)
+  at(5, 4) = 90;   // grid cell (1, 6): same block
+  at(4, 5) = 0;    // grid cell (0, 7): same block
+  at(0, 0) = 20;   // grid cell (-4, 2): block (-2, 1)
+  dds::OccupancyGridMessage m(3, 3, "odom");
+  m.fill_coarse(snap, 2, false);
+  // The robot's block is (0, 3) (1 m blocks); the 3 x 3 window starts at (-1, 2).
+  EXPECT_FLOAT_EQ(m.sample().info.resolution, 1.0f);
+  EXPECT_DOUBLE_EQ(m.sample().info.origin.position.x, -1.0);
+  EXPECT_DOUBLE_EQ(m.sample().info.origin.position.y, 2.0);
+  const std::int8_t* d = m.sample().data._buffer;
+  EXPECT_EQ(d[1 * 3 + 1], 90);  // block (0, 3): the largest of 10, 90, 0
+  EXPECT_EQ(d[0], -1);          // block (-1, 2): cells (-2..-1, 4..5), never seen
+  for (int k : {2, 3, 5, 6, 7, 8}) EXPECT_EQ(d[k], -1) << k;
+  dds::OccupancyGridMessage whole(4, 4, "odom");
+  snap.robot_x = -0.1;  // block -1: a 4 x 4 window from (-3, 1) covers every cell
+  whole.fill_coarse(snap, 2, false);
+  EXPECT_EQ(whole.sample().data._buffer[0 * 4 + 1], 20);  // block (-2, 1)
+  whole.fill_coarse(snap, 2, true);  // stale: the free blocks are forgotten, the obstacle stays
+  EXPECT_EQ(whole.sample().data._buffer[0 * 4 + 1], -1);
+  EXPECT_EQ(whole.sample().data._buffer[2 * 4 + 3], 90);
+}

@@ -59,6 +59,7 @@
 #include "sim_truth.hpp"
 #include "simulator.hpp"
 #include "geographic_msgs.h"
+#include "sensor_msgs.h"
 #include "std_msgs.h"
 #include "bench_daemon.hpp"
 #include "subscriber.hpp"
@@ -114,6 +115,10 @@ struct DaemonRun {
   std::vector<PathEnd> path_ends;
   std::uint64_t goal_samples = 0, orders_dropped = 0;  // health's newest
   std::vector<double> navigation_health_s;              // when health with the navigation status arrived
+  // Points for viewers: clouds received, and over all of them the points,
+  // those the Dirac model called obstacles, and any field out of place.
+  std::size_t clouds = 0, cloud_points = 0, cloud_obstacles = 0, cloud_bad = 0;
+  std::vector<std::int64_t> cloud_stamps;
   DurationSummary latency;  // last packet of a revolution -> subscriber
   long rss_start_kb = 0, rss_end_kb = 0;  // after the warm-up (a third of the drive, at least 4 s), at its end
   long rss_after_kb = 0;                  // after the silence and the late subscribers (Cyclone's discovery allocates)
@@ -130,7 +135,7 @@ struct DaemonRun {
 using Orders = std::function<void(double elapsed_s, const dds::Domain& domain)>;
 
 DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool navigation = false,
-                     const std::string& scenario = "urban", const Orders& orders = {}) {
+                     const std::string& scenario = "urban", const Orders& orders = {}, const std::string& dds_yaml = "") {
   DaemonRun out;
   test::BenchDaemonOptions bo;
   bo.scenario = scenario;
@@ -138,6 +143,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   bo.tag = "e2e-" + tag;
   bo.realtime = realtime;
   bo.navigation = navigation;
+  bo.dds_yaml = dds_yaml;
   std::string error;
   const auto bench = test::BenchDaemon::start(TRAILNAVD_BINARY, bo, error);
   EXPECT_TRUE(bench) << error;
@@ -187,6 +193,8 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   bool have_utm_odom = false;
   const auto t_start = std::chrono::steady_clock::now();
   auto elapsed_s = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count(); };
+  auto points = dds::Subscriber::create(*dds_domain.domain, "trailnav/points", &sensor_msgs_msg_dds__PointCloud2__desc, 0);
+  EXPECT_TRUE(points.subscriber);
   auto tf = dds::Subscriber::create(*dds_domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0);
   auto odometry = dds::Subscriber::create(*dds_domain.domain, "odom", &nav_msgs_msg_dds__Odometry__desc, 0);
   EXPECT_TRUE(tf.subscriber && odometry.subscriber);
@@ -285,6 +293,31 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       }
     });
     odometry.subscriber->take(0.0, [&](const dds::ReceivedSample&) { ++out.odometry; });
+    points.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& c = *static_cast<const sensor_msgs_msg_dds__PointCloud2_*>(r.sample);
+      ++out.clouds;
+      out.cloud_stamps.push_back(stamp_ns(c.header));
+      static const char* const kNames[] = {"x", "y", "z", "intensity", "time", "p_obstacle", "ring", "obstacle", "terrain"};
+      bool ok = c.fields._length == 9 && c.point_step == 28 && c.height == 1 && c.data._length == c.width * 28u &&
+                std::strcmp(c.header.frame_id, "odom") == 0;
+      for (std::uint32_t f = 0; ok && f < c.fields._length; ++f) ok = std::strcmp(c.fields._buffer[f].name, kNames[f]) == 0;
+      if (!ok) {
+        ++out.cloud_bad;
+        return;
+      }
+      for (std::uint32_t i = 0; i < c.width; ++i) {
+        const std::uint8_t* d = c.data._buffer + static_cast<std::size_t>(i) * 28;
+        float v[6];
+        std::memcpy(v, d, sizeof v);
+        std::uint16_t ring = 0;
+        std::memcpy(&ring, d + 24, 2);
+        const bool sane = std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]) && v[4] >= 0.0f && v[4] < 0.2f &&
+                          v[5] >= 0.0f && v[5] <= 1.0f && ring < 16 && d[26] <= 1 && d[27] < perception::kTerrainClasses;
+        if (!sane) ++out.cloud_bad;
+        ++out.cloud_points;
+        out.cloud_obstacles += d[26];
+      }
+    });
   };
   // The first RSS reading after the warm-up (the first plans, paths and
   // samples of each size fault in their pages during the first ~15 s).
@@ -472,7 +505,8 @@ std::uint64_t number_before(const std::string& text, const std::string& label) {
 }  // namespace
 
 TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
-  const DaemonRun r = run_daemon(8.0, "short", false);
+  // Points for viewers on (2 Hz): they never change a map.
+  const DaemonRun r = run_daemon(8.0, "short", false, false, "urban", {}, ", points: {rate_hz: 2}");
   report(r, "8 s");
   EXPECT_EQ(r.exit_code, 0);
   // 10 Hz lidar: about 80 revolutions; the first one is partial.
@@ -508,6 +542,18 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   EXPECT_GE(r.tf, 100u);
   EXPECT_GE(r.odometry, 100u);
   EXPECT_EQ(r.tf_static_frames, 3u);
+  // Points: at most 2 clouds a second of lidar time, each a whole VLP-16
+  // revolution (16 rings; the urban street has obstacles beside it).
+  std::printf("[ trailnavd points ] %zu clouds, %.0f points each, %.1f %% of them obstacles (Dirac), %zu out of place\n", r.clouds,
+              r.clouds ? static_cast<double>(r.cloud_points) / static_cast<double>(r.clouds) : 0.0,
+              r.cloud_points ? 100.0 * static_cast<double>(r.cloud_obstacles) / static_cast<double>(r.cloud_points) : 0.0,
+              r.cloud_bad);
+  EXPECT_GE(r.clouds, 12u);
+  EXPECT_LE(r.clouds, 18u);
+  for (std::size_t i = 1; i < r.cloud_stamps.size(); ++i) EXPECT_GE(r.cloud_stamps[i] - r.cloud_stamps[i - 1], 499'000'000);
+  EXPECT_EQ(r.cloud_bad, 0u);
+  EXPECT_GT(r.cloud_points, r.clouds * 10000);
+  EXPECT_GT(r.cloud_obstacles, 0u);
 }
 
 // The navigation task in the daemon: planned on the recording's OpenStreetMap
@@ -581,33 +627,12 @@ TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
   so.duration = 1.0;
   so.out = (dir / "rec").string();
   ASSERT_EQ(sim::run_simulation(so).error, "");
-  auto loaded = eval::load_sim_truth(so.out + "/truth");
-  ASSERT_TRUE(loaded.truth) << loaded.error;
-  auto graph = osm::load_road_graph(so.out + "/world.osm");
-  ASSERT_TRUE(graph.graph) << graph.error;
-  const osm::RoadGraph& g = *graph.graph;
-  // The new goal: the network's vertex farthest from where the drive starts
-  // that a route reaches from there.
-  double se = 0.0, sn = 0.0;
-  ASSERT_TRUE(g.to_utm(loaded.truth->trajectory.front().lat, loaded.truth->trajectory.front().lon, se, sn));
-  const auto start = g.project(se, sn);
-  ASSERT_TRUE(start);
-  osm::Router router(g);
-  std::vector<osm::Point2> path;
-  double best = -1.0, goal_e = 0.0, goal_n = 0.0;
-  for (const osm::RoadVertex& v : g.vertices()) {
-    const double d = std::hypot(v.x - se, v.y - sn);
-    const auto to = g.project(v.x, v.y);
-    if (d <= best || !to || !router.route(*start, *to, path).found) continue;
-    best = d;
-    goal_e = v.x;
-    goal_n = v.y;
-  }
-  ASSERT_GT(best, 100.0);
-  double goal_lat = 0.0, goal_lon = 0.0;
-  ASSERT_TRUE(g.to_latlon(goal_e, goal_n, goal_lat, goal_lon));
-  const auto goal_on_network = g.project(goal_e, goal_n);
+  test::FarGoal far;
+  std::string error;
+  ASSERT_TRUE(test::far_routable_goal(so.out, far, error)) << error;
   fs::remove_all(dir);
+  ASSERT_GT(far.distance, 100.0);
+  const double goal_lat = far.lat, goal_lon = far.lon, best = far.distance;
 
   struct Sent {
     bool goal = false, bad = false, fuzz = false, cancel = false;
@@ -712,7 +737,7 @@ TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
   for (const auto& e : r.path_ends) {
     if (e.at_s < taken->at_s + 0.5 || e.at_s > sent.fuzz_done_at) continue;
     ++ends;
-    const double d = std::hypot(e.e - goal_on_network->x, e.n - goal_on_network->y);
+    const double d = std::hypot(e.e - far.on_network_e, e.n - far.on_network_n);
     if (d < 2.5) {
       ++ends_at_goal;
     } else {

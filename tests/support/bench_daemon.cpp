@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -14,6 +15,8 @@
 
 #include "replayer.hpp"
 #include "simulator.hpp"
+#include "trailnav/navigation/osm/road_graph.hpp"
+#include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/runtime/clock.hpp"
 
 extern char** environ;
@@ -21,6 +24,46 @@ extern char** environ;
 namespace trailnav::test {
 
 namespace fs = std::filesystem;
+
+bool far_routable_goal(const std::string& recording, FarGoal& out, std::string& error) {
+  auto loaded = eval::load_sim_truth(recording + "/truth");
+  if (!loaded.truth || loaded.truth->trajectory.empty()) {
+    error = "truth: " + loaded.error;
+    return false;
+  }
+  auto graph = osm::load_road_graph(recording + "/world.osm");
+  if (!graph.graph) {
+    error = "world.osm: " + graph.error;
+    return false;
+  }
+  const osm::RoadGraph& g = *graph.graph;
+  double se = 0.0, sn = 0.0;
+  g.to_utm(loaded.truth->trajectory.front().lat, loaded.truth->trajectory.front().lon, se, sn);
+  const auto start = g.project(se, sn);
+  if (!start) {
+    error = "the drive starts off the network";
+    return false;
+  }
+  osm::Router router(g);
+  std::vector<osm::Point2> path;
+  out.distance = -1.0;
+  for (const osm::RoadVertex& v : g.vertices()) {
+    const double d = std::hypot(v.x - se, v.y - sn);
+    const auto to = g.project(v.x, v.y);
+    if (d <= out.distance || !to || !router.route(*start, *to, path).found) continue;
+    out.distance = d;
+    out.easting = v.x;
+    out.northing = v.y;
+    out.on_network_e = to->x;
+    out.on_network_n = to->y;
+  }
+  if (out.distance < 0.0) {
+    error = "no vertex routable from the start";
+    return false;
+  }
+  g.to_latlon(out.easting, out.northing, out.lat, out.lon);
+  return true;
+}
 
 std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary, const BenchDaemonOptions& options,
                                                 std::string& error) {

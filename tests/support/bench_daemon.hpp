@@ -32,6 +32,17 @@ struct BenchDaemonOptions {
   std::string dds_yaml;       // appended inside the dds section's braces, e.g. ", topics: {...}"
 };
 
+// A goal for orders: the vertex of the recording's world.osm farthest from
+// where its drive starts that a route reaches from there. False when the
+// recording has no map or truth.
+struct FarGoal {
+  double lat = 0.0, lon = 0.0;      // the vertex
+  double easting = 0.0, northing = 0.0;
+  double on_network_e = 0.0, on_network_n = 0.0;  // its projection onto the network (where routes end)
+  double distance = 0.0;            // m from the drive's start
+};
+bool far_routable_goal(const std::string& recording, FarGoal& out, std::string& error);
+
 class BenchDaemon {
  public:
   // Simulates, writes the config and spawns trailnavd (`daemon_binary`);

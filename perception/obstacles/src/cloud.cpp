@@ -78,6 +78,7 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
   out.reset(columns);
   out.sequence = image.sequence;
   out.time_ns = image.end_ns;
+  out.start_ns = image.start_ns;
   out.clock_offset_ns = image.clock_offset_ns;
   out.full_turn = true;
 

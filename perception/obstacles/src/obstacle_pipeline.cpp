@@ -70,4 +70,19 @@ PipelineCounters ObstaclePipeline::counters() const noexcept {
   return c;
 }
 
+ObstaclePipeline::PointAnswer ObstaclePipeline::answer(const TerrainSource& terrain, std::size_t k) const noexcept {
+  PointAnswer a;
+  const RevolutionCloud& c = cloud_;
+  const TerrainCell* cell = terrain.known_cell(c.ref_x + static_cast<double>(c.x[k]), c.ref_y + static_cast<double>(c.y[k]));
+  a.terrain = cell != nullptr ? cell->best : terrain.fallback();
+  a.terrain_known = cell != nullptr;
+  const bool measured = c.state[k] == PointState::measured;
+  const float step = measured ? c.step_height[k] : 0.0f;
+  const float incline = measured ? c.sin_incline[k] : 0.0f;
+  const int cls = static_cast<int>(a.terrain);
+  a.dirac = models_.dirac(cls, step, incline);
+  a.smooth = models_.smooth(cls, step, incline);
+  return a;
+}
+
 }  // namespace trailnav::perception

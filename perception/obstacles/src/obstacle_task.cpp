@@ -24,6 +24,35 @@ void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, Obstacl
   map.export_occupancy(out.occupancy);
 }
 
+void take_points(const ObstaclePipeline& pipeline, const TerrainClassMap* terrain, PointsSnapshot& out) noexcept {
+  const RevolutionCloud& c = pipeline.cloud();
+  const TerrainSource source = pipeline.terrain_source(terrain);
+  out.time_ns = c.time_ns + c.clock_offset_ns;
+  out.revolution = c.sequence;
+  const double span = static_cast<double>(c.time_ns - c.start_ns) * 1e-9;
+  const int columns = c.columns();
+  std::size_t n = 0;
+  for (int ring = 0; ring < c.rings(); ++ring) {
+    for (int col = 0; col < columns; ++col) {
+      const std::size_t k = c.index(ring, col);
+      if (c.state[k] == PointState::none) continue;
+      if (n == out.points.size()) break;
+      const ObstaclePipeline::PointAnswer a = pipeline.answer(source, k);
+      CloudPoint& p = out.points[n++];
+      p.x = static_cast<float>(c.ref_x + static_cast<double>(c.x[k]));
+      p.y = static_cast<float>(c.ref_y + static_cast<double>(c.y[k]));
+      p.z = static_cast<float>(c.ref_z + static_cast<double>(c.z[k]));
+      p.intensity = c.intensity[k];
+      p.time = static_cast<float>(span * (col + 0.5) / columns);
+      p.p_obstacle = a.smooth;
+      p.ring = static_cast<std::uint16_t>(ring);
+      p.obstacle = a.dirac ? 1 : 0;
+      p.terrain = static_cast<std::uint8_t>(a.terrain);
+    }
+  }
+  out.count = n;
+}
+
 void ObstacleTask::run(const TaskTick&) {
   ++counters_.runs;
   if (poses_ != nullptr) counters_.poses += track_.drain(*poses_);
@@ -47,6 +76,13 @@ void ObstacleTask::run(const TaskTick&) {
   snap.terrain_sequence = terrain_map_ != nullptr ? terrain_map_->sequence : 0;
   snap.received_ns = image->completed_receive_ns;
   out_.publish();
+  if (points_out_ != nullptr && (last_points_ns_ == 0 || snap.time_ns - last_points_ns_ >= points_period_ns_ ||
+                                 snap.time_ns < last_points_ns_)) {
+    last_points_ns_ = snap.time_ns;
+    take_points(pipeline_, terrain_map_, points_out_->write_slot());
+    points_out_->publish();
+    ++counters_.point_clouds;
+  }
   if (notify_ != nullptr) notify_->notify();
   counters_.pipeline = pipeline_.counters();
   shared_.post(counters_);

@@ -75,6 +75,7 @@ class RevolutionCloud {
   double robot_yaw = 0.0;
   double robot_z = 0.0, robot_roll = 0.0, robot_pitch = 0.0;
   std::int64_t time_ns = 0;  // end of the revolution, on the lidar's clock
+  std::int64_t start_ns = 0;  // its first firing, same clock
   std::int64_t clock_offset_ns = 0;  // reference clock minus the lidar's (RangeImage::clock_offset_ns)
   std::uint64_t sequence = 0;
   bool full_turn = false;  // the columns close the circle: the last column neighbours the first

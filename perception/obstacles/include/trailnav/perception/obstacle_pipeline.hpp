@@ -38,6 +38,15 @@ class ObstaclePipeline {
   void update_maps(const TerrainClassMap* terrain) noexcept;
   // Where update_maps(terrain) takes each point's terrain class from.
   TerrainSource terrain_source(const TerrainClassMap* terrain) const noexcept;
+  // What the last revolution's point k (cloud().index()) was fused as: the
+  // class of its cell (or the fallback) and its class's two models' answers.
+  struct PointAnswer {
+    TerrainClass terrain = TerrainClass::other;
+    bool terrain_known = false;
+    bool dirac = false;   // Dirac model: an obstacle
+    float smooth = 0.0f;  // smooth model: P(obstacle)
+  };
+  PointAnswer answer(const TerrainSource& terrain, std::size_t k) const noexcept;
 
   const ObstacleConfig& config() const noexcept { return config_; }
   const RevolutionCloud& cloud() const noexcept { return cloud_; }

@@ -45,12 +45,37 @@ struct ObstacleSnapshot {
   std::vector<std::int8_t> occupancy; // row-major, row 0 = lowest y
 };
 
+// One revolution's points for viewers (sensor_msgs/PointCloud2 on the
+// publisher's side): odometry frame, with what trailnav made of each.
+struct CloudPoint {
+  float x = 0.0f, y = 0.0f, z = 0.0f;  // m, odometry frame
+  float intensity = 0.0f;              // 0..255
+  float time = 0.0f;                   // s after the revolution's first firing
+  float p_obstacle = 0.0f;             // the smooth model's P(obstacle) for the point's terrain class
+  std::uint16_t ring = 0;              // 0 = lowest laser
+  std::uint8_t obstacle = 0;           // 1: the Dirac model says obstacle
+  std::uint8_t terrain = 0;            // the class the point was fused with (docs/terrain.md order)
+};
+
+struct PointsSnapshot {
+  explicit PointsSnapshot(std::size_t capacity = 0) : points(capacity) {}
+  std::int64_t time_ns = 0;  // end of the revolution, reference clock (as the map's stamp)
+  std::uint64_t revolution = 0;
+  std::size_t count = 0;     // points used
+  std::vector<CloudPoint> points;  // capacity: rings x columns of the lidar
+};
+
+// Fills `out` with the last processed revolution's valid points (no
+// allocation: at most out.points.size()).
+void take_points(const ObstaclePipeline& pipeline, const TerrainClassMap* terrain, PointsSnapshot& out) noexcept;
+
 struct ObstacleTaskCounters {
   std::uint64_t runs = 0;
   std::uint64_t revolutions = 0;       // processed
   std::uint64_t skipped = 0;           // revolutions replaced in the mailbox before this task saw them
   std::uint64_t poses = 0;
   std::uint64_t terrain_maps = 0;
+  std::uint64_t point_clouds = 0;      // revolutions handed over as points for viewers
   PipelineCounters pipeline;
 };
 
@@ -62,6 +87,12 @@ class ObstacleTask final : public Task {
 
   // Woken after each published snapshot (the DDS publisher). Before the scheduler starts.
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
+  // Also hands a revolution's points to `out` at most every `period_ns`
+  // (viewers; off unless set). Before the scheduler starts.
+  void set_points(Mailbox<PointsSnapshot>* out, std::int64_t period_ns) noexcept {
+    points_out_ = out;
+    points_period_ns_ = period_ns;
+  }
 
   void run(const TaskTick& tick) override;
   // The task thread's own counters.
@@ -81,6 +112,9 @@ class ObstacleTask final : public Task {
   ObstacleTaskCounters counters_;
   StatusBoard<ObstacleTaskCounters> shared_;
   Wakeup* notify_ = nullptr;
+  Mailbox<PointsSnapshot>* points_out_ = nullptr;
+  std::int64_t points_period_ns_ = 0;
+  std::int64_t last_points_ns_ = 0;
 };
 
 // Fills a snapshot from a map (no allocation when the sizes match).
