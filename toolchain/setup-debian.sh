@@ -22,7 +22,7 @@ packages=(
   libsystemd-dev
   # the cross-vendor test: eProsima Fast DDS (ROS 2's default middleware) and
   # its IDL generator (Java, from Debian)
-  libfastrtps-dev fastddsgen
+  libfastrtps-dev fastddsgen openjdk-17-jre-headless
   # bench tools: SocketCAN utilities, network namespaces
   can-utils iproute2
 )

@@ -173,7 +173,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                            *d->navigation_out_);
   }
 
-  auto domain = dds::Domain::create(config.dds.domain, config.dds.cyclone_xml);
+  auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
   if (!domain.domain) {
     return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
   }

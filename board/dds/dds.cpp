@@ -97,4 +97,15 @@ bool Writer::write(const void* sample, std::int64_t source_ns) noexcept {
   return false;
 }
 
+std::string with_small_receive_buffer(const std::string& xml) {
+  static constexpr const char* kBuffer = "<SocketReceiveBufferSize min=\"80kB\" max=\"80kB\"/>";
+  std::string out = xml;
+  if (const auto at = out.find("<Internal>"); at != std::string::npos) {
+    out.insert(at + std::string("<Internal>").size(), kBuffer);
+  } else if (const auto end = out.rfind("</Domain>"); end != std::string::npos) {
+    out.insert(end, std::string("<Internal>") + kBuffer + "</Internal>");
+  }
+  return out;
+}
+
 }  // namespace trailnav::dds

@@ -42,6 +42,16 @@ struct Domain::Created {
   std::string error;
 };
 
+// trailnavd's own Cyclone configuration: `xml` with the process's receive
+// socket buffer set to 80 kB (the kernel reports 160 kB). trailnavd receives
+// little (discovery, acknowledgements, goals), and Cyclone presumes a reader
+// that does not state its buffer (every other vendor's) has one like its own:
+// with Internal/BurstSize it then sends a large sample to such a reader in
+// bursts of two thirds of that, 107 kB, which a stock Fast DDS reader's
+// 212,992-byte buffer holds, while Cyclone readers, which state theirs (1 MB
+// and more), get a map in one burst, without the round trips of a repair.
+std::string with_small_receive_buffer(const std::string& xml);
+
 // Reads a Cyclone XML file; an error names the file.
 struct ConfigText {
   std::string xml;

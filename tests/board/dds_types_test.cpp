@@ -482,3 +482,18 @@ TEST(CoarseMap, BlocksKeepTheirObstaclesAndFollowTheRobot) {
   EXPECT_EQ(whole.sample().data._buffer[0 * 4 + 1], -1);
   EXPECT_EQ(whole.sample().data._buffer[2 * 4 + 3], 90);
 }
+
+// trailnavd's own Cyclone configuration: the shipped one with an 80 kB
+// receive buffer, inside the Internal element it has or a new one.
+TEST(CycloneConfig, TrailnavdsOwnReceiveBufferIsSmall) {
+  const std::string with = dds::with_small_receive_buffer(dds::loopback_config());
+  EXPECT_NE(with.find("<Internal><SocketReceiveBufferSize min=\"80kB\" max=\"80kB\"/>"), std::string::npos);
+  EXPECT_EQ(with.find("<Internal>"), with.rfind("<Internal>"));  // still one Internal element
+  const std::string bare = "<CycloneDDS><Domain Id=\"any\"><General/></Domain></CycloneDDS>";
+  EXPECT_EQ(dds::with_small_receive_buffer(bare),
+            "<CycloneDDS><Domain Id=\"any\"><General/><Internal><SocketReceiveBufferSize min=\"80kB\" max=\"80kB\"/>"
+            "</Internal></Domain></CycloneDDS>");
+  // Cyclone takes it (the loopback configuration only: nothing leaves lo).
+  auto d = dds::Domain::create(98, with);
+  EXPECT_TRUE(d.domain) << d.error;
+}

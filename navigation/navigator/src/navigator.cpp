@@ -223,6 +223,11 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
   StepResult result;
   ++counters_.steps;
   if (!utm.position_valid || !utm.heading_valid || utm.sigma_position() > config_.max_position_sigma) return result;
+  // A pose that is no position at all is not planned or followed from.
+  if (!finite(utm.easting) || !finite(utm.northing) || !finite(utm.yaw) || !finite(local.x) || !finite(local.y) ||
+      !finite(local.yaw)) {
+    return result;
+  }
   time_ns_ = local.time_ns;
   rot_ = local.yaw - utm.yaw;
   cos_ = std::cos(rot_);

@@ -148,7 +148,8 @@ RoadGraph RoadGraph::build(int zone, bool north, std::vector<RoadVertex> vertice
 }
 
 std::optional<RoadProjection> RoadGraph::project(double x, double y) const noexcept {
-  if (segments_.empty()) return std::nullopt;
+  // Not a position (the orders fuzzer found a NaN pose reaching the grid lookup).
+  if (segments_.empty() || !std::isfinite(x) || !std::isfinite(y)) return std::nullopt;
   RoadProjection best;
   double best_d2 = std::numeric_limits<double>::max();
   auto consider = [&](std::uint32_t s) {

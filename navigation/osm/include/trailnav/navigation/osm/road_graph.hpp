@@ -93,7 +93,7 @@ class RoadGraph {
   bool to_latlon(double x, double y, double& lat, double& lon) const noexcept;
 
   // The orthogonal projection of (x, y) onto the nearest segment; none for
-  // an empty graph. A grid index over the segments makes it independent of
+  // a non-finite position or an empty graph. A grid index over the segments makes it independent of
   // the network's size.
   std::optional<RoadProjection> project(double x, double y) const noexcept;
 
