@@ -5,6 +5,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -146,6 +147,24 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
     const auto& g = *static_cast<const geographic_msgs_msg_dds__GeoPoseStamped_*>(r.sample);
     std::printf("%s  stamp %.3f  lat %.7f lon %.7f alt %.2f m\n", head, stamp_s(g.header.stamp), g.pose.position.latitude,
                 g.pose.position.longitude, g.pose.position.altitude);
+  } else if (r.type == &sensor_msgs_msg_dds__PointCloud2__desc) {
+    const auto& c = *static_cast<const sensor_msgs_msg_dds__PointCloud2_*>(r.sample);
+    std::printf("%s  stamp %.3f  %s, %u x %u points of %u bytes, fields", head, stamp_s(c.header.stamp), c.header.frame_id,
+                c.width, c.height, c.point_step);
+    for (std::uint32_t f = 0; f < c.fields._length; ++f) std::printf(" %s", c.fields._buffer[f].name);
+    // trailnav's own clouds: how many points the Dirac model called obstacles.
+    std::int32_t obstacle_at = -1;
+    for (std::uint32_t f = 0; f < c.fields._length; ++f) {
+      if (std::strcmp(c.fields._buffer[f].name, "obstacle") == 0 && c.fields._buffer[f].datatype == 2) {
+        obstacle_at = static_cast<std::int32_t>(c.fields._buffer[f].offset);
+      }
+    }
+    if (obstacle_at >= 0 && c.point_step > 0 && static_cast<std::uint32_t>(obstacle_at) < c.point_step) {
+      std::uint64_t obstacles = 0;
+      for (std::uint32_t i = 0; i + c.point_step <= c.data._length; i += c.point_step) obstacles += c.data._buffer[i + static_cast<std::uint32_t>(obstacle_at)] != 0;
+      std::printf("; %llu obstacle points", static_cast<unsigned long long>(obstacles));
+    }
+    std::printf("\n");
   } else if (r.type == &std_msgs_msg_dds__Empty__desc) {
     std::printf("%s  (empty)\n", head);
   } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
@@ -251,7 +270,8 @@ void add_echo_command(CLI::App& app) {
                                  "its size and latency, then rate and latency percentiles; save maps as PNG.\n"
                                  "Topics: trailnav/obstacle_map, trailnav/terrain_map, trailnav/terrain_cost, trailnav/pose, "
                                  "trailnav/utm_pose, trailnav/fix, trailnav/subgoal, trailnav/subgoal_path, "
-                                 "trailnav/navigation_status, tf, tf_static, odom, diagnostics; and the order topics "
+                                 "trailnav/navigation_status, tf, tf_static, odom, diagnostics, and when configured "
+                                 "trailnav/obstacle_map_coarse and trailnav/points; and the order topics "
                                  "trailnav/goal, trailnav/geo_goal, trailnav/cancel (docs/dds.md). Exit 1 when nothing arrived.");
   cmd->add_option("topic", o->topic, "Topic name without the rt/ prefix, e.g. trailnav/obstacle_map")->required();
   cmd->add_option("--png", o->png_dir, "Save every map (obstacle map, terrain map) as DIR/<topic>-<n>.png");
