@@ -406,6 +406,14 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("stale", s.health == imu::ImuHealth::ok ? std::string_view("false") : std::string_view("true"));
     m.value("samples", s.stream.samples);
     m.value("queue_drops", s.queue_drops);
+    if (s.device_clock.valid) {
+      // Readings are stamped on the device's clock related to the host's;
+      // the spread is how late their bytes arrived.
+      m.value("clock_offset_s", static_cast<double>(s.device_clock.offset_ns) * 1e-9, 6);
+      m.value("clock_spread_ms", static_cast<double>(s.device_clock.spread_ns) * 1e-6, 3);
+      m.value("clock_max_spread_ms", static_cast<double>(s.device_clock.max_spread_ns) * 1e-6, 3);
+      m.value("clock_steps", s.device_clock.steps);
+    }
   }
   if (can_) {
     const can::CanDriverStatus s = can_->status();

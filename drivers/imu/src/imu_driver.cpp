@@ -55,7 +55,19 @@ void ImuDriver::start_device() noexcept {
 void ImuDriver::on_sample(const ImuSample& s, Nanos now) noexcept {
   ImuReading& slot = latest_.write_slot();
   slot.sample = s;
-  slot.attitude = filter_.update(s);
+  if (s.has(kSampleTimeFine)) {
+    // 10 kHz ticks in 32 bits, unwrapped (wraps every 4.97 days). The
+    // reading is stamped on the device's clock put on the host's (one time
+    // base, docs/dds.md): bytes the kernel held back and handed over in a
+    // burst keep the times they were measured at, not the time of the read.
+    if (have_ticks_) device_ns_ += static_cast<std::int64_t>(static_cast<std::uint32_t>(s.sample_time_fine - last_ticks_)) * 100'000;
+    have_ticks_ = true;
+    last_ticks_ = s.sample_time_fine;
+    device_clock_.add(device_ns_, s.time_ns);
+    local_.device_clock = device_clock_.state();
+    slot.sample.time_ns = device_clock_.to_reference(device_ns_);
+  }
+  slot.attitude = filter_.update(slot.sample);
   if (!queue_.try_push(slot)) ++local_.queue_drops;
   latest_.publish();
   last_sample_ = now;

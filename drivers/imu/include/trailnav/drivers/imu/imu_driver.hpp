@@ -16,6 +16,7 @@
 #include "trailnav/drivers/imu/attitude.hpp"
 #include "trailnav/drivers/imu/stream_decoder.hpp"
 #include "trailnav/drivers/link/byte_link.hpp"
+#include "trailnav/runtime/clock_relation.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/status_board.hpp"
@@ -60,6 +61,11 @@ struct ImuDriverStatus {
   std::uint64_t queue_drops = 0;  // samples the consumer did not take in time
   AttitudeCounters attitude_counters;
   Attitude attitude;
+  // The device's sample clock (Xsens SampleTimeFine, 10 kHz) against the
+  // host receive times readings are stamped with: the spread is how late a
+  // reading's stamp typically is (docs/dds.md, "One clock"). Not valid
+  // without a sample counter (the line protocol).
+  ClockRelationState device_clock;
   std::array<char, 160> last_link_error{};
 };
 
@@ -92,6 +98,10 @@ class ImuDriver final : public Task {
   SpscQueue<ImuReading, kImuQueueCapacity> queue_;
   std::array<std::uint8_t, 64> command_{};
   Nanos last_sample_ = -1;
+  ClockRelation device_clock_;
+  bool have_ticks_ = false;
+  std::uint32_t last_ticks_ = 0;
+  std::int64_t device_ns_ = 0;  // the sample counter unwrapped, ns
   Nanos last_device_error_ = -1;
   ImuDriverStatus local_;
   StatusBoard<ImuDriverStatus> shared_;
