@@ -114,7 +114,7 @@ struct DaemonRun {
     std::size_t poses = 0;
   };
   std::vector<PathEnd> path_ends;
-  std::uint64_t goal_samples = 0, orders_dropped = 0;  // health's newest
+  std::uint64_t goal_samples = 0, orders_dropped = 0, cancel_samples = 0;  // health's newest
   std::vector<double> navigation_health_s;              // when health with the navigation status arrived
   // Points for viewers: clouds received, and over all of them the points,
   // those the Dirac model called obstacles, and any field out of place.
@@ -277,6 +277,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
           if (imu_status && std::strcmp(kv.key, "clock_spread_ms") == 0) out.imu_clock_spread_ms = std::stod(kv.value);
           if (navigation_status && std::strcmp(kv.key, "goal_samples") == 0) out.goal_samples = std::stoull(kv.value);
           if (navigation_status && std::strcmp(kv.key, "orders_dropped") == 0) out.orders_dropped = std::stoull(kv.value);
+          if (navigation_status && std::strcmp(kv.key, "cancel_samples") == 0) out.cancel_samples = std::stoull(kv.value);
         }
       }
     });
@@ -653,6 +654,7 @@ TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
   struct Sent {
     bool goal = false, bad = false, fuzz = false, cancel = false;
     std::uint64_t samples = 0;  // goal samples sent
+    std::uint64_t fuzz_cancels = 0;
     double goal_at = 0.0, fuzz_done_at = 0.0;
   } sent;
   std::unique_ptr<dds::Writer> geo, pose, cancel;
@@ -712,7 +714,13 @@ TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
       static const char* const kFrames[] = {"odom", "utm_32N", "utm_33N", "", "map", "base_link", "\x7f\x01odom", "utm_"};
       for (int burst = 0; burst < 20; ++burst) {
         for (int i = 0; i < 10; ++i) {
-          if (rng() % 2 == 0) {
+          const std::uint64_t pick = rng() % 20;
+          if (pick == 0) {
+            // The cancel reader too (std_msgs/Empty: its one octet, any value).
+            std_msgs_msg_dds__Empty_ e{static_cast<std::uint8_t>(rng())};
+            EXPECT_TRUE(cancel->write(&e));
+            ++sent.fuzz_cancels;
+          } else if (pick % 2 == 0) {
             write_geo(random_double(), random_double());
           } else {
             write_pose(kFrames[rng() % 8], random_double(), random_double());
@@ -773,6 +781,7 @@ TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
   // queue did not drop offered to the navigator (its goal count also has
   // the config's goal); the daemon still reporting after them.
   EXPECT_EQ(r.goal_samples, sent.samples);
+  EXPECT_EQ(r.cancel_samples, sent.fuzz_cancels + 1);  // and the last one
   ASSERT_FALSE(r.statuses.empty());
   EXPECT_EQ(r.statuses.back().goals, 1 + r.goal_samples - r.orders_dropped);
   EXPECT_GE(std::count_if(r.navigation_health_s.begin(), r.navigation_health_s.end(),
