@@ -92,7 +92,6 @@ DdsPublisher::~DdsPublisher() { stop(); }
 
 void DdsPublisher::start() {
   if (running_.exchange(true)) return;
-  publish_static_frames();
   thread_ = std::thread([this] { loop(); });
 }
 
@@ -247,6 +246,7 @@ void DdsPublisher::publish_navigation(const nav::NavigationSnapshot& n) noexcept
 }
 
 void DdsPublisher::loop() noexcept {
+  publish_static_frames();
   const Nanos health_period = seconds_to_nanos(options_.health_period);
   const Nanos pose_period = options_.pose_rate_hz > 0.0 ? seconds_to_nanos(1.0 / options_.pose_rate_hz) : 0;
   const Nanos stale_after = seconds_to_nanos(options_.stale_after);
