@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <cstring>
 
+#include "messages.hpp"
+
 namespace trailnav::dds {
 
 namespace {
@@ -23,11 +25,12 @@ nav::NavCommand goal_from_pose(const geometry_msgs_msg_dds__PoseStamped_& s, con
   c.goal.b = s.pose.position.y;
   copy_frame(s.header.frame_id, c.goal.frame_id);
   const std::string_view frame = s.header.frame_id != nullptr ? std::string_view(s.header.frame_id) : std::string_view();
-  char utm[16];
-  std::snprintf(utm, sizeof utm, "utm_%d%c", o.zone, o.north ? 'N' : 'S');
+  char utm[16], map[64];
+  utm_frame_name(o.zone, o.north, utm);
+  map_frame_name(o.map_frame, o.zone, o.north, map);
   if (frame == o.odom_frame) {
     c.goal.frame = nav::GoalFrame::odom;
-  } else if (frame == utm || (o.map_frame != "utm" && frame == o.map_frame)) {
+  } else if (frame == utm || frame == map) {
     c.goal.frame = nav::GoalFrame::utm;
   } else {
     c.goal.frame = nav::GoalFrame::unknown;

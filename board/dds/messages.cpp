@@ -31,6 +31,18 @@ builtin_interfaces_msg_dds__Time_ to_time(std::int64_t utc_ns) noexcept {
   return {static_cast<std::int32_t>(sec), static_cast<std::uint32_t>(nsec)};
 }
 
+void utm_frame_name(int zone, bool north, std::span<char> out) noexcept {
+  std::snprintf(out.data(), out.size(), "utm_%d%c", zone, north ? 'N' : 'S');
+}
+
+void map_frame_name(std::string_view configured, int zone, bool north, std::span<char> out) noexcept {
+  if (configured == "utm") {
+    utm_frame_name(zone, north, out);
+  } else {
+    std::snprintf(out.data(), out.size(), "%.*s", static_cast<int>(configured.size()), configured.data());
+  }
+}
+
 geometry_msgs_msg_dds__Quaternion_ to_quaternion(double roll, double pitch, double yaw) noexcept {
   const double cr = std::cos(0.5 * roll), sr = std::sin(0.5 * roll);
   const double cp = std::cos(0.5 * pitch), sp = std::sin(0.5 * pitch);
@@ -129,7 +141,7 @@ UtmFixMessages::UtmFixMessages(std::string_view fix_frame_id) {
 bool UtmFixMessages::fill(const pose::UtmPose& u) noexcept {
   if (!u.position_valid) return false;
   char frame[16];
-  std::snprintf(frame, sizeof frame, "utm_%d%c", u.zone, u.north ? 'N' : 'S');
+  utm_frame_name(u.zone, u.north, frame);
   utm_frame_.set(frame);
   utm_.header.stamp = to_time(u.time_ns);
   utm_.pose.pose.position = {u.easting, u.northing, u.altitude};

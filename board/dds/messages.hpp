@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -45,6 +46,12 @@ struct FixedString {
 };
 
 builtin_interfaces_msg_dds__Time_ to_time(std::int64_t utc_ns) noexcept;
+
+// The UTM frame's name, utm_<zone><N|S> (e.g. utm_32N), into `out`; and
+// the map frame's: that name when `configured` is "utm" (dds.frames.map),
+// else `configured`. Both NUL-terminated, cut to `out`.
+void utm_frame_name(int zone, bool north, std::span<char> out) noexcept;
+void map_frame_name(std::string_view configured, int zone, bool north, std::span<char> out) noexcept;
 // Rotation about z by `yaw` (and roll/pitch when given) as a quaternion.
 geometry_msgs_msg_dds__Quaternion_ to_quaternion(double roll, double pitch, double yaw) noexcept;
 

@@ -180,11 +180,7 @@ void DdsPublisher::publish_pose(const pose::PoseSnapshot& p) noexcept {
       tf_msg_.add(p.local.time_ns, options_.odom_frame, options_.frames.base_link,
                   {p.local.x, p.local.y, p.local.z, p.local.roll, p.local.pitch, p.local.yaw});
       if (p.utm.position_valid && p.utm.heading_valid) {
-        if (options_.frames.map == "utm") {
-          std::snprintf(map_frame_.data(), map_frame_.size(), "utm_%d%c", p.utm.zone, p.utm.north ? 'N' : 'S');
-        } else {
-          std::snprintf(map_frame_.data(), map_frame_.size(), "%s", options_.frames.map.c_str());
-        }
+        map_frame_name(options_.frames.map, p.utm.zone, p.utm.north, map_frame_);
         tf_msg_.add(p.local.time_ns, map_frame_.data(), options_.odom_frame, utm_to_odom(p.local, p.utm));
       }
       count(tf_writer_->write(&tf_msg_.sample()), transforms_);
@@ -211,11 +207,7 @@ void DdsPublisher::publish_map_instant(const perception::ObstacleSnapshot& s) no
 }
 
 void DdsPublisher::publish_status(const nav::NavigationStatusReport& r) noexcept {
-  if (options_.frames.map == "utm") {
-    std::snprintf(map_frame_.data(), map_frame_.size(), "utm_%d%c", r.zone, r.north ? 'N' : 'S');
-  } else {
-    std::snprintf(map_frame_.data(), map_frame_.size(), "%s", options_.frames.map.c_str());
-  }
+  map_frame_name(options_.frames.map, r.zone, r.north, map_frame_);
   status_msg_.fill(r, map_frame_.data());
   count(status_writer_->write(&status_msg_.sample()), statuses_);
 }

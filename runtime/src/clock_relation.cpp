@@ -6,30 +6,22 @@
 
 namespace trailnav {
 
-void ClockRelation::reset() noexcept {
-  state_ = {};
-  window_open_ = false;
-}
-
 void ClockRelation::add(std::int64_t sensor_ns, std::int64_t reference_ns) noexcept {
   const std::int64_t d = reference_ns - sensor_ns;
   ++state_.pairs;
   if (state_.valid && (sensor_ns < last_sensor_ns_ - options_.tolerance_ns ||
                        (state_.settled && d < state_.offset_ns - options_.tolerance_ns))) {
-    restart(sensor_ns, d);
-    return;
+    // A step: a new provisional start from this message.
+    ++state_.steps;
+    state_.settled = false;
+    state_.offset_ns = d;
+    open_window(sensor_ns, d);
   }
   last_sensor_ns_ = sensor_ns;
   if (window_open_ && (sensor_ns < window_start_ns_ || sensor_ns - window_start_ns_ >= options_.window_ns)) {
     close_window();
   }
-  if (!window_open_) {
-    window_open_ = true;
-    window_start_ns_ = sensor_ns;
-    window_min_ = window_max_ = window_first_ = d;
-    window_sum_ = 0.0;
-    window_count_ = 0;
-  }
+  if (!window_open_) open_window(sensor_ns, d);
   window_min_ = std::min(window_min_, d);
   window_max_ = std::max(window_max_, d);
   window_sum_ += static_cast<double>(d - window_first_);
@@ -41,16 +33,12 @@ void ClockRelation::add(std::int64_t sensor_ns, std::int64_t reference_ns) noexc
   }
 }
 
-void ClockRelation::restart(std::int64_t sensor_ns, std::int64_t d) noexcept {
-  ++state_.steps;
-  state_.settled = false;
-  state_.offset_ns = d;
-  last_sensor_ns_ = sensor_ns;
+void ClockRelation::open_window(std::int64_t sensor_ns, std::int64_t d) noexcept {
   window_open_ = true;
   window_start_ns_ = sensor_ns;
   window_min_ = window_max_ = window_first_ = d;
   window_sum_ = 0.0;
-  window_count_ = 1;
+  window_count_ = 0;
 }
 
 void ClockRelation::close_window() noexcept {

@@ -56,7 +56,7 @@ void PoseTask::run(const TaskTick& tick) {
   if (gps_ != nullptr) {
     if (const gps::GpsReading* g = gps_->try_read()) {
       ++local_.gps_fixes;
-      if (estimator_.fix_time(g->fix, g->receive_ns) == g->fix.utc_ns && g->fix.has_date) {
+      if (g->fix.has_date && estimator_.fix_time(g->fix, g->receive_ns) == g->fix.utc_ns) {
         ++local_.gps_fixes_at_utc;
       } else {
         ++local_.gps_fixes_at_receive;

@@ -18,7 +18,6 @@ void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, Obstacl
   out.robot_roll = cloud.robot_roll;
   out.robot_pitch = cloud.robot_pitch;
   out.time_ns = cloud.time_ns + cloud.clock_offset_ns;
-  out.sensor_time_ns = cloud.time_ns;
   out.received_ns = 0;
   out.revolution = cloud.sequence;
   map.export_occupancy(out.occupancy);
@@ -28,7 +27,6 @@ void take_points(const ObstaclePipeline& pipeline, const TerrainClassMap* terrai
   const RevolutionCloud& c = pipeline.cloud();
   const TerrainSource source = pipeline.terrain_source(terrain);
   out.time_ns = c.time_ns + c.clock_offset_ns;
-  out.revolution = c.sequence;
   const double span = static_cast<double>(c.time_ns - c.start_ns) * 1e-9;
   const int columns = c.columns();
   std::size_t n = 0;

@@ -23,9 +23,9 @@
 // `tolerance` (GPS time arrived, a recording looped).
 //
 // Uncertainty: the spread of d above its minimum over the last window (its
-// mean), i.e. how late a typical message is; stamps carry the shortest
-// delay as a bias, which is the figure `min_delay` cannot know and the docs
-// state (docs/dds.md, "One clock").
+// mean and its largest value), i.e. how late a typical message is. The
+// shortest delay itself stays in the offset as a bias no receiver can
+// measure; docs/dds.md ("One clock") gives its size per link.
 //
 // Pure: no clock reads, no allocation; the caller gives both times.
 #pragma once
@@ -60,11 +60,10 @@ class ClockRelation {
   std::int64_t to_reference(std::int64_t sensor_ns) const noexcept { return sensor_ns + state_.offset_ns; }
   std::int64_t offset_ns() const noexcept { return state_.offset_ns; }
   const ClockRelationState& state() const noexcept { return state_; }
-  void reset() noexcept;
 
  private:
+  void open_window(std::int64_t sensor_ns, std::int64_t d) noexcept;
   void close_window() noexcept;
-  void restart(std::int64_t sensor_ns, std::int64_t d) noexcept;
 
   ClockRelationOptions options_;
   ClockRelationState state_;

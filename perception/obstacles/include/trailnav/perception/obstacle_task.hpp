@@ -38,7 +38,6 @@ struct ObstacleSnapshot {
   double robot_yaw = 0.0;
   double robot_z = 0.0, robot_roll = 0.0, robot_pitch = 0.0;
   std::int64_t time_ns = 0;           // end of the revolution, reference clock (what the map is stamped with)
-  std::int64_t sensor_time_ns = 0;    // the same instant on the lidar's clock
   std::int64_t received_ns = 0;       // host receive time of the packet that completed it (0 offline)
   std::uint64_t revolution = 0;       // the range image's sequence number
   std::uint64_t terrain_sequence = 0; // terrain map used (0: none)
@@ -60,7 +59,6 @@ struct CloudPoint {
 struct PointsSnapshot {
   explicit PointsSnapshot(std::size_t capacity = 0) : points(capacity) {}
   std::int64_t time_ns = 0;  // end of the revolution, reference clock (as the map's stamp)
-  std::uint64_t revolution = 0;
   std::size_t count = 0;     // points used
   std::vector<CloudPoint> points;  // capacity: rings x columns of the lidar
 };

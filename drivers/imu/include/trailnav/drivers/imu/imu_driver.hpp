@@ -62,9 +62,10 @@ struct ImuDriverStatus {
   AttitudeCounters attitude_counters;
   Attitude attitude;
   // The device's sample clock (Xsens SampleTimeFine, 10 kHz) against the
-  // host receive times readings are stamped with: the spread is how late a
-  // reading's stamp typically is (docs/dds.md, "One clock"). Not valid
-  // without a sample counter (the line protocol).
+  // host receive times of its bytes. Readings are stamped on it (put on the
+  // host clock); the spread is how late their bytes typically arrived
+  // (docs/dds.md, "One clock"). Not valid without a sample counter (the
+  // line protocol: readings keep their receive times).
   ClockRelationState device_clock;
   std::array<char, 160> last_link_error{};
 };

@@ -93,8 +93,8 @@ class RoadGraph {
   bool to_latlon(double x, double y, double& lat, double& lon) const noexcept;
 
   // The orthogonal projection of (x, y) onto the nearest segment; none for
-  // a non-finite position or an empty graph. A grid index over the segments makes it independent of
-  // the network's size.
+  // a non-finite position or an empty graph. A grid index over the segments
+  // makes it independent of the network's size.
   std::optional<RoadProjection> project(double x, double y) const noexcept;
 
   // Builds the graph from ways given as vertex sequences (the loader and the
