@@ -57,6 +57,7 @@
 #include "replayer.hpp"
 #include "robot_config.hpp"
 #include "sim_truth.hpp"
+#include "roads.hpp"
 #include "simulator.hpp"
 #include "geographic_msgs.h"
 #include "sensor_msgs.h"
@@ -85,6 +86,10 @@ struct DaemonRun {
   // subgoals lay on the simulated trail, and what a late joiner got.
   std::vector<double> subgoal_errors;  // m from the trail's centre, in the order received
   double narrowest_trail = 0.0;        // m, the scenario's narrowest trail
+  // How far OpenStreetMap's ways lie from where the robot drove (simulated
+  // truth: the simulator's own mapped view of its roads), the median over
+  // the drive: what a subgoal taken from the map alone is off by.
+  double map_error = 0.0;
   std::size_t paths = 0, last_path_poses = 0, late_subgoals = 0, late_paths = 0;
   std::size_t subgoals_unmatched = 0;  // no odometry pose near its stamp: not checked
   // One clock: map stamp minus the newest pose stamp received before it.
@@ -160,6 +165,36 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     out.narrowest_trail = std::numeric_limits<double>::max();
     for (const auto& t : truth.scenario.trails) out.narrowest_trail = std::min(out.narrowest_trail, t.width);
     EXPECT_EQ(eval::load_true_route(bench->recording() + "/truth", trail), "");
+    // How far OpenStreetMap puts the route's streets from where they are:
+    // the distance of every mapped point of the route's trails, near where
+    // the robot drove, from the true route. A subgoal taken from the map
+    // alone lies on those ways.
+    const sim::RoadsResult roads = sim::build_roads(truth.scenario, bo.seed);
+    EXPECT_TRUE(roads.roads) << roads.error;
+    std::vector<double> errors;
+    if (roads.roads) {
+      const std::int64_t start_ns = truth.trajectory.front().utc_ns;
+      std::vector<sim::Vec2> driven;
+      for (const eval::TruthPose& p : truth.trajectory) {
+        if (p.utc_ns - start_ns > static_cast<std::int64_t>(seconds * 1e9)) break;
+        driven.push_back({p.x, p.y});
+      }
+      for (const sim::OsmWay& w : roads.roads->osm) {
+        const std::string& name = roads.roads->trails[static_cast<std::size_t>(w.trail)].spec->name;
+        const bool on_route = std::any_of(truth.scenario.route.begin(), truth.scenario.route.end(),
+                                          [&](const sim::RouteLeg& leg) { return leg.trail == name; });
+        if (!on_route) continue;
+        for (const sim::Vec2& q : w.points) {
+          double near = std::numeric_limits<double>::max();
+          for (std::size_t k = 0; k < driven.size(); k += 10) near = std::min(near, (driven[k] - q).norm());
+          if (near < 25.0) errors.push_back(trail.project(q).distance);  // within the subgoals' lookahead
+        }
+      }
+    }
+    if (!errors.empty()) {
+      std::nth_element(errors.begin(), errors.begin() + static_cast<std::ptrdiff_t>(errors.size() / 2), errors.end());
+      out.map_error = errors[errors.size() / 2];
+    }
   }
   eval::TrailCheck trail_check(truth, trail, 0);
   struct Stamped {
@@ -587,6 +622,7 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   }
   first /= static_cast<double>(std::max<std::size_t>(half, 1));
   second /= static_cast<double>(std::max<std::size_t>(e.size() - half, 1));
+  std::printf("[ trailnavd navigation ] OpenStreetMap off the driven trail by %.2f m (median, simulated truth)\n", r.map_error);
   std::printf("[ trailnavd navigation ] %zu active subgoals; distance from the trail's centre: first %.2f m, first half "
               "mean %.2f m, second half mean %.2f m max %.2f m (narrowest street %.1f m wide); %zu paths (last %zu poses); late joiner got %zu subgoal(s) "
               "and %zu path(s)\n%s",
@@ -607,8 +643,15 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   // holds the raw subgoal but may be better than the second after it, so the
   // second half is held against the raw offset, not the first half's mean.
   const double half_width = 0.5 * r.narrowest_trail;
-  EXPECT_GT(e.front(), 3.0);
-  EXPECT_LT(second, 0.25 * e.front());
+  // Which subgoal is raw is a matter of timing: on a loaded machine the
+  // terrain map can show the street before the pose is aligned, and even the
+  // first subgoal is corrected (measured: 0.32 m from the centre with the
+  // other core busy, 5.9 m when idle). So the second half is held against
+  // how far the map's own streets lie from the true ones (urban: 1.6 m, the
+  // median over the route's mapped points near the drive), not against the
+  // first subgoal: on average closer to the centre than the map is.
+  EXPECT_GT(r.map_error, 1.0);
+  EXPECT_LT(second, r.map_error);
   EXPECT_LE(second, 0.5 * half_width);
   EXPECT_LE(second_max, half_width - 0.5);
   EXPECT_LE(r.subgoals_unmatched, 2u);

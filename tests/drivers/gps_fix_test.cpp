@@ -234,6 +234,37 @@ TEST(GpsFix, DateRollsOverAtMidnightWithoutRmc) {
   EXPECT_NEAR(out[1].alt_hae(), 327.0, 1e-9);
 }
 
+// The driver closes an epoch when its burst pauses (epoch_gap). On a loaded
+// machine a pause can fall inside the burst: the rest of that epoch's
+// sentences then arrive after it was published. They must not open a second
+// fix of the same time (found as one fix too many per lost race in the
+// drivers' bench test); they are dropped and counted.
+TEST(GpsFix, SentencesOfAnEpochAlreadyClosedAreDroppedAndCounted) {
+  gps::FixAssembler a;
+  gps::GpsFix f;
+  auto line = [](std::string body) {
+    char cs[4];
+    std::snprintf(cs, sizeof cs, "%02X", gps::nmea_checksum(body));
+    return "$" + body + "*" + cs;
+  };
+  std::vector<gps::GpsFix> out;
+  auto feed = [&](const std::string& s) {
+    if (a.add_line(s, f)) out.push_back(f);
+  };
+  feed(line("GPGGA,120000.00,4800.0000,N,00750.0000,E,1,08,1.0,280.0,M,47.0,M,,"));
+  if (a.flush(f)) out.push_back(f);  // the pause: the driver publishes the epoch
+  feed(line("GPGSA,A,3,01,02,03,04,05,06,07,08,,,,,1.8,1.0,1.5"));  // no time: late only if a late timed one follows
+  feed(line("GPRMC,120000.00,A,4800.0000,N,00750.0000,E,0.0,0.0,011226,,,A"));
+  feed(line("GPGST,120000.00,1.0,0.5,0.4,30.0,0.5,0.4,0.9"));
+  feed(line("GPGGA,120001.00,4800.0001,N,00750.0000,E,1,08,1.0,280.0,M,47.0,M,,"));
+  if (a.flush(f)) out.push_back(f);
+  ASSERT_EQ(out.size(), 2u);  // one fix per epoch, however the burst was split
+  EXPECT_DOUBLE_EQ(out[0].time_of_day, 12 * 3600.0);
+  EXPECT_DOUBLE_EQ(out[1].time_of_day, 12 * 3600.0 + 1.0);
+  EXPECT_EQ(a.counters().late, 3u);  // the GSA, the RMC and the GST
+  EXPECT_EQ(a.counters().fixes, 2u);
+}
+
 // Found by the fuzzer: a ZDA year far outside GPS time overflowed the
 // nanosecond clock. Years outside 1980..2099 are a bad field now.
 TEST(GpsFix, ZdaYearOutsideGpsTimeIsRejected) {

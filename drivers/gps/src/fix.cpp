@@ -91,6 +91,16 @@ bool FixAssembler::add(const NmeaSentence& s, GpsFix& completed) noexcept {
   const double t = sentence_time(s);
   bool closed = false;
   if (finite(t)) {
+    // A sentence of the epoch just closed: the receiver (or the link) paused
+    // inside the epoch's burst longer than the epoch gap, and the epoch was
+    // published without it. Merging it into a new epoch would publish the same
+    // time twice, so it is dropped and counted; so are sentences without a
+    // time that came after the close and before it.
+    if (epoch_key(t) == closed_key_ && (!epoch_.open || !finite(epoch_.time))) {
+      counters_.late += 1 + (epoch_.open ? static_cast<std::uint64_t>(epoch_.fix.sentences) : 0u);
+      epoch_.open = false;
+      return false;
+    }
     if (epoch_.open && finite(epoch_.time) && epoch_key(epoch_.time) != epoch_key(t)) closed = close(completed);
     if (!epoch_.open) start(t);
     if (!finite(epoch_.time)) {
@@ -245,6 +255,7 @@ bool FixAssembler::close(GpsFix& completed) noexcept {
     f.status = simulated ? FixStatus::simulated : FixStatus::unknown;
   }
   f.receiver_fix = e.gsa_fix;
+  if (finite(f.time_of_day)) closed_key_ = epoch_key(f.time_of_day);
   completed = f;
   e.open = false;
   ++counters_.fixes;

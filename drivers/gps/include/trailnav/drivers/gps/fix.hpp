@@ -89,7 +89,7 @@ class LineFramer {
 
 struct GpsCounters {
   std::uint64_t lines = 0;
-  std::uint64_t accepted = 0;  // sentences merged into fixes
+  std::uint64_t accepted = 0;  // valid sentences of the kinds we decode (the late ones too)
   std::uint64_t fixes = 0;     // epochs completed
   std::uint64_t with_position = 0;
   std::array<std::uint64_t, kNmeaErrors> rejected{};  // by NmeaError
@@ -97,6 +97,7 @@ struct GpsCounters {
   std::uint64_t stale_date = 0;              // epochs before any date was known
   std::uint64_t date_rollovers = 0;
   std::uint64_t simulated = 0;               // epochs of a receiver in simulator mode (GGA quality 8): no fix
+  std::uint64_t late = 0;                    // sentences of an epoch already closed (a pause inside its burst): dropped
   std::uint64_t rejected_total() const noexcept;
 };
 
@@ -133,6 +134,8 @@ class FixAssembler {
   };
   bool close(GpsFix& completed) noexcept;
   void start(double time) noexcept;
+  // The epoch key of the last closed epoch with a time (INT64_MIN: none).
+  long long closed_key_ = std::numeric_limits<long long>::min();
   void merge(const NmeaSentence& s) noexcept;
 
   NmeaSentence sentence_{};
