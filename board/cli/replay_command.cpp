@@ -28,6 +28,8 @@ struct ReplayCliOptions {
   double skip = 0.0;
   double duration = 0.0;
   bool quiet = false;
+  std::vector<std::string> faults;
+  std::uint64_t fault_seed = 1;
 };
 
 std::atomic<bool> g_stop{false};
@@ -93,6 +95,15 @@ int run_replay(const ReplayCliOptions& o) {
     return 2;
   }
   options.gpio_tunnel = *gpio_tunnel;
+  for (const std::string& f : o.faults) {
+    const replay::FaultSpecResult parsed = replay::parse_fault_spec(f);
+    if (!parsed.spec) {
+      std::fprintf(stderr, "trailnav replay: --fault: %s\n", parsed.error.c_str());
+      return 2;
+    }
+    options.faults.push_back(*parsed.spec);
+  }
+  options.fault_seed = o.fault_seed;
 
   ProgressBar progress("replay", 100.0, "%");
   if (!o.quiet) options.progress = [&](double part) { progress.update(part * 100.0); };
@@ -129,6 +140,22 @@ int run_replay(const ReplayCliOptions& o) {
     std::fprintf(stderr, "  send-time error: p50 %.1f us, p99 %.1f us, max %.1f us; %llu sends over 1 ms late\n",
                  us(report.send_error.p50), us(report.send_error.p99), us(report.send_error.max),
                  static_cast<unsigned long long>(report.late_over_1ms));
+  }
+  if (!report.faults.empty()) {
+    std::fprintf(stderr, "  faults (seed %llu): %s", static_cast<unsigned long long>(o.fault_seed), "");
+    for (const auto& f : o.faults) std::fprintf(stderr, " %s", f.c_str());
+    std::fprintf(stderr, "\n  %-16s %9s %9s %8s %8s %9s %9s %9s %9s %8s %8s %8s\n", "stream", "events", "sent", "lost",
+                 "silenced", "reordered", "duplicated", "truncated", "corrupted", "shifted", "stepped", "injected");
+    for (const auto& c : report.faults) {
+      if (c.events == c.sent && c.lost + c.silenced + c.reordered + c.duplicated + c.truncated + c.corrupted + c.shifted +
+                                        c.stepped + c.injected == 0) {
+        continue;
+      }
+      auto u = [](std::uint64_t v) { return static_cast<unsigned long long>(v); };
+      std::fprintf(stderr, "  %-16s %9llu %9llu %8llu %8llu %9llu %9llu %9llu %9llu %8llu %8llu %8llu\n", c.stream.c_str(),
+                   u(c.events), u(c.sent), u(c.lost), u(c.silenced), u(c.reordered), u(c.duplicated), u(c.truncated),
+                   u(c.corrupted), u(c.shifted), u(c.stepped), u(c.injected));
+    }
   }
   if (report.bad_lines > 0) {
     std::fprintf(stderr, "  %llu unparsable log lines skipped\n", static_cast<unsigned long long>(report.bad_lines));
@@ -171,6 +198,15 @@ void add_replay_command(CLI::App& app) {
   cmd->add_option("--serial-link", o.serial_links, "STREAM=PATH: a symlink to the stream's pseudo-terminal (repeatable)");
   cmd->add_option("--skip", o.skip, "Start this many seconds into the recording")->check(CLI::NonNegativeNumber);
   cmd->add_option("--duration", o.duration, "Replay only this many seconds (0: all)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--fault", o.faults,
+                  "STREAM:FAULT[=VALUE][,OPTION=VALUE]...[@FROM[+FOR]]: inject a fault into a stream on its way\n"
+                  "out (repeatable; docs/recording.md#faults). FAULT: loss=P[,burst=N], reorder=P[,depth=N],\n"
+                  "duplicate=P, truncate=P, corrupt=P[,bytes=K], silence=S, outage=S[,jump=M] and jump=M\n"
+                  "(NMEA), bus-off=S (CAN), clock-step=S (Velodyne). P a probability, S seconds, M metres\n"
+                  "north; FROM/FOR seconds from the replay's start. E.g. --fault lidar:loss=0.05,burst=10@5+10\n"
+                  "--fault gps:outage=10,jump=50@8 --fault wheels:bus-off=3@12");
+  cmd->add_option("--fault-seed", o.fault_seed, "Seed of the random faults: the same seed, the same faults")
+      ->capture_default_str();
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([] {
     const int code = run_replay(o);

@@ -377,6 +377,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("packets", c.data.datagrams);
     m.value("revolutions", c.assembler.revolutions);
     m.value("lost_packets", c.assembler.lost_packets);
+    m.value("discontinuities", c.assembler.discontinuities);
     m.value("malformed", c.assembler.malformed + c.wrong_size);
     m.value("kernel_drops", c.data.kernel_drops);
     m.value("position_packets", c.position_packets);
@@ -398,6 +399,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("lines", s.gps.lines);
     m.value("fixes", s.published);
     m.value("rejected", s.gps.rejected_total());
+    m.value("late_sentences", s.gps.late);
   }
   if (imu_) {
     const imu::ImuDriverStatus s = imu_->status();
@@ -423,6 +425,8 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("frames", s.frames);
     m.value("malformed", s.malformed);
     m.value("bus_off", s.bus_off);
+    m.value("restarted", s.restarted);
+    m.value("error_frames", s.error_frames);
     m.value("distance_m", s.odometry.distance, 2);
   }
   if (gpio_) {
@@ -443,6 +447,11 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("sigma_m", s.utm.position_valid ? s.utm.sigma_position() : 0.0, 2);
     m.value("distance_m", s.local.distance, 2);
     m.value("queue_drops", s.pose_queue_drops);
+    // What became of the GPS fixes: used, rejected as outliers, and how often
+    // agreeing outliers meant the GPS itself had jumped (re-anchored).
+    m.value("gps_fixes_used", s.utm_counters.used);
+    m.value("gps_outliers", s.utm_counters.outliers);
+    m.value("gps_jumps", s.utm_counters.jumps);
     // IMU and wheels are stamped with their host receive times (offset 0 by
     // construction); GPS fixes at the receiver's UTC when it agrees with the host.
     m.value("gps_fixes_at_utc", s.gps_fixes_at_utc);
@@ -451,10 +460,15 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   }
   if (obstacles_) {
     const perception::ObstacleTaskCounters c = obstacles_->status();
-    m.begin(c.skipped > 0 ? L::warn : L::ok, "trailnavd: obstacles",
-            c.skipped > 0 ? "revolutions skipped (too slow)" : "ok", "");
+    m.begin(c.odometry_lost ? L::error : c.skipped > 0 ? L::warn : L::ok, "trailnavd: obstacles",
+            c.odometry_lost ? "odometry lost (no wheel speeds): not mapping, map stale"
+            : c.skipped > 0 ? "revolutions skipped (too slow)"
+                            : "ok",
+            "");
     m.value("revolutions", c.revolutions);
     m.value("skipped", c.skipped);
+    m.value("no_odometry", c.no_odometry);
+    m.value("map_resets", c.map_resets);
     m.value("poses", c.poses);
     m.value("terrain_maps", c.terrain_maps);
   }
@@ -464,6 +478,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.begin(idle ? L::warn : L::ok, "trailnavd: terrain", idle ? "no class map yet (the robot must move d metres)" : "ok", "");
     m.value("revolutions", c.revolutions);
     m.value("skipped", c.skipped);
+    m.value("no_odometry", c.no_odometry);
     m.value("steps", c.mapper.steps);
     m.value("features", c.mapper.features);
     m.value("known_cells", c.mapper.known_cells);

@@ -79,7 +79,7 @@ SimTruthResult load_sim_truth(const std::string& dir) {
   }
   const auto n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   for (auto [file, out] : {std::pair{"sightings.u32", &t.sightings}, std::pair{"side_hits.u32", &t.side_hits},
-                           std::pair{"side_sightings.u32", &t.side_sightings}}) {
+                           std::pair{"side_sightings.u32", &t.side_sightings}, std::pair{"returns.u32", &t.returns}}) {
     const fs::path sight = fs::path(dir) / file;
     if (!fs::exists(sight)) continue;
     std::ifstream s(sight, std::ios::binary);
@@ -213,21 +213,28 @@ void TrailCheck::add_odometry_pose(std::int64_t t_ns, double x, double y, double
   odometry_.push_back({t_ns, x, y, yaw});
 }
 
-double TrailCheck::distance(std::int64_t t_ns, double x, double y) const {
-  const double nan = std::numeric_limits<double>::quiet_NaN();
+bool TrailCheck::to_world(std::int64_t t_ns, double x, double y, double& wx, double& wy) const {
   auto it = std::lower_bound(odometry_.begin(), odometry_.end(), t_ns, [](const Sample& s, std::int64_t t) { return s.t < t; });
   const Sample* best = nullptr;
   if (it != odometry_.end()) best = &*it;
   if (it != odometry_.begin() && (best == nullptr || t_ns - (it - 1)->t < best->t - t_ns)) best = &*(it - 1);
-  if (best == nullptr || std::abs(best->t - t_ns) > 200'000'000) return nan;
+  if (best == nullptr || std::abs(best->t - t_ns) > 200'000'000) return false;
   TruthAt p;
-  if (!truth_at(truth_.trajectory, best->t - offset_ns_, p)) return nan;
+  if (!truth_at(truth_.trajectory, best->t - offset_ns_, p)) return false;
   // Into the robot's frame through the odometry pose, out through the true pose.
   const double dx = x - best->x, dy = y - best->y;
   const double c0 = std::cos(best->yaw), s0 = std::sin(best->yaw);
   const double rx = c0 * dx + s0 * dy, ry = -s0 * dx + c0 * dy;
   const double c1 = std::cos(p.yaw), s1 = std::sin(p.yaw);
-  return trail_.project({p.x + c1 * rx - s1 * ry, p.y + s1 * rx + c1 * ry}).distance;
+  wx = p.x + c1 * rx - s1 * ry;
+  wy = p.y + s1 * rx + c1 * ry;
+  return true;
+}
+
+double TrailCheck::distance(std::int64_t t_ns, double x, double y) const {
+  double wx = 0.0, wy = 0.0;
+  if (!to_world(t_ns, x, y, wx, wy)) return std::numeric_limits<double>::quiet_NaN();
+  return trail_.project({wx, wy}).distance;
 }
 
 }  // namespace trailnav::eval

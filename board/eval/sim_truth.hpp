@@ -52,6 +52,10 @@ struct SimTruth {
   // board/sim/truth.hpp); empty for older recordings.
   std::vector<std::uint32_t> side_hits;
   std::vector<std::uint32_t> side_sightings;
+  // Per pixel: ms after the start + 1 of the first lidar return of any kind
+  // there (returns.u32): a map may call a cell free only after this. Empty
+  // for recordings made before the simulator wrote it.
+  std::vector<std::uint32_t> returns;
   std::vector<TruthPose> trajectory;
 };
 
@@ -82,6 +86,10 @@ class TrailCheck {
   // Distance of (x, y), stamped t_ns (trailnavd's clock), to the trail's
   // centre; NaN without an odometry pose within 0.2 s or a true pose then.
   double distance(std::int64_t t_ns, double x, double y) const;
+  // (x, y) of the odometry frame at t_ns in the simulator's world frame;
+  // false as for distance().
+  bool to_world(std::int64_t t_ns, double x, double y, double& wx, double& wy) const;
+  std::int64_t offset_ns() const noexcept { return offset_ns_; }
 
  private:
   struct Sample {

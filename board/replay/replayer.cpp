@@ -278,6 +278,14 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
     }
     r->report_.streams.push_back(report);
   }
+  if (!options.faults.empty()) {
+    auto made = FaultInjector::create(options.faults, r->reader_->streams(), options.fault_seed);
+    if (!made.injector) {
+      result.error = made.error;
+      return result;
+    }
+    r->faults_ = std::move(made.injector);
+  }
   result.replayer = std::move(r);
   return result;
 }
@@ -291,6 +299,16 @@ ReplayReport Replayer::run() {
   std::int64_t covered_ns = 0;
   int loop = 0;
   auto stopped = [&] { return options_.stop != nullptr && options_.stop->load(std::memory_order_relaxed); };
+  const FaultInjector::Emit emit = [this](const recording::Event& e) {
+    Output& out = *outputs_[static_cast<std::size_t>(e.stream)];
+    StreamReport& report = report_.streams[static_cast<std::size_t>(e.stream)];
+    if (out.send(e)) {
+      ++report.sent;
+      report.bytes += e.kind == StreamKind::can ? e.can->length : e.payload.size();
+    } else {
+      ++report.failures;
+    }
+  };
 
   while (!stopped() && (options_.loops == 0 || loop < options_.loops)) {
     if (loop > 0) {
@@ -312,13 +330,10 @@ ReplayReport Replayer::run() {
       const std::int64_t target =
           schedule_base + static_cast<std::int64_t>(static_cast<double>(last_offset) / options_.rate);
       if (!options_.max_rate) wait_until(target);
-      Output& out = *outputs_[static_cast<std::size_t>(event->stream)];
-      StreamReport& report = report_.streams[static_cast<std::size_t>(event->stream)];
-      if (out.send(*event)) {
-        ++report.sent;
-        report.bytes += event->kind == StreamKind::can ? event->can->length : event->payload.size();
+      if (faults_) {
+        faults_->process(*event, last_offset, emit);
       } else {
-        ++report.failures;
+        emit(*event);
       }
       if (!options_.max_rate) {
         const std::int64_t error = monotonic_ns() - target;
@@ -329,6 +344,10 @@ ReplayReport Replayer::run() {
         const double part = static_cast<double>(reader_->position()) / static_cast<double>(reader_->size());
         options_.progress(options_.loops > 0 ? (loop + part) / options_.loops : part);
       }
+    }
+    if (faults_) {
+      faults_->flush(emit);
+      faults_->restart_loop();
     }
     report_.bad_lines += reader_->counters().bad_lines;
     report_.unassigned_udp += reader_->counters().unassigned_udp;
@@ -344,6 +363,7 @@ ReplayReport Replayer::run() {
   report_.recording_s = static_cast<double>(covered_ns) * 1e-9;
   report_.wall_s = static_cast<double>(monotonic_ns() - wall_start) * 1e-9;
   report_.send_error = errors.summary();
+  if (faults_) report_.faults = faults_->counters();
   return report_;
 }
 

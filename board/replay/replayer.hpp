@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "faults.hpp"
 #include "trailnav/drivers/gpio/line_tunnel.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_sender.hpp"
@@ -38,6 +39,8 @@ struct ReplayOptions {
   std::map<std::string, std::string> serial_links;    // per stream name: a symlink to its pseudo-terminal
   double skip_s = 0.0;      // start this far into the recording
   double duration_s = 0.0;  // replay only this much (0: all)
+  std::vector<FaultSpec> faults;  // injected on the way out (faults.hpp)
+  std::uint64_t fault_seed = 1;   // the same seed, the same faults
   const std::atomic<bool>* stop = nullptr;
   std::function<void(double fraction)> progress;  // called now and then with the part done
 };
@@ -60,6 +63,7 @@ struct ReplayReport {
   int loops = 0;
   std::uint64_t bad_lines = 0;
   std::uint64_t unassigned_udp = 0;
+  std::vector<FaultCounters> faults;  // per stream, when faults were injected
 };
 
 class Replayer {
@@ -84,6 +88,7 @@ class Replayer {
   ReplayOptions options_;
   std::unique_ptr<recording::RecordingReader> reader_;
   std::vector<std::unique_ptr<Output>> outputs_;  // per stream
+  std::unique_ptr<FaultInjector> faults_;
   ReplayReport report_;
 };
 

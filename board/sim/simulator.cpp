@@ -85,6 +85,7 @@ class LidarSim {
     sighted_.any.assign(static_cast<std::size_t>(world.width()) * static_cast<std::size_t>(world.height()), 0);
     sighted_.side_hit.assign(sighted_.any.size(), 0);
     sighted_.side.assign(sighted_.any.size(), 0);
+    sighted_.returns.assign(sighted_.any.size(), 0);
   }
 
   double packet_start_us(std::uint64_t i) const { return static_cast<double>(i) * packet_period_us_; }
@@ -165,6 +166,15 @@ class LidarSim {
           const double raw = std::nearbyint(range / step);
           if (raw < 1.0 || raw > 65535.0) continue;
           const auto r16 = static_cast<std::uint16_t>(raw);
+          {
+            // Every return, whatever it hit, shows its pixel to the lidar.
+            const Vec3 at = sensor + R * (os + ds * hit.distance);
+            const auto ms = static_cast<std::uint32_t>(tg_us / 1000.0) + 1;
+            if (const std::ptrdiff_t px = world_.pixel(at.x(), at.y()); px >= 0) {
+              std::uint32_t& f = sighted_.returns[static_cast<std::size_t>(px)];
+              if (f == 0 || ms < f) f = ms;
+            }
+          }
           if (hit.kind == HitKind::object || hit.kind == HitKind::ground) {
             const auto ms = static_cast<std::uint32_t>(tg_us / 1000.0) + 1;
             const auto mark = [&](std::vector<std::uint32_t>& first, const Vec3& at) {

@@ -145,6 +145,10 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
     if (Status st = write_u32_raster(dir + "/side_hits.u32", sightings.side_hit); !st) return st;
     if (Status st = write_u32_raster(dir + "/side_sightings.u32", sightings.side); !st) return st;
   }
+  const bool returned = sightings.returns.size() == world.obstacle_raster().size();
+  if (returned) {
+    if (Status st = write_u32_raster(dir + "/returns.u32", sightings.returns); !st) return st;
+  }
   f = std::fopen((dir + "/rasters.yaml").c_str(), "w");
   if (!f) return Status::error("cannot write " + dir + "/rasters.yaml");
   std::fprintf(f,
@@ -170,6 +174,11 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
                  "that show the face: at least %.2f m below the obstacle's top, meeting the face at %.0f degrees or "
                  "more\"}\n",
                  kSideSightingRange, kSideSightingDepth, kSideSightingAngle);
+  }
+  if (returned) {
+    std::fprintf(f,
+                 "returns.u32: {type: uint32 little-endian, rows: south_up, value: \"ms after the start + 1 of the first "
+                 "lidar return of any kind (ground, obstacle, vegetation) in the pixel; 0: never\"}\n");
   }
   std::fclose(f);
 

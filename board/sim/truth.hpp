@@ -38,6 +38,9 @@ struct Sightings {
   std::vector<std::uint32_t> any;
   std::vector<std::uint32_t> side_hit;
   std::vector<std::uint32_t> side;
+  // The first lidar return of any kind (ground, obstacle, vegetation) in each
+  // pixel: what the lidar has seen, so what a map may call free.
+  std::vector<std::uint32_t> returns;
 };
 
 Status write_truth(const std::string& directory, const Scenario& scenario, std::uint64_t seed, const World& world,

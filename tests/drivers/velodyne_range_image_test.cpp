@@ -241,6 +241,40 @@ TEST(RangeImage, OutOfOrderPacketsAreDroppedAndCounted) {
   EXPECT_EQ(images.size(), 12u);
 }
 
+// A real capture with a gap: the sensor silent for 2 s (its packets
+// dropped), and in a second run its clock stepped 3 s back halfway. Either way
+// the revolution in progress is dropped, never joined across the jump (its
+// points would be placed with poses seconds apart): every revolution handed
+// on spans one turn's time, and the jump is counted.
+TEST(RangeImage, ClockJumpsEndTheRevolutionInProgress) {
+  const PacketDecoder d = decoder_for(Model::vlp16);
+  const std::vector<Packet> packets = data_packets(shared_data("velodyne/einride_vlp16_recording_raw1206.bin"));
+  ASSERT_GT(packets.size(), 800u);
+  const auto clean = assemble(d, packets);
+  auto stamp = [](Packet& p, std::int64_t shift_us) {
+    std::uint32_t us = 0;
+    for (int k = 0; k < 4; ++k) us |= static_cast<std::uint32_t>(p.bytes[static_cast<std::size_t>(1200 + k)]) << (8 * k);
+    std::int64_t v = (static_cast<std::int64_t>(us) + shift_us) % 3'600'000'000;
+    if (v < 0) v += 3'600'000'000;
+    for (int k = 0; k < 4; ++k) p.bytes[static_cast<std::size_t>(1200 + k)] = static_cast<std::uint8_t>(v >> (8 * k));
+  };
+  for (const std::int64_t shift : {2'000'000LL, -3'000'000LL}) {
+    std::vector<Packet> jumped = packets;
+    for (std::size_t k = 410; k < jumped.size(); ++k) {
+      stamp(jumped[k], shift);  // raw file: the host's time follows the packet clock here
+    }
+    AssemblerCounters counters;
+    const auto images = assemble(d, jumped, {}, &counters);
+    EXPECT_EQ(counters.discontinuities, 1u) << shift;
+    EXPECT_EQ(counters.out_of_order, 0u) << shift;
+    // One revolution fewer than the clean capture: the one the jump cut.
+    EXPECT_EQ(images.size(), clean.size() - 1) << shift;
+    for (const RangeImage& image : images) {
+      EXPECT_LT(image.end_ns - image.start_ns, 120'000'000) << shift;  // one turn at 600 rpm, not seconds
+    }
+  }
+}
+
 TEST(RangeImage, CutIsExactAtAnyAzimuth) {
   const PacketDecoder d = decoder_for(Model::vlp16);
   const auto packets = data_packets(shared_data("velodyne/einride_vlp16_recording_raw1206.bin"));

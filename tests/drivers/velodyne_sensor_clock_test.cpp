@@ -115,6 +115,31 @@ TEST(SensorClock, HostTimeFollowsTheSmallestDelayAcrossTheTopOfTheHour) {
   EXPECT_EQ(clock.source(), TimeSource::host);
 }
 
+// A packet a few milliseconds late keeps its place (held, times stay
+// monotonic); a counter set back by seconds is a step of the sensor's clock
+// (a re-lock), and times follow it down instead of standing still for as
+// long as the step (found by trailnav replay --fault lidar:clock-step=-2.5).
+TEST(SensorClock, LatePacketsAreHeldButAClockSetBackIsFollowed) {
+  SensorClock clock;
+  const std::int64_t host = 1'700'000'000'000'000'000;
+  std::int64_t t = 0;
+  for (std::int64_t us = 1'000'000; us < 2'000'000; us += 1327) {
+    t = clock.resolve(static_cast<std::uint32_t>(us), host + us * 1000);
+  }
+  const std::int64_t before = t;
+  // 3 ms late: held at the newest time.
+  EXPECT_EQ(clock.resolve(1'997'000, host + 2'000'000'000), before);
+  EXPECT_EQ(clock.clamped(), 1u);
+  EXPECT_EQ(clock.steps_back(), 0u);
+  // Set back by 2.5 s: followed.
+  const std::int64_t after = clock.resolve(static_cast<std::uint32_t>(2'000'000 - 2'500'000 + 3'600'000'000LL), host + 2'001'000'000);
+  EXPECT_EQ(clock.steps_back(), 1u);
+  EXPECT_NEAR(static_cast<double>(after - before), -2.5e9, 5e6);
+  // And runs on from there.
+  const std::int64_t next = clock.resolve(static_cast<std::uint32_t>(2'001'327 - 2'500'000 + 3'600'000'000LL), host + 2'002'000'000);
+  EXPECT_EQ(next - after, 1'327'000);
+}
+
 TEST(SensorClock, HostTimeFollowsClockDrift) {
   SensorClockOptions options;
   options.offset_window_ns = 1'000'000'000;

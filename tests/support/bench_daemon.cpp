@@ -13,7 +13,6 @@
 #include <sstream>
 #include <vector>
 
-#include "replayer.hpp"
 #include "simulator.hpp"
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/osm/router.hpp"
@@ -166,17 +165,28 @@ void BenchDaemon::start_replay(double delay_s) {
   ro.gpio_tunnel = {0x7F000001u, port(3)};
   ro.serial_links["gps"] = (dir_ / "gps").string();
   ro.serial_links["imu"] = (dir_ / "imu").string();
+  for (const std::string& f : options_.faults) {
+    const replay::FaultSpecResult parsed = replay::parse_fault_spec(f);
+    if (!parsed.spec) {
+      replay_error_ = parsed.error;
+      std::fprintf(stderr, "bench daemon: %s\n", parsed.error.c_str());
+      return;
+    }
+    ro.faults.push_back(*parsed.spec);
+  }
+  ro.fault_seed = options_.fault_seed;
   replaying_ = true;
   player_ = std::thread([this, ro, delay_s] {
     auto replayer = replay::Replayer::create(recording_, ro);
     if (!replayer.replayer) {
       std::fprintf(stderr, "bench daemon: replay: %s\n", replayer.error.c_str());
+      replay_error_ = replayer.error;
       replaying_ = false;
       return;
     }
     std::this_thread::sleep_for(std::chrono::duration<double>(delay_s));
     replay_start_ns_ = wall_clock_ns();
-    replayer.replayer->run();
+    replay_report_ = replayer.replayer->run();
     replaying_ = false;
   });
 }

@@ -14,6 +14,9 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
+
+#include "replayer.hpp"
 
 #include "sim_truth.hpp"
 
@@ -30,6 +33,8 @@ struct BenchDaemonOptions {
   bool navigation = false;
   std::string extra_yaml;     // appended to the config (e.g. more dds keys go in `dds_yaml`)
   std::string dds_yaml;       // appended inside the dds section's braces, e.g. ", topics: {...}"
+  std::vector<std::string> faults;  // injected by the replayer (trailnav replay --fault)
+  std::uint64_t fault_seed = 1;
 };
 
 // A goal for orders: the vertex of the recording's world.osm farthest from
@@ -58,6 +63,9 @@ class BenchDaemon {
   void start_replay(double delay_s = 1.5);
   bool replaying() const noexcept { return replaying_.load(); }
   void join_replay();
+  // What the replayer did (after join_replay()); its error when it could not start.
+  const replay::ReplayReport& replay_report() const noexcept { return replay_report_; }
+  const std::string& replay_error() const noexcept { return replay_error_; }
   // Host time (CLOCK_REALTIME ns) the replay started; 0 before.
   std::int64_t replay_start_ns() const noexcept { return replay_start_ns_.load(); }
 
@@ -87,6 +95,8 @@ class BenchDaemon {
   std::atomic<bool> replaying_{false};
   std::atomic<std::int64_t> replay_start_ns_{0};
   std::thread player_;
+  replay::ReplayReport replay_report_;
+  std::string replay_error_;
 };
 
 }  // namespace trailnav::test

@@ -119,6 +119,21 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
 
   // Order and loss, from the packet clock and from the azimuth.
   std::int64_t lost = 0;
+  bool restart = false;
+  if (have_previous_) {
+    const std::int64_t dt = hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_);
+    const double half_revolution_us = 30e6 / current_rpm_;
+    if (static_cast<double>(std::abs(dt)) > half_revolution_us) {
+      // Points from both sides of the jump in one revolution would be
+      // placed with poses seconds apart.
+      ++counters_.discontinuities;
+      restart = true;
+      have_previous_ = false;
+      rate_azimuth_ = 0.0;
+      rate_time_us_ = 0.0;
+      if (image_ != nullptr && !partial_) ++counters_.partial_revolutions;
+    }
+  }
   if (have_previous_) {
     const std::int64_t dt = hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_);
     if (dt <= 0) {
@@ -150,7 +165,7 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   const auto sequence_ns = [&](int s) {
     return packet_time_ns + std::llround(static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(s)]) * 1e3);
   };
-  if (image_ == nullptr) start_revolution(sink, sequence_ns(0), true);
+  if (image_ == nullptr || restart) start_revolution(sink, sequence_ns(0), true);
   if (lost > 0) image_->lost_packets += static_cast<std::uint32_t>(std::min<std::int64_t>(lost, 0xFFFFFFFF));
 
   const bool continuous = have_previous_ && lost == 0;

@@ -109,6 +109,16 @@ std::int64_t SensorClock::unwrap(std::uint32_t counter) noexcept {
   // from before it.
   const std::int64_t delta = hour_clock_delta_us(counter, last_counter_);
   const std::int64_t continuous = last_continuous_us_ + delta;
+  if (delta < -kStepBackUs) {
+    // Half a second is no late packet: the clock was set back. Follow it, and
+    // let the outputs go back with it (held at the old time, every revolution
+    // of the next seconds would have one time).
+    ++steps_back_;
+    last_counter_ = counter;
+    last_continuous_us_ = continuous;
+    last_out_ns_ = 0;
+    return continuous;
+  }
   if (delta > 0) {
     if (counter < last_counter_) ++rollovers_;
     last_counter_ = counter;

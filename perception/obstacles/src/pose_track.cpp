@@ -66,6 +66,7 @@ PoseLookup PoseTrack::at(std::int64_t t_ns, Pose& out) const noexcept {
   out.roll = lerp_angle(a.roll, b.roll, f);
   out.pitch = lerp_angle(a.pitch, b.pitch, f);
   out.yaw = lerp_angle(a.yaw, b.yaw, f);
+  out.translation_valid = a.translation_valid && b.translation_valid;
   return PoseLookup::interpolated;
 }
 

@@ -86,6 +86,13 @@ class ObstacleMap {
     return c.logit > occupied_logit_ ? CellState::occupied : CellState::free;
   }
   std::uint32_t revolutions() const noexcept { return revolution_; }
+  // Every cell unknown again (the odometry lost track of the robot: what was
+  // mapped no longer fits where it is). Keeps the origin.
+  void forget() noexcept {
+    grid_.fill(ObstacleCell{});
+    occupancy_.fill(std::int8_t{-1});
+    hits_.fill(DiracHit{});
+  }
   const MapCounters& counters() const noexcept { return counters_; }
 
   // Row-major copy from the map's origin (row 0 = lowest y): 0..100 percent

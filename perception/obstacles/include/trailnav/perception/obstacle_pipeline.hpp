@@ -53,6 +53,12 @@ class ObstaclePipeline {
   const ObstacleModels& models() const noexcept { return models_; }
   // The map of the configured model.
   const ObstacleMap& map() const noexcept { return *maps_[static_cast<std::size_t>(config_.model)]; }
+  // Every model's map unknown again (ObstacleMap::forget).
+  void forget_maps() noexcept {
+    for (auto& m : maps_) {
+      if (m) m->forget();
+    }
+  }
   // The map of another model; null unless compare_models is set (or it is the configured one).
   const ObstacleMap* map(FusionModel m) const noexcept { return maps_[static_cast<std::size_t>(m)].get(); }
   PipelineCounters counters() const noexcept;

@@ -74,6 +74,12 @@ struct ObstacleTaskCounters {
   std::uint64_t poses = 0;
   std::uint64_t terrain_maps = 0;
   std::uint64_t point_clouds = 0;      // revolutions handed over as points for viewers
+  // Revolutions not mapped because the odometry did not know the robot's
+  // motion then (wheel speeds lost), and how often the map was forgotten
+  // when it knew again.
+  std::uint64_t no_odometry = 0;
+  std::uint64_t map_resets = 0;
+  bool odometry_lost = false;  // the newest revolution was not mapped for that reason
   PipelineCounters pipeline;
 };
 
@@ -105,6 +111,7 @@ class ObstacleTask final : public Task {
   Broadcast<TerrainClassMap>::Reader* terrain_;
   Mailbox<ObstacleSnapshot>& out_;
   PoseTrack track_;
+  bool odometry_lost_ = false;
   const TerrainClassMap* terrain_map_ = nullptr;
   std::uint64_t last_sequence_ = 0;
   ObstacleTaskCounters counters_;

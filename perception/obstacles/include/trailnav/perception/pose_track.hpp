@@ -24,6 +24,9 @@ struct Pose {
   double roll = 0.0;  // rad: R = Rz(yaw) * Ry(pitch) * Rx(roll), robot to odometry frame
   double pitch = 0.0;
   double yaw = 0.0;
+  // False while the odometry could not measure the robot's motion (wheel
+  // speeds lost): the obstacle and terrain threads do not map with it.
+  bool translation_valid = true;
 };
 
 // Pose samples from the pose thread to the obstacle (and terrain) thread.

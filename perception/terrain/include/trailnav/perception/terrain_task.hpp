@@ -24,6 +24,7 @@ struct TerrainTaskCounters {
   std::uint64_t skipped = 0;      // revolutions that came and went between two runs
   std::uint64_t poses = 0;
   std::uint64_t published = 0;    // class-map snapshots
+  std::uint64_t no_odometry = 0;  // revolutions left out: the odometry did not know the robot's motion then
   std::int64_t last_step_ns = 0;  // sensor time of the newest step
   TerrainCounters mapper;
 };

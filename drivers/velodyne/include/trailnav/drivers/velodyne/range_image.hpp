@@ -140,6 +140,10 @@ struct AssemblerCounters {
   std::uint64_t packets = 0;
   std::uint64_t malformed = 0;      // rejected by the decoder
   std::uint64_t out_of_order = 0;   // timestamp not after the previous packet's: dropped
+  // The packet clock jumped by more than half a revolution either way (the
+  // sensor fell silent, or its clock stepped): the revolution in progress is
+  // dropped, never joined across the jump, and a new one starts.
+  std::uint64_t discontinuities = 0;
   std::uint64_t lost_packets = 0;   // inferred from gaps in packet time and azimuth
   std::uint64_t revolutions = 0;    // completed and handed to the sink
   std::uint64_t partial_revolutions = 0;  // the first, incomplete one (not handed on)

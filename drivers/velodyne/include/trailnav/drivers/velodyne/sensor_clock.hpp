@@ -59,6 +59,10 @@ class SensorClock {
   std::uint64_t hour_rollovers() const noexcept { return rollovers_; }
   std::uint64_t clamped() const noexcept { return clamped_; }  // outputs held back to stay monotonic
   std::uint64_t steps() const noexcept { return steps_; }      // switches from host to GPS time
+  // The counter went back by more than kStepBackUs: the sensor's clock was
+  // set back (a PPS or GPS re-lock), not a late packet. Times follow it down.
+  std::uint64_t steps_back() const noexcept { return steps_back_; }
+  static constexpr std::int64_t kStepBackUs = 500'000;
 
  private:
   // The sensor counter unwrapped into continuous microseconds.
@@ -84,6 +88,7 @@ class SensorClock {
   std::int64_t last_out_ns_ = 0;
   std::uint64_t clamped_ = 0;
   std::uint64_t steps_ = 0;
+  std::uint64_t steps_back_ = 0;
 };
 
 }  // namespace trailnav::velodyne

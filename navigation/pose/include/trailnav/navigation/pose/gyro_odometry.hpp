@@ -32,6 +32,11 @@ struct LocalPose {
   double yaw_rate = 0.0;                      // rad/s about gravity
   double distance = 0.0;                      // m driven (absolute)
   bool standstill = false;
+  // False while the wheels, once heard, have gone quiet (a CAN bus-off, a
+  // cable): the speed is then unknown and the position stands still while
+  // the robot may not. What was mapped in the odometry frame before and what
+  // is seen after no longer fit together (docs/pose.md).
+  bool translation_valid = true;
   PoseSource source = PoseSource::none;
 };
 
