@@ -35,6 +35,9 @@ mkdir -p "$unitdir"
 sed "s|/usr/bin/trailnavd|$root/usr/bin/trailnavd|g" "$root/usr/lib/systemd/system/trailnavd.service" >"$unitdir/trailnavd.service"
 systemd-analyze verify "$unitdir/trailnavd.service"
 systemd-analyze security --offline=true "$unitdir/trailnavd.service" | tail -n1
+# Fails above 2.0 (the threshold is the score times ten).
+systemd-analyze security --offline=true --threshold=20 "$unitdir/trailnavd.service" >/dev/null ||
+  { echo "check-deb: the unit's exposure is above 2.0" >&2; exit 1; }
 rm -rf "$unitdir"
 # The installed binary validates the installed config (its absolute paths,
 # the terrain model's, moved under the temporary root).

@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -58,7 +59,46 @@ struct BenchDemoOptions {
   std::string png;
   int png_every = 20;
   unsigned domain = 0;
+  // Soak: the recording replayed again and again for this long, with the
+  // daemon's figures sampled every `sample_every` seconds (0: one replay).
+  double soak_minutes = 0.0;
+  double sample_every = 10.0;
 };
+
+// What the kernel says of a process: resident memory, open descriptors,
+// threads, CPU time.
+struct ProcessFigures {
+  long rss_kb = 0;
+  long fds = 0;
+  long threads = 0;
+  double cpu_s = 0.0;
+};
+
+ProcessFigures process_figures(pid_t pid) {
+  ProcessFigures f;
+  const std::string dir = "/proc/" + std::to_string(pid);
+  std::ifstream status(dir + "/status");
+  for (std::string line; std::getline(status, line);) {
+    if (line.rfind("VmRSS:", 0) == 0) f.rss_kb = std::atol(line.c_str() + 6);
+    if (line.rfind("Threads:", 0) == 0) f.threads = std::atol(line.c_str() + 8);
+  }
+  std::error_code ec;
+  for (auto it = fs::directory_iterator(dir + "/fd", ec); !ec && it != fs::directory_iterator(); it.increment(ec)) ++f.fds;
+  std::ifstream stat(dir + "/stat");
+  std::string text((std::istreambuf_iterator<char>(stat)), std::istreambuf_iterator<char>());
+  // Fields after the command's closing parenthesis; utime and stime are the 14th and 15th of the line.
+  const std::size_t close = text.rfind(')');
+  if (close != std::string::npos) {
+    std::istringstream rest(text.substr(close + 2));
+    std::string field;
+    double ticks = 0.0;
+    for (int i = 3; i <= 15 && rest >> field; ++i) {
+      if (i == 14 || i == 15) ticks += std::atof(field.c_str());
+    }
+    f.cpu_s = ticks / static_cast<double>(sysconf(_SC_CLK_TCK));
+  }
+  return f;
+}
 
 void replace_all(std::string& text, const std::string& from, const std::string& to) {
   for (std::size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
@@ -70,6 +110,56 @@ std::string sibling_binary(const char* name) {
   std::error_code ec;
   const fs::path self = fs::read_symlink("/proc/self/exe", ec);
   return ec ? std::string(name) : (self.parent_path() / name).string();
+}
+
+// The soak's verdict, from its samples: RSS and descriptors constant after the
+// first minute, no real-time allocation, no overrun, map latency p99 at most
+// 5 ms in every window.
+template <class Row>
+int soak_summary(const std::vector<Row>& rows, const DurationSummary& all, const std::string& report, const fs::path& csv) {
+  if (rows.empty()) {
+    std::fprintf(stderr, "trailnav demo: no soak sample was taken\n");
+    return 1;
+  }
+  long rss_min = std::numeric_limits<long>::max(), rss_max = 0, fds_min = rss_min, fds_max = 0, threads_min = rss_min,
+       threads_max = 0;
+  double worst_p99 = 0.0;
+  for (const Row& r : rows) {
+    worst_p99 = std::max(worst_p99, nanos_to_seconds(r.latency.p99) * 1e3);
+    if (r.t < 60.0) continue;  // the first minute: discovery, the maps' first fill
+    rss_min = std::min(rss_min, r.p.rss_kb);
+    rss_max = std::max(rss_max, r.p.rss_kb);
+    fds_min = std::min(fds_min, r.p.fds);
+    fds_max = std::max(fds_max, r.p.fds);
+    threads_min = std::min(threads_min, r.p.threads);
+    threads_max = std::max(threads_max, r.p.threads);
+  }
+  const Row& last = rows.back();
+  const bool after_minute = rss_max > 0;
+  std::printf("4. soak: %.0f s, %zu samples in %s\n", last.t, rows.size(), csv.c_str());
+  if (after_minute) {
+    std::printf("   after the first minute: RSS %ld..%ld kB (%+ld kB), fds %ld..%ld, threads %ld..%ld\n", rss_min, rss_max,
+                rss_max - rss_min, fds_min, fds_max, threads_min, threads_max);
+  }
+  std::printf("   CPU %.1f s in %.0f s (%.1f %% of one core); overruns %llu; real-time allocations %llu\n", last.p.cpu_s, last.t,
+              100.0 * last.p.cpu_s / last.t, static_cast<unsigned long long>(last.overruns),
+              static_cast<unsigned long long>(last.rt_allocations));
+  std::printf("   map latency over the whole soak p50 %.2f ms, p99 %.2f ms, max %.2f ms; worst window p99 %.2f ms\n",
+              nanos_to_seconds(all.p50) * 1e3, nanos_to_seconds(all.p99) * 1e3, nanos_to_seconds(all.max) * 1e3, worst_p99);
+  // RSS may move by a page or two of stack and allocator slack; more than
+  // 1 MB after the first minute is growth.
+  const bool ok = after_minute && rss_max - rss_min <= 1024 && fds_max == fds_min && threads_max == threads_min &&
+                  last.overruns == 0 && last.rt_allocations == 0 && nanos_to_seconds(all.p99) * 1e3 <= 5.0;
+  std::printf("   %s\n", ok ? "soak goals met: RSS and fds constant after the first minute, 0 real-time allocations, "
+                               "0 overruns, map latency p99 <= 5 ms"
+                             : "SOAK GOALS NOT MET (RSS or fds not constant after the first minute, real-time "
+                               "allocations, overruns, or map latency p99 above 5 ms)");
+  std::printf("5. trailnavd after SIGTERM:\n");
+  std::istringstream lines(report);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.find("info") == std::string::npos || line.find("stopped") != std::string::npos) std::printf("   %s\n", line.c_str());
+  }
+  return ok ? 0 : 1;
 }
 
 int run_bench_demo(const BenchDemoOptions& o) {
@@ -195,6 +285,12 @@ int run_bench_demo(const BenchDemoOptions& o) {
   replay::ReplayOptions ro;
   ro.serial_links["gps"] = (out / "gps").string();
   ro.serial_links["imu"] = (out / "imu").string();
+  const bool soak = o.soak_minutes > 0.0;
+  std::atomic<bool> stop_replay{false};
+  if (soak) {
+    ro.loops = 0;
+    ro.stop = &stop_replay;
+  }
   auto replayer = replay::Replayer::create(so.out, ro);
   if (!replayer.replayer) {
     std::fprintf(stderr, "trailnav demo: %s\n%s", replayer.error.c_str(), stop_daemon().c_str());
@@ -208,11 +304,15 @@ int run_bench_demo(const BenchDemoOptions& o) {
     replayer.replayer->run();
     playing = false;
   });
-  ProgressBar bar("replay", o.seconds, "s");
+  const double total_s = soak ? o.soak_minutes * 60.0 : o.seconds;
+  ProgressBar bar(soak ? "soak" : "replay", total_s, "s");
   std::uint64_t n_maps = 0, n_stale = 0, n_poses = 0, n_health = 0, pngs = 0, n_terrain = 0;
   std::string terrain_summary;
   std::string driving_health;
   DurationHistogram latency;  // ns, within 3 %
+  DurationHistogram window_latency;  // the soak's sample window
+  std::uint64_t window_maps = 0;
+  std::map<std::string, std::map<std::string, std::string>> health_values;  // the newest, by status name
   std::vector<std::int8_t> last_map;
   nav_msgs_msg_dds__OccupancyGrid_ last_header{};
   std::string last_pose, last_health;
@@ -241,6 +341,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
       }
       ++n_maps;
       latency.record(r.receive_ns - r.source_ns);
+      window_latency.record(r.receive_ns - r.source_ns);
+      ++window_maps;
       last_map.assign(g.data._buffer, g.data._buffer + g.data._length);
       last_header = g;
       last_header.data = {};
@@ -287,15 +389,64 @@ int run_bench_demo(const BenchDemoOptions& o) {
       last_health.clear();
       for (std::uint32_t i = 0; i < a.status._length; ++i) {
         const auto& s = a.status._buffer[i];
+        auto& values = health_values[s.name];
+        for (std::uint32_t k = 0; k < s.values._length; ++k) values[s.values._buffer[k].key] = s.values._buffer[k].value;
         if (std::string_view(s.name).find("task ") != std::string_view::npos) continue;
         last_health += std::string("     ") + (s.level < 4 ? kLevels[s.level] : "?") + "  " + s.name + ": " + s.message + "\n";
       }
     });
   };
+  // The soak's samples: every `sample_every` s the daemon's memory, descriptors,
+  // threads and CPU, its overruns and real-time allocations (health), and the
+  // maps' latency over the window.
+  std::ofstream soak_csv;
+  struct SoakRow {
+    double t;
+    ProcessFigures p;
+    std::uint64_t overruns, rt_allocations, maps;
+    DurationSummary latency;
+  };
+  std::vector<SoakRow> soak_rows;
+  if (soak) {
+    soak_csv.open(out / "soak.csv");
+    soak_csv << "elapsed_s,rss_kb,fds,threads,cpu_s,overruns,rt_allocations,maps,map_latency_p50_ms,map_latency_p99_ms,"
+                "map_latency_max_ms\n";
+  }
+  auto health_sum = [&](const std::string& prefix, const std::string& key) {
+    std::uint64_t sum = 0;
+    for (const auto& [name, values] : health_values) {
+      if (name.rfind(prefix, 0) != 0) continue;
+      if (auto it = values.find(key); it != values.end()) sum += std::strtoull(it->second.c_str(), nullptr, 10);
+    }
+    return sum;
+  };
+  double next_sample = o.sample_every;
   while (playing) {
     listen(0.05);
     driving_health = last_health;
-    bar.update(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    bar.update(std::min(elapsed, total_s));
+    if (soak && elapsed >= next_sample) {
+      next_sample += o.sample_every;
+      SoakRow row{elapsed, process_figures(pid), health_sum("trailnavd: task ", "overruns"),
+                  health_sum("trailnavd: memory", "rt_allocations"), window_maps, window_latency.summary()};
+      char line[256];
+      std::snprintf(line, sizeof line, "%.1f,%ld,%ld,%ld,%.2f,%llu,%llu,%llu,%.3f,%.3f,%.3f\n", row.t, row.p.rss_kb, row.p.fds,
+                    row.p.threads, row.p.cpu_s, static_cast<unsigned long long>(row.overruns),
+                    static_cast<unsigned long long>(row.rt_allocations), static_cast<unsigned long long>(row.maps),
+                    nanos_to_seconds(row.latency.p50) * 1e3, nanos_to_seconds(row.latency.p99) * 1e3,
+                    nanos_to_seconds(row.latency.max) * 1e3);
+      soak_csv << line;
+      soak_csv.flush();
+      soak_rows.push_back(row);
+      window_latency.reset();
+      window_maps = 0;
+      if (::waitpid(pid, nullptr, WNOHANG) == pid) {
+        std::fprintf(stderr, "\ntrailnav demo: trailnavd stopped during the soak\n");
+        stop_replay = true;
+      }
+    }
+    if (soak && elapsed >= total_s) stop_replay = true;
   }
   bar.finish();
   player.join();
@@ -303,6 +454,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
   const std::string report = stop_daemon();
 
   const DurationSummary lat = latency.summary();
+  if (soak) return soak_summary(soak_rows, lat, report, out / "soak.csv");
   std::printf("4. received: %llu obstacle maps (latency from the revolution's last packet: p50 %.2f ms, p99 %.2f ms), "
               "%llu poses (last: %s), %llu health messages\n",
               static_cast<unsigned long long>(n_maps), nanos_to_seconds(lat.p50) * 1e3, nanos_to_seconds(lat.p99) * 1e3, static_cast<unsigned long long>(n_poses),
@@ -379,6 +531,14 @@ void add_bench_demo_command(CLI::App& app) {
   cmd->add_option("--png", o->png, "Also write the last obstacle map received to this PNG file");
   cmd->add_option("--png-every", o->png_every, "Save every Nth map received in OUT/maps (0: none)")->capture_default_str()->check(CLI::NonNegativeNumber);
   cmd->add_option("--domain", o->domain, "DDS domain id")->capture_default_str()->check(CLI::Range(0, 232));
+  cmd->add_option("--soak-minutes", o->soak_minutes,
+                  "Soak: replay the recording again and again for this many minutes, sampling trailnavd's RSS,\n"
+                  "descriptors, threads, CPU, overruns, real-time allocations and map latency into OUT/soak.csv;\n"
+                  "exits 1 unless RSS and fds stay constant after the first minute, with 0 real-time\n"
+                  "allocations, 0 overruns and map latency p99 <= 5 ms (toolchain/soak.sh)")
+      ->check(CLI::Range(0.0, 24.0 * 60.0));
+  cmd->add_option("--sample-every", o->sample_every, "Soak: seconds between samples")->capture_default_str()->check(
+      CLI::Range(1.0, 600.0));
   cmd->callback([o] {
     const int rc = run_bench_demo(*o);
     if (rc != 0) throw CLI::RuntimeError(rc);

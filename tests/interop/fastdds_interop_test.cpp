@@ -60,6 +60,15 @@
 
 extern char** environ;
 
+#if defined(__SANITIZE_ADDRESS__)
+// Fast DDS 2.9 (Debian's libfastrtps, not ours) frees its readers through a
+// base class whose sized delete disagrees with the allocation
+// (RTPSReader::~RTPSReader, when a participant deletes its entities):
+// AddressSanitizer's new-delete-type-mismatch check is off in this test
+// executable only; every other check stays on (docs/testing.md).
+extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
+#endif
+
 namespace {
 
 namespace fdds = eprosima::fastdds::dds;

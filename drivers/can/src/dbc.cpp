@@ -307,7 +307,8 @@ SignalError decode_signal(const DbcSignal& sig, std::span<const std::uint8_t> da
   if (sig.multiplexer || sig.multiplexed_by) return SignalError::multiplexed;
   std::uint64_t raw = 0;
   const bool ok = for_each_bit(sig, static_cast<int>(data.size() * 8), [&](int k, int pos) {
-    const std::uint64_t bit = (data[static_cast<std::size_t>(pos / 8)] >> (pos % 8)) & 1u;
+    const unsigned byte = data[static_cast<std::size_t>(pos / 8)];
+    const std::uint64_t bit = (byte >> static_cast<unsigned>(pos % 8)) & 1u;
     raw |= bit << k;
   });
   if (!ok) return SignalError::short_frame;
