@@ -274,7 +274,7 @@ Status Daemon::start() {
   if (gpio_) gpio_->set_ready(true);
   // From here on the real-time tasks are watched for heap use.
   alloc_guard::reset_counters();
-  armed_ = alloc_guard::arm();
+  armed_.store(alloc_guard::arm(), std::memory_order_release);
   return Status::ok();
 }
 
@@ -283,9 +283,9 @@ void Daemon::stop() {
   if (command_reader_) command_reader_->stop();
   if (scheduler_ && scheduler_->running()) scheduler_->stop();
   if (publisher_) publisher_->stop();
-  if (armed_) {
+  if (armed_.load(std::memory_order_acquire)) {
     alloc_guard::disarm();
-    armed_ = false;
+    armed_.store(false, std::memory_order_release);
   }
 }
 
@@ -529,7 +529,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("cpu_max_ms", nanos_to_seconds(st.cpu_max) * 1e3, 3);
   }
   m.begin(alloc_guard::total_allocations() > 0 ? L::error : L::ok, "trailnavd: memory",
-          armed_ ? "real-time threads watched" : "allocation guard not armed", "");
+          armed_.load(std::memory_order_acquire) ? "real-time threads watched" : "allocation guard not armed", "");
   m.value("rt_allocations", alloc_guard::total_allocations());
   (void)now;
 }

@@ -15,6 +15,7 @@
 // into its own buffers).
 #pragma once
 
+#include <atomic>
 #include <memory>
 #include <optional>
 #include <string>
@@ -110,7 +111,8 @@ class Daemon {
   std::unique_ptr<nav::NavStatusQueue> answers_;
   std::unique_ptr<dds::CommandReader> command_reader_;
   std::vector<std::uint64_t> last_runs_;
-  bool armed_ = false;
+  // Set on the main thread after the publisher has started; its health reads it.
+  std::atomic<bool> armed_{false};
 };
 
 struct Daemon::Created {

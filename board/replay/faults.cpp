@@ -125,16 +125,7 @@ FaultSpecResult parse_fault_spec(std::string_view text) {
     window = rest.substr(at + 1);
     rest = rest.substr(0, at);
   }
-  std::vector<std::string_view> items;
-  {
-    std::size_t start = 0;
-    for (std::size_t i = 0; i <= rest.size(); ++i) {
-      if (i == rest.size() || rest[i] == ',') {
-        items.push_back(rest.substr(start, i - start));
-        start = i + 1;
-      }
-    }
-  }
+  const std::vector<std::string_view> items = split_fields(rest);
   std::string_view name = items.front(), value;
   if (const std::size_t eq = name.find('='); eq != std::string_view::npos) {
     value = name.substr(eq + 1);

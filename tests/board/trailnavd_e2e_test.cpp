@@ -95,6 +95,7 @@ struct DaemonRun {
   // One clock: map stamp minus the newest pose stamp received before it.
   std::vector<double> map_minus_pose_ms;
   std::int64_t lidar_clock_offset_ns = 0;  // as health reported it last
+  std::uint64_t terrain_skipped = 0;        // revolutions the terrain task never saw (health's newest)
   double lidar_clock_spread_ms = -1.0, imu_clock_spread_ms = -1.0;
   // TF: messages on rt/tf and rt/tf_static, odometry samples, and per map
   // the distance between its own odom -> base_link and the pose-rate
@@ -304,12 +305,14 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
         const bool navigation_status = std::strcmp(a.status._buffer[i].name, "trailnavd: navigation") == 0;
         const bool lidar_status = std::strcmp(a.status._buffer[i].name, "trailnavd: lidar") == 0;
         const bool imu_status = std::strcmp(a.status._buffer[i].name, "trailnavd: imu") == 0;
+        const bool terrain_status = std::strcmp(a.status._buffer[i].name, "trailnavd: terrain") == 0;
         if (navigation_status) out.navigation_health_s.push_back(elapsed_s());
         for (std::uint32_t k = 0; k < a.status._buffer[i].values._length; ++k) {
           const auto& kv = a.status._buffer[i].values._buffer[k];
           if (lidar_status && std::strcmp(kv.key, "clock_offset_s") == 0) out.lidar_clock_offset_ns = std::llround(std::stod(kv.value) * 1e9);
           if (lidar_status && std::strcmp(kv.key, "clock_spread_ms") == 0) out.lidar_clock_spread_ms = std::stod(kv.value);
           if (imu_status && std::strcmp(kv.key, "clock_spread_ms") == 0) out.imu_clock_spread_ms = std::stod(kv.value);
+          if (terrain_status && std::strcmp(kv.key, "skipped") == 0) out.terrain_skipped = std::stoull(kv.value);
           if (navigation_status && std::strcmp(kv.key, "goal_samples") == 0) out.goal_samples = std::stoull(kv.value);
           if (navigation_status && std::strcmp(kv.key, "orders_dropped") == 0) out.orders_dropped = std::stoull(kv.value);
           if (navigation_status && std::strcmp(kv.key, "cancel_samples") == 0) out.cancel_samples = std::stoull(kv.value);
@@ -567,7 +570,18 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   // time; the robot's pose is not fed to it here), each as offline.
   EXPECT_GE(r.terrain_offline, 5u);
   EXPECT_GE(r.terrain_matched, r.terrain_offline - 1);
-  EXPECT_EQ(r.terrain_identical, r.terrain_matched);
+  // Each class map depends on every revolution before it. The terrain task
+  // (periodic, taking the newest revolution) sees them all on a machine that
+  // keeps up; when it was too slow for some (a loaded machine, a sanitizer
+  // build: health counts them), the maps from then on differ from the
+  // offline pipeline's, which sees every one, and only the first must agree.
+  if (r.terrain_skipped == 0) {
+    EXPECT_EQ(r.terrain_identical, r.terrain_matched);
+  } else {
+    std::printf("[ trailnavd ] the terrain task skipped %llu revolutions: %zu of %zu class maps identical\n",
+                static_cast<unsigned long long>(r.terrain_skipped), r.terrain_identical, r.terrain_matched);
+    EXPECT_GE(r.terrain_identical, 1u);
+  }
   EXPECT_GT(r.terrain_known, 1000u);
   // One time base: the recording's GPS time lies months before the host's,
   // yet every map is stamped close to the poses arriving with it. A pose is

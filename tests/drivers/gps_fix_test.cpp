@@ -211,14 +211,17 @@ TEST(GpsFix, SimulatorFixIsNotAPosition) {
   for (const auto& f : d.fixes) EXPECT_FALSE(f.has_fix());
 }
 
+// A sentence with its checksum.
+std::string nmea_line(const std::string& body) {
+  char cs[4];
+  std::snprintf(cs, sizeof cs, "%02X", gps::nmea_checksum(body));
+  return "$" + body + "*" + cs;
+}
+
 TEST(GpsFix, DateRollsOverAtMidnightWithoutRmc) {
   gps::FixAssembler a;
   gps::GpsFix f;
-  auto line = [](std::string body) {
-    char cs[4];
-    std::snprintf(cs, sizeof cs, "%02X", gps::nmea_checksum(body));
-    return "$" + body + "*" + cs;
-  };
+  const auto line = nmea_line;
   std::vector<gps::GpsFix> out;
   for (const std::string& s :
        {line("GPZDA,235959.00,31,12,2025,00,00"), line("GPGGA,235959.00,4800.0000,N,00750.0000,E,1,08,1.0,280.0,M,47.0,M,,"),
@@ -242,11 +245,7 @@ TEST(GpsFix, DateRollsOverAtMidnightWithoutRmc) {
 TEST(GpsFix, SentencesOfAnEpochAlreadyClosedAreDroppedAndCounted) {
   gps::FixAssembler a;
   gps::GpsFix f;
-  auto line = [](std::string body) {
-    char cs[4];
-    std::snprintf(cs, sizeof cs, "%02X", gps::nmea_checksum(body));
-    return "$" + body + "*" + cs;
-  };
+  const auto line = nmea_line;
   std::vector<gps::GpsFix> out;
   auto feed = [&](const std::string& s) {
     if (a.add_line(s, f)) out.push_back(f);
