@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "trailnav/drivers/can/frame.hpp"
+#include "trailnav/drivers/gps/nmea.hpp"
 
 namespace trailnav::replay {
 namespace {
@@ -243,8 +244,7 @@ bool shift_nmea_north(std::string& line, double metres) {
   const std::size_t hemi_pos = static_cast<std::size_t>(hemi.data() - line.data());
   line.replace(lat_pos, lat.size(), buffer, static_cast<std::size_t>(n));
   line[hemi_pos] = south ? 'S' : 'N';
-  std::uint8_t sum = 0;
-  for (std::size_t i = 1; i < star; ++i) sum = static_cast<std::uint8_t>(sum ^ static_cast<std::uint8_t>(line[i]));
+  const std::uint8_t sum = gps::nmea_checksum(std::string_view(line).substr(1, star - 1));
   static constexpr char kHex[] = "0123456789ABCDEF";
   line[star + 1] = kHex[sum >> 4];
   line[star + 2] = kHex[sum & 0xF];

@@ -118,6 +118,7 @@ void VelodyneDriver::publish_counters() noexcept {
   local_.time_source = clock_.source();
   local_.time_steps = clock_.steps();
   local_.time_clamped = clock_.clamped();
+  local_.time_steps_back = clock_.steps_back();
   local_.reference = reference_.state();
   shared_.post(local_);
 }

@@ -120,22 +120,18 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   // Order and loss, from the packet clock and from the azimuth.
   std::int64_t lost = 0;
   bool restart = false;
-  if (have_previous_) {
-    const std::int64_t dt = hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_);
-    const double half_revolution_us = 30e6 / current_rpm_;
-    if (static_cast<double>(std::abs(dt)) > half_revolution_us) {
-      // Points from both sides of the jump in one revolution would be
-      // placed with poses seconds apart.
-      ++counters_.discontinuities;
-      restart = true;
-      have_previous_ = false;
-      rate_azimuth_ = 0.0;
-      rate_time_us_ = 0.0;
-      if (image_ != nullptr && !partial_) ++counters_.partial_revolutions;
-    }
+  const std::int64_t dt = have_previous_ ? hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_) : 0;
+  if (have_previous_ && static_cast<double>(std::abs(dt)) > 30e6 / current_rpm_) {
+    // A jump of over half a revolution: points from both sides of it in one
+    // revolution would be placed with poses seconds apart.
+    ++counters_.discontinuities;
+    restart = true;
+    have_previous_ = false;
+    rate_azimuth_ = 0.0;
+    rate_time_us_ = 0.0;
+    if (image_ != nullptr && !partial_) ++counters_.partial_revolutions;
   }
   if (have_previous_) {
-    const std::int64_t dt = hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_);
     if (dt <= 0) {
       ++counters_.out_of_order;
       return PacketError::none;
@@ -158,7 +154,7 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   if (have_previous_) {
     // Rotation rate: azimuth advance over packet time since the last revolution began.
     rate_azimuth_ += static_cast<double>(wrap_turn(cut_.relative(0) - previous_first_relative_));
-    rate_time_us_ += static_cast<double>(hour_clock_delta_us(info.timestamp_us, previous_timestamp_us_));
+    rate_time_us_ += static_cast<double>(dt);
   }
   previous_first_relative_ = cut_.relative(0);
 

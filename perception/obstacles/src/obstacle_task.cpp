@@ -67,27 +67,20 @@ void ObstacleTask::run(const TaskTick&) {
   }
   if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
   last_sequence_ = image->sequence;
-  if (track_.size() > 0) {
-    // A revolution mapped with a position the odometry could not measure
-    // would put what it sees in the wrong cells, next to cells mapped before
-    // from where the robot really was: no map then (the publisher sends the
-    // last one stale), and a fresh one when the odometry knows again.
-    Pose start, end;
-    track_.at(image->start_ns + image->clock_offset_ns, start);
-    track_.at(image->reference_end_ns(), end);
-    if (!start.translation_valid || !end.translation_valid) {
-      ++counters_.no_odometry;
-      odometry_lost_ = true;
-      counters_.odometry_lost = true;
-      shared_.post(counters_);
-      return;
-    }
-    if (odometry_lost_) {
-      pipeline_.forget_maps();
-      ++counters_.map_resets;
-      odometry_lost_ = false;
-      counters_.odometry_lost = false;
-    }
+  // A revolution mapped with a position the odometry could not measure
+  // would put what it sees in the wrong cells, next to cells mapped before
+  // from where the robot really was: no map then (the publisher sends the
+  // last one stale), and a fresh one when the odometry knows again.
+  if (!track_.translation_known(image->reference_start_ns(), image->reference_end_ns())) {
+    ++counters_.no_odometry;
+    counters_.odometry_lost = true;
+    shared_.post(counters_);
+    return;
+  }
+  if (counters_.odometry_lost) {
+    pipeline_.forget_maps();
+    ++counters_.map_resets;
+    counters_.odometry_lost = false;
   }
   pipeline_.process(*image, track_.size() > 0 ? &track_ : nullptr, terrain_map_);
   ++counters_.revolutions;

@@ -33,6 +33,27 @@ bool PoseTrack::push(const Pose& pose) noexcept {
   return true;
 }
 
+bool PoseTrack::translation_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept {
+  if (count_ == 0) return true;
+  // The last sample at or before `from` (or the oldest), then on to the
+  // first sample at or after `to` (or the newest).
+  std::size_t lo = 0, hi = count_;  // first sample later than from_ns
+  while (lo < hi) {
+    const std::size_t mid = lo + (hi - lo) / 2;
+    if (get(mid).t_ns <= from_ns) {
+      lo = mid + 1;
+    } else {
+      hi = mid;
+    }
+  }
+  for (std::size_t i = lo > 0 ? lo - 1 : 0; i < count_; ++i) {
+    const Pose& p = get(i);
+    if (!p.translation_valid) return false;
+    if (p.t_ns >= to_ns) break;
+  }
+  return true;
+}
+
 PoseLookup PoseTrack::at(std::int64_t t_ns, Pose& out) const noexcept {
   if (count_ == 0) return PoseLookup::empty;
   if (t_ns <= oldest().t_ns) {

@@ -13,12 +13,7 @@ void TerrainTask::run(const TaskTick&) {
   if (image != nullptr && image->sequence != last_sequence_) {
     if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
     last_sequence_ = image->sequence;
-    Pose start, end;
-    const bool odometry = track_.size() == 0 ||
-                          (track_.at(image->start_ns + image->clock_offset_ns, start) != PoseLookup::empty &&
-                           track_.at(image->reference_end_ns(), end) != PoseLookup::empty && start.translation_valid &&
-                           end.translation_valid);
-    if (!odometry) {
+    if (!track_.translation_known(image->reference_start_ns(), image->reference_end_ns())) {
       // Features placed with a position the odometry could not measure
       // would land in the wrong cells (as for the obstacle map).
       ++counters_.no_odometry;

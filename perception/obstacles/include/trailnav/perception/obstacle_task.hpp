@@ -111,7 +111,6 @@ class ObstacleTask final : public Task {
   Broadcast<TerrainClassMap>::Reader* terrain_;
   Mailbox<ObstacleSnapshot>& out_;
   PoseTrack track_;
-  bool odometry_lost_ = false;
   const TerrainClassMap* terrain_map_ = nullptr;
   std::uint64_t last_sequence_ = 0;
   ObstacleTaskCounters counters_;

@@ -64,6 +64,11 @@ class PoseTrack {
   const Pose& oldest() const noexcept { return get(0); }
 
   PoseLookup at(std::int64_t t_ns, Pose& out) const noexcept;
+  // Whether the odometry measured the robot's motion over [from, to]: every
+  // sample in it and the two around it have translation_valid (an empty
+  // track knows nothing better: true). What the obstacle and terrain threads
+  // ask before mapping a revolution.
+  bool translation_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept;
 
   std::uint64_t rejected() const noexcept { return rejected_; }
 

@@ -57,6 +57,7 @@ struct DriverCounters {
   std::uint64_t position_malformed = 0;
   std::uint64_t time_steps = 0;
   std::uint64_t time_clamped = 0;
+  std::uint64_t time_steps_back = 0;  // the sensor's clock set back by over 0.5 s (SensorClock::steps_back)
   TimeSource time_source = TimeSource::none;
   std::int64_t last_packet_ns = 0;        // receive time of the newest data packet
   // The packets' times (last firing of each) against their host receive

@@ -88,6 +88,7 @@ class RangeImage {
   // sensor's clock so that a recording always gives the same revolutions;
   // whatever relates them to poses or stamps them for others adds this.
   std::int64_t clock_offset_ns = 0;
+  std::int64_t reference_start_ns() const noexcept { return start_ns + clock_offset_ns; }
   std::int64_t reference_end_ns() const noexcept { return end_ns + clock_offset_ns; }
 
   // Clears the first `columns` columns (no allocation). Used by the assembler.
