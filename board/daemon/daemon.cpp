@@ -158,12 +158,13 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       d->pose_->add_pose_output(d->terrain_pose_queue_.get());
     }
     d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_, d->lidar_->revolutions(config.obstacles ? 1 : 0),
-                                                           d->terrain_pose_queue_.get(), *d->terrain_out_);
+                                                           d->terrain_pose_queue_.get(), *d->terrain_out_, 512,
+                                                           config.pose_wait);
   }
   if (config.obstacles) {
     d->obstacles_ = std::make_unique<perception::ObstacleTask>(
         *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
-        d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_);
+        d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_, 512, config.pose_wait);
     d->lidar_->set_revolution_event(&d->revolution_event_);
   }
 
@@ -408,6 +409,13 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("stale", s.health == imu::ImuHealth::ok ? std::string_view("false") : std::string_view("true"));
     m.value("samples", s.stream.samples);
     m.value("queue_drops", s.queue_drops);
+    m.value("bytes", s.stream.xbus.bytes);
+    m.value("bad_checksum", s.stream.xbus.bad_checksum);
+    m.value("skipped_bytes", s.stream.xbus.skipped_bytes);
+    m.value("link_closes", s.link.closes);
+    m.value("link_silences", s.link.silences);
+    m.value("link_read_errors", s.link.read_errors);
+    m.value("last_link_error", std::string_view(s.last_link_error.data()));
     if (s.device_clock.valid) {
       // Readings are stamped on the device's clock related to the host's;
       // the spread is how late their bytes arrived.
@@ -447,6 +455,13 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("sigma_m", s.utm.position_valid ? s.utm.sigma_position() : 0.0, 2);
     m.value("distance_m", s.local.distance, 2);
     m.value("queue_drops", s.pose_queue_drops);
+    // How the odometry stepped: with the IMU's yaw rate, with the wheels'
+    // alone (the IMU silent), and the steps it could not integrate.
+    m.value("imu_steps", s.odometry_counters.imu_steps);
+    m.value("wheel_steps", s.odometry_counters.wheel_steps);
+    m.value("odometry_gaps", s.odometry_counters.gaps);
+    m.value("wheels_held", s.wheels_held);
+    m.value("wheels_released_early", s.wheels_released_early);
     // What became of the GPS fixes: used, rejected as outliers, and how often
     // agreeing outliers meant the GPS itself had jumped (re-anchored).
     m.value("gps_fixes_used", s.utm_counters.used);
@@ -460,8 +475,9 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   }
   if (obstacles_) {
     const perception::ObstacleTaskCounters c = obstacles_->status();
-    m.begin(c.odometry_lost ? L::error : c.skipped > 0 ? L::warn : L::ok, "trailnavd: obstacles",
+    m.begin(c.odometry_lost ? L::error : c.pose_behind || c.skipped > 0 ? L::warn : L::ok, "trailnavd: obstacles",
             c.odometry_lost ? "odometry lost (no wheel speeds): not mapping, map stale"
+            : c.pose_behind ? "the pose thread is behind the lidar: not mapping until it catches up"
             : c.skipped > 0 ? "revolutions skipped (too slow)"
                             : "ok",
             "");
@@ -469,6 +485,9 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("skipped", c.skipped);
     m.value("no_odometry", c.no_odometry);
     m.value("map_resets", c.map_resets);
+    m.value("pose_waits", c.pose_waits);
+    m.value("pose_late", c.pose_late);
+    m.value("pose_wait_max_ms", static_cast<double>(c.pose_wait_max_ns) * 1e-6, 1);
     m.value("poses", c.poses);
     m.value("terrain_maps", c.terrain_maps);
   }
@@ -479,6 +498,9 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("revolutions", c.revolutions);
     m.value("skipped", c.skipped);
     m.value("no_odometry", c.no_odometry);
+    m.value("pose_waits", c.pose_waits);
+    m.value("pose_late", c.pose_late);
+    m.value("pose_wait_max_ms", static_cast<double>(c.pose_wait_max_ns) * 1e-6, 1);
     m.value("steps", c.mapper.steps);
     m.value("features", c.mapper.features);
     m.value("known_cells", c.mapper.known_cells);

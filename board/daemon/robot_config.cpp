@@ -139,13 +139,19 @@ gpio::GpioDriverOptions parse_gpio(const ConfigNode& n) {
   return o;
 }
 
-pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles, bool& feed_terrain) {
+pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles, bool& feed_terrain,
+                                      perception::PoseWait& wait) {
   pose::PoseEstimatorOptions o;
   o.utm.antenna = vec3(n, "antenna", o.utm.antenna);
   o.utm.zone = static_cast<int>(n.integer("utm_zone", 0, 60, 0));
   o.utm.min_baseline = n.number("min_baseline_m", 0.5, 1000.0, o.utm.min_baseline);
   feed_obstacles = n.boolean("feed_obstacles", true);
   feed_terrain = n.boolean("feed_terrain", true);
+  o.imu_wait = n.number("imu_wait_ms", 0.0, 5000.0, o.imu_wait * 1e3) * 1e-3;
+  // How far the pose may lag behind a revolution's end before the obstacle
+  // and terrain threads wait for it, and for how long (docs/pose.md).
+  wait.max_lag_ns = static_cast<std::int64_t>(n.number("max_lag_ms", 1.0, 500.0, static_cast<double>(wait.max_lag_ns) * 1e-6) * 1e6);
+  wait.max_wait_ns = static_cast<std::int64_t>(n.number("max_wait_ms", 0.0, 500.0, static_cast<double>(wait.max_wait_ns) * 1e-6) * 1e6);
   n.reject_unknown_keys();
   return o;
 }
@@ -237,7 +243,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   if (auto n = root.optional_map("imu")) c.imu = parse_imu(*n, c.imu_position);
   if (auto n = root.optional_map("can")) c.can = parse_can(*n);
   if (auto n = root.optional_map("gpio")) c.gpio = parse_gpio(*n);
-  if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose, c.terrain_use_pose);
+  if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose, c.terrain_use_pose, c.pose_wait);
   if (auto n = root.optional_map("obstacles")) {
     c.obstacles = perception::parse_obstacle_config(*n);
     if (!c.lidar) root.fail("obstacles", "the obstacle map needs a lidar: add a 'lidar' section");

@@ -21,6 +21,7 @@
 #include "trailnav/navigation/navigator/navigation_config.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/pose_track.hpp"
 #include "trailnav/perception/terrain_config.hpp"
 #include "trailnav/runtime/runtime_config.hpp"
 
@@ -61,6 +62,7 @@ struct RobotConfig {
   bool obstacles_use_pose = true;
   std::optional<perception::TerrainConfig> terrain;
   bool terrain_use_pose = true;
+  perception::PoseWait pose_wait;  // how the obstacle and terrain threads wait for a late pose
   std::optional<nav::NavigationSection> navigation;
   DdsSection dds;
 };

@@ -244,3 +244,68 @@ TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
   EXPECT_NEAR(s.utm.yaw, 0.0, 0.05);  // driving grid east
   test::expect_no_realtime_allocations();
 }
+
+namespace {
+
+// Pushes the IMU readings (yaw rate `imu_rate`) and wheel readings (no yaw
+// rate of their own) of [from, to) ms, 10 ms apart.
+void push_imu(SpscQueue<imu::ImuReading, imu::kImuQueueCapacity>& q, int from, int to, double imu_rate) {
+  for (int k = from; k < to; k += 10) {
+    imu::ImuReading r;
+    r.attitude = attitude(kStart + ms(k), imu_rate);
+    ASSERT_TRUE(q.try_push(r));
+  }
+}
+void push_wheels(SpscQueue<can::OdometryState, can::kOdometryQueueCapacity>& q, int from, int to) {
+  for (int k = from; k < to; k += 10) ASSERT_TRUE(q.try_push(wheels(kStart + ms(k), 1.0, 0.0)));
+}
+
+}  // namespace
+
+// The IMU's readings come through their own thread and can be late next to
+// the wheels' (its thread lost its core). The wheel readings wait for them:
+// every IMU reading is integrated, none is lost as a step into the past, and
+// the heading is the IMU's (the wheels here say "straight on", the IMU turns).
+TEST(PoseTask, WheelReadingsWaitForTheIMUReadingsOfTheirTime) {
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+  PoseEstimatorOptions o;
+  PoseTask task(o, &imu_queue, &wheel_queue, nullptr);
+  const double rate = 0.5;  // rad/s
+  push_imu(imu_queue, 0, 50, rate);
+  push_wheels(wheel_queue, 0, 400);  // the wheels 350 ms ahead of the IMU
+  task.run(TaskTick{0, 0, ms(100)});
+  EXPECT_EQ(task.status().wheels_held, 35u);
+  push_imu(imu_queue, 50, 400, rate);
+  task.run(TaskTick{1, 0, ms(130)});  // the IMU spoke 30 ms ago (host time): live
+  const PoseTaskStatus s = task.status();
+  EXPECT_EQ(s.imu_readings, 40u);
+  EXPECT_EQ(s.wheel_readings, 40u);
+  EXPECT_EQ(s.odometry_counters.imu_steps, 40u);
+  EXPECT_EQ(s.odometry_counters.wheel_steps, 1u);  // the very first reading, before any IMU one: it starts the odometry
+  EXPECT_EQ(s.odometry_counters.gaps, 0u);
+  EXPECT_EQ(s.wheels_released_early, 0u);
+  EXPECT_NEAR(s.local.yaw, rate * 0.39, 1e-9);  // 39 steps of 10 ms at the IMU's rate
+  EXPECT_NEAR(s.local.distance, 0.39, 1e-9);
+}
+
+// A silent IMU does not hold the wheels back: after imu_timeout of host time
+// the held readings go, and the wheels alone carry the pose.
+TEST(PoseTask, ASilentIMULetsTheHeldWheelReadingsGo) {
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+  PoseEstimatorOptions o;
+  PoseTask task(o, &imu_queue, &wheel_queue, nullptr);
+  push_imu(imu_queue, 0, 50, 0.0);
+  push_wheels(wheel_queue, 0, 50);
+  task.run(TaskTick{0, 0, ms(50)});
+  push_wheels(wheel_queue, 50, 500);
+  task.run(TaskTick{1, 0, ms(100)});  // IMU 50 ms silent: still waited for (imu_wait 3 s)
+  EXPECT_EQ(task.status().odometry_counters.wheel_steps, 1u);  // the first reading only (it started the odometry)
+  task.run(TaskTick{2, 0, ms(3100)});  // 3050 ms silent: the IMU is down
+  const PoseTaskStatus s = task.status();
+  EXPECT_EQ(s.wheels_released_early, 45u);
+  EXPECT_GT(s.odometry_counters.wheel_steps, 30u);
+  EXPECT_EQ(s.local.source, PoseSource::wheels_only);
+  EXPECT_NEAR(s.local.distance, 0.49, 1e-9);
+}

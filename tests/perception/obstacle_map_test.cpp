@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <chrono>
 #include <numbers>
+#include <thread>
 #include <vector>
 
 #include "test_data.hpp"
@@ -262,6 +264,91 @@ TEST(PoseTrack, TranslationIsKnownOnlyWhenEverySampleOfTheSpanHadIt) {
   EXPECT_FALSE(t.translation_known(52, 58));   // 50 is the sample before
   EXPECT_TRUE(t.translation_known(60, 200));   // past the newest: the newest says
   EXPECT_TRUE(t.translation_known(-50, -10));  // before the oldest: the oldest says
+}
+
+// The obstacle and terrain threads wait for a pose thread that is behind
+// the revolution, asleep and for a bounded time.
+TEST(PoseTrack, WaitsForALatePoseThreadAndGivesUpAfterTheLimit) {
+  PoseTrack t(16);
+  PoseQueue q;
+  PoseWait w;
+  w.max_lag_ns = 30;
+  w.max_wait_ns = 20'000'000;
+  EXPECT_EQ(t.lag(1000), 0);  // empty: nothing to wait for
+  q.try_push(Pose{1000, 0, 0, 0, 0, 0, 0});
+  PoseWaitResult r = wait_for_pose(t, q, 1020, w, true);  // drained; 20 ns behind: within the lag
+  EXPECT_TRUE(r.ready);
+  EXPECT_EQ(r.poses, 1u);
+  EXPECT_EQ(r.waited_ns, 0);
+  EXPECT_EQ(t.lag(1100), 100);
+  // Only checking: no wait.
+  r = wait_for_pose(t, q, 1100, w, false);
+  EXPECT_FALSE(r.ready);
+  EXPECT_EQ(r.waited_ns, 0);
+  // Nothing comes: back after the limit, not ready.
+  r = wait_for_pose(t, q, 1100, w, true);
+  EXPECT_FALSE(r.ready);
+  EXPECT_GE(r.waited_ns, w.max_wait_ns);
+  // The pose thread catches up while it waits (the limit is long here, so a
+  // busy machine cannot make this fail).
+  w.max_wait_ns = 20'000'000'000;
+  std::thread late([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    q.try_push(Pose{1050, 0, 0, 0, 0, 0, 0});
+    q.try_push(Pose{1090, 0, 0, 0, 0, 0, 0});
+  });
+  r = wait_for_pose(t, q, 1100, w, true);
+  late.join();
+  EXPECT_TRUE(r.ready);
+  EXPECT_GT(r.waited_ns, 0);
+  EXPECT_GE(r.poses, 1u);
+  EXPECT_LE(t.lag(1100), 30);
+}
+
+// A revolution the pose thread has not reached is not mapped with the newest
+// (stale) pose: the task waits, then leaves it out, counts it and says so;
+// it maps again once the pose catches up.
+TEST(ObstacleTask, LeavesOutARevolutionThePoseHasNotReached) {
+  ObstacleConfig config;
+  auto made = ObstaclePipeline::create(config, kitti_shape());
+  ASSERT_TRUE(made.pipeline) << made.error;
+  std::vector<float> buffer;
+  velodyne::RangeImage image(kitti_shape());
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, image));
+  Broadcast<velodyne::RangeImage> revolutions(1, kitti_shape());
+  Mailbox<ObstacleSnapshot> out(config.map.size, config.map.size);
+  PoseQueue pose_queue;
+  PoseWait wait;
+  wait.max_lag_ns = 30'000'000;
+  wait.max_wait_ns = 5'000'000;
+  ObstacleTask task(*made.pipeline, revolutions.reader(0), &pose_queue, nullptr, out, 64, wait);
+  auto send = [&](std::uint64_t n) {
+    revolutions.write_slot() = image;
+    revolutions.write_slot().start_ns = static_cast<std::int64_t>(n) * 100'000'000LL;
+    revolutions.write_slot().end_ns = static_cast<std::int64_t>(n + 1) * 100'000'000LL;
+    revolutions.write_slot().sequence = n;
+    revolutions.publish();
+    task.run(TaskTick{});
+  };
+  for (int i = 0; i <= 10; ++i) pose_queue.try_push(Pose{i * 10'000'000LL, 0.01 * i, 0, 0, 0, 0, 0});
+  send(1);  // 100..200 ms: the poses end at 100 ms
+  EXPECT_EQ(task.counters().revolutions, 0u);
+  EXPECT_EQ(task.counters().pose_waits, 1u);
+  EXPECT_EQ(task.counters().pose_late, 1u);
+  EXPECT_TRUE(task.counters().pose_behind);
+  EXPECT_GE(task.counters().pose_wait_max_ns, wait.max_wait_ns);
+  EXPECT_EQ(out.try_read(), nullptr);
+  send(2);  // still behind: checked, not waited for again
+  EXPECT_EQ(task.counters().pose_waits, 1u);
+  EXPECT_EQ(task.counters().pose_late, 2u);
+  for (int i = 11; i <= 40; ++i) pose_queue.try_push(Pose{i * 10'000'000LL, 0.01 * i, 0, 0, 0, 0, 0});
+  send(3);  // 300..400 ms, poses to 400 ms
+  EXPECT_EQ(task.counters().revolutions, 1u);
+  EXPECT_FALSE(task.counters().pose_behind);
+  const ObstacleSnapshot* snap = out.try_read();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_EQ(snap->revolution, 3u);
+  EXPECT_NEAR(snap->robot_x, 0.4, 1e-9);  // the pose at the revolution's end
 }
 
 TEST(CloudAligner, LevelsThePitchAndCompensatesMotion) {

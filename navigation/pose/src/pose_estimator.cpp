@@ -1,5 +1,6 @@
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 
@@ -31,28 +32,59 @@ PoseTask::PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReadin
     : estimator_(options), imu_(imu), wheels_(wheels), gps_(gps) {}
 
 void PoseTask::run(const TaskTick& tick) {
-  (void)tick;
   ++local_.runs;
-  std::size_t ni = 0, nw = 0;
+  std::size_t ni = 0;
   if (imu_ != nullptr) {
     imu::ImuReading r;
     while (ni < imu_batch_.size() && imu_->try_pop(r)) imu_batch_[ni++] = r.attitude;
   }
+  if (ni > 0) {
+    imu_newest_ns_ = std::max(imu_newest_ns_, imu_batch_[ni - 1].time_ns);
+    imu_arrival_ = tick.started;
+  }
+  std::size_t nw = wheels_pending_;
   if (wheels_ != nullptr) {
     while (nw < wheel_batch_.size() && wheels_->try_pop(wheel_batch_[nw])) ++nw;
   }
   local_.imu_readings += ni;
-  local_.wheel_readings += nw;
+  local_.wheel_readings += nw - wheels_pending_;
+  // The two streams come through two threads: a wheel reading can be here
+  // before the IMU readings of its time are (the IMU's thread lost its core
+  // for a while, or its bytes came late). Stepping with it then would step
+  // the odometry on the wheels' yaw rate alone, as if the IMU had failed,
+  // and the IMU readings that follow would lie in the past and be lost
+  // (gaps): the heading would drift. So wheel readings later than the newest
+  // IMU reading wait for it (held here, across runs), as long as the IMU
+  // spoke within imu_wait of host time; a silent IMU lets them go, and the
+  // wheels alone carry the pose as designed.
+  const Nanos imu_wait = seconds_to_nanos(estimator_.options().imu_wait);
+  const bool imu_live = imu_ != nullptr && imu_arrival_ >= 0 && tick.started - imu_arrival_ <= imu_wait;
+  std::size_t usable = nw;
+  if (imu_live) {
+    usable = 0;
+    while (usable < nw && wheel_batch_[usable].time_ns <= imu_newest_ns_) ++usable;
+    if (usable < nw && nw == wheel_batch_.size()) {  // the hold is full: let the oldest go
+      ++local_.wheels_released_early;
+      ++usable;
+    }
+  } else if (wheels_pending_ > 0) {
+    local_.wheels_released_early += wheels_pending_;
+  }
   // Merge by time: a wheel reading sets the speed the IMU steps after it use.
   std::size_t i = 0, w = 0;
-  while (i < ni || w < nw) {
-    if (w < nw && (i >= ni || wheel_batch_[w].time_ns <= imu_batch_[i].time_ns)) {
+  while (i < ni || w < usable) {
+    if (w < usable && (i >= ni || wheel_batch_[w].time_ns <= imu_batch_[i].time_ns)) {
       estimator_.add_wheels(wheel_batch_[w++]);
     } else {
       estimator_.add_imu(imu_batch_[i++]);
     }
   }
-  bool changed = ni + nw > 0;
+  const std::size_t held = nw - usable;
+  for (std::size_t k = 0; k < held; ++k) wheel_batch_[k] = wheel_batch_[usable + k];
+  const std::size_t still_pending = wheels_pending_ > usable ? wheels_pending_ - usable : 0;  // held before, held again
+  local_.wheels_held += held - still_pending;
+  wheels_pending_ = held;
+  bool changed = ni + usable > 0;
   if (gps_ != nullptr) {
     if (const gps::GpsReading* g = gps_->try_read()) {
       ++local_.gps_fixes;

@@ -1,10 +1,14 @@
 #include "trailnav/perception/obstacle_task.hpp"
 
+#include <algorithm>
+
 namespace trailnav::perception {
 
 ObstacleTask::ObstacleTask(ObstaclePipeline& pipeline, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
-                           Broadcast<TerrainClassMap>::Reader* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history)
-    : pipeline_(pipeline), revolutions_(revolutions), poses_(poses), terrain_(terrain), out_(out), track_(pose_history) {}
+                           Broadcast<TerrainClassMap>::Reader* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history,
+                           PoseWait pose_wait)
+    : pipeline_(pipeline), revolutions_(revolutions), poses_(poses), terrain_(terrain), out_(out), track_(pose_history),
+      pose_wait_(pose_wait) {}
 
 void take_snapshot(const ObstacleMap& map, const RevolutionCloud& cloud, ObstacleSnapshot& out) noexcept {
   const auto& g = map.grid();
@@ -67,6 +71,21 @@ void ObstacleTask::run(const TaskTick&) {
   }
   if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
   last_sequence_ = image->sequence;
+  // The pose thread must have reached the revolution's end (see PoseWait).
+  if (poses_ != nullptr) {
+    const PoseWaitResult w = wait_for_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, !counters_.pose_behind);
+    counters_.poses += w.poses;
+    if (w.waited_ns > 0) {
+      ++counters_.pose_waits;
+      counters_.pose_wait_max_ns = std::max(counters_.pose_wait_max_ns, w.waited_ns);
+    }
+    counters_.pose_behind = !w.ready;
+    if (!w.ready) {
+      ++counters_.pose_late;
+      shared_.post(counters_);
+      return;
+    }
+  }
   // A revolution mapped with a position the odometry could not measure
   // would put what it sees in the wrong cells, next to cells mapped before
   // from where the robot really was: no map then (the publisher sends the

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <time.h>
 
 namespace trailnav::perception {
 
@@ -89,6 +90,32 @@ PoseLookup PoseTrack::at(std::int64_t t_ns, Pose& out) const noexcept {
   out.yaw = lerp_angle(a.yaw, b.yaw, f);
   out.translation_valid = a.translation_valid && b.translation_valid;
   return PoseLookup::interpolated;
+}
+
+PoseWaitResult wait_for_pose(PoseTrack& track, PoseQueue& queue, std::int64_t t_ns, const PoseWait& wait,
+                             bool may_wait) noexcept {
+  PoseWaitResult r;
+  r.poses = track.drain(queue);
+  if (track.lag(t_ns) <= wait.max_lag_ns) {
+    r.ready = true;
+    return r;
+  }
+  if (!may_wait) return r;
+  timespec start{};
+  clock_gettime(CLOCK_MONOTONIC, &start);
+  for (;;) {
+    const timespec nap{0, static_cast<long>(wait.step_ns)};
+    nanosleep(&nap, nullptr);
+    r.poses += track.drain(queue);
+    timespec now{};
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    r.waited_ns = (now.tv_sec - start.tv_sec) * 1'000'000'000LL + (now.tv_nsec - start.tv_nsec);
+    if (track.lag(t_ns) <= wait.max_lag_ns) {
+      r.ready = true;
+      return r;
+    }
+    if (r.waited_ns >= wait.max_wait_ns) return r;
+  }
 }
 
 }  // namespace trailnav::perception

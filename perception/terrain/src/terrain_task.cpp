@@ -1,10 +1,12 @@
 #include "trailnav/perception/terrain_task.hpp"
 
+#include <algorithm>
+
 namespace trailnav::perception {
 
 TerrainTask::TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
-                         Broadcast<TerrainClassMap>& out, std::size_t pose_history)
-    : mapper_(mapper), revolutions_(revolutions), poses_(poses), out_(out), track_(pose_history) {}
+                         Broadcast<TerrainClassMap>& out, std::size_t pose_history, PoseWait pose_wait)
+    : mapper_(mapper), revolutions_(revolutions), poses_(poses), out_(out), track_(pose_history), pose_wait_(pose_wait) {}
 
 void TerrainTask::run(const TaskTick&) {
   ++counters_.runs;
@@ -13,6 +15,21 @@ void TerrainTask::run(const TaskTick&) {
   if (image != nullptr && image->sequence != last_sequence_) {
     if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
     last_sequence_ = image->sequence;
+    // The pose thread must have reached the revolution's end (see PoseWait).
+    if (poses_ != nullptr) {
+      const PoseWaitResult w = wait_for_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, !pose_was_late_);
+      counters_.poses += w.poses;
+      if (w.waited_ns > 0) {
+        ++counters_.pose_waits;
+        counters_.pose_wait_max_ns = std::max(counters_.pose_wait_max_ns, w.waited_ns);
+      }
+      pose_was_late_ = !w.ready;
+      if (!w.ready) {
+        ++counters_.pose_late;
+        shared_.post(counters_);
+        return;
+      }
+    }
     if (!track_.translation_known(image->reference_start_ns(), image->reference_end_ns())) {
       // Features placed with a position the odometry could not measure
       // would land in the wrong cells (as for the obstacle map).

@@ -4,7 +4,8 @@
 // new one arrived), the newest terrain-class map from the terrain thread's
 // mailbox (if any), the pose samples queued by the pose thread, updates the
 // obstacle map and publishes a snapshot of it through its own mailbox. It
-// never allocates after construction and never waits.
+// never allocates after construction; it waits only for a pose thread that
+// has fallen behind the revolution, and at most PoseWait::max_wait_ns.
 #pragma once
 
 #include <cstdint>
@@ -80,6 +81,13 @@ struct ObstacleTaskCounters {
   std::uint64_t no_odometry = 0;
   std::uint64_t map_resets = 0;
   bool odometry_lost = false;  // the newest revolution was not mapped for that reason
+  // Revolutions whose end the pose track had not reached (within
+  // PoseWait::max_lag_ns) when they came: those the task waited for, those
+  // it then mapped, and those left out because the pose did not come in time.
+  std::uint64_t pose_waits = 0;
+  std::uint64_t pose_late = 0;
+  std::int64_t pose_wait_max_ns = 0;  // longest wait
+  bool pose_behind = false;           // the newest revolution was left out for that reason
   PipelineCounters pipeline;
 };
 
@@ -87,7 +95,8 @@ class ObstacleTask final : public Task {
  public:
   // `poses` and `terrain` may be null.
   ObstacleTask(ObstaclePipeline& pipeline, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
-               Broadcast<TerrainClassMap>::Reader* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history = 512);
+               Broadcast<TerrainClassMap>::Reader* terrain, Mailbox<ObstacleSnapshot>& out, std::size_t pose_history = 512,
+               PoseWait pose_wait = {});
 
   // Woken after each published snapshot (the DDS publisher). Before the scheduler starts.
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
@@ -111,6 +120,7 @@ class ObstacleTask final : public Task {
   Broadcast<TerrainClassMap>::Reader* terrain_;
   Mailbox<ObstacleSnapshot>& out_;
   PoseTrack track_;
+  PoseWait pose_wait_;
   const TerrainClassMap* terrain_map_ = nullptr;
   std::uint64_t last_sequence_ = 0;
   ObstacleTaskCounters counters_;

@@ -69,6 +69,11 @@ class PoseTrack {
   // track knows nothing better: true). What the obstacle and terrain threads
   // ask before mapping a revolution.
   bool translation_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept;
+  // How far the newest sample lies before `t_ns` (0 when at or after it, or
+  // when the track is empty: nothing to wait for).
+  std::int64_t lag(std::int64_t t_ns) const noexcept {
+    return count_ == 0 || newest().t_ns >= t_ns ? 0 : t_ns - newest().t_ns;
+  }
 
   std::uint64_t rejected() const noexcept { return rejected_; }
 
@@ -80,5 +85,32 @@ class PoseTrack {
   std::size_t count_ = 0;
   std::uint64_t rejected_ = 0;
 };
+
+// Waiting for the pose thread. A revolution placed with poses that end before
+// it does would be placed, for its last columns, where the robot was at the
+// newest pose: when the pose thread falls behind (it lost its core to other
+// work), the cells the robot has moved past since would be mapped from the
+// wrong place, and free cells the lidar has not seen would follow. So the
+// obstacle and terrain threads map a revolution only once the track reaches
+// its end within `max_lag_ns`, waiting (asleep, in `step_ns` naps, no
+// allocation) at most `max_wait_ns` for the pose thread to catch up.
+struct PoseWait {
+  std::int64_t max_lag_ns = 30'000'000;   // a pose period and the IMU's, with room
+  std::int64_t max_wait_ns = 60'000'000;  // under a revolution: the next one is not delayed
+  std::int64_t step_ns = 1'000'000;
+};
+
+struct PoseWaitResult {
+  bool ready = false;          // the track reaches the time (within the lag)
+  std::int64_t waited_ns = 0;  // time spent asleep
+  std::uint64_t poses = 0;     // samples drained meanwhile
+};
+
+// Drains `queue` into `track` until the track's lag behind `t_ns` is at most
+// `wait.max_lag_ns` or `wait.max_wait_ns` has passed; `may_wait` false only
+// checks (after a revolution that waited in vain, not to wait on each one
+// while the pose is down).
+PoseWaitResult wait_for_pose(PoseTrack& track, PoseQueue& queue, std::int64_t t_ns, const PoseWait& wait,
+                             bool may_wait) noexcept;
 
 }  // namespace trailnav::perception

@@ -25,6 +25,9 @@ struct TerrainTaskCounters {
   std::uint64_t poses = 0;
   std::uint64_t published = 0;    // class-map snapshots
   std::uint64_t no_odometry = 0;  // revolutions left out: the odometry did not know the robot's motion then
+  std::uint64_t pose_waits = 0;   // revolutions the pose track had not reached: waited for (PoseWait)
+  std::uint64_t pose_late = 0;    // ... and left out, the pose not coming in time
+  std::int64_t pose_wait_max_ns = 0;
   std::int64_t last_step_ns = 0;  // sensor time of the newest step
   TerrainCounters mapper;
 };
@@ -33,7 +36,7 @@ class TerrainTask final : public Task {
  public:
   // `poses` may be null (no pose stream: the map stays where it started).
   TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
-              Broadcast<TerrainClassMap>& out, std::size_t pose_history = 512);
+              Broadcast<TerrainClassMap>& out, std::size_t pose_history = 512, PoseWait pose_wait = {});
 
   // Woken after each published class map (the DDS publisher). Before the scheduler starts.
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
@@ -48,6 +51,8 @@ class TerrainTask final : public Task {
   PoseQueue* poses_;
   Broadcast<TerrainClassMap>& out_;
   PoseTrack track_;
+  PoseWait pose_wait_;
+  bool pose_was_late_ = false;
   std::uint64_t last_sequence_ = 0;
   TerrainTaskCounters counters_;
   StatusBoard<TerrainTaskCounters> shared_;

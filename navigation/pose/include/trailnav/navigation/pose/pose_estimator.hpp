@@ -29,6 +29,13 @@ struct PoseEstimatorOptions {
   // minus `gps_latency`.
   double gps_time_tolerance = 2.0;  // s
   double gps_latency = 0.1;         // s
+  // How long (host time) wheel readings wait for the IMU readings of their
+  // time before the IMU is taken to be silent and the wheels alone step the
+  // odometry (PoseTask::run). IMU bytes can come late by hundreds of
+  // milliseconds on a loaded machine (a serial port's bytes wait for a
+  // kernel worker); longer than GyroOdometryOptions::imu_timeout, which
+  // judges the readings' own times.
+  double imu_wait = 3.0;  // s
 };
 
 struct PoseSnapshot {
@@ -49,6 +56,7 @@ class PoseEstimator {
   void add_gps(const gps::GpsFix& fix, std::int64_t receive_ns) noexcept;
 
   const GyroOdometry& odometry() const noexcept { return odometry_; }
+  const PoseEstimatorOptions& options() const noexcept { return options_; }
   const UtmAlignment& alignment() const noexcept { return alignment_; }
   // The current pose in both frames.
   void snapshot(PoseSnapshot& out) const noexcept;
@@ -66,6 +74,11 @@ struct PoseTaskStatus {
   std::uint64_t imu_readings = 0, wheel_readings = 0, gps_fixes = 0;
   std::uint64_t published = 0;
   std::uint64_t pose_queue_drops = 0;  // samples the perception threads' queue had no room for
+  // Wheel readings that came before the IMU readings of their time and were
+  // held until those came (see PoseTask::run), and those let go without them
+  // because the IMU fell silent or the hold was full.
+  std::uint64_t wheels_held = 0;
+  std::uint64_t wheels_released_early = 0;
   // The GPS receiver's clock against the reference (host) clock: fixes placed
   // at the receiver's UTC (within gps_time_tolerance of their receive time)
   // or at their receive time minus gps_latency, and receive minus UTC of the
@@ -111,6 +124,9 @@ class PoseTask final : public Task {
   Mailbox<gps::GpsReading>* gps_;
   std::array<imu::Attitude, imu::kImuQueueCapacity> imu_batch_{};
   std::array<can::OdometryState, can::kOdometryQueueCapacity> wheel_batch_{};
+  std::size_t wheels_pending_ = 0;   // held at the front of wheel_batch_, in arrival order
+  std::int64_t imu_newest_ns_ = -1;  // time of the newest IMU reading taken
+  Nanos imu_arrival_ = -1;           // host time of the last run that took IMU readings
   Mailbox<PoseSnapshot> poses_;
   Mailbox<PoseSnapshot> navigation_poses_;
   std::array<perception::PoseQueue*, kMaxPoseOutputs> pose_out_{};
