@@ -398,8 +398,12 @@ TEST(TrailnavdFaults, NoFaultIsTheBaseline) {
   ASSERT_NE(lidar, nullptr);
   EXPECT_EQ(count(lidar, "lost_packets"), 0u);
   EXPECT_EQ(count(lidar, "malformed"), 0u);
-  // The last map is resent stale only after the drive has ended.
-  for (double t : r.stale_maps) EXPECT_GT(t, 13.9);
+  // The last map is resent stale only after the drive has ended, or while
+  // revolutions were left out for a reason the daemon counted (a loaded
+  // machine: the pose thread behind, the obstacle thread too slow).
+  const auto during = static_cast<std::size_t>(
+      std::count_if(r.stale_maps.begin(), r.stale_maps.end(), [](double t) { return t <= 13.9; }));
+  EXPECT_LE(during, r.maps_left_out());
 }
 
 TEST(TrailnavdFaults, LidarPacketLossInBursts) {

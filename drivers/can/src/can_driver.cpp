@@ -87,12 +87,16 @@ void CanDriver::fail(Nanos now, const char* what, int err) noexcept {
   } else {
     std::snprintf(local_.last_error.data(), local_.last_error.size(), "%s %s", what, options_.interface.c_str());
   }
-  if (fd_ >= 0) {
-    ::close(fd_);
-    fd_ = -1;
+  // An open that failed half-way (a socket made, the interface missing) is
+  // an open failure, not a close: only a socket that was open is closed.
+  if (local_.open) {
     ++local_.closes;
   } else {
     ++local_.open_failures;
+  }
+  if (fd_ >= 0) {
+    ::close(fd_);
+    fd_ = -1;
   }
   local_.open = false;
   next_attempt_ = now + seconds_to_nanos(current_backoff_);

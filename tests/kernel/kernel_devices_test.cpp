@@ -1,0 +1,421 @@
+// The CAN and GPIO drivers against real kernel devices: SocketCAN on a
+// `vcan` interface (kernel receive filters, kernel timestamps, error frames,
+// the interface taken down and up, removed and added back) and libgpiod on
+// a `gpio-sim` chip (lines found by name, the e-stop debounced, outputs
+// driven, the chip removed under the driver).
+//
+// These need the devices, which a developer's machine or a container rarely
+// has and must not be changed for a test: they run inside a virtual machine
+// that boots Debian's kernel with the modules loaded (toolchain/kernel-tests.sh,
+// docs/testing.md "Real kernel devices"), which sets TRAILNAV_KERNEL_VM=1.
+// Anywhere else they say so and skip.
+#include <gtest/gtest.h>
+
+#include <linux/can.h>
+#include <linux/can/error.h>
+#include <net/if.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "trailnav/drivers/can/can_driver.hpp"
+#include "trailnav/drivers/gpio/gpio_driver.hpp"
+
+using namespace trailnav;
+namespace fs = std::filesystem;
+
+namespace {
+
+bool in_vm() { return std::getenv("TRAILNAV_KERNEL_VM") != nullptr; }
+
+#define REQUIRE_VM()                                                                         \
+  do {                                                                                       \
+    if (!in_vm()) GTEST_SKIP() << "needs the kernel test virtual machine (toolchain/kernel-tests.sh)"; \
+  } while (false)
+
+Nanos monotonic() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<Nanos>(ts.tv_sec) * kNanosPerSecond + ts.tv_nsec;
+}
+Nanos realtime() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<Nanos>(ts.tv_sec) * kNanosPerSecond + ts.tv_nsec;
+}
+
+int sh(const std::string& command) {
+  const int rc = std::system(command.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+std::string read_file(const fs::path& p) {
+  std::ifstream f(p);
+  std::string s;
+  std::getline(f, s);
+  return s;
+}
+
+// ---- CAN -------------------------------------------------------------------
+
+can::Dbc robot_dbc() {
+  auto r = can::load_dbc("board/sim/trailnav-robot.dbc");
+  EXPECT_TRUE(r.dbc) << r.error;
+  return *r.dbc;
+}
+
+can::CanDriverOptions vcan_options(const std::string& interface) {
+  can::CanDriverOptions o;
+  o.transport = can::CanTransport::socketcan;
+  o.interface = interface;
+  o.odometry.left = {"WHEEL_SPEEDS", "SpeedLeft"};
+  o.odometry.right = {"WHEEL_SPEEDS", "SpeedRight"};
+  o.odometry.track = 0.6;
+  o.backoff = 0.05;
+  o.max_backoff = 0.2;
+  return o;
+}
+
+// A vcan interface for one test, removed after it.
+class Vcan {
+ public:
+  explicit Vcan(std::string name) : name_(std::move(name)) {
+    ok_ = sh("/sbin/ip link add dev " + name_ + " type vcan && /sbin/ip link set " + name_ + " up") == 0;
+  }
+  ~Vcan() { sh("/sbin/ip link del dev " + name_ + " 2>/dev/null"); }
+  bool ok() const { return ok_; }
+  const std::string& name() const { return name_; }
+
+ private:
+  std::string name_;
+  bool ok_ = false;
+};
+
+// A raw socket on the interface, as another node on the bus.
+class Node {
+ public:
+  explicit Node(const std::string& interface) {
+    fd_ = ::socket(PF_CAN, SOCK_RAW, CAN_RAW);
+    sockaddr_can a{};
+    a.can_family = AF_CAN;
+    a.can_ifindex = static_cast<int>(if_nametoindex(interface.c_str()));
+    if (fd_ >= 0 && ::bind(fd_, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) {
+      ::close(fd_);
+      fd_ = -1;
+    }
+  }
+  ~Node() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  bool ok() const { return fd_ >= 0; }
+  bool send(std::uint32_t id, const std::uint8_t* data, std::uint8_t length) {
+    can_frame f{};
+    f.can_id = id;
+    f.len = length;
+    std::memcpy(f.data, data, length);
+    return ::write(fd_, &f, sizeof f) == static_cast<ssize_t>(sizeof f);
+  }
+  bool send_speeds(const can::Dbc& dbc, double left, double right) {
+    const can::DbcMessage& m = *dbc.message("WHEEL_SPEEDS");
+    std::array<std::uint8_t, 8> d{};
+    if (can::encode_signal(*m.signal("SpeedLeft"), left, d) != can::SignalError::none) return false;
+    if (can::encode_signal(*m.signal("SpeedRight"), right, d) != can::SignalError::none) return false;
+    return send(m.id, d.data(), 8);
+  }
+
+ private:
+  int fd_ = -1;
+};
+
+void tick(Task& t, Nanos now) {
+  TaskTick k;
+  k.scheduled = k.started = now;
+  t.run(k);
+}
+
+// Runs the task every 5 ms until `done` or `seconds` pass.
+template <class Done>
+bool run_until(Task& t, double seconds, Done done) {
+  const Nanos until = monotonic() + static_cast<Nanos>(seconds * 1e9);
+  while (monotonic() < until) {
+    tick(t, monotonic());
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return false;
+}
+
+}  // namespace
+
+// The kernel hands over only the odometry's frames (the receive filter) and
+// stamps each as it arrived (SO_TIMESTAMPNS): frames sent 10 ms apart and
+// read in one go keep their 10 ms spacing.
+TEST(KernelCan, FiltersPassOnlyTheOdometrysFramesStampedByTheKernel) {
+  REQUIRE_VM();
+  Vcan bus("vcan-filter");
+  ASSERT_TRUE(bus.ok());
+  const can::Dbc dbc = robot_dbc();
+  auto made = can::CanDriver::create(dbc, vcan_options(bus.name()));
+  ASSERT_TRUE(made.driver) << made.error;
+  can::CanDriver& d = *made.driver;
+  tick(d, monotonic());
+  ASSERT_TRUE(d.status().open) << d.status().last_error.data();
+  Node node(bus.name());
+  ASSERT_TRUE(node.ok());
+  const std::uint8_t junk[8] = {1, 2, 3, 4, 5, 6, 7, 8};
+  const Nanos before = realtime();
+  for (int k = 0; k < 20; ++k) {
+    ASSERT_TRUE(node.send_speeds(dbc, 1.0, 1.2));
+    ASSERT_TRUE(node.send(0x123, junk, 8));                  // another node's standard frame
+    ASSERT_TRUE(node.send(0x18FEF100u | CAN_EFF_FLAG, junk, 8));  // and an extended one
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  const Nanos after = realtime();
+  tick(d, monotonic());  // one read of everything queued
+  const can::CanDriverStatus s = d.status();
+  EXPECT_EQ(s.frames, 20u) << "the kernel filter lets only WHEEL_SPEEDS through";
+  EXPECT_EQ(s.odometry_counters.updates, 20u);
+  EXPECT_EQ(s.kernel_drops, 0u);
+  std::vector<std::int64_t> times;
+  can::OdometryState o;
+  while (d.readings().try_pop(o)) times.push_back(o.time_ns);
+  ASSERT_EQ(times.size(), 20u);
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    EXPECT_GE(times[k], before);
+    EXPECT_LE(times[k], after);
+    if (k > 0) {
+      EXPECT_GE(times[k] - times[k - 1], 9'000'000) << "kernel stamps keep the sending gaps";
+    }
+  }
+  EXPECT_NEAR(o.speed, 1.1, 0.01);
+}
+
+// Error frames (as a controller reports them: CAN_ERR_FLAG with the class in
+// the id and the detail in the data) are counted and set health.
+TEST(KernelCan, ErrorFramesReportBusOffAndRestart) {
+  REQUIRE_VM();
+  Vcan bus("vcan-error");
+  ASSERT_TRUE(bus.ok());
+  const can::Dbc dbc = robot_dbc();
+  auto made = can::CanDriver::create(dbc, vcan_options(bus.name()));
+  ASSERT_TRUE(made.driver) << made.error;
+  can::CanDriver& d = *made.driver;
+  tick(d, monotonic());
+  Node node(bus.name());
+  ASSERT_TRUE(node.ok());
+  ASSERT_TRUE(node.send_speeds(dbc, 1.0, 1.0));
+  const std::uint8_t none[8] = {};
+  ASSERT_TRUE(node.send(CAN_ERR_FLAG | CAN_ERR_BUSOFF, none, CAN_ERR_DLC));
+  std::uint8_t passive[8] = {};
+  passive[1] = CAN_ERR_CRTL_RX_PASSIVE;
+  ASSERT_TRUE(node.send(CAN_ERR_FLAG | CAN_ERR_CRTL, passive, CAN_ERR_DLC));
+  ASSERT_TRUE(node.send(CAN_ERR_FLAG | CAN_ERR_RESTARTED, none, CAN_ERR_DLC));
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().error_frames == 3; }));
+  const can::CanDriverStatus s = d.status();
+  EXPECT_EQ(s.bus_off, 1u);
+  EXPECT_EQ(s.error_passive, 1u);
+  EXPECT_EQ(s.restarted, 1u);
+  EXPECT_EQ(s.health, can::CanHealth::bus_error);
+  EXPECT_EQ(s.frames, 4u);
+}
+
+// `ip link set down` makes the socket fail with ENETDOWN: the driver closes
+// it, says so, and opens it again once the interface is back up.
+TEST(KernelCan, InterfaceDownAndUpAgainIsReopened) {
+  REQUIRE_VM();
+  Vcan bus("vcan-updown");
+  ASSERT_TRUE(bus.ok());
+  const can::Dbc dbc = robot_dbc();
+  auto made = can::CanDriver::create(dbc, vcan_options(bus.name()));
+  ASSERT_TRUE(made.driver) << made.error;
+  can::CanDriver& d = *made.driver;
+  Node node(bus.name());
+  ASSERT_TRUE(node.ok());
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().open; }));
+  ASSERT_TRUE(node.send_speeds(dbc, 1.0, 1.0));
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().frames == 1; }));
+  ASSERT_EQ(sh("/sbin/ip link set " + bus.name() + " down"), 0);
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return !d.status().open; }));
+  EXPECT_EQ(d.status().health, can::CanHealth::no_link);
+  EXPECT_NE(std::string(d.status().last_error.data()).find("down"), std::string::npos) << d.status().last_error.data();
+  ASSERT_EQ(sh("/sbin/ip link set " + bus.name() + " up"), 0);
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().open && d.status().opens == 2; }));
+  Node again(bus.name());
+  ASSERT_TRUE(again.send_speeds(dbc, 2.0, 2.0));
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().frames == 2; }));
+  EXPECT_EQ(d.status().health, can::CanHealth::ok);
+  EXPECT_GE(d.status().closes, 1u);
+}
+
+// An adapter unplugged (the interface removed) and plugged in again.
+TEST(KernelCan, InterfaceRemovedAndAddedBackIsReopened) {
+  REQUIRE_VM();
+  auto bus = std::make_unique<Vcan>("vcan-replug");
+  ASSERT_TRUE(bus->ok());
+  const can::Dbc dbc = robot_dbc();
+  auto made = can::CanDriver::create(dbc, vcan_options("vcan-replug"));
+  ASSERT_TRUE(made.driver) << made.error;
+  can::CanDriver& d = *made.driver;
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().open; }));
+  bus.reset();  // ip link del
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return !d.status().open; }));
+  // Gone: reopening fails, and says which interface is missing.
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().open_failures > 0; }));
+  EXPECT_NE(std::string(d.status().last_error.data()).find("vcan-replug"), std::string::npos) << d.status().last_error.data();
+  bus = std::make_unique<Vcan>("vcan-replug");
+  ASSERT_TRUE(bus->ok());
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().open; }));
+  Node node("vcan-replug");
+  ASSERT_TRUE(node.send_speeds(dbc, 1.5, 1.5));
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().frames == 1; }));
+  // One socket was open and closed; the attempts while the interface was
+  // gone are open failures (they were counted as closes before this test).
+  EXPECT_EQ(d.status().closes, 1u);
+  EXPECT_EQ(d.status().opens, 2u);
+}
+
+// ---- GPIO ------------------------------------------------------------------
+
+namespace {
+
+// A gpio-sim chip made through configfs, with named lines; removed after.
+class SimChip {
+ public:
+  SimChip(const std::string& name, const std::vector<std::string>& lines) : dir_("/sys/kernel/config/gpio-sim/" + name) {
+    std::error_code ec;
+    fs::create_directory(dir_, ec);
+    fs::create_directory(dir_ / "bank0", ec);
+    if (ec) return;
+    std::ofstream(dir_ / "bank0" / "num_lines") << lines.size();
+    for (std::size_t i = 0; i < lines.size(); ++i) {
+      const fs::path l = dir_ / "bank0" / ("line" + std::to_string(i));
+      fs::create_directory(l, ec);
+      std::ofstream(l / "name") << lines[i];
+    }
+    set_live(true);
+    chip_ = read_file(dir_ / "bank0" / "chip_name");
+    device_ = read_file(dir_ / "dev_name");
+  }
+  ~SimChip() {
+    set_live(false);
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir_ / "bank0", ec)) {
+      if (e.is_directory()) fs::remove(e.path(), ec);
+    }
+    fs::remove(dir_ / "bank0", ec);
+    fs::remove(dir_, ec);
+  }
+  void set_live(bool live) { std::ofstream(dir_ / "live") << (live ? 1 : 0); }
+  bool ok() const { return !chip_.empty(); }
+  const std::string& chip() const { return chip_; }  // gpiochipN
+  fs::path line(int offset) const {
+    return fs::path("/sys/devices/platform") / device_ / chip_ / ("sim_gpio" + std::to_string(offset));
+  }
+  // What drives an input: the simulated pull.
+  void pull(int offset, bool up) const { std::ofstream(line(offset) / "pull") << (up ? "pull-up" : "pull-down"); }
+  // What the driver put on an output.
+  int value(int offset) const { return std::atoi(read_file(line(offset) / "value").c_str()); }
+
+ private:
+  fs::path dir_;
+  std::string chip_, device_;
+};
+
+gpio::GpioDriverOptions sim_options(const std::string& chip) {
+  gpio::GpioDriverOptions o;
+  o.transport = gpio::GpioTransport::chip;
+  o.chip = chip;
+  o.estop_line = "ESTOP";
+  o.heartbeat_line = "HEARTBEAT";
+  o.status_line = "STATUS";
+  o.estop_release_debounce = 0.2;
+  o.heartbeat_period = 0.1;
+  return o;
+}
+
+}  // namespace
+
+TEST(KernelGpio, LinesAreFoundByNameAndAMissingOneIsExplained) {
+  REQUIRE_VM();
+  SimChip sim("names", {"ESTOP", "HEARTBEAT", "STATUS", "SPARE"});
+  ASSERT_TRUE(sim.ok());
+  auto made = gpio::GpioDriver::create(sim_options(sim.chip()));
+  ASSERT_TRUE(made.driver) << made.error;
+  gpio::GpioDriverOptions bad = sim_options(sim.chip());
+  bad.estop_line = "E_STOP";
+  made.driver.reset();  // the lines are free again
+  auto refused = gpio::GpioDriver::create(bad);
+  EXPECT_FALSE(refused.driver);
+  EXPECT_NE(refused.error.find("E_STOP"), std::string::npos) << refused.error;
+  EXPECT_NE(refused.error.find("ESTOP"), std::string::npos) << "the lines the chip has: " << refused.error;
+}
+
+// A press engages at once (from the edge); the release waits for the line to
+// stay inactive for the debounce time; the status output follows.
+TEST(KernelGpio, EstopEngagesAtOnceAndReleasesAfterTheDebounce) {
+  REQUIRE_VM();
+  SimChip sim("estop", {"ESTOP", "HEARTBEAT", "STATUS"});
+  ASSERT_TRUE(sim.ok());
+  sim.pull(0, false);
+  auto made = gpio::GpioDriver::create(sim_options(sim.chip()));
+  ASSERT_TRUE(made.driver) << made.error;
+  gpio::GpioDriver& d = *made.driver;
+  d.set_ready(true);
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().estop == gpio::EstopState::released; }));
+  EXPECT_EQ(sim.value(2), 1) << "ready and released: the status output is on";
+  sim.pull(0, true);  // pressed (active high)
+  const Nanos pressed = monotonic();
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().estop == gpio::EstopState::engaged; }));
+  EXPECT_LT(monotonic() - pressed, 200'000'000) << "a press engages at once";
+  EXPECT_GE(d.status().edges, 1u);
+  EXPECT_EQ(sim.value(2), 0) << "engaged: the status output is off";
+  sim.pull(0, false);
+  const Nanos let_go = monotonic();
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().estop == gpio::EstopState::released; }));
+  EXPECT_GE(monotonic() - let_go, 200'000'000) << "the release waits for the debounce";
+  EXPECT_EQ(sim.value(2), 1);
+}
+
+TEST(KernelGpio, TheHeartbeatTogglesOnTheLine) {
+  REQUIRE_VM();
+  SimChip sim("beat", {"ESTOP", "HEARTBEAT", "STATUS"});
+  ASSERT_TRUE(sim.ok());
+  auto made = gpio::GpioDriver::create(sim_options(sim.chip()));
+  ASSERT_TRUE(made.driver) << made.error;
+  gpio::GpioDriver& d = *made.driver;
+  int changes = 0, last = -1;
+  run_until(d, 1.0, [&] {
+    const int v = sim.value(1);
+    if (last >= 0 && v != last) ++changes;
+    last = v;
+    return false;
+  });
+  EXPECT_GE(changes, 5) << "0.1 s period for 1 s";
+  EXPECT_EQ(static_cast<int>(d.status().heartbeat_toggles) % 2 == 1 ? 1 : 0, sim.value(1));
+}
+
+// The chip taken away under the driver: health failed, the e-stop unknown
+// (which counts as engaged), and the driver does not crash.
+TEST(KernelGpio, AChipRemovedUnderTheDriverIsReportedAndTheStopEngages) {
+  REQUIRE_VM();
+  SimChip sim("removed", {"ESTOP", "HEARTBEAT", "STATUS"});
+  ASSERT_TRUE(sim.ok());
+  sim.pull(0, false);
+  auto made = gpio::GpioDriver::create(sim_options(sim.chip()));
+  ASSERT_TRUE(made.driver) << made.error;
+  gpio::GpioDriver& d = *made.driver;
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().estop == gpio::EstopState::released; }));
+  sim.set_live(false);
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().health == gpio::GpioHealth::failed; }));
+  EXPECT_NE(d.status().estop, gpio::EstopState::released);
+  EXPECT_NE(std::string(d.status().last_error.data()), "");
+}
