@@ -25,6 +25,9 @@ packages=(
   libfastrtps-dev fastddsgen openjdk-17-jre-headless
   # bench tools: SocketCAN utilities, network namespaces
   can-utils iproute2
+  # the kernel tests' virtual machine (toolchain/kernel-tests.sh fetches the
+  # pinned kernel itself, into a cache outside the checkout)
+  qemu-system-x86 busybox-static cpio
 )
 
 missing=()
