@@ -435,6 +435,10 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("bus_off", s.bus_off);
     m.value("restarted", s.restarted);
     m.value("error_frames", s.error_frames);
+    // Readings the odometry did not integrate: after a gap, or stamped before
+    // the one before (the host clock stepped back).
+    m.value("odometry_gaps", s.odometry_counters.gaps);
+    m.value("time_back", s.odometry_counters.time_back);
     m.value("distance_m", s.odometry.distance, 2);
   }
   if (gpio_) {

@@ -283,6 +283,54 @@ TEST(KernelCan, InterfaceRemovedAndAddedBackIsReopened) {
   EXPECT_EQ(d.status().opens, 2u);
 }
 
+// The host's clock stepped (an NTP step at boot, an operator's `date -s`):
+// the kernel stamps frames with the new time at once. The virtual machine's
+// clock is the test's to step. Forward: the odometry sees a gap as long as
+// the step and does not integrate across it; back: the reading is stamped
+// before the one before, counted, not integrated. Either way the next
+// readings integrate again and health stays ok.
+TEST(KernelClock, HostClockStepsForwardAndBackUnderTheCanDriver) {
+  REQUIRE_VM();
+  Vcan bus("vcan-clock");
+  ASSERT_TRUE(bus.ok());
+  const can::Dbc dbc = robot_dbc();
+  auto made = can::CanDriver::create(dbc, vcan_options(bus.name()));
+  ASSERT_TRUE(made.driver) << made.error;
+  can::CanDriver& d = *made.driver;
+  Node node(bus.name());
+  ASSERT_TRUE(node.ok());
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().open; }));
+  auto drive = [&](int frames) {
+    for (int k = 0; k < frames; ++k) {
+      ASSERT_TRUE(node.send_speeds(dbc, 1.0, 1.0));
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      tick(d, monotonic());
+    }
+  };
+  auto step = [](std::int64_t by_ns) {
+    timespec now{};
+    clock_gettime(CLOCK_REALTIME, &now);
+    const std::int64_t t = static_cast<std::int64_t>(now.tv_sec) * 1'000'000'000 + now.tv_nsec + by_ns;
+    const timespec to{static_cast<time_t>(t / 1'000'000'000), static_cast<long>(t % 1'000'000'000)};
+    return clock_settime(CLOCK_REALTIME, &to) == 0;
+  };
+  drive(20);
+  const double before = d.status().odometry.distance;
+  ASSERT_TRUE(step(5'000'000'000));
+  drive(20);
+  can::CanDriverStatus s = d.status();
+  EXPECT_EQ(s.odometry_counters.gaps, 1u) << "the 5 s step is a gap";
+  EXPECT_NEAR(s.odometry.distance - before, 0.19, 0.03) << "not 5 m: 19 steps of 10 ms at 1 m/s";
+  ASSERT_TRUE(step(-5'000'000'000));
+  drive(20);
+  s = d.status();
+  EXPECT_EQ(s.odometry_counters.time_back, 1u);
+  EXPECT_EQ(s.odometry_counters.gaps, 1u);
+  EXPECT_EQ(s.frames, 60u);
+  EXPECT_EQ(s.health, can::CanHealth::ok);
+  EXPECT_NEAR(s.odometry.distance - before, 0.38, 0.06);
+}
+
 // ---- GPIO ------------------------------------------------------------------
 
 namespace {

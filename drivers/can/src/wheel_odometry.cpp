@@ -104,6 +104,7 @@ void WheelOdometry::integrate(std::int64_t time_ns) noexcept {
   const double dt = have_reading_ ? static_cast<double>(time_ns - last_reading_) * 1e-9 : 0.0;
   last_reading_ = time_ns;
   have_reading_ = true;
+  if (dt < 0.0) ++counters_.time_back;
   double vl = 0.0, vr = 0.0;
   if (options_.input == WheelInput::speed) {
     vl = left_.value * options_.speed_scale;

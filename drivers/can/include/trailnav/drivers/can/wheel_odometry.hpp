@@ -57,6 +57,7 @@ struct OdometryCounters {
   std::uint64_t decode_errors = 0;  // signals that could not be decoded
   std::uint64_t implausible = 0;    // readings beyond max_speed: skipped
   std::uint64_t gaps = 0;           // readings after more than max_gap: not integrated
+  std::uint64_t time_back = 0;      // readings stamped before the one before (the host clock stepped back): not integrated
   std::uint64_t updates = 0;
 };
 
