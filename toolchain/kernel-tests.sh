@@ -4,10 +4,12 @@
 # that holds busybox, the modules vcan, can-raw and gpio-sim, iproute2's `ip`
 # and the test binary, runs the binary there and returns its exit status.
 #
-# Usage: toolchain/kernel-tests.sh [--binary PATH] [--filter GTEST_FILTER] [--keep]
+# Usage: toolchain/kernel-tests.sh [--binary PATH] [--filter GTEST_FILTER] [--keep] [--prepare]
 #   --binary PATH  the test binary (default build/release/bin/trailnav_kernel_tests)
 #   --filter F     run only these tests (--gtest_filter)
 #   --keep         keep the machine's folder (initramfs, console log) and say where
+#   --prepare      only fetch and build what the machine needs, print the cache
+#                  folder and stop (toolchain/service-vm.sh uses it)
 #
 # Everything comes from Debian's packages, pinned and cached outside the
 # repository ($TRAILNAV_KERNEL_CACHE, default /var/cache/trailnav/kernel):
@@ -25,17 +27,18 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-binary=build/release/bin/trailnav_kernel_tests filter="" keep=0
+binary=build/release/bin/trailnav_kernel_tests filter="" keep=0 prepare=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --binary) binary=$2; shift 2 ;;
     --filter) filter=$2; shift 2 ;;
     --keep) keep=1; shift ;;
-    -h|--help) sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --prepare) prepare=1; shift ;;
+    -h|--help) sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "kernel-tests: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-[ -x "$binary" ] || { echo "kernel-tests: no test binary at $binary: build it first (cmake --build build/release)" >&2; exit 2; }
+[ $prepare -eq 1 ] || [ -x "$binary" ] || { echo "kernel-tests: no test binary at $binary: build it first (cmake --build build/release)" >&2; exit 2; }
 
 pin=${TRAILNAV_KERNEL_VERSION:-6.1.0-50:6.1.176-1}
 abi=${pin%%:*} version=${pin#*:}
@@ -92,6 +95,11 @@ if [ ! -f "$cache/gpio-sim/gpio-sim.ko" ]; then
   printf 'obj-m := gpio-sim.o\ngpio-sim-y := gpio-sim-main.o irq_sim.o\n' > "$cache/gpio-sim/Kbuild"
   make -s -C "/usr/src/linux-headers-$kver" M="$cache/gpio-sim" modules > "$cache/gpio-sim/build.log" 2>&1 || {
     cat "$cache/gpio-sim/build.log" >&2; exit 1; }
+fi
+
+if [ $prepare -eq 1 ]; then
+  echo "$cache"
+  exit 0
 fi
 
 # The machine's root: busybox, modules, ip, the test binary and their libraries.
