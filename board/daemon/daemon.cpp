@@ -501,6 +501,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.begin(idle ? L::warn : L::ok, "trailnavd: terrain", idle ? "no class map yet (the robot must move d metres)" : "ok", "");
     m.value("revolutions", c.revolutions);
     m.value("skipped", c.skipped);
+    if (c.intact_until_ns >= 0) m.value("intact_until_s", static_cast<double>(c.intact_until_ns) * 1e-9, 6);
     m.value("no_odometry", c.no_odometry);
     m.value("pose_waits", c.pose_waits);
     m.value("pose_late", c.pose_late);

@@ -13,8 +13,12 @@ void TerrainTask::run(const TaskTick&) {
   if (poses_ != nullptr) counters_.poses += track_.drain(*poses_);
   const velodyne::RangeImage* image = revolutions_.try_read();
   if (image != nullptr && image->sequence != last_sequence_) {
-    if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) counters_.skipped += image->sequence - last_sequence_ - 1;
+    if (last_sequence_ != 0 && image->sequence > last_sequence_ + 1) {
+      if (counters_.skipped == 0) counters_.intact_until_ns = last_taken_end_ns_;
+      counters_.skipped += image->sequence - last_sequence_ - 1;
+    }
     last_sequence_ = image->sequence;
+    last_taken_end_ns_ = image->reference_end_ns();
     // The pose thread must have reached the revolution's end (see PoseWait).
     if (poses_ != nullptr) {
       const PoseWaitResult w = wait_for_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, !pose_was_late_);

@@ -22,6 +22,11 @@ struct TerrainTaskCounters {
   std::uint64_t runs = 0;
   std::uint64_t revolutions = 0;  // processed
   std::uint64_t skipped = 0;      // revolutions that came and went between two runs
+  // Each class map depends on every revolution before it: the end
+  // (reference clock) of the last revolution taken before the first skip;
+  // the maps up to it are as an offline run over every revolution makes
+  // them. -1 while none was skipped.
+  std::int64_t intact_until_ns = -1;
   std::uint64_t poses = 0;
   std::uint64_t published = 0;    // class-map snapshots
   std::uint64_t no_odometry = 0;  // revolutions left out: the odometry did not know the robot's motion then
@@ -53,6 +58,7 @@ class TerrainTask final : public Task {
   PoseTrack track_;
   PoseWait pose_wait_;
   bool pose_was_late_ = false;
+  std::int64_t last_taken_end_ns_ = 0;
   std::uint64_t last_sequence_ = 0;
   TerrainTaskCounters counters_;
   StatusBoard<TerrainTaskCounters> shared_;
