@@ -149,7 +149,7 @@ pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles,
   feed_terrain = n.boolean("feed_terrain", true);
   o.imu_wait = n.number("imu_wait_ms", 0.0, 5000.0, o.imu_wait * 1e3) * 1e-3;
   // How far the pose may lag behind a revolution's end before the obstacle
-  // and terrain threads wait for it, and for how long (docs/pose.md).
+  // and terrain threads wait for it, and for how long (docs/obstacles.md).
   wait.max_lag_ns = static_cast<std::int64_t>(n.number("max_lag_ms", 1.0, 500.0, static_cast<double>(wait.max_lag_ns) * 1e-6) * 1e6);
   wait.max_wait_ns = static_cast<std::int64_t>(n.number("max_wait_ms", 0.0, 500.0, static_cast<double>(wait.max_wait_ns) * 1e-6) * 1e6);
   n.reject_unknown_keys();

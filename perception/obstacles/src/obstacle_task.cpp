@@ -1,7 +1,5 @@
 #include "trailnav/perception/obstacle_task.hpp"
 
-#include <algorithm>
-
 namespace trailnav::perception {
 
 ObstacleTask::ObstacleTask(ObstaclePipeline& pipeline, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
@@ -73,15 +71,7 @@ void ObstacleTask::run(const TaskTick&) {
   last_sequence_ = image->sequence;
   // The pose thread must have reached the revolution's end (see PoseWait).
   if (poses_ != nullptr) {
-    const PoseWaitResult w = wait_for_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, !counters_.pose_behind);
-    counters_.poses += w.poses;
-    if (w.waited_ns > 0) {
-      ++counters_.pose_waits;
-      counters_.pose_wait_max_ns = std::max(counters_.pose_wait_max_ns, w.waited_ns);
-    }
-    counters_.pose_behind = !w.ready;
-    if (!w.ready) {
-      ++counters_.pose_late;
+    if (!await_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, counters_)) {
       shared_.post(counters_);
       return;
     }

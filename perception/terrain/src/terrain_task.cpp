@@ -1,7 +1,5 @@
 #include "trailnav/perception/terrain_task.hpp"
 
-#include <algorithm>
-
 namespace trailnav::perception {
 
 TerrainTask::TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
@@ -21,15 +19,7 @@ void TerrainTask::run(const TaskTick&) {
     last_taken_end_ns_ = image->reference_end_ns();
     // The pose thread must have reached the revolution's end (see PoseWait).
     if (poses_ != nullptr) {
-      const PoseWaitResult w = wait_for_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, !pose_was_late_);
-      counters_.poses += w.poses;
-      if (w.waited_ns > 0) {
-        ++counters_.pose_waits;
-        counters_.pose_wait_max_ns = std::max(counters_.pose_wait_max_ns, w.waited_ns);
-      }
-      pose_was_late_ = !w.ready;
-      if (!w.ready) {
-        ++counters_.pose_late;
+      if (!await_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, counters_)) {
         shared_.post(counters_);
         return;
       }

@@ -113,4 +113,21 @@ struct PoseWaitResult {
 PoseWaitResult wait_for_pose(PoseTrack& track, PoseQueue& queue, std::int64_t t_ns, const PoseWait& wait,
                              bool may_wait) noexcept;
 
+// What the obstacle and terrain tasks do with it, on their counters (fields
+// poses, pose_waits, pose_late, pose_wait_max_ns, pose_behind): wait unless
+// the last revolution already waited in vain, count, and say whether the
+// revolution may be mapped.
+template <class Counters>
+bool await_pose(PoseTrack& track, PoseQueue& queue, std::int64_t t_ns, const PoseWait& wait, Counters& c) noexcept {
+  const PoseWaitResult w = wait_for_pose(track, queue, t_ns, wait, !c.pose_behind);
+  c.poses += w.poses;
+  if (w.waited_ns > 0) {
+    ++c.pose_waits;
+    if (w.waited_ns > c.pose_wait_max_ns) c.pose_wait_max_ns = w.waited_ns;
+  }
+  c.pose_behind = !w.ready;
+  if (!w.ready) ++c.pose_late;
+  return w.ready;
+}
+
 }  // namespace trailnav::perception

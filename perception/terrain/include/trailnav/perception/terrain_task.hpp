@@ -33,6 +33,7 @@ struct TerrainTaskCounters {
   std::uint64_t pose_waits = 0;   // revolutions the pose track had not reached: waited for (PoseWait)
   std::uint64_t pose_late = 0;    // ... and left out, the pose not coming in time
   std::int64_t pose_wait_max_ns = 0;
+  bool pose_behind = false;       // the newest revolution was left out for that reason
   std::int64_t last_step_ns = 0;  // sensor time of the newest step
   TerrainCounters mapper;
 };
@@ -57,7 +58,6 @@ class TerrainTask final : public Task {
   Broadcast<TerrainClassMap>& out_;
   PoseTrack track_;
   PoseWait pose_wait_;
-  bool pose_was_late_ = false;
   std::int64_t last_taken_end_ns_ = 0;
   std::uint64_t last_sequence_ = 0;
   TerrainTaskCounters counters_;
