@@ -224,6 +224,16 @@ void DdsPublisher::publish_navigation(const nav::NavigationSnapshot& n) noexcept
     } else {
       failures_.fetch_add(1, std::memory_order_relaxed);
     }
+    // Its own odom -> base_link at its stamp, as each map has: the pose-rate
+    // transforms are a sample of the poses and need not hold the one the
+    // subgoal was placed from (after the pose thread catches up on held
+    // readings, several poses pass between two of them).
+    if (tf_writer_ && n.robot.time_ns == n.time_ns) {
+      tf_msg_.clear();
+      tf_msg_.add(n.time_ns, options_.odom_frame, options_.frames.base_link,
+                  {n.robot.x, n.robot.y, n.robot.z, n.robot.roll, n.robot.pitch, n.robot.yaw});
+      count(tf_writer_->write(&tf_msg_.sample()), transforms_);
+    }
   }
   if (n.path_revision != last_path_revision_) {
     last_path_revision_ = n.path_revision;

@@ -229,6 +229,7 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
     return result;
   }
   time_ns_ = local.time_ns;
+  local_ = local;
   rot_ = local.yaw - utm.yaw;
   cos_ = std::cos(rot_);
   sin_ = std::sin(rot_);
@@ -480,6 +481,7 @@ void Navigator::snapshot(NavigationSnapshot& out) const noexcept {
   out.goal_revision = goal_revision_;
   report(out.report);
   out.time_ns = time_ns_;
+  out.robot = local_;
   out.plan = counters_.plans;
   out.active_revision = active_revision_;
   out.path_revision = path_revision_;
