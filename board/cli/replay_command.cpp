@@ -189,7 +189,10 @@ void add_replay_command(CLI::App& app) {
   cmd->add_flag("--loop", o.forever, "Play it again and again until Ctrl-C")->excludes(loops);
   cmd->add_option("--lidar-to", o.lidar_to, "Destination of the 'lidar' stream (default 127.0.0.1:<recorded port>)");
   cmd->add_option("--position-to", o.position_to, "Destination of the 'lidar-position' stream");
-  cmd->add_option("--to", o.to, "STREAM=ADDRESS:PORT for any UDP stream (repeatable)");
+  cmd->add_option("--to", o.to,
+                  "STREAM=ADDRESS:PORT for any UDP stream; for a serial stream, its bytes go there as UDP\n"
+                  "datagrams instead of into a pseudo-terminal, as a serial device server sends them\n"
+                  "(the driver's link: udp:ADDRESS:PORT) (repeatable)");
   cmd->add_option("--can-interface", o.can_interface, "Send CAN frames onto this SocketCAN interface (e.g. vcan0)");
   cmd->add_option("--can-tunnel", o.can_tunnel, "Where the CAN tunnel sends when there is no --can-interface")
       ->capture_default_str();

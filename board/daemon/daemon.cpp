@@ -452,8 +452,17 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   }
   if (pose_) {
     const pose::PoseTaskStatus s = pose_->status();
-    m.begin(s.local.source == pose::PoseSource::none ? L::warn : L::ok, "trailnavd: pose",
-            pose::pose_source_name(s.local.source), "");
+    // A pose whose motion went unmeasured (wheel speeds lost, or the IMU lost
+    // once heard) is not mapped with; health says which.
+    const bool degraded = !s.local.translation_valid || !s.local.rotation_valid;
+    m.begin(s.local.source == pose::PoseSource::none || degraded ? L::warn : L::ok, "trailnavd: pose",
+            !s.local.translation_valid ? "wheel speeds lost: the position is not measured, not mapping"
+            : !s.local.rotation_valid  ? "IMU lost: the wheels alone turn the pose, not mapping"
+                                       : pose::pose_source_name(s.local.source),
+            "");
+    m.value("source", pose::pose_source_name(s.local.source));
+    m.value("translation_valid", s.local.translation_valid ? std::string_view("true") : std::string_view("false"));
+    m.value("rotation_valid", s.local.rotation_valid ? std::string_view("true") : std::string_view("false"));
     m.value("utm_valid", s.utm.position_valid ? std::string_view("true") : std::string_view("false"));
     m.value("heading_valid", s.utm.heading_valid ? std::string_view("true") : std::string_view("false"));
     m.value("sigma_m", s.utm.position_valid ? s.utm.sigma_position() : 0.0, 2);
@@ -480,7 +489,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   if (obstacles_) {
     const perception::ObstacleTaskCounters c = obstacles_->status();
     m.begin(c.odometry_lost ? L::error : c.pose_behind || c.skipped > 0 ? L::warn : L::ok, "trailnavd: obstacles",
-            c.odometry_lost ? "odometry lost (no wheel speeds): not mapping, map stale"
+            c.odometry_lost ? "odometry lost (wheel speeds or IMU silent): not mapping, map stale"
             : c.pose_behind ? "the pose thread is behind the lidar: not mapping until it catches up"
             : c.skipped > 0 ? "revolutions skipped (too slow)"
                             : "ok",

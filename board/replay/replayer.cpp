@@ -145,7 +145,8 @@ Replayer::~Replayer() = default;
 
 std::string Replayer::pty_path(const std::string& stream) const {
   for (const StreamReport& s : report_.streams) {
-    if (s.name == stream && s.kind == StreamKind::serial) return s.target;
+    // A serial stream sent as UDP datagrams has no pseudo-terminal.
+    if (s.name == stream && s.kind == StreamKind::serial) return s.target.rfind("udp ", 0) == 0 ? "" : s.target;
   }
   return "";
 }
@@ -175,7 +176,15 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
     return true;
   };
   for (const auto& target : options.udp_targets) {
-    if (missing(target.first, StreamKind::udp)) return result;
+    // A serial stream may go out as UDP datagrams too: its bytes as a serial
+    // device server on the robot's network would send them.
+    bool serial = false;
+    for (const auto& s : r->reader_->streams()) serial = serial || (s.name == target.first && s.kind == StreamKind::serial);
+    if (serial && options.serial_links.count(target.first) != 0) {
+      result.error = "stream '" + target.first + "': both a UDP destination and a pseudo-terminal link; give one";
+      return result;
+    }
+    if (!serial && missing(target.first, StreamKind::udp)) return result;
   }
   for (const auto& link : options.serial_links) {
     if (missing(link.first, StreamKind::serial)) return result;
@@ -251,6 +260,18 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
       auto out = std::make_unique<GpioTunnelOutput>();
       out->sender = gpio_tunnel;
       report.target = "gpio-tunnel udp " + udp::format_endpoint(options.gpio_tunnel);
+      r->outputs_.push_back(std::move(out));
+    } else if (options.udp_targets.count(s.name) != 0) {
+      // Serial bytes as datagrams, one per recorded read.
+      const udp::Endpoint& to = options.udp_targets.at(s.name);
+      auto sender = udp::UdpSender::open(to);
+      if (!sender.sender) {
+        result.error = "stream '" + s.name + "': " + sender.error;
+        return result;
+      }
+      auto out = std::make_unique<UdpOutput>();
+      out->sender = std::move(sender.sender);
+      report.target = "udp " + udp::format_endpoint(to) + " (serial bytes)";
       r->outputs_.push_back(std::move(out));
     } else {
       auto out = std::make_unique<PtyOutput>();

@@ -32,7 +32,10 @@ struct ReplayOptions {
   double rate = 1.0;       // speed-up over the recorded timing
   bool max_rate = false;   // no waiting at all
   int loops = 1;           // 0: until stopped
-  std::map<std::string, udp::Endpoint> udp_targets;  // per stream name; default 127.0.0.1:<recorded port>
+  // Per stream name; default 127.0.0.1:<recorded port>. A serial stream named
+  // here goes out as UDP datagrams (a serial device server) instead of into a
+  // pseudo-terminal.
+  std::map<std::string, udp::Endpoint> udp_targets;
   std::string can_interface;                          // SocketCAN interface; empty: the UDP tunnel
   udp::Endpoint can_tunnel{0x7F000001u, kDefaultCanTunnelPort};
   udp::Endpoint gpio_tunnel{0x7F000001u, kDefaultGpioTunnelPort};
@@ -75,7 +78,7 @@ class Replayer {
 
   // Where each stream goes (pseudo-terminal paths are known from here on).
   const std::vector<StreamReport>& streams() const noexcept { return report_.streams; }
-  std::string pty_path(const std::string& stream) const;
+  std::string pty_path(const std::string& stream) const;  // "" for a serial stream sent as UDP
 
   // Replays; returns when done or stopped.
   ReplayReport run();

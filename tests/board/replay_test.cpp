@@ -298,6 +298,63 @@ TEST(Replay, SerialAndCanStreamsArriveIntact) {
   fs::remove_all(dir);
 }
 
+// A serial stream sent to a UDP destination goes out as datagrams, one per
+// recorded read, as a serial device server sends a port's bytes: real NMEA
+// bytes, intact and in order. Naming it for a pseudo-terminal link as well is
+// refused.
+TEST(Replay, ASerialStreamGoesOutAsUdpDatagramsWhenGivenADestination) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-replay-serial-udp-" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  std::vector<std::vector<std::uint8_t>> reads;
+  {
+    auto w = std::move(recording::RecordingWriter::create(dir.string(), "serial over UDP").writer);
+    const int gps = w->add_serial_stream("gps", 4800);
+    std::ifstream nmea(test::shared_data("nmea/bu353s4.log"));
+    std::string line;
+    std::int64_t t = 1'000'000'000'000;
+    while (std::getline(nmea, line) && reads.size() < 80) {
+      if (line.empty() || line[0] != '$') continue;
+      line += "\r\n";
+      reads.emplace_back(line.begin(), line.end());
+      ASSERT_TRUE(w->write_serial(gps, t, reads.back()));
+      t += 5'000'000;
+    }
+    ASSERT_TRUE(w->close());
+  }
+  udp::ReceiverOptions ro;
+  ro.bind = {0x7F000001u, 0};
+  auto receiver = std::move(udp::UdpReceiver::open(ro).receiver);
+  ASSERT_TRUE(receiver);
+  replay::ReplayOptions options;
+  options.udp_targets["gps"] = receiver->local();
+  options.serial_links["gps"] = (dir / "gps-link").string();
+  EXPECT_NE(replay::Replayer::create(dir.string(), options).error.find("both a UDP destination and a pseudo-terminal"),
+            std::string::npos);
+  options.serial_links.clear();
+  auto created = replay::Replayer::create(dir.string(), options);
+  ASSERT_TRUE(created.replayer) << created.error;
+  EXPECT_TRUE(created.replayer->pty_path("gps").empty());
+  std::vector<std::vector<std::uint8_t>> received;
+  std::atomic<bool> done{false};
+  std::thread consumer([&] {
+    for (;;) {
+      const bool finished = done.load();
+      for (const udp::Datagram& d : receiver->receive(1)) received.emplace_back(d.payload.begin(), d.payload.end());
+      if (finished) break;
+    }
+  });
+  const replay::ReplayReport report = created.replayer->run();
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  done.store(true);
+  consumer.join();
+  EXPECT_EQ(received, reads);
+  ASSERT_EQ(report.streams.size(), 1u);
+  EXPECT_NE(report.streams[0].target.find("(serial bytes)"), std::string::npos) << report.streams[0].target;
+  EXPECT_EQ(report.streams[0].sent, reads.size());
+  EXPECT_EQ(report.streams[0].failures, 0u);
+  fs::remove_all(dir);
+}
+
 TEST(Replay, BadDestinationsAndInputsAreRefused) {
   const std::string capture = test::shared_data("velodyne/mrpt_sample_velodyne_vlp16_gps.pcap");
   replay::ReplayOptions options;

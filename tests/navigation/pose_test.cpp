@@ -117,8 +117,28 @@ TEST(GyroOdometry, WheelsCarryThePoseWhenTheImuFallsSilentAndPitchClimbs) {
   EXPECT_EQ(odo.pose().source, PoseSource::wheels_only);
   EXPECT_NEAR(odo.pose().yaw, 0.1 * 1.9, 0.02);  // the IMU timed out after 0.1 s
   EXPECT_GT(odo.counters().wheel_steps, 180u);
+  // The IMU was heard, so the wheels' yaw rate is a stand-in: the pose says
+  // its rotation is unmeasured (not mapped with), its translation is fine.
+  EXPECT_FALSE(odo.pose().rotation_valid);
+  EXPECT_TRUE(odo.pose().translation_valid);
   LocalPose p;
   EXPECT_FALSE(odo.pose_at(kStart + ms(5000.0), p));  // beyond the newest
+  ASSERT_TRUE(odo.pose_at(kStart + ms(1000.0), p));
+  EXPECT_TRUE(p.rotation_valid);  // kept poses keep what they were
+  // The IMU back: measured again.
+  odo.add_imu(attitude(kStart + ms(3010.0), 0.1, 0.0, -0.1));
+  EXPECT_TRUE(odo.pose().rotation_valid);
+  EXPECT_EQ(odo.pose().source, PoseSource::gyro_odometry);
+}
+
+// A robot without an IMU: the wheels carry the pose by design, and it is valid.
+TEST(GyroOdometry, WithoutAnImuTheWheelsPoseIsAMeasuredOne) {
+  GyroOdometry odo;
+  for (int k = 0; k <= 200; ++k) odo.add_wheels(wheels(kStart + ms(10.0 * k), 1.0, 0.1));
+  EXPECT_EQ(odo.pose().source, PoseSource::wheels_only);
+  EXPECT_NEAR(odo.pose().yaw, 0.2, 0.01);
+  EXPECT_TRUE(odo.pose().rotation_valid);
+  EXPECT_TRUE(odo.pose().translation_valid);
 }
 
 TEST(UtmAlignment, FindsTheTransformDespiteOutliersAndFollowsAJump) {

@@ -255,15 +255,15 @@ TEST(PoseTrack, InterpolatesAndWrapsYaw) {
 // at its ends), or the samples around it, is enough to say no.
 TEST(PoseTrack, TranslationIsKnownOnlyWhenEverySampleOfTheSpanHadIt) {
   PoseTrack t(16);
-  EXPECT_TRUE(t.translation_known(0, 100));  // nothing better known
+  EXPECT_TRUE(t.motion_known(0, 100));  // nothing better known
   for (int i = 0; i < 10; ++i) t.push({i * 10, 0.1 * i, 0, 0, 0, 0, 0, i != 5});  // 50: wheels stale
-  EXPECT_TRUE(t.translation_known(0, 40));
-  EXPECT_TRUE(t.translation_known(61, 90));
-  EXPECT_FALSE(t.translation_known(42, 48));   // between 40 and 50: 50 is the sample after
-  EXPECT_FALSE(t.translation_known(30, 70));   // 50 inside, both ends fine
-  EXPECT_FALSE(t.translation_known(52, 58));   // 50 is the sample before
-  EXPECT_TRUE(t.translation_known(60, 200));   // past the newest: the newest says
-  EXPECT_TRUE(t.translation_known(-50, -10));  // before the oldest: the oldest says
+  EXPECT_TRUE(t.motion_known(0, 40));
+  EXPECT_TRUE(t.motion_known(61, 90));
+  EXPECT_FALSE(t.motion_known(42, 48));   // between 40 and 50: 50 is the sample after
+  EXPECT_FALSE(t.motion_known(30, 70));   // 50 inside, both ends fine
+  EXPECT_FALSE(t.motion_known(52, 58));   // 50 is the sample before
+  EXPECT_TRUE(t.motion_known(60, 200));   // past the newest: the newest says
+  EXPECT_TRUE(t.motion_known(-50, -10));  // before the oldest: the oldest says
 }
 
 // The obstacle and terrain threads wait for a pose thread that is behind

@@ -98,12 +98,16 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
   {
     std::ofstream c(b->config_);
     const char* nav = options.navigation ? "true" : "false";
+    const auto serial_link = [&](const char* name, const char* baud, int k) {
+      return options.serial_over_udp ? "udp:127.0.0.1:" + std::to_string(base + k)
+                                     : "serial:" + (b->dir_ / name).string() + "@" + baud;
+    };
     c << "runtime: {realtime: " << (options.realtime ? "best_effort, lock_memory: true" : "off, lock_memory: false")
       << ", log_level: warn, log_sink: stderr}\n"
       << "lidar: {model: VLP-16, calibration: builtin, data: 127.0.0.1:" << base << ", position: 127.0.0.1:" << base + 1
       << ", rpm: 600}\n"
-      << "gps: {link: 'serial:" << (b->dir_ / "gps").string() << "@115200'}\n"
-      << "imu: {link: 'serial:" << (b->dir_ / "imu").string() << "@921600', protocol: xsens}\n"
+      << "gps: {link: '" << serial_link("gps", "115200", 4) << "'}\n"
+      << "imu: {link: '" << serial_link("imu", "921600", 5) << "', protocol: xsens}\n"
       << "can: {transport: tunnel, tunnel: 127.0.0.1:" << base + 2
       << ", dbc: " << fs::absolute("board/sim/trailnav-robot.dbc").string()
       << ", left: WHEEL_SPEEDS.SpeedLeft, right: WHEEL_SPEEDS.SpeedRight, track: 0.6}\n"
@@ -163,8 +167,13 @@ void BenchDaemon::start_replay(double delay_s) {
   ro.udp_targets["lidar-position"] = {0x7F000001u, port(1)};
   ro.can_tunnel = {0x7F000001u, port(2)};
   ro.gpio_tunnel = {0x7F000001u, port(3)};
-  ro.serial_links["gps"] = (dir_ / "gps").string();
-  ro.serial_links["imu"] = (dir_ / "imu").string();
+  if (options_.serial_over_udp) {
+    ro.udp_targets["gps"] = {0x7F000001u, port(4)};
+    ro.udp_targets["imu"] = {0x7F000001u, port(5)};
+  } else {
+    ro.serial_links["gps"] = (dir_ / "gps").string();
+    ro.serial_links["imu"] = (dir_ / "imu").string();
+  }
   for (const std::string& f : options_.faults) {
     const replay::FaultSpecResult parsed = replay::parse_fault_spec(f);
     if (!parsed.spec) {

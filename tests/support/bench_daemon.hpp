@@ -35,6 +35,12 @@ struct BenchDaemonOptions {
   std::string dds_yaml;       // appended inside the dds section's braces, e.g. ", topics: {...}"
   std::vector<std::string> faults;  // injected by the replayer (trailnav replay --fault)
   std::uint64_t fault_seed = 1;
+  // The GPS and IMU bytes as UDP datagrams on loopback (a serial device
+  // server) instead of through pseudo-terminals: a pseudo-terminal's bytes
+  // are moved by a kernel worker thread, which two CPU hogs in the test's own
+  // session starved for seconds (docs/testing.md); the drivers' own tests and
+  // the other daemon tests keep the pseudo-terminals.
+  bool serial_over_udp = false;
 };
 
 // A goal for orders: the vertex of the recording's world.osm farthest from

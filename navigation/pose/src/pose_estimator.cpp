@@ -115,7 +115,8 @@ void PoseTask::run(const TaskTick& tick) {
     const LocalPose& l = slot.local;
     if (pose_outputs_ > 0 && l.source != PoseSource::none && l.time_ns > last_out_ns_) {
       last_out_ns_ = l.time_ns;
-      const perception::Pose pose{l.time_ns, l.x, l.y, l.z, l.roll, l.pitch, l.yaw, l.translation_valid};
+      const perception::Pose pose{l.time_ns, l.x, l.y, l.z, l.roll, l.pitch, l.yaw,
+                                         l.translation_valid && l.rotation_valid};
       for (std::size_t q = 0; q < pose_outputs_; ++q) {
         if (!pose_out_[q]->try_push(pose)) ++local_.pose_queue_drops;
       }

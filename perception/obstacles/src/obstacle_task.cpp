@@ -80,7 +80,7 @@ void ObstacleTask::run(const TaskTick&) {
   // would put what it sees in the wrong cells, next to cells mapped before
   // from where the robot really was: no map then (the publisher sends the
   // last one stale), and a fresh one when the odometry knows again.
-  if (!track_.translation_known(image->reference_start_ns(), image->reference_end_ns())) {
+  if (!track_.motion_known(image->reference_start_ns(), image->reference_end_ns())) {
     ++counters_.no_odometry;
     counters_.odometry_lost = true;
     shared_.post(counters_);

@@ -34,7 +34,7 @@ bool PoseTrack::push(const Pose& pose) noexcept {
   return true;
 }
 
-bool PoseTrack::translation_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept {
+bool PoseTrack::motion_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept {
   if (count_ == 0) return true;
   // The last sample at or before `from` (or the oldest), then on to the
   // first sample at or after `to` (or the newest).
@@ -49,7 +49,7 @@ bool PoseTrack::translation_known(std::int64_t from_ns, std::int64_t to_ns) cons
   }
   for (std::size_t i = lo > 0 ? lo - 1 : 0; i < count_; ++i) {
     const Pose& p = get(i);
-    if (!p.translation_valid) return false;
+    if (!p.motion_known) return false;
     if (p.t_ns >= to_ns) break;
   }
   return true;
@@ -88,7 +88,7 @@ PoseLookup PoseTrack::at(std::int64_t t_ns, Pose& out) const noexcept {
   out.roll = lerp_angle(a.roll, b.roll, f);
   out.pitch = lerp_angle(a.pitch, b.pitch, f);
   out.yaw = lerp_angle(a.yaw, b.yaw, f);
-  out.translation_valid = a.translation_valid && b.translation_valid;
+  out.motion_known = a.motion_known && b.motion_known;
   return PoseLookup::interpolated;
 }
 

@@ -24,7 +24,7 @@ void TerrainTask::run(const TaskTick&) {
         return;
       }
     }
-    if (!track_.translation_known(image->reference_start_ns(), image->reference_end_ns())) {
+    if (!track_.motion_known(image->reference_start_ns(), image->reference_end_ns())) {
       // Features placed with a position the odometry could not measure
       // would land in the wrong cells (as for the obstacle map).
       ++counters_.no_odometry;

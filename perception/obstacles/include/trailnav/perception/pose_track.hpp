@@ -24,9 +24,11 @@ struct Pose {
   double roll = 0.0;  // rad: R = Rz(yaw) * Ry(pitch) * Rx(roll), robot to odometry frame
   double pitch = 0.0;
   double yaw = 0.0;
-  // False while the odometry could not measure the robot's motion (wheel
-  // speeds lost): the obstacle and terrain threads do not map with it.
-  bool translation_valid = true;
+  // False while the odometry could not measure the robot's motion: the wheel
+  // speeds lost (the position stands still), or the IMU lost once heard (the
+  // wheels' yaw rate alone turns the pose, and wheel slip turns it wrong).
+  // The obstacle and terrain threads do not map with it.
+  bool motion_known = true;
 };
 
 // Pose samples from the pose thread to the obstacle (and terrain) thread.
@@ -65,10 +67,10 @@ class PoseTrack {
 
   PoseLookup at(std::int64_t t_ns, Pose& out) const noexcept;
   // Whether the odometry measured the robot's motion over [from, to]: every
-  // sample in it and the two around it have translation_valid (an empty
+  // sample in it and the two around it have motion_known (an empty
   // track knows nothing better: true). What the obstacle and terrain threads
   // ask before mapping a revolution.
-  bool translation_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept;
+  bool motion_known(std::int64_t from_ns, std::int64_t to_ns) const noexcept;
   // How far the newest sample lies before `t_ns` (0 when at or after it, or
   // when the track is empty: nothing to wait for).
   std::int64_t lag(std::int64_t t_ns) const noexcept {

@@ -37,6 +37,11 @@ struct LocalPose {
   // the robot may not. What was mapped in the odometry frame before and what
   // is seen after no longer fit together (docs/pose.md).
   bool translation_valid = true;
+  // False while the IMU, once heard, has gone quiet (a cable, a serial port
+  // whose bytes stopped coming) and the wheels' yaw rate alone turns the
+  // pose: wheel slip then turns the odometry frame, and what was mapped
+  // before and what is seen after no longer fit together either.
+  bool rotation_valid = true;
   PoseSource source = PoseSource::none;
 };
 
