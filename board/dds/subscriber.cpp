@@ -2,6 +2,7 @@
 
 #include <dds/ddsi/ddsi_serdata.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <ctime>
@@ -65,7 +66,7 @@ const dds_topic_descriptor_t* known_type(const std::string& name) noexcept {
 
 Subscriber::Created Subscriber::create(const Domain& domain, const std::string& topic_name,
                                        const dds_topic_descriptor_t* type, double discover_timeout_s,
-                                       bool transient_local) {
+                                       bool transient_local, int depth) {
   Created result;
   std::unique_ptr<Subscriber> s(new Subscriber());
   s->topic_ = ros_topic(topic_name);
@@ -91,7 +92,7 @@ Subscriber::Created Subscriber::create(const Domain& domain, const std::string& 
   }
   dds_qos_t* q = dds_create_qos();
   dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
-  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 32);
+  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, std::max(depth, 1));
   // Paths and tf_static are offered transient local by their writers (tf2's
   // convention for tf_static): a late subscriber then still gets them.
   if (transient_local || type == &nav_msgs_msg_dds__Path__desc || s->topic_ == "rt/tf_static") {

@@ -32,9 +32,11 @@ class Subscriber {
   // transient-local writer, or the type nav_msgs/Path) makes the reader
   // transient-local: a late joiner gets the writer's current sample (the
   // active subgoal, the corrected path, the terrain map). A transient-local
-  // reader does not match a volatile writer. All readers are reliable.
+  // reader does not match a volatile writer. All readers are reliable and
+  // keep the last `depth` samples not yet taken (older ones are replaced:
+  // a reader that cannot keep up loses the oldest, never blocks the writer).
   static Created create(const Domain& domain, const std::string& topic_name, const dds_topic_descriptor_t* type,
-                        double discover_timeout_s, bool transient_local = false);
+                        double discover_timeout_s, bool transient_local = false, int depth = 32);
   ~Subscriber();
   Subscriber(const Subscriber&) = delete;
   Subscriber& operator=(const Subscriber&) = delete;

@@ -204,7 +204,10 @@ FaultRun run_with_faults(const std::vector<std::string>& faults, double seconds 
   // The odometry poses come from odom -> base_link on tf: the pose-rate ones
   // and each map's own at its stamp (the pose topic is a sample of the poses
   // at pose_rate_hz and need not hold a map's).
-  auto poses = dds::Subscriber::create(*domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0);
+  // Deep enough for 20 s of transforms (about 40 a second): this process may
+  // lose its core for a second on a loaded machine, and every map's own must
+  // still be there when it takes them.
+  auto poses = dds::Subscriber::create(*domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0, false, 1000);
   auto utm = dds::Subscriber::create(*domain.domain, "trailnav/utm_pose", &geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, 0);
   auto health = dds::Subscriber::create(*domain.domain, "diagnostics", &diagnostic_msgs_msg_dds__DiagnosticArray__desc, 0);
   EXPECT_TRUE(maps.subscriber && poses.subscriber && utm.subscriber && health.subscriber);

@@ -241,7 +241,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   auto elapsed_s = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count(); };
   auto points = dds::Subscriber::create(*dds_domain.domain, "trailnav/points", &sensor_msgs_msg_dds__PointCloud2__desc, 0);
   EXPECT_TRUE(points.subscriber);
-  auto tf = dds::Subscriber::create(*dds_domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0);
+  // Deep: every map's and subgoal's own transform must be there even when
+  // this process loses its core for a second.
+  auto tf = dds::Subscriber::create(*dds_domain.domain, "tf", &tf2_msgs_msg_dds__TFMessage__desc, 0, false, 1000);
   auto odometry = dds::Subscriber::create(*dds_domain.domain, "odom", &nav_msgs_msg_dds__Odometry__desc, 0);
   EXPECT_TRUE(tf.subscriber && odometry.subscriber);
   // odom -> base_link transforms by stamp (pose-rate ones and each map's own).
@@ -613,8 +615,12 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   // yet every map is stamped close to the poses arriving with it. A pose is
   // published every 50 ms with the newest IMU or wheel reading's time and a
   // map a few ms after its last packet, so on an idle machine the two differ
-  // by up to about 60 ms (88 ms seen); the bound leaves room for a loaded
-  // machine delaying the publisher, and is still 10^7 times smaller than
+  // by up to about 60 ms (88 ms seen). This test keeps the IMU on a
+  // pseudo-terminal, whose kernel worker a loaded machine starves for seconds
+  // (docs/testing.md): the pose thread then holds the wheel readings for up
+  // to pose.imu_wait_ms (3 s) waiting for the IMU, and the newest pose lags
+  // the maps by as much (1.04 s seen beside two hogs in the test's session).
+  // So the bound is that wait plus a second, still 10^6 times smaller than
   // the clocks' offset. (Same instant to the millisecond: the navigation
   // test's map-instant transforms.)
   EXPECT_GT(r.lidar_clock_offset_ns, 86'400'000'000'000LL);  // more than a day
@@ -629,7 +635,7 @@ TEST(Trailnavd, PublishesTheOfflinePipelinesMapsBitForBitOverLoopbackDds) {
   EXPECT_LT(r.lidar_clock_spread_ms, 50.0);
   EXPECT_GE(r.imu_clock_spread_ms, 0.0);
   ASSERT_GE(r.map_minus_pose_ms.size(), 60u);
-  EXPECT_LE(max_abs(r.map_minus_pose_ms), 1000.0);
+  EXPECT_LE(max_abs(r.map_minus_pose_ms), 3000.0 + 1000.0);
   // TF and odometry at the pose rate, the three sensors' places on tf_static.
   EXPECT_GE(r.tf, 100u);
   EXPECT_GE(r.odometry, 100u);
