@@ -196,7 +196,9 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
     StreamReport report;
     report.name = s.name;
     report.kind = s.kind;
-    if (s.kind == StreamKind::udp) {
+    // A UDP stream, or a serial stream sent as datagrams (one per recorded read).
+    const bool serial_as_udp = s.kind == StreamKind::serial && options.udp_targets.count(s.name) != 0;
+    if (s.kind == StreamKind::udp || serial_as_udp) {
       udp::Endpoint target{0x7F000001u, s.port};
       if (auto it = options.udp_targets.find(s.name); it != options.udp_targets.end()) target = it->second;
       auto sender = udp::UdpSender::open(target);
@@ -206,7 +208,7 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
       }
       auto out = std::make_unique<UdpOutput>();
       out->sender = std::move(sender.sender);
-      report.target = "udp " + udp::format_endpoint(target);
+      report.target = "udp " + udp::format_endpoint(target) + (serial_as_udp ? " (serial bytes)" : "");
       r->outputs_.push_back(std::move(out));
     } else if (s.kind == StreamKind::can) {
       if (!options.can_interface.empty()) {
@@ -260,18 +262,6 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
       auto out = std::make_unique<GpioTunnelOutput>();
       out->sender = gpio_tunnel;
       report.target = "gpio-tunnel udp " + udp::format_endpoint(options.gpio_tunnel);
-      r->outputs_.push_back(std::move(out));
-    } else if (options.udp_targets.count(s.name) != 0) {
-      // Serial bytes as datagrams, one per recorded read.
-      const udp::Endpoint& to = options.udp_targets.at(s.name);
-      auto sender = udp::UdpSender::open(to);
-      if (!sender.sender) {
-        result.error = "stream '" + s.name + "': " + sender.error;
-        return result;
-      }
-      auto out = std::make_unique<UdpOutput>();
-      out->sender = std::move(sender.sender);
-      report.target = "udp " + udp::format_endpoint(to) + " (serial bytes)";
       r->outputs_.push_back(std::move(out));
     } else {
       auto out = std::make_unique<PtyOutput>();
