@@ -16,10 +16,6 @@
 #include "trailnav/runtime/host_clock.hpp"
 
 namespace trailnav::can {
-namespace {
-
-
-}  // namespace
 
 const char* can_transport_name(CanTransport t) noexcept { return t == CanTransport::socketcan ? "socketcan" : "tunnel"; }
 

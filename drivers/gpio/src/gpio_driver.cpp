@@ -21,7 +21,6 @@ namespace fs = std::filesystem;
 
 constexpr std::size_t kEventBatch = 16;
 
-
 // "gpiochip0 [pinctrl-bcm2711], gpiochip1 [raspberrypi-exp-gpio]" or "none".
 std::string list_chips() {
   std::vector<std::string> names;

@@ -58,7 +58,6 @@ speed_t baud_constant(int baud) noexcept {
   return B0;
 }
 
-
 }  // namespace
 
 const char* link_kind_name(LinkKind kind) noexcept {

@@ -18,7 +18,6 @@ namespace {
 
 std::string errno_text(const char* what) { return std::string(what) + ": " + std::strerror(errno); }
 
-
 // Room for an SO_TIMESTAMPNS and an SO_RXQ_OVFL control message.
 constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(std::uint32_t)) + 64;
 
