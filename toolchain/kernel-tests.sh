@@ -2,10 +2,12 @@
 # Runs the drivers against real kernel devices: boots Debian's kernel under
 # qemu-system-x86_64 (software emulation: no KVM needed) with an initramfs
 # that holds busybox, the modules vcan, can-raw and gpio-sim, iproute2's `ip`
-# and the test binary, runs the binary there and returns its exit status.
+# the test binary and trailnavd, runs the binary there and returns its exit
+# status.
 #
-# Usage: toolchain/kernel-tests.sh [--binary PATH] [--filter GTEST_FILTER] [--keep] [--prepare]
+# Usage: toolchain/kernel-tests.sh [--binary PATH] [--daemon PATH] [--filter GTEST_FILTER] [--keep] [--prepare]
 #   --binary PATH  the test binary (default build/release/bin/trailnav_kernel_tests)
+#   --daemon PATH  trailnavd, which the host clock test runs (default build/release/bin/trailnavd)
 #   --filter F     run only these tests (--gtest_filter)
 #   --keep         keep the machine's folder (initramfs, console log) and say where
 #   --prepare      only fetch and build what the machine needs, print the cache
@@ -27,10 +29,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-binary=build/release/bin/trailnav_kernel_tests filter="" keep=0 prepare=0
+binary=build/release/bin/trailnav_kernel_tests daemon=build/release/bin/trailnavd filter="" keep=0 prepare=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --binary) binary=$2; shift 2 ;;
+    --daemon) daemon=$2; shift 2 ;;
     --filter) filter=$2; shift 2 ;;
     --keep) keep=1; shift ;;
     --prepare) prepare=1; shift ;;
@@ -39,6 +42,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 [ $prepare -eq 1 ] || [ -x "$binary" ] || { echo "kernel-tests: no test binary at $binary: build it first (cmake --build build/release)" >&2; exit 2; }
+[ $prepare -eq 1 ] || [ -x "$daemon" ] || { echo "kernel-tests: no trailnavd at $daemon: build it first (cmake --build build/release)" >&2; exit 2; }
 
 pin=${TRAILNAV_KERNEL_VERSION:-6.1.0-50:6.1.176-1}
 abi=${pin%%:*} version=${pin#*:}
@@ -113,8 +117,9 @@ cp "$modules/fs/configfs/configfs.ko" "$modules/net/can/can.ko" "$modules/net/ca
    "$modules/drivers/net/can/dev/can-dev.ko" "$modules/drivers/net/can/vcan.ko" "$cache/gpio-sim/gpio-sim.ko" "$root/mods/"
 cp "$(command -v ip)" "$root/sbin/ip"
 cp "$binary" "$root/bin/trailnav_kernel_tests"
+cp "$daemon" "$root/bin/trailnavd"
 cp board/sim/trailnav-robot.dbc "$root/work/board/sim/"
-for exe in "$root/sbin/ip" "$root/bin/trailnav_kernel_tests"; do
+for exe in "$root/sbin/ip" "$root/bin/trailnav_kernel_tests" "$root/bin/trailnavd"; do
   for lib in $(ldd "$exe" | grep -o '/[^ ]*'); do
     mkdir -p "$root$(dirname "$lib")"
     [ -e "$root$lib" ] || cp -L "$lib" "$root$lib"
@@ -129,8 +134,10 @@ for m in configfs can can-raw can-dev vcan gpio-sim; do
   insmod /mods/\$m.ko || { echo "kernel-tests: insmod \$m failed"; echo "@@TEST_RC=3@@"; poweroff -f; }
 done
 mount -t configfs none /sys/kernel/config
+mount -t tmpfs tmp /tmp
+/sbin/ip link set lo up
 cd /work
-TRAILNAV_KERNEL_VM=1 /bin/trailnav_kernel_tests --gtest_color=no ${filter:+--gtest_filter=$filter}
+TRAILNAV_KERNEL_VM=1 TRAILNAVD=/bin/trailnavd /bin/trailnav_kernel_tests --gtest_color=no ${filter:+--gtest_filter=$filter}
 echo "@@TEST_RC=\$?@@"
 poweroff -f
 EOF

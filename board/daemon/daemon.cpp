@@ -6,6 +6,7 @@
 
 #include "trailnav/drivers/velodyne/calibration.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 #include "trailnav/runtime/log.hpp"
 
 namespace trailnav::daemon {
@@ -358,8 +359,24 @@ std::string Daemon::task_report() const {
 
 void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   using L = dds::DiagnosticsMessage;
-  const std::int64_t utc = wall_clock_ns();
+  const std::int64_t utc = host_now_ns();  // the drivers' receive times are on it
   const double stale_after = config_.dds.publisher.stale_after;
+  {
+    // Steps of the system clock since start: taken out of every stamp inside
+    // (host time) and put back on the way out (runtime/host_clock.hpp).
+    const std::uint64_t steps = host_clock_steps();
+    const double step_s = nanos_to_seconds(host_clock_step_ns());
+    char msg[120];
+    if (steps == 0) {
+      std::snprintf(msg, sizeof msg, "the system clock has not been set since start");
+    } else {
+      std::snprintf(msg, sizeof msg, "the system clock was set %llu time(s) since start, %+.3f s in all: stamps carry on",
+                    static_cast<unsigned long long>(steps), step_s);
+    }
+    m.begin(L::ok, "trailnavd: clock", msg, "");
+    m.value("host_clock_steps", steps);
+    m.value("host_clock_step_s", step_s, 3);
+  }
   if (lidar_) {
     const velodyne::DriverCounters c = lidar_->counters();
     const double silent = c.last_packet_ns > 0 ? static_cast<double>(utc - c.last_packet_ns) * 1e-9 : -1.0;

@@ -15,11 +15,15 @@
 
 #include "daemon.hpp"
 #include "robot_config.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 #include "trailnav/runtime/log.hpp"
 
 using namespace trailnav;
 
 int main(int argc, char** argv) {
+  // Host time starts here: steps of the system clock from now on are taken
+  // out of every stamp (runtime/host_clock.hpp).
+  trailnav::host_clock_start();
   CLI::App app{
       "trailnavd: the trailnav service. Runs the sensor drivers, the pose, the obstacle map and their\n"
       "publisher on the real-time scheduler, as one robot config says, and publishes ROS 2-compatible\n"

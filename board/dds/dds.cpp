@@ -5,6 +5,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::dds {
 
 const char* loopback_config() noexcept { return kLoopbackConfig; }
@@ -88,7 +90,9 @@ Writer::~Writer() {
 }
 
 bool Writer::write(const void* sample, std::int64_t source_ns) noexcept {
-  const dds_return_t rc = source_ns > 0 ? dds_write_ts(writer_, sample, source_ns) : dds_write(writer_, sample);
+  // The source timestamp in host time, put on the system clock of this moment.
+  const dds_return_t rc =
+      source_ns > 0 ? dds_write_ts(writer_, sample, host_to_realtime(source_ns)) : dds_write(writer_, sample);
   if (rc == DDS_RETCODE_OK) {
     ++written_;
     return true;

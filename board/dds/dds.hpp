@@ -79,7 +79,8 @@ class Writer {
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
-  // Writes with the source timestamp `source_ns` (CLOCK_REALTIME), or now when 0.
+  // Writes with the source timestamp `source_ns` (host time, runtime/host_clock.hpp,
+  // sent on the system clock), or now when 0.
   bool write(const void* sample, std::int64_t source_ns = 0) noexcept;
   std::uint64_t written() const noexcept { return written_; }
   std::uint64_t failed() const noexcept { return failed_; }

@@ -10,6 +10,7 @@
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 #include "trailnav/navigation/pose/utm_alignment.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
 
 namespace trailnav::dds {
@@ -21,7 +22,10 @@ void FixedString<N>::set(std::string_view s) noexcept {
   text[n] = '\0';
 }
 
-builtin_interfaces_msg_dds__Time_ to_time(std::int64_t utc_ns) noexcept {
+// A stamp in host time, on the system clock of this moment
+// (runtime/host_clock.hpp): what other nodes compare with their own now().
+builtin_interfaces_msg_dds__Time_ to_time(std::int64_t host_ns) noexcept {
+  const std::int64_t utc_ns = host_ns == 0 ? 0 : host_to_realtime(host_ns);
   std::int64_t sec = utc_ns / 1'000'000'000;
   std::int64_t nsec = utc_ns % 1'000'000'000;
   if (nsec < 0) {

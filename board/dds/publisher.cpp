@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <ctime>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::dds {
 
 DdsPublisher::DdsPublisher(Clock& clock, const PublisherOptions& options, PublisherInputs inputs)
@@ -121,7 +123,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
 }
 
 void DdsPublisher::publish_health(Nanos now) noexcept {
-  health_msg_.clear(wall_clock_ns());
+  health_msg_.clear(host_now_ns());
   if (inputs_.health) inputs_.health(health_msg_, now);
   const PublisherStats s = stats();
   const bool stale = s.lidar_stale;
@@ -157,7 +159,7 @@ void DdsPublisher::count(bool written, std::atomic<std::uint64_t>& counter) noex
 void DdsPublisher::publish_static_frames() noexcept {
   if (!tf_static_writer_) return;
   // Stamped once, at start-up: static transforms hold for every time.
-  const std::int64_t now = wall_clock_ns();
+  const std::int64_t now = host_now_ns();
   tf_static_msg_->clear();
   for (const StaticFrame& f : options_.static_frames) {
     tf_static_msg_->add(now, options_.frames.base_link, f.frame, f.transform);

@@ -13,16 +13,9 @@
 #include <cstring>
 #include <ctime>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::can {
-namespace {
-
-std::int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-}  // namespace
 
 const char* can_transport_name(CanTransport t) noexcept { return t == CanTransport::socketcan ? "socketcan" : "tunnel"; }
 
@@ -168,13 +161,13 @@ void CanDriver::read_socketcan(Nanos now) noexcept {
       continue;
     }
     Frame f;
-    f.time_ns = realtime_ns();
+    f.time_ns = host_now_ns();
     for (cmsghdr* c = CMSG_FIRSTHDR(&m); c; c = CMSG_NXTHDR(&m, c)) {
       if (c->cmsg_level != SOL_SOCKET) continue;
       if (c->cmsg_type == SO_TIMESTAMPNS) {
         timespec ts{};
         std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
-        f.time_ns = static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+        f.time_ns = host_from_realtime(static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec);
       } else if (c->cmsg_type == SO_RXQ_OVFL) {
         std::uint32_t dropped = 0;
         std::memcpy(&dropped, CMSG_DATA(c), sizeof dropped);

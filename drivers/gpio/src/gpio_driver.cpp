@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "trailnav/drivers/udp/udp_sender.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 
 namespace trailnav::gpio {
 namespace {
@@ -19,12 +20,6 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr std::size_t kEventBatch = 16;
-
-std::int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 // "gpiochip0 [pinctrl-bcm2711], gpiochip1 [raspberrypi-exp-gpio]" or "none".
 std::string list_chips() {
@@ -274,7 +269,7 @@ void GpioDriver::set_output(gpiod_line* line, const std::string& name, bool valu
     fail("writing an output line", errno);
   }
   if (mirror_ && !name.empty()) {
-    const TunnelDatagram d = encode_tunnel(name, value, realtime_ns());
+    const TunnelDatagram d = encode_tunnel(name, value, host_now_ns());
     if (!mirror_->send(d.view())) ++local_.write_errors;
   }
 }

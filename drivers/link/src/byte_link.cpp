@@ -17,6 +17,8 @@
 #include <cstring>
 #include <ctime>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::link {
 namespace {
 
@@ -54,12 +56,6 @@ speed_t baud_constant(int baud) noexcept {
     case 4000000: return B4000000;
   }
   return B0;
-}
-
-std::int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 }  // namespace
@@ -335,7 +331,7 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
   if (got > 0) {
     counters_.bytes += got;
     last_byte_ = now;
-    receive_ns_ = realtime_ns();
+    receive_ns_ = host_now_ns();
     current_backoff_ = options_.backoff;
     return {buffer_.get(), got};
   }

@@ -11,16 +11,12 @@
 #include <cstring>
 #include <ctime>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::udp {
 namespace {
 
 std::string errno_text(const char* what) { return std::string(what) + ": " + std::strerror(errno); }
-
-std::int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 // Room for an SO_TIMESTAMPNS and an SO_RXQ_OVFL control message.
 constexpr std::size_t kControlBytes = CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(std::uint32_t)) + 64;
@@ -168,6 +164,7 @@ std::span<const Datagram> UdpReceiver::receive(int timeout_ms) noexcept {
   }
   ++counters_.calls;
   std::int64_t now = 0;  // read only for datagrams without a kernel timestamp
+  const std::int64_t step = host_clock_step_ns();
   std::size_t kept = 0;
   for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
     const msghdr& h = b.messages[i].msg_hdr;
@@ -177,7 +174,8 @@ std::span<const Datagram> UdpReceiver::receive(int timeout_ms) noexcept {
       if (c->cmsg_type == SO_TIMESTAMPNS) {
         timespec ts{};
         std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
-        stamp = static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+        // The kernel's CLOCK_REALTIME, in host time (runtime/host_clock.hpp).
+        stamp = static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec - step;
       } else if (c->cmsg_type == SO_RXQ_OVFL) {
         std::uint32_t overflow = 0;
         std::memcpy(&overflow, CMSG_DATA(c), sizeof overflow);
@@ -186,7 +184,7 @@ std::span<const Datagram> UdpReceiver::receive(int timeout_ms) noexcept {
       }
     }
     if (stamp == 0) {
-      if (now == 0) now = realtime_ns();
+      if (now == 0) now = host_now_ns();
       stamp = now;
     }
     if ((h.msg_flags & MSG_TRUNC) != 0) {

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdlib>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::pose {
 
 PoseEstimator::PoseEstimator(const PoseEstimatorOptions& options)
@@ -88,16 +90,21 @@ void PoseTask::run(const TaskTick& tick) {
   if (gps_ != nullptr) {
     if (const gps::GpsReading* g = gps_->try_read()) {
       ++local_.gps_fixes;
-      if (g->fix.has_date && estimator_.fix_time(g->fix, g->receive_ns) == g->fix.utc_ns) {
+      // The receiver's UTC in host time, which the other readings are on
+      // (runtime/host_clock.hpp: the same unless the system clock was set
+      // since start).
+      gps::GpsFix fix = g->fix;
+      if (fix.has_date) fix.utc_ns = host_from_realtime(fix.utc_ns);
+      if (fix.has_date && estimator_.fix_time(fix, g->receive_ns) == fix.utc_ns) {
         ++local_.gps_fixes_at_utc;
       } else {
         ++local_.gps_fixes_at_receive;
       }
-      if (g->fix.has_date) {
+      if (fix.has_date) {
         local_.gps_has_utc = true;
-        local_.gps_receive_minus_utc_ns = g->receive_ns - g->fix.utc_ns;
+        local_.gps_receive_minus_utc_ns = g->receive_ns - fix.utc_ns;
       }
-      estimator_.add_gps(g->fix, g->receive_ns);
+      estimator_.add_gps(fix, g->receive_ns);
       changed = true;
     }
   }

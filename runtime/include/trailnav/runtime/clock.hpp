@@ -20,8 +20,9 @@ inline constexpr Nanos kNanosPerMicro = 1'000;
 constexpr Nanos seconds_to_nanos(double s) noexcept { return static_cast<Nanos>(s * 1e9); }
 constexpr double nanos_to_seconds(Nanos n) noexcept { return static_cast<double>(n) * 1e-9; }
 
-// UTC now (CLOCK_REALTIME, ns since the epoch): the time base of packet
-// receive stamps and message headers, not of scheduling.
+// UTC now (CLOCK_REALTIME, ns since the epoch), as the system clock reads
+// it: for tools and tests. trailnavd stamps on host time, which carries on
+// across steps of this clock (runtime/host_clock.hpp).
 Nanos wall_clock_ns() noexcept;
 constexpr double nanos_to_millis(Nanos n) noexcept { return static_cast<double>(n) * 1e-6; }
 constexpr double nanos_to_micros(Nanos n) noexcept { return static_cast<double>(n) * 1e-3; }

@@ -1,8 +1,10 @@
 // How one sensor's clock relates to trailnavd's reference clock.
 //
-// trailnavd stamps everything it publishes on one time base: the host's
-// CLOCK_REALTIME (UTC since the epoch), the clock every driver already takes
-// its kernel receive timestamps from and the one a ROS 2 node's `now()` reads.
+// trailnavd stamps everything on one time base: host time, the host's
+// CLOCK_REALTIME (UTC since the epoch) minus the steps the system clock took
+// since start (runtime/host_clock.hpp), the clock every driver takes its
+// receive times on; its stamps go out on the CLOCK_REALTIME a ROS 2 node's
+// `now()` reads.
 // A sensor that keeps its own clock (a Velodyne locked to GPS PPS, a replayed
 // recording's GPS time, an IMU's sample counter) hands over times on that
 // clock; this class relates them to the reference from pairs of

@@ -38,7 +38,7 @@ enum class GpsHealth : std::uint8_t {
 const char* gps_health_name(GpsHealth h) noexcept;
 
 struct GpsReading {
-  std::int64_t receive_ns = 0;  // CLOCK_REALTIME when the epoch's last bytes arrived
+  std::int64_t receive_ns = 0;  // host time (runtime/host_clock.hpp) when the epoch's last bytes arrived
   GpsFix fix;
 };
 

@@ -25,7 +25,7 @@ enum ImuField : std::uint32_t {
 };
 
 struct ImuSample {
-  std::int64_t time_ns = 0;  // host receive time (CLOCK_REALTIME) or recording time
+  std::int64_t time_ns = 0;  // host receive time (runtime/host_clock.hpp) or recording time
   std::uint32_t fields = 0;  // ImuField bits
   std::uint16_t packet_counter = 0;
   std::uint32_t sample_time_fine = 0;

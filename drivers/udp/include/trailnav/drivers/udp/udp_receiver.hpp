@@ -39,7 +39,7 @@ struct ReceiverOptions {
 
 struct Datagram {
   std::span<const std::uint8_t> payload;
-  std::int64_t receive_ns = 0;  // CLOCK_REALTIME
+  std::int64_t receive_ns = 0;  // host time (runtime/host_clock.hpp): the kernel timestamp
   Endpoint source;
 };
 

@@ -79,10 +79,10 @@ class RangeImage {
   std::uint32_t packets = 0;       // data packets that contributed
   std::uint32_t lost_packets = 0;  // packets inferred lost inside this revolution
   std::uint32_t collisions = 0;    // firings dropped because their column already had one
-  // Host receive time (CLOCK_REALTIME ns) of the packet that completed this
+  // Host receive time (host time, runtime/host_clock.hpp) of the packet that completed this
   // revolution, set by the driver task (0 offline): where latency is measured from.
   std::int64_t completed_receive_ns = 0;
-  // trailnavd's reference clock (host CLOCK_REALTIME) minus the sensor's
+  // trailnavd's reference clock (host time) minus the sensor's
   // clock that start_ns and end_ns are on, when the revolution was published
   // (runtime/clock_relation.hpp; 0 offline). The times above stay on the
   // sensor's clock so that a recording always gives the same revolutions;

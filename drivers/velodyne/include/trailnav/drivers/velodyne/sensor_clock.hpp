@@ -50,7 +50,7 @@ class SensorClock {
   void on_position_packet(const PositionPacket& packet) noexcept;
 
   // The time of a data packet's first firing, given its microseconds past the
-  // hour and the host's receive time (CLOCK_REALTIME ns, kernel timestamp).
+  // hour and the host's receive time (host time, runtime/host_clock.hpp: the kernel timestamp).
   std::int64_t resolve(std::uint32_t us_past_hour, std::int64_t host_receive_ns) noexcept;
 
   TimeSource source() const noexcept { return source_; }

@@ -25,7 +25,7 @@ enum class PoseSource : std::uint8_t { none, gyro_odometry, wheels_only };
 const char* pose_source_name(PoseSource s) noexcept;
 
 struct LocalPose {
-  std::int64_t time_ns = 0;  // the clock of the readings (host CLOCK_REALTIME, or a recording's time)
+  std::int64_t time_ns = 0;  // the clock of the readings (host time, runtime/host_clock.hpp, or a recording's time)
   double x = 0.0, y = 0.0, z = 0.0;           // m, odometry frame (x: initial heading, z: up)
   double roll = 0.0, pitch = 0.0, yaw = 0.0;  // rad, ZYX Euler angles of the robot in the odometry frame
   double speed = 0.0;                         // m/s, forward

@@ -1,0 +1,96 @@
+#include "trailnav/runtime/host_clock.hpp"
+
+#include <ctime>
+
+namespace trailnav {
+namespace {
+
+Nanos read(clockid_t id) noexcept {
+  timespec ts{};
+  ::clock_gettime(id, &ts);
+  return static_cast<Nanos>(ts.tv_sec) * kNanosPerSecond + ts.tv_nsec;
+}
+
+// Readings further apart than this (the reader lost its core between them)
+// say nothing about the difference: the step is left as it is.
+constexpr Nanos kBracket = 200 * kNanosPerMicro;
+
+struct Process {
+  std::atomic<Nanos> anchor{0};
+  std::atomic<bool> anchored{false};
+  std::atomic<Nanos> step{0};
+  std::atomic<std::uint64_t> steps{0};
+};
+
+Process& process() noexcept {
+  static Process p;  // constant-initialised: no guard, no allocation
+  return p;
+}
+
+// REALTIME read between two MONOTONIC readings; false when they are too far apart.
+bool pair(Nanos& realtime, Nanos& monotonic) noexcept {
+  const Nanos m0 = read(CLOCK_MONOTONIC);
+  realtime = read(CLOCK_REALTIME);
+  const Nanos m1 = read(CLOCK_MONOTONIC);
+  monotonic = m0 + (m1 - m0) / 2;
+  return m1 - m0 <= kBracket;
+}
+
+void anchor_once() noexcept {
+  Process& p = process();
+  if (p.anchored.load(std::memory_order_acquire)) return;
+  Nanos rt = 0, mono = 0;
+  for (int i = 0; i < 8 && !pair(rt, mono); ++i) {
+  }
+  Nanos expected = 0;
+  if (p.anchor.compare_exchange_strong(expected, rt - mono, std::memory_order_acq_rel)) {
+    p.anchored.store(true, std::memory_order_release);
+  }
+}
+
+// The step now: from a fresh pair of readings when they are close enough.
+Nanos current_step(Nanos& realtime) noexcept {
+  anchor_once();
+  Process& p = process();
+  Nanos mono = 0;
+  const bool good = pair(realtime, mono);
+  Nanos step = p.step.load(std::memory_order_acquire);
+  if (!good) return step;
+  const Nanos raw = realtime - mono - p.anchor.load(std::memory_order_acquire);
+  if (raw - step > HostClockRelation::kTolerance || step - raw > HostClockRelation::kTolerance) {
+    if (p.step.compare_exchange_strong(step, raw, std::memory_order_acq_rel)) {
+      p.steps.fetch_add(1, std::memory_order_relaxed);
+      step = raw;
+    }  // else another thread saw it first: `step` holds its value
+  }
+  return step;
+}
+
+}  // namespace
+
+void host_clock_start() noexcept { anchor_once(); }
+
+Nanos host_now_ns() noexcept {
+  Nanos realtime = 0;
+  const Nanos step = current_step(realtime);
+  return realtime - step;
+}
+
+Nanos host_from_realtime(Nanos realtime_ns) noexcept {
+  Nanos now = 0;
+  return realtime_ns - current_step(now);
+}
+
+Nanos host_to_realtime(Nanos host_ns) noexcept {
+  Nanos now = 0;
+  return host_ns + current_step(now);
+}
+
+Nanos host_clock_step_ns() noexcept {
+  Nanos now = 0;
+  return current_step(now);
+}
+
+std::uint64_t host_clock_steps() noexcept { return process().steps.load(std::memory_order_relaxed); }
+
+}  // namespace trailnav
