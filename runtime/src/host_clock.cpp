@@ -16,8 +16,7 @@ Nanos read(clockid_t id) noexcept {
 constexpr Nanos kBracket = 200 * kNanosPerMicro;
 
 struct Process {
-  std::atomic<Nanos> anchor{0};
-  std::atomic<bool> anchored{false};
+  std::atomic<Nanos> anchor{0};  // 0 until anchored (REALTIME - MONOTONIC is never 0 on a running system)
   std::atomic<Nanos> step{0};
   std::atomic<std::uint64_t> steps{0};
 };
@@ -36,39 +35,37 @@ bool pair(Nanos& realtime, Nanos& monotonic) noexcept {
   return m1 - m0 <= kBracket;
 }
 
-void anchor_once() noexcept {
+// The anchor, taken by the first caller (the one whose exchange succeeds).
+Nanos anchor() noexcept {
   Process& p = process();
-  if (p.anchored.load(std::memory_order_acquire)) return;
+  Nanos a = p.anchor.load(std::memory_order_acquire);
+  if (a != 0) return a;
   Nanos rt = 0, mono = 0;
   for (int i = 0; i < 8 && !pair(rt, mono); ++i) {
   }
   Nanos expected = 0;
-  if (p.anchor.compare_exchange_strong(expected, rt - mono, std::memory_order_acq_rel)) {
-    p.anchored.store(true, std::memory_order_release);
-  }
+  return p.anchor.compare_exchange_strong(expected, rt - mono, std::memory_order_acq_rel) ? rt - mono : expected;
 }
 
 // The step now: from a fresh pair of readings when they are close enough.
 Nanos current_step(Nanos& realtime) noexcept {
-  anchor_once();
+  const Nanos a = anchor();
   Process& p = process();
   Nanos mono = 0;
   const bool good = pair(realtime, mono);
   Nanos step = p.step.load(std::memory_order_acquire);
   if (!good) return step;
-  const Nanos raw = realtime - mono - p.anchor.load(std::memory_order_acquire);
-  if (raw - step > HostClockRelation::kTolerance || step - raw > HostClockRelation::kTolerance) {
-    if (p.step.compare_exchange_strong(step, raw, std::memory_order_acq_rel)) {
-      p.steps.fetch_add(1, std::memory_order_relaxed);
-      step = raw;
-    }  // else another thread saw it first: `step` holds its value
-  }
+  const Nanos next = HostClockRelation::next_step(a, realtime, mono, step);
+  if (next != step && p.step.compare_exchange_strong(step, next, std::memory_order_acq_rel)) {
+    p.steps.fetch_add(1, std::memory_order_relaxed);
+    step = next;
+  }  // a failed exchange: another thread saw the step first, and `step` holds its value
   return step;
 }
 
 }  // namespace
 
-void host_clock_start() noexcept { anchor_once(); }
+void host_clock_start() noexcept { anchor(); }
 
 Nanos host_now_ns() noexcept {
   Nanos realtime = 0;

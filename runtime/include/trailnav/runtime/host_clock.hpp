@@ -40,14 +40,19 @@ class HostClockRelation {
   // `realtime` and `monotonic` read at (about) one instant.
   HostClockRelation(Nanos realtime, Nanos monotonic) noexcept : anchor_(realtime - monotonic) {}
 
-  // Takes a new pair of readings; returns the step since the anchor
-  // (unchanged while the difference stays within the tolerance of it).
+  // The step a pair of readings shows, given the one taken so far: the new
+  // difference when it moved more than the tolerance, else the old one. What
+  // update() and the process's clock (host_now_ns() and the rest) both use.
+  static constexpr Nanos next_step(Nanos anchor, Nanos realtime, Nanos monotonic, Nanos step) noexcept {
+    const Nanos raw = realtime - monotonic - anchor;
+    return raw - step > kTolerance || step - raw > kTolerance ? raw : step;
+  }
+
+  // Takes a new pair of readings; returns the step since the anchor.
   Nanos update(Nanos realtime, Nanos monotonic) noexcept {
-    const Nanos raw = realtime - monotonic - anchor_;
-    if (raw - step_ > kTolerance || step_ - raw > kTolerance) {
-      step_ = raw;
-      ++steps_;
-    }
+    const Nanos next = next_step(anchor_, realtime, monotonic, step_);
+    if (next != step_) ++steps_;
+    step_ = next;
     return step_;
   }
   Nanos step() const noexcept { return step_; }
