@@ -141,6 +141,10 @@ void CanDriver::open_socketcan(Nanos now) noexcept {
 }
 
 void CanDriver::read_socketcan(Nanos now) noexcept {
+  // The kernel stamps on CLOCK_REALTIME; host time is that minus the steps
+  // of the system clock (runtime/host_clock.hpp), read once per run.
+  std::int64_t step = 0;
+  bool have_step = false;
   for (int k = 0; k < options_.max_frames_per_run; ++k) {
     canfd_frame raw{};
     alignas(cmsghdr) std::array<std::uint8_t, CMSG_SPACE(sizeof(timespec)) + CMSG_SPACE(sizeof(std::uint32_t)) + 32> control{};
@@ -160,14 +164,17 @@ void CanDriver::read_socketcan(Nanos now) noexcept {
       ++local_.malformed;
       continue;
     }
-    Frame f;
-    f.time_ns = host_now_ns();
+    Frame f;  // time_ns 0 until the kernel's timestamp is found
     for (cmsghdr* c = CMSG_FIRSTHDR(&m); c; c = CMSG_NXTHDR(&m, c)) {
       if (c->cmsg_level != SOL_SOCKET) continue;
       if (c->cmsg_type == SO_TIMESTAMPNS) {
         timespec ts{};
         std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
-        f.time_ns = host_from_realtime(static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec);
+        if (!have_step) {
+          step = host_clock_step_ns();
+          have_step = true;
+        }
+        f.time_ns = static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec - step;
       } else if (c->cmsg_type == SO_RXQ_OVFL) {
         std::uint32_t dropped = 0;
         std::memcpy(&dropped, CMSG_DATA(c), sizeof dropped);
@@ -175,6 +182,7 @@ void CanDriver::read_socketcan(Nanos now) noexcept {
         last_overflow_ = dropped;
       }
     }
+    if (f.time_ns == 0) f.time_ns = host_now_ns();  // no kernel timestamp: when it was read
     f.id = raw.can_id;
     f.fd = n == CANFD_MTU;
     f.fd_flags = f.fd ? static_cast<std::uint8_t>(raw.flags & 0x3) : 0;
