@@ -146,7 +146,7 @@ Replayer::~Replayer() = default;
 std::string Replayer::pty_path(const std::string& stream) const {
   for (const StreamReport& s : report_.streams) {
     // A serial stream sent as UDP datagrams has no pseudo-terminal.
-    if (s.name == stream && s.kind == StreamKind::serial) return s.target.rfind("udp ", 0) == 0 ? "" : s.target;
+    if (s.name == stream && s.kind == StreamKind::serial) return options_.udp_targets.count(stream) != 0 ? "" : s.target;
   }
   return "";
 }
@@ -168,18 +168,21 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
   r->reader_ = std::move(opened.reader);
 
   // Every stream an option names must exist, with the kind the option is for.
-  auto missing = [&](const std::string& name, StreamKind kind) {
+  auto has = [&](const std::string& name, StreamKind kind) {
     for (const auto& s : r->reader_->streams()) {
-      if (s.name == name && s.kind == kind) return false;
+      if (s.name == name && s.kind == kind) return true;
     }
+    return false;
+  };
+  auto missing = [&](const std::string& name, StreamKind kind) {
+    if (has(name, kind)) return false;
     result.error = std::string("no ") + (kind == StreamKind::udp ? "UDP" : "serial") + " stream '" + name + "' in " + path;
     return true;
   };
   for (const auto& target : options.udp_targets) {
     // A serial stream may go out as UDP datagrams too: its bytes as a serial
     // device server on the robot's network would send them.
-    bool serial = false;
-    for (const auto& s : r->reader_->streams()) serial = serial || (s.name == target.first && s.kind == StreamKind::serial);
+    const bool serial = has(target.first, StreamKind::serial);
     if (serial && options.serial_links.count(target.first) != 0) {
       result.error = "stream '" + target.first + "': both a UDP destination and a pseudo-terminal link; give one";
       return result;
