@@ -230,7 +230,7 @@ void DdsPublisher::publish_navigation(const nav::NavigationSnapshot& n) noexcept
     // transforms are a sample of the poses and need not hold the one the
     // subgoal was placed from (after the pose thread catches up on held
     // readings, several poses pass between two of them).
-    if (tf_writer_ && n.robot.time_ns == n.time_ns) {
+    if (tf_writer_) {
       tf_msg_.clear();
       tf_msg_.add(n.time_ns, options_.odom_frame, options_.frames.base_link,
                   {n.robot.x, n.robot.y, n.robot.z, n.robot.roll, n.robot.pitch, n.robot.yaw});

@@ -209,7 +209,7 @@ bool Navigator::plan(const pose::UtmPose& utm, std::int64_t now, const osm::Road
 
 subgoals::Vec2 Navigator::to_local(const osm::Point2& p) const noexcept {
   const double dx = p.x - utm_e_, dy = p.y - utm_n_;
-  return {local_x_ + cos_ * dx - sin_ * dy, local_y_ + sin_ * dx + cos_ * dy};
+  return {local_.x + cos_ * dx - sin_ * dy, local_.y + sin_ * dx + cos_ * dy};
 }
 
 subgoals::Vec2 Navigator::raw_local(std::size_t i) const noexcept { return to_local(subgoals_[i]); }
@@ -228,14 +228,10 @@ StepResult Navigator::step(const pose::LocalPose& local, const pose::UtmPose& ut
       !finite(local.yaw)) {
     return result;
   }
-  time_ns_ = local.time_ns;
   local_ = local;
   rot_ = local.yaw - utm.yaw;
   cos_ = std::cos(rot_);
   sin_ = std::sin(rot_);
-  local_x_ = local.x;
-  local_y_ = local.y;
-  local_yaw_ = local.yaw;
   utm_e_ = utm.easting;
   utm_n_ = utm.northing;
   have_pose_ = true;
@@ -422,7 +418,7 @@ bool Navigator::set_goal(const GoalRequest& g) noexcept {
         return false;
       }
       // The inverse of to_local through the newest pose pair.
-      const double dx = g.a - local_x_, dy = g.b - local_y_;
+      const double dx = g.a - local_.x, dy = g.b - local_.y;
       x = utm_e_ + cos_ * dx + sin_ * dy;
       y = utm_n_ - sin_ * dx + cos_ * dy;
       graph_.to_latlon(x, y, lat, lon);
@@ -458,7 +454,7 @@ void Navigator::cancel() noexcept {
 }
 
 void Navigator::report(NavigationStatusReport& out) const noexcept {
-  out.time_ns = time_ns_;
+  out.time_ns = local_.time_ns;
   out.state = state_;
   out.has_goal = has_goal_;
   out.goal_easting = goal_x_;
@@ -480,7 +476,7 @@ void Navigator::snapshot(NavigationSnapshot& out) const noexcept {
   out.state = state_;
   out.goal_revision = goal_revision_;
   report(out.report);
-  out.time_ns = time_ns_;
+  out.time_ns = local_.time_ns;
   out.robot = local_;
   out.plan = counters_.plans;
   out.active_revision = active_revision_;
@@ -507,7 +503,7 @@ void Navigator::snapshot(NavigationSnapshot& out) const noexcept {
     // Heading: towards the next subgoal (from the previous one at the end).
     const subgoals::Vec2 a = i + 1 < n ? v : (i > 0 ? corrected(i - 1) : v);
     const subgoals::Vec2 b = i + 1 < n ? corrected(i + 1) : v;
-    p.yaw = (a.x == b.x && a.y == b.y) ? local_yaw_ : std::atan2(b.y - a.y, b.x - a.x);
+    p.yaw = (a.x == b.x && a.y == b.y) ? local_.yaw : std::atan2(b.y - a.y, b.x - a.x);
     return p;
   };
   out.active_pose = pose_of(active_);

@@ -138,7 +138,7 @@ struct NavigationSnapshot {
 
   NavState state = NavState::planning;
   std::int64_t time_ns = 0;        // the pose's time
-  pose::LocalPose robot;           // the odometry pose the subgoals were placed from (its time is time_ns)
+  pose::LocalPose robot;           // the odometry pose the subgoals were placed from (robot.time_ns == time_ns)
   std::uint64_t plan = 0;          // number of the plan the subgoals belong to
   std::uint64_t active_revision = 0;  // changes whenever the active subgoal or its position changes
   std::uint64_t path_revision = 0;    // changes whenever the path changes
@@ -257,10 +257,8 @@ class Navigator {
   std::int64_t off_route_since_ = -1;
   std::uint64_t active_revision_ = 0, path_revision_ = 0;
   // The latest pose pair: odometry = rotate(utm - utm_origin) + local_origin.
-  double local_x_ = 0.0, local_y_ = 0.0, utm_e_ = 0.0, utm_n_ = 0.0, cos_ = 1.0, sin_ = 0.0, rot_ = 0.0;
-  double local_yaw_ = 0.0;
-  pose::LocalPose local_;  // the whole pose of time_ns_
-  std::int64_t time_ns_ = 0;
+  pose::LocalPose local_;  // the odometry pose of the latest step (its time is the navigator's)
+  double utm_e_ = 0.0, utm_n_ = 0.0, cos_ = 1.0, sin_ = 0.0, rot_ = 0.0;
   const char* message_ = "";
   NavigationCounters counters_;
 };
