@@ -9,7 +9,6 @@
 // latency, and trailnavd's own report.
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -40,6 +39,7 @@
 #include "subscriber.hpp"
 #include "terminal.hpp"
 #include "trailnav/runtime/histogram.hpp"
+#include "trailnav/runtime/spawn.hpp"
 
 extern char** environ;
 
@@ -228,19 +228,11 @@ int run_bench_demo(const BenchDemoOptions& o) {
   std::ofstream(out / "trailnav-robot.dbc") << sim::robot_dbc_text();
   std::ofstream(out / "bench.yaml") << config;
   const std::string daemon_log = (out / "trailnavd.log").string();
-  std::vector<std::string> args = {sibling_binary("trailnavd"), "--config", (out / "bench.yaml").string()};
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 2, daemon_log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
-  pid_t pid = 0;
-  const int spawned = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (spawned != 0) {
-    std::fprintf(stderr, "trailnav demo: cannot start %s: %s\n", argv[0], std::strerror(spawned));
+  std::string spawn_error;
+  const pid_t pid = spawn_process({sibling_binary("trailnavd"), "--config", (out / "bench.yaml").string()},
+                                  {.stdout_path = "/dev/null", .stderr_path = daemon_log}, spawn_error);
+  if (pid < 0) {
+    std::fprintf(stderr, "trailnav demo: %s\n", spawn_error.c_str());
     return 1;
   }
   std::printf("2. trailnavd started (pid %d): %s, log %s\n", static_cast<int>(pid), (out / "bench.yaml").c_str(),

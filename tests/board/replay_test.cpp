@@ -1,7 +1,6 @@
 // End to end on loopback: recordings replayed by `trailnav replay` (the real
 // binary) and by the replayer library into the real receivers.
 #include <fcntl.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -22,6 +21,7 @@
 #include "trailnav/drivers/velodyne/driver.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/spawn.hpp"
 
 extern char** environ;
 
@@ -59,16 +59,9 @@ std::vector<RangeImage> decode_offline(const std::string& capture, Model model, 
 }
 
 int run_binary(const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
-  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) return -1;
+  std::string error;
+  const pid_t pid = spawn_process(args, {.stdout_path = "", .stderr_path = "/dev/null"}, error);
+  if (pid < 0) return -1;
   int status = 0;
   waitpid(pid, &status, 0);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;

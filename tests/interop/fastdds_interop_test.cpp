@@ -14,9 +14,7 @@
 //   - a goal written by Fast DDS is taken: the navigation status follows it.
 #include <gtest/gtest.h>
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -58,6 +56,7 @@
 #include "sensor_msgsPubSubTypes.h"
 #include "tf2_msgsPubSubTypes.h"
 #include "trailnav_msgsPubSubTypes.h"
+#include "trailnav/runtime/spawn.hpp"
 
 extern char** environ;
 
@@ -176,18 +175,11 @@ struct Echo {
   std::string out_path;
   bool start(std::uint32_t domain, const fs::path& dir) {
     out_path = (dir / "echo.txt").string();
-    std::vector<std::string> args = {TRAILNAV_BINARY, "echo",  "trailnav/obstacle_map", "--digest",
-                                     "--domain",      std::to_string(domain), "--timeout", "30"};
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
-    const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    return rc == 0;
+    std::string error;
+    pid = trailnav::spawn_process({TRAILNAV_BINARY, "echo", "trailnav/obstacle_map", "--digest", "--domain",
+                                   std::to_string(domain), "--timeout", "30"},
+                                  {.stdout_path = out_path, .stderr_path = "/dev/null"}, error);
+    return pid > 0;
   }
   // Stops it (SIGINT: it prints its summary) and returns stamp -> digest.
   std::map<std::int64_t, std::uint64_t> stop() {

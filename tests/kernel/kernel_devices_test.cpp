@@ -11,12 +11,10 @@
 // Anywhere else they say so and skip.
 #include <gtest/gtest.h>
 
-#include <fcntl.h>
 #include <linux/can.h>
 #include <linux/can/error.h>
 #include <net/if.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -40,6 +38,7 @@
 #include "trailnav/drivers/can/can_driver.hpp"
 #include "trailnav/drivers/gpio/gpio_driver.hpp"
 #include "trailnav/runtime/host_clock.hpp"
+#include "trailnav/runtime/spawn.hpp"
 
 using namespace trailnav;
 namespace fs = std::filesystem;
@@ -380,16 +379,10 @@ TEST(KernelClock, TrailnavdCarriesOnAcrossStepsOfTheHostClock) {
       << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 5.0}\n";
   }
   const std::string err = (dir / "trailnavd.err").string();
-  std::vector<std::string> args = {daemon, "--config", (dir / "robot.yaml").string(), "--duration", "120"};
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  pid_t pid = 0;
-  ASSERT_EQ(posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ), 0);
-  posix_spawn_file_actions_destroy(&actions);
+  std::string error;
+  const pid_t pid = spawn_process({daemon, "--config", (dir / "robot.yaml").string(), "--duration", "120"},
+                                  {.stdout_path = "", .stderr_path = err}, error);
+  ASSERT_GT(pid, 0) << error;
 
   auto dds_domain = dds::Domain::create(domain, dds::loopback_config());
   ASSERT_TRUE(dds_domain.domain) << dds_domain.error;

@@ -1,8 +1,6 @@
 #include "bench_daemon.hpp"
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -17,6 +15,7 @@
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/runtime/clock.hpp"
+#include "trailnav/runtime/spawn.hpp"
 
 extern char** environ;
 
@@ -137,18 +136,10 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
 
   // trailnavd itself, as systemd would run it (stderr to a file).
   b->stderr_path_ = (b->dir_ / "trailnavd.err").string();
-  std::vector<std::string> args = {daemon_binary, "--config", b->config_.string(), "--duration", "600"};
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 2, b->stderr_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  const int rc = posix_spawn(&b->pid_, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) {
+  b->pid_ = spawn_process({daemon_binary, "--config", b->config_.string(), "--duration", "600"},
+                          {.stdout_path = "", .stderr_path = b->stderr_path_}, error);
+  if (b->pid_ < 0) {
     b->pid_ = 0;
-    error = "cannot start " + daemon_binary;
     return nullptr;
   }
   return b;
