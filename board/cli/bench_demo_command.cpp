@@ -283,6 +283,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
     ro.loops = 0;
     ro.stop = &stop_replay;
   }
+  std::atomic<std::int64_t> replay_start_ns{0};  // wall clock when the replay began (read by the replayer)
+  ro.started = [&replay_start_ns] { replay_start_ns = wall_clock_ns(); };
   auto replayer = replay::Replayer::create(so.out, ro);
   if (!replayer.replayer) {
     std::fprintf(stderr, "trailnav demo: %s\n%s", replayer.error.c_str(), stop_daemon().c_str());
@@ -290,10 +292,9 @@ int run_bench_demo(const BenchDemoOptions& o) {
   }
   std::printf("3. replaying into trailnavd in real time; listening on DDS (loopback) like a planner\n");
   std::atomic<bool> playing{true};
-  std::atomic<std::int64_t> replay_start_ns{0};  // wall clock when the replay began
+  std::int64_t replay_late_ns = 0;                // its worst send, late by (read after the join)
   std::thread player([&] {
-    replay_start_ns = wall_clock_ns();
-    replayer.replayer->run();
+    replay_late_ns = replayer.replayer->run().send_error.max;
     playing = false;
   });
   const double total_s = soak ? o.soak_minutes * 60.0 : o.seconds;
@@ -460,6 +461,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
     double half_width = std::numeric_limits<double>::max();
     for (const auto& t : truth.truth->scenario.trails) half_width = std::min(half_width, 0.5 * t.width);
     trail_check.set_offset(replay_start_ns - start.utc_ns);
+    trail_check.set_past_end_tolerance(replay_late_ns + eval::kDaemonStallTolerance_ns);
     std::ofstream csv(out / "subgoals.csv");
     csv << "stamp_s,odom_x,odom_y,trail_distance\n";
     for (const Stamped& g : subgoals_received) {

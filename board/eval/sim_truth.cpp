@@ -220,7 +220,12 @@ bool TrailCheck::to_world(std::int64_t t_ns, double x, double y, double& wx, dou
   if (it != odometry_.begin() && (best == nullptr || t_ns - (it - 1)->t < best->t - t_ns)) best = &*(it - 1);
   if (best == nullptr || std::abs(best->t - t_ns) > 200'000'000) return false;
   TruthAt p;
-  if (!truth_at(truth_.trajectory, best->t - offset_ns_, p)) return false;
+  const std::int64_t t_true = best->t - offset_ns_;
+  if (!truth_at(truth_.trajectory, t_true, p)) {
+    const auto& traj = truth_.trajectory;
+    if (traj.empty() || t_true < traj.back().utc_ns || t_true - traj.back().utc_ns > late_ns_) return false;
+    truth_at(traj, traj.back().utc_ns, p);
+  }
   // Into the robot's frame through the odometry pose, out through the true pose.
   const double dx = x - best->x, dy = y - best->y;
   const double c0 = std::cos(best->yaw), s0 = std::sin(best->yaw);

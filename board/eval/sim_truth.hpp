@@ -4,6 +4,7 @@
 // which stands in for the terrain thread until one is configured.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -77,11 +78,23 @@ std::string load_true_route(const std::string& dir, sim::Polyline& out);
 // pose at the same instant: world = T_true(t) T_odom(t)^-1 p. Odometry poses
 // come from the pose topic; `offset_ns` maps trailnavd's clock to the
 // recording's (the replay's start in wall time minus the recording's start).
+// How far past a recording's end the daemon's stamps may lie beyond the
+// replayer's own lateness: its threads stalled for up to 3.1 s under
+// ThreadSanitizer on a busy 2-core machine (CI, December 2026).
+inline constexpr std::int64_t kDaemonStallTolerance_ns = 5'000'000'000;
+
 class TrailCheck {
  public:
   TrailCheck(const SimTruth& truth, const sim::Polyline& trail, std::int64_t offset_ns)
       : truth_(truth), trail_(trail), offset_ns_(offset_ns) {}
   void set_offset(std::int64_t offset_ns) noexcept { offset_ns_ = offset_ns; }
+  // A recording has no data after its end, so an odometry pose stamped past
+  // the trajectory's end is of data at or before it, stamped late: a sensor
+  // whose clock relation was re-anchored on late arrivals (the replayer sent
+  // late, or the daemon's threads stalled for seconds, as under a sanitizer)
+  // stamps late until the next window. Such a stamp, up to `late_ns` past the
+  // end, is taken as the robot at the end; beyond it, no true pose (NaN).
+  void set_past_end_tolerance(std::int64_t late_ns) noexcept { late_ns_ = std::max<std::int64_t>(0, late_ns); }
   void add_odometry_pose(std::int64_t t_ns, double x, double y, double yaw);
   // Distance of (x, y), stamped t_ns (trailnavd's clock), to the trail's
   // centre; NaN without an odometry pose within 0.2 s or a true pose then.
@@ -99,6 +112,7 @@ class TrailCheck {
   const SimTruth& truth_;
   const sim::Polyline& trail_;
   std::int64_t offset_ns_;
+  std::int64_t late_ns_ = 0;
   std::vector<Sample> odometry_;
 };
 

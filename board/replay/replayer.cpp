@@ -308,6 +308,7 @@ ReplayReport Replayer::run() {
   DurationHistogram errors;
   const std::int64_t skip_ns = static_cast<std::int64_t>(options_.skip_s * 1e9);
   const std::int64_t limit_ns = options_.duration_s > 0.0 ? static_cast<std::int64_t>(options_.duration_s * 1e9) : -1;
+  if (options_.started) options_.started();
   const std::int64_t wall_start = monotonic_ns();
   std::int64_t schedule_base = wall_start;  // wall time of the current loop's first event
   std::int64_t covered_ns = 0;

@@ -46,6 +46,7 @@ struct ReplayOptions {
   std::uint64_t fault_seed = 1;   // the same seed, the same faults
   const std::atomic<bool>* stop = nullptr;
   std::function<void(double fraction)> progress;  // called now and then with the part done
+  std::function<void()> started;  // called once, just before the first event's schedule is fixed
 };
 
 struct StreamReport {

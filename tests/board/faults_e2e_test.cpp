@@ -294,6 +294,7 @@ FaultRun run_with_faults(const std::vector<std::string>& faults, double seconds 
   // the recording's.
   const std::int64_t offset = bench->replay_start_ns() - truth.trajectory.front().utc_ns;
   to_world.set_offset(offset);
+  to_world.set_past_end_tolerance(out.report.send_error.max + eval::kDaemonStallTolerance_ns);
   for (const auto& [stamp, xyyaw] : odometry) to_world.add_odometry_pose(stamp, xyyaw[0], xyyaw[1], xyyaw[2]);
   for (const Pending& m : pending) {
     if (odometry.count(m.stamp) == 0) ++out.maps_without_tf;

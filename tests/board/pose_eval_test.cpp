@@ -6,10 +6,14 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <numbers>
 
 #include "pose_eval.hpp"
+#include "roads.hpp"
+#include "sim_truth.hpp"
 #include "simulator.hpp"
 
 using namespace trailnav;
@@ -43,4 +47,44 @@ TEST(PoseEval, MixedRouteUtmErrorStaysAtTheGpsLevelAndTheCovarianceIsHonest) {
   EXPECT_GT(r.utm_counters.used, 2500u);
   EXPECT_EQ(r.rows.size(), 4u);
   fs::remove_all(dir);
+}
+
+// The check of points against the simulated trail: through the odometry pose
+// at a stamp and the true pose then; a stamp past the trajectory's end only
+// within the tolerance given (the robot at its end), never before its start.
+TEST(TrailCheck, MapsThroughOdometryAndTruthAndTakesLateStampsOnlyWithinTheTolerance) {
+  eval::SimTruth truth;
+  // True: along x at 1 m/s from (100, 50) for 10 s, facing +x.
+  for (int i = 0; i <= 10; ++i) {
+    eval::TruthPose p;
+    p.utc_ns = 1'000'000'000'000LL + i * 1'000'000'000LL;
+    p.x = 100.0 + i;
+    p.y = 50.0;
+    truth.trajectory.push_back(p);
+  }
+  const sim::Polyline trail({{0.0, 50.0}, {300.0, 50.0}});  // the centre line y = 50
+  const std::int64_t offset = 5'000'000'000LL;              // daemon clock = recording + 5 s
+  eval::TrailCheck check(truth, trail, offset);
+  // Odometry: the robot at the origin of its frame facing +y at each second.
+  for (int i = 0; i <= 20; ++i) check.add_odometry_pose(truth.trajectory.front().utc_ns + offset + i * 1'000'000'000LL, 0.0, 0.0, std::numbers::pi / 2);
+  const std::int64_t t3 = truth.trajectory[3].utc_ns + offset;
+  // 2 m ahead of the robot in odometry (0, 2) is (105, 50) in the world: on the centre.
+  double wx = 0, wy = 0;
+  ASSERT_TRUE(check.to_world(t3, 0.0, 2.0, wx, wy));
+  EXPECT_NEAR(wx, 105.0, 1e-9);
+  EXPECT_NEAR(wy, 50.0, 1e-9);
+  EXPECT_NEAR(check.distance(t3, 0.0, 2.0), 0.0, 1e-9);
+  // 1.5 m to its left (-1.5, 0) is 1.5 m off the centre.
+  EXPECT_NEAR(check.distance(t3, -1.5, 0.0), 1.5, 1e-9);
+  // No odometry pose within 0.2 s: NaN.
+  EXPECT_TRUE(std::isnan(check.distance(truth.trajectory.front().utc_ns + offset - 1'000'000'000LL, 0.0, 0.0)));
+  // Past the end: NaN without a tolerance, the end pose within it.
+  const std::int64_t late = truth.trajectory.back().utc_ns + offset + 3'000'000'000LL;
+  EXPECT_TRUE(std::isnan(check.distance(late, 0.0, 0.0)));
+  check.set_past_end_tolerance(2'000'000'000LL);
+  EXPECT_TRUE(std::isnan(check.distance(late, 0.0, 0.0)));
+  check.set_past_end_tolerance(3'000'000'000LL);
+  ASSERT_TRUE(check.to_world(late, 0.0, 1.0, wx, wy));
+  EXPECT_NEAR(wx, 111.0, 1e-9);
+  EXPECT_NEAR(wy, 50.0, 1e-9);
 }

@@ -443,6 +443,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   }
   if (navigation) {
     if (!truth.trajectory.empty()) trail_check.set_offset(bench->replay_start_ns() - truth.trajectory.front().utc_ns);
+    trail_check.set_past_end_tolerance(bench->replay_report().send_error.max + eval::kDaemonStallTolerance_ns);
     // Through odom -> base_link at each subgoal's own stamp: the daemon sends
     // that transform with every subgoal (the pose topic and the pose-rate
     // transforms are a sample of the poses, and after the pose thread caught

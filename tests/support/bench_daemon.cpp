@@ -175,6 +175,10 @@ void BenchDaemon::start_replay(double delay_s) {
     ro.faults.push_back(*parsed.spec);
   }
   ro.fault_seed = options_.fault_seed;
+  // The replay's start is read by the replayer itself, right before it fixes
+  // its schedule (a thread preempted between here and there would otherwise
+  // move every true time by as long).
+  ro.started = [this] { replay_start_ns_ = wall_clock_ns(); };
   replaying_ = true;
   player_ = std::thread([this, ro, delay_s] {
     auto replayer = replay::Replayer::create(recording_, ro);
@@ -185,7 +189,6 @@ void BenchDaemon::start_replay(double delay_s) {
       return;
     }
     std::this_thread::sleep_for(std::chrono::duration<double>(delay_s));
-    replay_start_ns_ = wall_clock_ns();
     replay_report_ = replayer.replayer->run();
     replaying_ = false;
   });
