@@ -54,6 +54,28 @@ TEST(TaskAccounting, AThreadKeptOffItsCoreStallsButDoesNotOverrun) {
   EXPECT_EQ(s.cpu_max, 3 * kMs);
 }
 
+TEST(TaskAccounting, ARunAfterADelayHasABudgetPerPeriodOfInput) {
+  TaskAccounting acc(TaskKind::periodic, 10 * kMs, 2 * kMs);
+  acc.record_run(10 * kMs, 10 * kMs, 11 * kMs, kMs);  // on time: 1 ms per period
+  // Started 30 ms after the run before: three periods of input, 6 ms allowed.
+  acc.record_run(20 * kMs, 40 * kMs, 45 * kMs, 5 * kMs);
+  TaskStats s = acc.stats();
+  EXPECT_EQ(s.overruns, 0u);
+  EXPECT_EQ(s.stalls, 0u);
+  EXPECT_EQ(s.slips, 1u);
+  EXPECT_EQ(s.cpu_max, 5 * kMs);                       // the most one run used
+  EXPECT_NEAR(static_cast<double>(s.cpu_per_period.max), 5.0 / 3.0 * kMs, 0.05 * kMs);  // per period of input
+  // Back on the grid, one period after: one budget again.
+  acc.record_run(50 * kMs, 50 * kMs, 53 * kMs, 3 * kMs);
+  s = acc.stats();
+  EXPECT_EQ(s.overruns, 1u);
+  // An event task's allowance is its budget, however long since its last run.
+  TaskAccounting ev(TaskKind::event, 0, 2 * kMs);
+  ev.record_run(0, 0, kMs, kMs);
+  ev.record_run(100 * kMs, 100 * kMs, 103 * kMs, 3 * kMs);
+  EXPECT_EQ(ev.stats().overruns, 1u);
+}
+
 TEST(TaskAccounting, EventTasksNeverSlip) {
   TaskAccounting acc(TaskKind::event, 0, 2 * kMs);
   acc.record_run(0, 500 * kMs, 501 * kMs);

@@ -1,15 +1,17 @@
 // The fixed-rate scheduler. One task table states, for every task, its name,
 // kind (periodic at a rate, or event-driven), time budget, priority and CPU;
 // the scheduler runs each task on its own thread and measures it against that
-// table: runs, overruns (more CPU time than the budget), stalls (over budget
+// table: runs, overruns (more CPU time than the budget; a periodic run after a
+// delay has a budget per period of input it drains), stalls (over budget
 // by the clock while the task's own CPU time stayed within it: the thread
 // lost its core mid-run to the kernel, the hypervisor or a higher priority),
 // slips (start more than one period after the deadline), skipped periods, and
-// execution-time (by the clock) and wake-up-latency distributions, all
-// readable at any time without locks.
+// execution-time (by the clock), CPU-time and wake-up-latency distributions,
+// all readable at any time without locks.
 #pragma once
 
 #include <atomic>
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -84,6 +86,7 @@ struct TaskStats {
   DurationSummary execution;
   DurationSummary latency;  // start minus deadline (periodic) or minus signal (event)
   Nanos cpu_max = 0;        // most CPU time one run used
+  DurationSummary cpu_per_period;  // CPU time of a run per period of input it drained (record_run)
 };
 
 // The bookkeeping for one task, separate from any thread so that it can be
@@ -94,20 +97,35 @@ class TaskAccounting {
       : kind_(kind), period_(period), budget_(budget) {}
 
   // `cpu`: the CPU time the run used (by default all of its clock time).
+  //
+  // A periodic task drains what arrived since its last run, so a run that
+  // starts k periods after the one before (the thread was delayed) has k
+  // periods of input and k budgets: the allowance is budget x max(1, time
+  // since the last start / period). Overruns and stalls are held against the
+  // allowance; the CPU distribution is per period of input (cpu / k), the
+  // figure a budget is chosen from. An event task's allowance is its budget.
   void record_run(Nanos scheduled, Nanos started, Nanos finished, Nanos cpu = -1) noexcept {
     const Nanos latency = started - scheduled;
     const Nanos execution = finished - started;
     if (cpu < 0) cpu = execution;
+    double periods = 1.0;
+    if (kind_ == TaskKind::periodic && period_ > 0) {
+      const Nanos since = started - (last_started_ != kNever ? last_started_ : scheduled - period_);
+      periods = std::max(1.0, static_cast<double>(since) / static_cast<double>(period_));
+      last_started_ = started;
+    }
+    const auto allowance = static_cast<Nanos>(static_cast<double>(budget_) * periods);
     runs_.fetch_add(1, std::memory_order_relaxed);
     if (cpu > cpu_max_.load(std::memory_order_relaxed)) cpu_max_.store(cpu, std::memory_order_relaxed);
-    if (cpu > budget_) {
+    if (cpu > allowance) {
       overruns_.fetch_add(1, std::memory_order_relaxed);
-    } else if (execution > budget_) {
+    } else if (execution > allowance) {
       stalls_.fetch_add(1, std::memory_order_relaxed);
     }
     if (kind_ == TaskKind::periodic && latency > period_) slips_.fetch_add(1, std::memory_order_relaxed);
     execution_.record(execution);
     latency_.record(latency);
+    cpu_per_period_.record(static_cast<Nanos>(static_cast<double>(cpu) / periods));
   }
   void record_skipped(std::uint64_t periods) noexcept { skipped_.fetch_add(periods, std::memory_order_relaxed); }
 
@@ -121,6 +139,7 @@ class TaskAccounting {
     s.skipped_periods = skipped_.load(std::memory_order_relaxed);
     s.execution = execution_.summary();
     s.latency = latency_.summary();
+    s.cpu_per_period = cpu_per_period_.summary();
     return s;
   }
 
@@ -136,6 +155,9 @@ class TaskAccounting {
   std::atomic<std::uint64_t> skipped_{0};
   DurationHistogram execution_;
   DurationHistogram latency_;
+  DurationHistogram cpu_per_period_;
+  static constexpr Nanos kNever = INT64_MIN;
+  Nanos last_started_ = kNever;  // the task's own thread only
 };
 
 // After a periodic run that ended at `finished`, the next deadline to sleep
