@@ -9,8 +9,9 @@
 # the corpus kept, and findings (crashes, leaks, timeouts: the artifacts,
 # left in build/fuzz-campaign/TARGET/).
 #
-# Usage: toolchain/fuzz-campaign.sh [--targets "A B ..."] [--runs N] [--seconds S] [--cpu C]
+# Usage: toolchain/fuzz-campaign.sh [--targets "A B ..."] [--runs N] [--seconds S] [--cpu C] [--jobs J]
 #   --targets  which (default: every target CTest knows, label fuzz)
+#   --jobs     targets run at once, each pinned to its own CPU (default 1)
 #   --runs     executions per target (default 10000000)
 #   --seconds  time per target (default 3600)
 #   --cpu      pin to this CPU (default: none)
@@ -19,18 +20,20 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-runs=10000000 seconds=3600 cpu="" targets=""
+runs=10000000 seconds=3600 cpu="" targets="" jobs=1 summary=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --targets) targets=$2; shift 2 ;;
     --runs) runs=$2; shift 2 ;;
     --seconds) seconds=$2; shift 2 ;;
     --cpu) cpu=$2; shift 2 ;;
-    -h|--help) sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --jobs) jobs=$2; shift 2 ;;
+    --summary) summary=$2; shift 2 ;;  # (internal: one job's rows)
+    -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "fuzz-campaign: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-case "$runs$seconds$cpu" in *[!0-9]*) echo "fuzz-campaign: --runs, --seconds and --cpu take whole numbers" >&2; exit 2 ;; esac
+case "$runs$seconds$cpu$jobs" in *[!0-9]*) echo "fuzz-campaign: --runs, --seconds, --cpu and --jobs take whole numbers" >&2; exit 2 ;; esac
 tree=build/release
 [ -d "$tree/fuzz" ] || { echo "fuzz-campaign: no fuzzers in $tree/fuzz: build the release tree first" >&2; exit 2; }
 if [ -z "$targets" ]; then
@@ -40,11 +43,33 @@ fi
 
 out=build/fuzz-campaign
 mkdir -p "$out"
-summary=$out/summary.md
-{
+header() {
   echo "| target | executions | seconds | exec/s | cov (edges) | features | corpus kept | findings |"
   echo "|---|---|---|---|---|---|---|---|"
-} > "$summary"
+}
+if [ "$jobs" -gt 1 ]; then
+  # Deal the targets out to J jobs, job j pinned to CPU j, then one table.
+  read -r -a all <<< "$targets"
+  pids=()
+  for ((j = 0; j < jobs; j++)); do
+    mine=""
+    for ((i = j; i < ${#all[@]}; i += jobs)); do mine+="${all[i]} "; done
+    [ -n "$mine" ] || continue
+    "$0" --targets "$mine" --runs "$runs" --seconds "$seconds" --cpu "$j" --summary "$out/summary-$j.md" &
+    pids+=($!)
+  done
+  for p in "${pids[@]}"; do wait "$p"; done
+  { header; cat "$out"/summary-[0-9]*.md; } > "$out/summary.md"
+  rm -f "$out"/summary-[0-9]*.md
+  cat "$out/summary.md"
+  exit 0
+fi
+if [ -z "$summary" ]; then
+  summary=$out/summary.md
+  header > "$summary"
+else
+  : > "$summary"
+fi
 pin=()
 [ -z "$cpu" ] || pin=(taskset -c "$cpu")
 
