@@ -2,12 +2,15 @@
 # Rebuilds the terrain models trained on the simulator's terrain (docs/terrain.md)
 # and evaluates each on layouts and seeds it never saw:
 #   board/models/terrain-sim.tnrf          VLP-16 (the simulator's default lidar)
+#   board/models/terrain-sim-vlp32c.tnrf   VLP-32C
+#   board/models/terrain-sim-hdl32e.tnrf   HDL-32E
 #   board/models/terrain-sim-hdl64e.tnrf   HDL-64E (the thesis' lidar)
 # A model learns one lidar's remissions; the tools refuse it for another.
 # Needs a release build (cmake --workflow --preset release). The VLP-16 part
-# takes about two minutes on two cores, the HDL-64E part (simulating 64 lasers)
-# about fifteen; the results are the same bytes each time.
-# Usage: toolchain/train-terrain-model.sh [vlp16|hdl64e|all]   (default: all)
+# takes about two minutes on two cores, each 32-laser one a few more, the
+# HDL-64E part (simulating 64 lasers) about fifteen; the results are the same
+# bytes each time.
+# Usage: toolchain/train-terrain-model.sh [vlp16|vlp32c|hdl32e|hdl64e|all]   (default: all)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=build/release/bin/trailnav
@@ -28,7 +31,9 @@ train() {  # data-directory lidar model-file
 
 case "$which" in
   vlp16|all) train build/terrain-data VLP-16 board/models/terrain-sim.tnrf ;;&
+  vlp32c|all) train build/terrain-data-vlp32c VLP-32C board/models/terrain-sim-vlp32c.tnrf ;;&
+  hdl32e|all) train build/terrain-data-hdl32e HDL-32E board/models/terrain-sim-hdl32e.tnrf ;;&
   hdl64e|all) train build/terrain-data-hdl64e HDL-64E board/models/terrain-sim-hdl64e.tnrf ;;
-  vlp16) ;;
-  *) echo "usage: $0 [vlp16|hdl64e|all]" >&2; exit 2 ;;
+  vlp16|vlp32c|hdl32e) ;;
+  *) echo "usage: $0 [vlp16|vlp32c|hdl32e|hdl64e|all]" >&2; exit 2 ;;
 esac

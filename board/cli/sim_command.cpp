@@ -79,7 +79,7 @@ void add_sim_command(CLI::App& app) {
   cmd->add_option("--duration", o.sim.duration,
                   "Seconds to simulate (default: the scenario's, else until the route's end)")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--lidar", o.sim.lidar, "Lidar model: VLP-16, VLP-16-HiRes, HDL-32E or HDL-64E (default: the scenario's)");
+  cmd->add_option("--lidar", o.sim.lidar, "Lidar model: VLP-16, VLP-16-HiRes, VLP-32C, HDL-32E or HDL-64E (default: the scenario's)");
   cmd->add_option("--calibration", o.sim.calibration,
                   "Velodyne calibration file (default: the model's file in ../shared/data/velodyne/calibration/)");
   cmd->add_option("--out", o.sim.out, "Output recording directory");

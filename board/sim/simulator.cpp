@@ -331,9 +331,8 @@ SimReport run_simulation(const SimOptions& o) {
   if (!o.lidar.empty()) s.lidar.model = o.lidar;
   if (!o.calibration.empty()) s.lidar.calibration = o.calibration;
   const auto model = vel::parse_model(s.lidar.model);
-  if (!model || (*model != vel::Model::vlp16 && *model != vel::Model::hdl32e && *model != vel::Model::hdl64e &&
-                 *model != vel::Model::vlp16_hires)) {
-    return fail("lidar model '" + s.lidar.model + "' cannot be simulated; choose VLP-16, VLP-16-HiRes, HDL-32E or HDL-64E");
+  if (!model) {
+    return fail("lidar model '" + s.lidar.model + "' cannot be simulated; choose VLP-16, VLP-16-HiRes, VLP-32C, HDL-32E or HDL-64E");
   }
   report.lidar_model = std::string(vel::model_info(*model).name);
   std::string calib_path = s.lidar.calibration.empty() ? default_calibration_file(*model) : s.lidar.calibration;

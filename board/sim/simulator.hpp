@@ -15,7 +15,7 @@ struct SimOptions {
   std::string scenario = "urban";  // built-in name or YAML file
   std::uint64_t seed = 1;
   double duration = 0.0;           // s; 0: the scenario's, else until the route ends
-  std::string lidar;               // model override ("VLP-16", "HDL-32E", "HDL-64E")
+  std::string lidar;               // model override ("VLP-16", "VLP-32C", "HDL-32E", "HDL-64E")
   std::string calibration;         // calibration file override
   std::string out;                 // output directory
   bool truth = true;               // write DIR/truth/
