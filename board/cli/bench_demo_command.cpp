@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -21,12 +22,14 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <span>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "bench_config.hpp"
+#include "builtin_models.hpp"
 #include "commands.hpp"
 #include "dds.hpp"
 #include "diagnostic_msgs.h"
@@ -38,14 +41,12 @@
 #include "simulator.hpp"
 #include "subscriber.hpp"
 #include "terminal.hpp"
+#include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/runtime/histogram.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
 extern char** environ;
 
-// board/cli/builtin_model.S: the simulated-terrain model, for trailnavd on the bench.
-extern "C" const unsigned char trailnav_builtin_terrain_model[];
-extern "C" const unsigned char trailnav_builtin_terrain_model_end[];
 
 namespace trailnav::cli {
 namespace {
@@ -54,6 +55,7 @@ namespace fs = std::filesystem;
 
 struct BenchDemoOptions {
   std::string scenario = "urban";
+  std::string lidar = "VLP-16";
   double seconds = 30.0;
   std::string out = "build/demo";
   std::string png;
@@ -112,6 +114,16 @@ std::string sibling_binary(const char* name) {
   return ec ? std::string(name) : (self.parent_path() / name).string();
 }
 
+// trailnavd's own report after SIGTERM: its warnings and errors, and its
+// closing figures (each task's runs, overruns, execution and CPU time).
+void print_daemon_report(const std::string& report) {
+  std::printf("5. trailnavd after SIGTERM:\n");
+  std::istringstream lines(report);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.find("info") == std::string::npos || line.find("stopped") != std::string::npos) std::printf("   %s\n", line.c_str());
+  }
+}
+
 // The soak's verdict, from its samples: RSS and descriptors constant after the
 // first minute, no real-time allocation, no overrun, map latency p99 at most
 // 5 ms in every window.
@@ -154,11 +166,7 @@ int soak_summary(const std::vector<Row>& rows, const DurationSummary& all, const
                                "0 overruns, map latency p99 <= 5 ms"
                              : "SOAK GOALS NOT MET (RSS or fds not constant after the first minute, real-time "
                                "allocations, overruns, or map latency p99 above 5 ms)");
-  std::printf("5. trailnavd after SIGTERM:\n");
-  std::istringstream lines(report);
-  for (std::string line; std::getline(lines, line);) {
-    if (line.find("info") == std::string::npos || line.find("stopped") != std::string::npos) std::printf("   %s\n", line.c_str());
-  }
+  print_daemon_report(report);
   return ok ? 0 : 1;
 }
 
@@ -171,8 +179,18 @@ int run_bench_demo(const BenchDemoOptions& o) {
     return 1;
   }
   // 1. The recording.
+  const auto lidar = velodyne::parse_model(o.lidar);
+  // The terrain model trained on this lidar's simulated remissions.
+  const std::span<const std::uint8_t> terrain_model = lidar ? builtin_terrain_model(*lidar) : std::span<const std::uint8_t>();
+  if (terrain_model.empty()) {
+    std::fprintf(stderr, "trailnav demo: --lidar %s: no terrain model for it in board/models/ (VLP-16, VLP-32C, HDL-32E, "
+                         "HDL-64E; trailnav terrain-train makes one)\n", o.lidar.c_str());
+    return 2;
+  }
+  std::string calibration;  // the one the simulator used, for trailnavd too
   sim::SimOptions so;
   so.scenario = o.scenario;
+  so.lidar = o.lidar;
   so.duration = o.seconds;
   so.out = (out / "recording").string();
   {
@@ -186,6 +204,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
     }
     std::printf("1. recording: scenario %s, %.0f s, %s -> %s\n", o.scenario.c_str(), sr.sim_seconds, sr.lidar_model.c_str(),
                 so.out.c_str());
+    calibration = sr.calibration;
   }
   // 2. trailnavd on the bench config, its pseudo-terminals and DBC in OUT.
   std::string config = kBenchRobotConfig;
@@ -193,9 +212,15 @@ int run_bench_demo(const BenchDemoOptions& o) {
   replace_all(config, "../sim/trailnav-robot.dbc", "trailnav-robot.dbc");
   replace_all(config, "../models/terrain-sim.tnrf", "terrain-sim.tnrf");
   {
-    std::ofstream model(out / "terrain-sim.tnrf", std::ios::binary);
-    model.write(reinterpret_cast<const char*>(trailnav_builtin_terrain_model),
-                trailnav_builtin_terrain_model_end - trailnav_builtin_terrain_model);
+    std::ofstream file(out / "terrain-sim.tnrf", std::ios::binary);
+    file.write(reinterpret_cast<const char*>(terrain_model.data()), static_cast<std::streamsize>(terrain_model.size()));
+  }
+  if (*lidar != velodyne::Model::vlp16) {
+    // The lidar the recording has, and the calibration it was simulated with.
+    replace_all(config, "  model: VLP-16", "  model: " + std::string(velodyne::model_info(*lidar).name));
+    if (fs::is_regular_file(calibration)) {
+      replace_all(config, "  calibration: builtin", "  calibration: " + fs::absolute(calibration).string());
+    }
   }
   replace_all(config, "  domain: 0", "  domain: " + std::to_string(o.domain));
   replace_all(config, "  log_sink: auto ", "  log_sink: stderr");
@@ -216,13 +241,12 @@ int run_bench_demo(const BenchDemoOptions& o) {
                   "  osm: %s\n"
                   "  goal: [%.8f, %.8f]\n",
                   (fs::path(so.out) / "world.osm").c_str(), end.lat, end.lon);
-    // The task row goes first in the task table, the section before the table.
+    // The section goes before the task table (its preset has the navigation task's row).
     const auto tasks = config.find("\ntasks:\n");
     if (tasks == std::string::npos) {
       std::fprintf(stderr, "trailnav demo: the built-in bench config (board/robots/bench.yaml) has no task table\n");
       return 1;
     }
-    config.insert(tasks + 8, "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20.0, priority: 45}\n");
     config.insert(tasks, section);
   }
   std::ofstream(out / "trailnav-robot.dbc") << sim::robot_dbc_text();
@@ -293,6 +317,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
   std::printf("3. replaying into trailnavd in real time; listening on DDS (loopback) like a planner\n");
   std::atomic<bool> playing{true};
   std::int64_t replay_late_ns = 0;                // its worst send, late by (read after the join)
+  // trailnavd's CPU time over the replay alone (not its start-up: the
+  // terrain model, the road network).
+  const double cpu_before = process_figures(pid).cpu_s;
+  const auto wall_before = std::chrono::steady_clock::now();
   std::thread player([&] {
     replay_late_ns = replayer.replayer->run().send_error.max;
     playing = false;
@@ -443,6 +471,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
   }
   bar.finish();
   player.join();
+  const double replay_cpu_s = process_figures(pid).cpu_s - cpu_before;
+  const double replay_wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_before).count();
   for (int i = 0; i < 5; ++i) listen(0.1);
   const std::string report = stop_daemon();
 
@@ -500,11 +530,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
       std::fprintf(stderr, "trailnav demo: %s\n", st.message().c_str());
     }
   }
-  std::printf("5. trailnavd after SIGTERM:\n");
-  std::istringstream lines(report);
-  for (std::string line; std::getline(lines, line);) {
-    if (line.find("info") == std::string::npos || line.find("stopped") != std::string::npos) std::printf("   %s\n", line.c_str());
-  }
+  std::printf("   trailnavd's CPU over the replay: %.2f s in %.1f s, %.1f %% of one core (%s, %s)\n", replay_cpu_s,
+              replay_wall_s, replay_wall_s > 0.0 ? 100.0 * replay_cpu_s / replay_wall_s : 0.0, o.lidar.c_str(),
+              o.scenario.c_str());
+  print_daemon_report(report);
   return n_maps > 0 && n_poses > 0 && n_health > 0 && !subgoals_received.empty() ? 0 : 1;
 }
 
@@ -520,6 +549,16 @@ void add_bench_demo_command(CLI::App& app) {
       "the recording's OpenStreetMap to where the drive ends and checked against the simulated trail. Prints what\n"
       "arrived, the latency and trailnavd's report.");
   cmd->add_option("--scenario", o->scenario, "Simulator scenario (docs/simulator.md)")->capture_default_str();
+  cmd->add_option("--lidar", o->lidar,
+                  "Lidar model the drive is simulated with and trailnavd configured for: VLP-16, VLP-32C, HDL-32E or\n"
+                  "HDL-64E (the thesis' lidar). The calibration is the simulator's (the real file in\n"
+                  "../shared/data/velodyne/calibration/), the terrain model the one trained for that lidar\n"
+                  "(board/models/), the task table its preset (docs/performance.md \"Task presets\")")
+      ->capture_default_str()
+      ->check([](const std::string& v) {
+        return velodyne::parse_model(v) ? std::string()
+                                         : "unknown lidar model '" + v + "' (VLP-16, VLP-16-HiRes, VLP-32C, HDL-32E, HDL-64E)";
+      });
   cmd->add_option("--seconds", o->seconds, "Seconds to drive (and replay)")->capture_default_str()->check(CLI::Range(2.0, 600.0));
   cmd->add_option("--out", o->out, "Directory for the recording, the config, trailnavd's log and the map PNGs")->capture_default_str();
   cmd->add_option("--png", o->png, "Also write the last obstacle map received to this PNG file");

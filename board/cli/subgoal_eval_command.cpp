@@ -10,13 +10,12 @@
 #include <string>
 #include <vector>
 
+#include "builtin_models.hpp"
 #include "commands.hpp"
 #include "subgoal_eval.hpp"
 #include "terminal.hpp"
 #include "trailnav/runtime/config.hpp"
 
-extern "C" const unsigned char trailnav_builtin_terrain_model[];
-extern "C" const unsigned char trailnav_builtin_terrain_model_end[];
 
 namespace trailnav::cli {
 namespace {
@@ -54,8 +53,7 @@ int run_eval(SubgoalEvalCli& c) {
   std::string model_name = c.model.empty() ? (o.terrain.model.empty() ? "" : o.terrain.model) : c.model;
   if (model_name.empty()) {
     auto parsed = perception::RandomForest::parse(
-        std::span<const std::uint8_t>(trailnav_builtin_terrain_model,
-                                      static_cast<std::size_t>(trailnav_builtin_terrain_model_end - trailnav_builtin_terrain_model)),
+        builtin_terrain_model(velodyne::Model::vlp16),
         "built-in terrain-sim.tnrf");
     if (!parsed.forest) {
       std::fprintf(stderr, "%s: %s\n", who, parsed.error.c_str());

@@ -57,7 +57,9 @@ int main(int argc, char** argv) {
       return 2;
     }
     if (!nav.summary.empty()) std::printf("trailnavd: %s\n", nav.summary.c_str());
-    std::printf("trailnavd: %s is valid (%zu tasks)\n", config_path.c_str(), config.tasks.size());
+    for (const std::string& w : config.warnings) std::printf("trailnavd: warning: %s\n", w.c_str());
+    std::printf("trailnavd: %s is valid (%zu tasks%s%s)\n", config_path.c_str(), config.tasks.size(),
+                config.task_preset.empty() ? "" : ", the task preset of a ", config.task_preset.c_str());
     return 0;
   }
 
@@ -71,6 +73,7 @@ int main(int argc, char** argv) {
 
   log::set_min_level(config.runtime.log_level);
   log::start(config.runtime.log_sink);
+  for (const std::string& w : config.warnings) TN_LOG_WARN("trailnavd: %s", w.c_str());
   auto created = daemon::Daemon::create(config);
   if (!created.daemon) {
     TN_LOG_ERROR("trailnavd: cannot start: %s", created.error.c_str());

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "task_presets.hpp"
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/drivers/velodyne/calibration.hpp"
 #include "trailnav/perception/random_forest.hpp"
@@ -280,7 +281,6 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   c.dds = parse_dds(root.map("dds"));
 
   const int cpus = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  c.tasks = parse_task_table(root, "tasks", cpus);
   // One row per part: is it configured, and how must its task run.
   struct Part {
     const char* name;
@@ -296,6 +296,28 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"obstacles", c.obstacles.has_value(), TaskKind::event},
                         {"terrain", c.terrain.has_value(), TaskKind::periodic},
                         {"navigation", c.navigation.has_value(), TaskKind::periodic}};
+  if (root.is_map("tasks")) {
+    // A preset: the measured table of a lidar model, for the parts configured.
+    const ConfigNode t = root.map("tasks");
+    const std::string preset = t.string("preset");
+    velodyne::Model model = c.lidar ? c.lidar->model : velodyne::Model::vlp16;
+    if (preset != "auto") {
+      const auto m = velodyne::parse_model(preset);
+      if (!m) t.fail("preset", "unknown preset '" + preset + "' (auto: the lidar's model; VLP-16, VLP-32C, HDL-32E, HDL-64E)");
+      model = *m;
+    }
+    std::vector<std::string_view> names;
+    for (const Part& part : parts) {
+      if (part.configured) names.push_back(part.name);
+    }
+    c.tasks = preset_tasks(model, names);
+    c.task_preset = std::string(velodyne::model_info(model).name);
+    change_task_table(t, "change", cpus, c.tasks);
+    t.reject_unknown_keys();
+  } else {
+    c.tasks = parse_task_table(root, "tasks", cpus);
+  }
+  if (c.lidar) c.warnings = budget_warnings(c.tasks, c.lidar->model);
   for (const Part& part : parts) {
     if (!part.configured) continue;
     const TaskSpec& t = require_task(c.tasks, part.name, root, "tasks");

@@ -51,6 +51,8 @@ struct RobotConfig {
   std::string name;
   RuntimeSettings runtime;
   std::vector<TaskSpec> tasks;
+  std::string task_preset;            // the lidar model whose measured table `tasks` came from; empty: written out
+  std::vector<std::string> warnings;  // not errors, said at start-up (a budget below what the lidar needs)
   std::optional<LidarSection> lidar;
   std::optional<gps::GpsDriverOptions> gps;
   std::optional<imu::ImuDriverOptions> imu;

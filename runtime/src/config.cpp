@@ -101,6 +101,11 @@ bool ConfigNode::has(std::string_view key) const {
   return value.IsDefined() && !value.IsNull();
 }
 
+bool ConfigNode::is_map(std::string_view key) const {
+  const YAML::Node value = value_of(key);
+  return value.IsDefined() && value.IsMap();
+}
+
 void ConfigNode::require_scalar(std::string_view key, const YAML::Node& value, const char* expected) const {
   if (!value.IsScalar()) fail(key, std::string("expected ") + expected + ", found a " + (value.IsMap() ? "mapping" : "sequence"));
 }

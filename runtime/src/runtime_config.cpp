@@ -1,5 +1,6 @@
 #include "trailnav/runtime/runtime_config.hpp"
 
+#include <algorithm>
 #include <string>
 
 namespace trailnav {
@@ -41,6 +42,35 @@ std::vector<TaskSpec> parse_task_table(const ConfigNode& parent, std::string_vie
     table.push_back(spec);
   }
   return table;
+}
+
+void change_task_table(const ConfigNode& parent, std::string_view key, int cpu_count, std::vector<TaskSpec>& table) {
+  std::vector<std::string> changed;
+  for (const ConfigNode& entry : parent.optional_map_list(key)) {
+    const std::string name = entry.string("name");
+    const auto it = std::find_if(table.begin(), table.end(), [&](const TaskSpec& t) { return t.name == name; });
+    if (it == table.end()) {
+      std::string names;
+      for (const TaskSpec& t : table) names += (names.empty() ? "" : ", ") + t.name;
+      entry.fail("name", "the table has no task '" + name + "' to change (it has " + names + ")");
+    }
+    if (std::find(changed.begin(), changed.end(), name) != changed.end()) {
+      entry.fail("name", "task '" + name + "' is changed twice");
+    }
+    changed.push_back(name);
+    TaskSpec spec = *it;
+    if (spec.kind == TaskKind::periodic) {
+      spec.rate_hz = entry.number("rate_hz", 0.001, 10'000.0, spec.rate_hz);
+    } else if (entry.has("rate_hz")) {
+      entry.fail("rate_hz", "task '" + name + "' is event-driven: it has no rate");
+    }
+    if (entry.has("budget_ms")) spec.budget = static_cast<Nanos>(entry.number("budget_ms", 0.001, 60'000.0) * 1e6);
+    spec.priority = static_cast<int>(entry.integer("priority", 0, 99, spec.priority));
+    spec.cpu = static_cast<int>(entry.integer("cpu", -1, cpu_count - 1, spec.cpu));
+    entry.reject_unknown_keys();
+    if (Status s = validate_task_spec(spec, cpu_count); !s) entry.fail("", s.message());
+    *it = spec;
+  }
 }
 
 const TaskSpec& require_task(const std::vector<TaskSpec>& table, std::string_view name, const ConfigNode& parent,

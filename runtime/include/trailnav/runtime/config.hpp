@@ -47,6 +47,8 @@ class ConfigNode {
   int line() const noexcept;                                  // 1-based; 0 if unknown
 
   bool has(std::string_view key) const;
+  // Present and a mapping (a key may take either a mapping or a list).
+  bool is_map(std::string_view key) const;
 
   // Sub-mapping; `optional_map` returns nullopt when the key is absent.
   ConfigNode map(std::string_view key) const;

@@ -33,6 +33,11 @@ RuntimeSettings parse_runtime_settings(const ConfigNode& section);
 // are unique, with errors that point at the entry's line.
 std::vector<TaskSpec> parse_task_table(const ConfigNode& parent, std::string_view key, int cpu_count);
 
+// Changes to a given table (a preset): an optional list under `key` whose
+// entries name a task of `table` and give any of rate_hz (periodic tasks),
+// budget_ms, priority and cpu; the changed entry is checked as a whole one.
+void change_task_table(const ConfigNode& parent, std::string_view key, int cpu_count, std::vector<TaskSpec>& table);
+
 // Finds a task by name in a parsed table; fails naming the task when the
 // table lacks one the program needs.
 const TaskSpec& require_task(const std::vector<TaskSpec>& table, std::string_view name, const ConfigNode& parent,

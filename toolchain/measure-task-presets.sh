@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Measures what each of trailnavd's tasks needs per lidar model, for the task
+# presets (board/daemon/task_presets.cpp, docs/performance.md "Task presets"):
+# `trailnav demo --lidar MODEL --scenario mixed-route` replayed into trailnavd
+# at real time, RUNS times per model, nothing else running. Prints, per model
+# and task, the largest CPU time of one run over all runs (the need), the
+# largest 99th percentile, and the overruns against the budgets in use; per
+# model the daemon's CPU over the replay (% of one core) and the map latency.
+#
+# Usage: toolchain/measure-task-presets.sh [--models "VLP-16 HDL-64E"] [--runs N] [--seconds S]
+# Needs the release tree (the README's first command builds it). Each run's
+# whole output stays in build/task-presets/MODEL-RUN.txt.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+models="VLP-16 HDL-64E" runs=3 seconds=60
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --models) models=$2; shift 2 ;;
+    --runs) runs=$2; shift 2 ;;
+    --seconds) seconds=$2; shift 2 ;;
+    -h|--help) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "measure-task-presets: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+case "$runs$seconds" in *[!0-9]*) echo "measure-task-presets: --runs and --seconds take whole numbers" >&2; exit 2 ;; esac
+bin=build/release/bin/trailnav
+[ -x "$bin" ] || { echo "measure-task-presets: $bin is missing: build the release tree first" >&2; exit 2; }
+out=build/task-presets
+mkdir -p "$out"
+
+for m in $models; do
+  for ((r = 1; r <= runs; r++)); do
+    f=$out/$m-$r.txt
+    echo "measure-task-presets: $m, run $r of $runs ($seconds s)" >&2
+    "$bin" demo --lidar "$m" --scenario mixed-route --seconds "$seconds" --png-every 0 --out "$out/$m-$r" > "$f" 2>&1 || {
+      echo "measure-task-presets: the demo failed; see $f" >&2
+      exit 1
+    }
+  done
+  echo
+  echo "### $m ($runs runs of $seconds s, mixed-route)"
+  echo
+  echo "| task | need: largest CPU of one run [ms] | largest CPU p99 [ms] | overruns (all runs) |"
+  echo "|---|---|---|---|"
+  # Task lines of the daemon's report: "<name> runs N overruns N ... cpu p99 X max Y ms ...".
+  cat "$out/$m"-[0-9]*.txt | awk '
+    $2 == "runs" && $4 == "overruns" {
+      name = $1; ov[name] += $5
+      for (i = 1; i < NF; ++i) if ($i == "cpu/period" && $(i + 1) == "p99") { p = $(i + 2); x = $(i + 4) }
+      if (!(name in need) || x + 0 > need[name] + 0) need[name] = x
+      if (!(name in p99) || p + 0 > p99[name] + 0) p99[name] = p
+      if (!(name in seen)) { seen[name] = 1; order[n++] = name }
+    }
+    END { for (i = 0; i < n; ++i) { t = order[i]; printf "| %s | %s | %s | %d |\n", t, need[t], p99[t], ov[t] } }'
+  echo
+  grep -h "CPU over the replay" "$out/$m"-[0-9]*.txt | sed 's/^ */- /'
+  grep -h "^4. received" "$out/$m"-[0-9]*.txt | sed -n 's/.*(latency from the revolution.s last packet: \([^)]*\)).*/- map latency \1/p'
+done
