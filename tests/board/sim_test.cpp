@@ -174,6 +174,15 @@ TEST(Simulator, Hdl64ePointsLieOnTheIntendedSurfaces) {
   fs::remove_all(dir);
 }
 
+TEST(Simulator, Vlp32cPointsLieOnTheIntendedSurfaces) {
+  // Lasers fired in pairs, each with its own azimuth offset (the VeloView table).
+  const std::string dir = temp_dir("vlp32c");
+  ASSERT_EQ(simulate(dir, "urban", 3, 0.6, "VLP-32C").error, "");
+  expect_on_surfaces(range_error(dir, "urban", 3, velodyne::Model::vlp32c, "ros_velodyne_VeloView-VLP-32C.yaml"),
+                     "VLP-32C");
+  fs::remove_all(dir);
+}
+
 TEST(Simulator, NmeaPassesTheGpsParserAndFollowsTheRobot) {
   const std::string dir = temp_dir("nmea");
   const SimReport r = simulate(dir, "forest-track", 5, 20.0);
