@@ -98,13 +98,18 @@ std::vector<std::string> budget_warnings(const std::vector<TaskSpec>& tasks, vel
   for (const TaskSpec& t : tasks) {
     for (const PresetRow& r : task_preset(model)) {
       if (r.name != t.name || static_cast<double>(t.budget) * 1e-6 >= r.need_ms) continue;
-      char line[300];
+      // A need above 90 % of the period cannot be granted at this rate: the
+      // rate is what to change, not the budget.
+      const bool rate_bound = t.kind == TaskKind::periodic && t.rate_hz > 0.0 && r.need_ms > 0.9e3 / t.rate_hz;
+      char line[400];
       std::snprintf(line, sizeof line,
-                    "task '%s': its budget of %.3f ms is below the %.3f ms of CPU time one run needed with a %.*s "
-                    "(docs/performance.md \"Task presets\"): expect overruns; take 'tasks: {preset: auto}' or "
-                    "raise budget_ms",
+                    "task '%s': its budget of %.3f ms is below the %.3f ms of CPU time one run needed with the %.*s "
+                    "(docs/performance.md \"Task presets\"): expect overruns; %s",
                     t.name.c_str(), static_cast<double>(t.budget) * 1e-6, r.need_ms, static_cast<int>(lidar.size()),
-                    lidar.data());
+                    lidar.data(),
+                    rate_bound ? "at its rate a budget can be at most 90 % of the period: a lower rate_hz (tasks.change) "
+                                 "gives each run more"
+                               : "take 'tasks: {preset: auto}' or raise budget_ms");
       out.emplace_back(line);
     }
   }
