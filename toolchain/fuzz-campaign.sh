@@ -4,7 +4,8 @@
 # its 20-second CTest run uses (the real captures and logs, the seeds) plus
 # the campaign corpus kept in the repository (tests/fuzz/corpus/TARGET), and
 # what it finds new is merged back there, minimised (-merge=1 keeps only
-# inputs that add coverage), so the kept corpus stays small. Prints, per
+# inputs that add coverage beyond the real files, the seeds and the corpus
+# kept so far), so the kept corpus stays small. Prints, per
 # target: executions, seconds, coverage (edges) and features at the end,
 # the corpus kept, and findings (crashes, leaks, timeouts: the artifacts,
 # left in build/fuzz-campaign/TARGET/).
@@ -100,8 +101,19 @@ for t in $targets; do
   cov=$(echo "$last" | sed -n 's/.* cov: \([0-9]*\).*/\1/p')
   ft=$(echo "$last" | sed -n 's/.* ft: \([0-9]*\).*/\1/p')
   findings=$(find "$work" -maxdepth 1 -type f \( -name 'crash-*' -o -name 'leak-*' -o -name 'timeout-*' -o -name 'oom-*' \) | wc -l)
-  # Keep what adds coverage, minimised.
-  "$bin" "${flags[@]}" -merge=1 "$kept" "$work/corpus" > "$work/merge.log" 2>&1 || true
+  # Keep what adds coverage beyond the inputs the CTest run has anyway (the
+  # real files, the seeds) and the corpus kept so far: merge into a copy of
+  # those, then keep only the files the merge added.
+  base=$work/merge-base
+  rm -rf "$base" && mkdir -p "$base"
+  for i in "$kept" "${inputs[@]}"; do
+    if [ -d "$i" ]; then find "$i" -type f -exec cp -t "$base" {} + ; elif [ -f "$i" ]; then cp "$i" "$base"; fi
+  done
+  ls "$base" | sort > "$work/before"
+  # Edges only (-use_counters=0): a new hit count of a known edge is no reason to keep a file.
+  "$bin" "${flags[@]}" -merge=1 -use_counters=0 "$base" "$work/corpus" > "$work/merge.log" 2>&1 || true
+  ls "$base" | sort | comm -13 "$work/before" - | while read -r f; do cp "$base/$f" "$kept/"; done
+  rm -rf "$base"
   size=$(find "$kept" -type f | wc -l)
   bytes=$(du -sk "$kept" | cut -f1)
   rate=$(( ${execs:-0} / (took > 0 ? took : 1) ))
