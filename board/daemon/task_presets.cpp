@@ -9,60 +9,58 @@ namespace {
 
 using K = TaskKind;
 
-// Measured with toolchain/measure-task-presets.sh on 2026-12-02 (this 2-core
-// VM; docs/performance.md "Task presets"): need = the largest CPU time of one
-// run per period of input over three 60 s replays of `mixed-route`; budget =
-// need x 1.5 rounded up to 0.1 ms, at most 90 % of the period. Where that cap
-// bites (the lidar task of the 32- and 64-laser models, whose run completing
-// a revolution clears the next one's range image) the budget is below the
-// need and start-up says so. Priorities: the e-stop first, then the sensors by
-// how little their kernel buffers hold against their rate, then pose,
-// obstacles, navigation and terrain.
-//   name, kind, rate [Hz], need [ms], budget [ms], priority
-constexpr std::array<PresetRow, 9> kVlp16 = {{
-    {"gpio", K::periodic, 200, 0.886, 1.4, 75},
-    {"lidar", K::periodic, 1000, 0.886, 0.9, 70},
-    {"imu", K::periodic, 400, 0.584, 0.9, 65},
-    {"can", K::periodic, 200, 1.566, 2.4, 64},
-    {"gps", K::periodic, 50, 0.513, 0.8, 60},
-    {"pose", K::periodic, 100, 0.891, 1.4, 58},
-    {"obstacles", K::event, 0, 4.668, 7.1, 50},
-    {"navigation", K::periodic, 10, 0.992, 1.5, 45},
-    {"terrain", K::periodic, 20, 10.623, 16.0, 40},
+// The tasks, the same for every lidar: rate and priority. Priorities: the
+// e-stop first, then the sensors by how little their kernel buffers hold
+// against their rate, then pose, obstacles, navigation and terrain.
+struct Task {
+  std::string_view name;
+  TaskKind kind;
+  double rate_hz;  // periodic tasks
+  int priority;
+};
+constexpr std::array<Task, 9> kTasks = {{
+    {"gpio", K::periodic, 200, 75},
+    {"lidar", K::periodic, 1000, 70},
+    {"imu", K::periodic, 400, 65},
+    {"can", K::periodic, 200, 64},
+    {"gps", K::periodic, 50, 60},
+    {"pose", K::periodic, 100, 58},
+    {"obstacles", K::event, 0, 50},
+    {"navigation", K::periodic, 10, 45},
+    {"terrain", K::periodic, 20, 40},
 }};
-constexpr std::array<PresetRow, 9> kVlp32c = {{
-    {"gpio", K::periodic, 200, 0.947, 1.5, 75},
-    {"lidar", K::periodic, 1000, 5.537, 0.9, 70},
-    {"imu", K::periodic, 400, 0.824, 1.3, 65},
-    {"can", K::periodic, 200, 0.967, 1.5, 64},
-    {"gps", K::periodic, 50, 0.292, 0.5, 60},
-    {"pose", K::periodic, 100, 2.806, 4.3, 58},
-    {"obstacles", K::event, 0, 7.600, 11.4, 50},
-    {"navigation", K::periodic, 10, 1.188, 1.8, 45},
-    {"terrain", K::periodic, 20, 13.261, 19.9, 40},
-}};
-constexpr std::array<PresetRow, 9> kHdl32e = {{
-    {"gpio", K::periodic, 200, 0.660, 1.0, 75},
-    {"lidar", K::periodic, 1000, 2.180, 0.9, 70},
-    {"imu", K::periodic, 400, 0.409, 0.7, 65},
-    {"can", K::periodic, 200, 0.690, 1.1, 64},
-    {"gps", K::periodic, 50, 4.783, 7.2, 60},
-    {"pose", K::periodic, 100, 0.720, 1.1, 58},
-    {"obstacles", K::event, 0, 5.947, 9.0, 50},
-    {"navigation", K::periodic, 10, 0.914, 1.4, 45},
-    {"terrain", K::periodic, 20, 11.118, 16.7, 40},
-}};
-constexpr std::array<PresetRow, 9> kHdl64e = {{
-    {"gpio", K::periodic, 200, 0.688, 1.1, 75},
-    {"lidar", K::periodic, 1000, 3.807, 0.9, 70},
-    {"imu", K::periodic, 400, 1.586, 2.2, 65},
-    {"can", K::periodic, 200, 0.618, 1.0, 64},
-    {"gps", K::periodic, 50, 0.262, 0.4, 60},
-    {"pose", K::periodic, 100, 2.108, 3.2, 58},
-    {"obstacles", K::event, 0, 9.480, 14.3, 50},
-    {"navigation", K::periodic, 10, 1.613, 2.5, 45},
-    {"terrain", K::periodic, 20, 13.999, 21.0, 40},
-}};
+
+// The budget a need gets: need x 1.5 rounded up to 0.1 ms, at most 90 % of
+// the period. Where that cap bites (the lidar task of the 32- and 64-laser
+// models, whose run completing a revolution clears the next one's range
+// image) the budget is below the need and start-up says so.
+constexpr double budget_for(double need_ms, TaskKind kind, double rate_hz) {
+  const double tenths = need_ms * 15.0;
+  auto whole = static_cast<long long>(tenths);
+  if (static_cast<double>(whole) < tenths) ++whole;
+  const double budget = static_cast<double>(whole) / 10.0;
+  const double cap = kind == K::periodic ? 0.9e3 / rate_hz : budget;
+  return budget < cap ? budget : cap;
+}
+
+// One model's table from its measured needs, in kTasks' order.
+constexpr std::array<PresetRow, 9> rows(const std::array<double, 9>& need_ms) {
+  std::array<PresetRow, 9> out{};
+  for (std::size_t i = 0; i < kTasks.size(); ++i) {
+    const Task& t = kTasks[i];
+    out[i] = {t.name, t.kind, t.rate_hz, need_ms[i], budget_for(need_ms[i], t.kind, t.rate_hz), t.priority};
+  }
+  return out;
+}
+
+// The needs, measured with toolchain/measure-task-presets.sh on 2026-12-02
+// (this 2-core VM; docs/performance.md "Task presets"): the largest CPU time
+// of one run per period of input over three 60 s replays of `mixed-route`.
+//                                          gpio   lidar  imu    can    gps    pose   obstacles navigation terrain
+constexpr std::array<PresetRow, 9> kVlp16 = rows({0.886, 0.886, 0.584, 1.566, 0.513, 0.891, 4.668, 0.992, 10.623});
+constexpr std::array<PresetRow, 9> kVlp32c = rows({0.947, 5.537, 0.824, 0.967, 0.292, 2.806, 7.600, 1.188, 13.261});
+constexpr std::array<PresetRow, 9> kHdl32e = rows({0.660, 2.180, 0.409, 0.690, 4.783, 0.720, 5.947, 0.914, 11.118});
+constexpr std::array<PresetRow, 9> kHdl64e = rows({0.688, 3.807, 1.586, 0.618, 0.262, 2.108, 9.480, 1.613, 13.999});
 
 }  // namespace
 

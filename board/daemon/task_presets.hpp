@@ -1,13 +1,15 @@
 // Task tables per lidar model: the rates, priorities and budgets trailnavd's
 // tasks need with a VLP-16, VLP-32C, HDL-32E or HDL-64E on the robot PC.
 //
-// A budget is the CPU time one run of a task may use (an overrun above it).
-// Each preset row carries the CPU time its task was measured to need: the
-// largest CPU time of one run over 60 s replays of the `mixed-route` drive
-// with that lidar into trailnavd on the reference machine (a 2-core VM,
-// docs/performance.md "Task presets" gives the runs and the command); the
-// budget is that need times a margin for another machine and for the
-// kernel's interrupt work billed to whichever thread it interrupts.
+// A budget is the CPU time one run of a task may use per period of input it
+// drains (runtime/include/trailnav/runtime/scheduler.hpp; an overrun above
+// it). Each preset row carries the CPU time its task was measured to need:
+// the largest CPU time of one run per period of input over 60 s replays of
+// the `mixed-route` drive with that lidar into trailnavd on the reference
+// machine (a 2-core VM, docs/performance.md "Task presets" gives the runs and
+// the command). The budget is derived from it: need x 1.5 (a margin for
+// another machine and for the kernel's interrupt work billed to whichever
+// thread it interrupts), rounded up to 0.1 ms, at most 90 % of the period.
 //
 // A config takes a preset with
 //
@@ -20,7 +22,6 @@
 // budget below what the lidar needs is warned about at start-up.
 #pragma once
 
-#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -35,8 +36,8 @@ struct PresetRow {
   std::string_view name;
   TaskKind kind;
   double rate_hz;    // periodic tasks
-  double need_ms;    // the largest CPU time of one run measured with this lidar
-  double budget_ms;  // what the table grants
+  double need_ms;    // the largest CPU time of one run per period of input, measured with this lidar
+  double budget_ms;  // what the table grants: derived from need_ms (above)
   int priority;      // SCHED_FIFO
 };
 

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -258,4 +259,19 @@ TEST(RobotConfig, TaskPresetIsTheLidarsMeasuredTableForThePartsConfigured) {
   EXPECT_NE(load_error(head + "tasks:\n  preset: auto\n  change:\n    - {name: obstacles, rate_hz: 9}\n").find("event-driven"),
             std::string::npos);
   EXPECT_NE(load_error(head + "tasks:\n  preset: auto\n  chnage: []\n").find("unknown key"), std::string::npos);
+}
+
+// Every preset's budgets follow the stated rule from the measured needs:
+// need x 1.5 rounded up to 0.1 ms, at most 90 % of the period.
+TEST(RobotConfig, EveryPresetsBudgetIsItsNeedWithTheStatedMargin) {
+  for (const auto model : {velodyne::Model::vlp16, velodyne::Model::vlp32c, velodyne::Model::hdl32e, velodyne::Model::hdl64e}) {
+    const auto rows = daemon::task_preset(model);
+    ASSERT_EQ(rows.size(), 9u);
+    for (const daemon::PresetRow& r : rows) {
+      const double cap = r.kind == TaskKind::periodic ? 0.9 * 1000.0 / r.rate_hz : 1e9;
+      const double expected = std::min(cap, std::ceil(r.need_ms * 15.0 - 1e-9) / 10.0);
+      EXPECT_NEAR(r.budget_ms, expected, 1e-9) << velodyne::model_info(model).name << " " << r.name;
+      EXPECT_GT(r.need_ms, 0.0) << velodyne::model_info(model).name << " " << r.name;
+    }
+  }
 }
