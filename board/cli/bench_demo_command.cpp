@@ -7,7 +7,6 @@
 // (planned on the recording's world.osm to where the drive ends), each
 // checked against the simulated trail. It ends with what arrived, the
 // latency, and trailnavd's own report.
-#include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -17,7 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -44,9 +43,6 @@
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/runtime/histogram.hpp"
 #include "trailnav/runtime/spawn.hpp"
-
-extern char** environ;
-
 
 namespace trailnav::cli {
 namespace {

@@ -16,7 +16,6 @@
 #include "terminal.hpp"
 #include "trailnav/runtime/config.hpp"
 
-
 namespace trailnav::cli {
 namespace {
 

@@ -59,7 +59,7 @@ int main(int argc, char** argv) {
     if (!nav.summary.empty()) std::printf("trailnavd: %s\n", nav.summary.c_str());
     for (const std::string& w : config.warnings) std::printf("trailnavd: warning: %s\n", w.c_str());
     std::printf("trailnavd: %s is valid (%zu tasks%s%s)\n", config_path.c_str(), config.tasks.size(),
-                config.task_preset.empty() ? "" : ", the task preset of a ", config.task_preset.c_str());
+                config.task_preset.empty() ? "" : ", task preset ", config.task_preset.c_str());
     return 0;
   }
 

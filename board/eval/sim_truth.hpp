@@ -72,17 +72,17 @@ SimTruthResult load_sim_truth(const std::string& dir);
 // route's legs, world frame); an error when missing or shorter than two points.
 std::string load_true_route(const std::string& dir, sim::Polyline& out);
 
+// How far past a recording's end the daemon's stamps may lie beyond the
+// replayer's own lateness: its threads stalled for up to 3.1 s under
+// ThreadSanitizer on a busy 2-core machine (CI, December 2026).
+inline constexpr std::int64_t kDaemonStallTolerance_ns = 5'000'000'000;
+
 // Checks points a subscriber receives in trailnavd's odometry frame against
 // the simulated trail. The odometry frame drifts away from the simulator's
 // world, so each point goes through the robot's odometry pose and its true
 // pose at the same instant: world = T_true(t) T_odom(t)^-1 p. Odometry poses
 // come from the pose topic; `offset_ns` maps trailnavd's clock to the
 // recording's (the replay's start in wall time minus the recording's start).
-// How far past a recording's end the daemon's stamps may lie beyond the
-// replayer's own lateness: its threads stalled for up to 3.1 s under
-// ThreadSanitizer on a busy 2-core machine (CI, December 2026).
-inline constexpr std::int64_t kDaemonStallTolerance_ns = 5'000'000'000;
-
 class TrailCheck {
  public:
   TrailCheck(const SimTruth& truth, const sim::Polyline& trail, std::int64_t offset_ns)

@@ -23,8 +23,6 @@
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
-extern char** environ;
-
 namespace trailnav {
 namespace {
 

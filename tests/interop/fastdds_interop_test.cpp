@@ -58,8 +58,6 @@
 #include "trailnav_msgsPubSubTypes.h"
 #include "trailnav/runtime/spawn.hpp"
 
-extern char** environ;
-
 #if defined(__SANITIZE_ADDRESS__)
 // Fast DDS 2.9 (Debian's libfastrtps, not ours) frees its readers through a
 // base class whose sized delete disagrees with the allocation

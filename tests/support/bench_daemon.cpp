@@ -17,8 +17,6 @@
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
-extern char** environ;
-
 namespace trailnav::test {
 
 namespace fs = std::filesystem;

@@ -10,8 +10,8 @@
 // all readable at any time without locks.
 #pragma once
 
-#include <atomic>
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
