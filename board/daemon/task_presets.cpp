@@ -32,8 +32,8 @@ constexpr std::array<Task, 9> kTasks = {{
 
 // The budget a need gets: need x 1.5 rounded up to 0.1 ms, at most 90 % of
 // the period. Where that cap bites (the lidar task of the 32- and 64-laser
-// models, whose run completing a revolution clears the next one's range
-// image) the budget is below the need and start-up says so.
+// models, whose worst runs took 2.2-5.5 ms, for reasons not yet found) the
+// budget is below the need and start-up says so.
 constexpr double budget_for(double need_ms, TaskKind kind, double rate_hz) {
   const double tenths = need_ms * 15.0;
   auto whole = static_cast<long long>(tenths);

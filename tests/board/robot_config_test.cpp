@@ -60,7 +60,7 @@ TEST(RobotConfig, ShippedExamplesAreValid) {
     EXPECT_EQ(r.config->lidar->driver.revolution_readers, 2) << f;  // obstacles and terrain
     EXPECT_EQ(r.config->tasks.size(), 8u) << f;
     EXPECT_EQ(r.config->task_preset, velodyne::model_info(r.config->lidar->model).name) << f;
-    // The HDL-64E's lidar task needs more in the run completing a revolution
+    // The HDL-64E's lidar task was measured to need more in its worst run
     // than 90 % of its 1 ms period, the most its preset grants: said at start.
     const bool hdl64e = r.config->lidar->model == velodyne::Model::hdl64e;
     ASSERT_EQ(r.config->warnings.size(), hdl64e ? 1u : 0u) << f << ": " << (r.config->warnings.empty() ? "" : r.config->warnings[0]);
