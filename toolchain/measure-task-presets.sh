@@ -3,8 +3,9 @@
 # presets (board/daemon/task_presets.cpp, docs/performance.md "Task presets"):
 # `trailnav demo --lidar MODEL --scenario mixed-route` replayed into trailnavd
 # at real time, RUNS times per model, nothing else running. Prints, per model
-# and task, the largest CPU time of one run over all runs (the need), the
-# largest 99th percentile, and the overruns against the budgets in use; per
+# and task, the largest CPU time of one run per period of input over all runs
+# (the need), the largest 99th percentile, and the overruns against the
+# budgets in use (the presets' at the time of the run); per
 # model the daemon's CPU over the replay (% of one core) and the map latency.
 #
 # Usage: toolchain/measure-task-presets.sh [--models "VLP-16 HDL-64E"] [--runs N] [--seconds S]
@@ -41,7 +42,7 @@ for m in $models; do
   echo
   echo "### $m ($runs runs of $seconds s, mixed-route)"
   echo
-  echo "| task | need: largest CPU of one run [ms] | largest CPU p99 [ms] | overruns (all runs) |"
+  echo "| task | need: largest CPU of one run per period of input [ms] | largest CPU per period, p99 [ms] | overruns (all runs) |"
   echo "|---|---|---|---|"
   # Task lines of the daemon's report: "<name> runs N overruns N ... cpu p99 X max Y ms ...".
   cat "$out/$m"-[0-9]*.txt | awk '
