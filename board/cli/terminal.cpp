@@ -41,8 +41,8 @@ double us(Nanos n) { return nanos_to_micros(n); }
 }  // namespace
 
 void print_task_table(std::FILE* out, const Scheduler& scheduler) {
-  std::fprintf(out, "%-14s %-8s %8s %9s %8s %8s %6s %6s %7s  %-26s %-26s\n", "task", "kind", "rate_hz", "budget_us",
-               "runs", "overruns", "stalls", "slips", "skipped", "exec_us p50/p99/max", "latency_us p50/p99/max");
+  std::fprintf(out, "%-14s %-8s %8s %9s %8s %8s %6s %6s %7s %7s  %-26s %-26s\n", "task", "kind", "rate_hz", "budget_us",
+               "runs", "overruns", "stalls", "slips", "skipped", "rested", "exec_us p50/p99/max", "latency_us p50/p99/max");
   for (std::size_t i = 0; i < scheduler.task_count(); ++i) {
     const TaskSpec& spec = scheduler.spec(i);
     const TaskStats s = scheduler.stats(i);
@@ -50,10 +50,11 @@ void print_task_table(std::FILE* out, const Scheduler& scheduler) {
     char latency[64];
     std::snprintf(exec, sizeof exec, "%.1f/%.1f/%.1f", us(s.execution.p50), us(s.execution.p99), us(s.execution.max));
     std::snprintf(latency, sizeof latency, "%.1f/%.1f/%.1f", us(s.latency.p50), us(s.latency.p99), us(s.latency.max));
-    std::fprintf(out, "%-14s %-8s %8.1f %9.1f %8llu %8llu %6llu %6llu %7llu  %-26s %-26s\n", spec.name.c_str(),
+    std::fprintf(out, "%-14s %-8s %8.1f %9.1f %8llu %8llu %6llu %6llu %7llu %7llu  %-26s %-26s\n", spec.name.c_str(),
                  spec.kind == TaskKind::periodic ? "periodic" : "event", spec.rate_hz, us(spec.budget),
                  static_cast<unsigned long long>(s.runs), static_cast<unsigned long long>(s.overruns),
-                 static_cast<unsigned long long>(s.stalls), static_cast<unsigned long long>(s.slips), static_cast<unsigned long long>(s.skipped_periods), exec,
+                 static_cast<unsigned long long>(s.stalls), static_cast<unsigned long long>(s.slips), static_cast<unsigned long long>(s.skipped_periods),
+                 static_cast<unsigned long long>(s.rested_periods), exec,
                  latency);
   }
 }

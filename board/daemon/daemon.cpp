@@ -342,13 +342,13 @@ std::string Daemon::task_report() const {
   std::string out;
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
     const TaskStats st = scheduler_->stats(i);
-    char line[260];
+    char line[300];
     std::snprintf(line, sizeof line,
-                  "  %-10s runs %8llu  overruns %llu  stalls %llu  slips %llu  exec p50 %.3f p99 %.3f max %.3f ms  "
+                  "  %-10s runs %8llu  overruns %llu  stalls %llu  slips %llu  rested %llu  exec p50 %.3f p99 %.3f max %.3f ms  "
                   "cpu/period p99 %.3f max %.3f ms  latency p99 %.3f ms\n",
                   scheduler_->spec(i).name.c_str(), static_cast<unsigned long long>(st.runs),
                   static_cast<unsigned long long>(st.overruns), static_cast<unsigned long long>(st.stalls),
-                  static_cast<unsigned long long>(st.slips),
+                  static_cast<unsigned long long>(st.slips), static_cast<unsigned long long>(st.rested_periods),
                   nanos_to_seconds(st.execution.p50) * 1e3, nanos_to_seconds(st.execution.p99) * 1e3,
                   nanos_to_seconds(st.execution.max) * 1e3, nanos_to_seconds(st.cpu_per_period.p99) * 1e3, nanos_to_seconds(st.cpu_per_period.max) * 1e3,
                   nanos_to_seconds(st.latency.p99) * 1e3);
@@ -577,6 +577,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("overruns", st.overruns);
     m.value("stalls", st.stalls);
     m.value("slips", st.slips);
+    m.value("rested_periods", st.rested_periods);
     m.value("exec_p99_ms", nanos_to_seconds(st.execution.p99) * 1e3, 3);
     m.value("exec_max_ms", nanos_to_seconds(st.execution.max) * 1e3, 3);
     m.value("cpu_per_period_p99_ms", nanos_to_seconds(st.cpu_per_period.p99) * 1e3, 3);

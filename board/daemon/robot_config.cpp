@@ -82,6 +82,9 @@ LidarSection parse_lidar(const ConfigNode& n) {
   }
   s.driver.assembler.rpm = n.number("rpm", 300.0, 1200.0, 600.0);
   s.driver.assembler.min_rpm = std::min(300.0, s.driver.assembler.rpm);
+  // Between revolutions' ends the task reads its socket at most this far
+  // apart (VelodyneDriver::rest); 0: every period of its rate.
+  s.driver.max_rest_ns = static_cast<Nanos>(n.number("max_rest_ms", 0.0, 50.0, 10.0) * 1e6);
   n.reject_unknown_keys();
   return s;
 }

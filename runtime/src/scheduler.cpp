@@ -43,6 +43,17 @@ Nanos next_periodic_deadline(Nanos scheduled, Nanos period, Nanos finished, std:
   return next;
 }
 
+Nanos rested_deadline(Nanos next, Nanos period, Nanos finished, Nanos rest, std::uint64_t& rested) noexcept {
+  rested = 0;
+  if (rest <= 0 || period <= 0) return next;
+  const Nanos until = finished + rest;
+  if (until - next >= period) {
+    rested = static_cast<std::uint64_t>((until - next) / period);
+    next += static_cast<Nanos>(rested) * period;
+  }
+  return next;
+}
+
 bool TaskEvent::wait(std::uint32_t& seen) noexcept {
   for (;;) {
     if (interrupted_.load(std::memory_order_acquire)) return false;
@@ -189,6 +200,9 @@ void Scheduler::run_periodic(Entry& entry) noexcept {
     std::uint64_t skipped = 0;
     deadline = next_periodic_deadline(deadline, period, finished, skipped);
     if (skipped > 0) entry.accounting.record_skipped(skipped);
+    std::uint64_t rested = 0;
+    deadline = rested_deadline(deadline, period, finished, entry.task.rest(), rested);
+    if (rested > 0) entry.accounting.record_rested(rested);
     ++cycle;
   }
 }

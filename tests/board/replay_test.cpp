@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
 #include <filesystem>
@@ -18,8 +19,10 @@
 #include "test_data.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_receiver.hpp"
+#include "trailnav/drivers/udp/udp_sender.hpp"
 #include "trailnav/drivers/velodyne/driver.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
@@ -186,6 +189,81 @@ TEST(Replay, ASimulatedRecordingReplaysInRealTimeIntoTheDriver) {
   EXPECT_GE(live.size(), 28u);
   expect_same_revolutions(live, file, true);
   fs::remove_all(dir);
+}
+
+// The driver's rest (VelodyneDriver::rest): a real VLP-16 capture sent at
+// its own pace (each packet its sensor-clock interval after the one before, so a
+// delayed sender delays everything after it), the driver run after every
+// packet. No rest may reach past the arrival of the packet that completes the
+// next revolution, mid-revolution rests are the whole 10 ms, and once the
+// stream stops the driver rests the whole 10 ms.
+TEST(Replay, TheLidarRestsBetweenRevolutionsButNeverPastTheEndOfOne) {
+  auto reader = recording::RecordingReader::open(test::shared_data("velodyne/einride_vlp16_recording_raw1206.bin"));
+  ASSERT_TRUE(reader.reader) << reader.error;
+  std::vector<std::vector<std::uint8_t>> packets;
+  std::vector<std::int64_t> times;  // the packets' own clock (no capture times in a raw file)
+  while (auto e = reader.reader->next()) {
+    if (e->payload.size() != kDataPacketSize) continue;
+    packets.emplace_back(e->payload.begin(), e->payload.end());
+    times.push_back(static_cast<std::int64_t>(read_u32(e->payload.data() + kTimestampOffset)) * 1000);
+    if (packets.size() == 600) break;  // about 0.8 s: eight revolutions
+  }
+  ASSERT_EQ(packets.size(), 600u);
+
+  DriverOptions options;
+  options.data.bind = {0x7F000001u, 0};
+  options.position.reset();
+  ASSERT_EQ(options.max_rest_ns, 10 * kNanosPerMilli);  // the default
+  auto created = VelodyneDriver::create(make_decoder(Model::vlp16, ""), options);
+  ASSERT_TRUE(created.driver) << created.error;
+  VelodyneDriver& driver = *created.driver;
+  auto sender = udp::UdpSender::open(driver.data_endpoint());
+  ASSERT_TRUE(sender.sender) << sender.error;
+
+  struct Run {
+    std::int64_t made;     // host time right after rest() returned
+    std::int64_t wake_by;  // when the rest asked for ends
+    Nanos rest;
+  };
+  std::vector<Run> runs;
+  std::vector<std::int64_t> completed_at;  // receive times of the packets that completed a revolution
+  std::uint64_t seen = 0;
+  for (std::size_t i = 0; i < packets.size(); ++i) {
+    if (i > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(std::clamp<std::int64_t>(times[i] - times[i - 1], 0, 5'000'000)));
+    ASSERT_TRUE(sender.sender->send(packets[i]));
+    for (int tries = 0; tries < 5000 && driver.counters().data.datagrams < i + 1; ++tries) {
+      driver.run(TaskTick{i, 0, 0});
+      if (driver.counters().data.datagrams < i + 1) std::this_thread::sleep_for(std::chrono::microseconds(20));
+    }
+    ASSERT_EQ(driver.counters().data.datagrams, i + 1);
+    if (const RangeImage* image = driver.revolutions().try_read(); image != nullptr && image->sequence != seen) {
+      seen = image->sequence;
+      completed_at.push_back(image->completed_receive_ns);
+    }
+    const Nanos rest = driver.rest();
+    const std::int64_t now = host_now_ns();
+    ASSERT_GE(rest, 0);
+    ASSERT_LE(rest, 10 * kNanosPerMilli);
+    runs.push_back({now, now + rest, rest});
+  }
+  ASSERT_GE(completed_at.size(), 5u);
+  std::size_t far = 0, far_full = 0;
+  for (const Run& run : runs) {
+    const auto next = std::upper_bound(completed_at.begin(), completed_at.end(), run.made);
+    if (next == completed_at.end()) break;
+    EXPECT_LE(run.wake_by, *next) << "a rest reached " << static_cast<double>(run.wake_by - *next) * 1e-6
+                                  << " ms past the packet that completed the revolution";
+    if (*next - run.made > 25 * kNanosPerMilli) {
+      ++far;
+      far_full += run.rest == 10 * kNanosPerMilli ? 1 : 0;
+    }
+  }
+  ASSERT_GT(far, 100u);
+  EXPECT_GE(far_full, far * 9 / 10) << far_full << " of " << far << " runs over 25 ms before an end rested 10 ms";
+  // The stream stopped: no revolution can end, the whole rest.
+  std::this_thread::sleep_for(std::chrono::milliseconds(12));
+  driver.run(TaskTick{packets.size(), 0, 0});
+  EXPECT_EQ(driver.rest(), 10 * kNanosPerMilli);
 }
 
 TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileHostTimed) {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <thread>
+#include <vector>
 
 namespace trailnav {
 namespace {
@@ -98,6 +99,23 @@ TEST(NextPeriodicDeadline, DropsWholePeriodsThatAreLongGone) {
   EXPECT_EQ(skipped, 1u);
   EXPECT_EQ(next_periodic_deadline(100 * kMs, 10 * kMs, 147 * kMs, skipped), 140 * kMs);
   EXPECT_EQ(skipped, 3u);
+}
+
+TEST(RestedDeadline, SleepsThroughWholePeriodsNeverPastTheRest) {
+  std::uint64_t rested = 99;
+  // No rest, or one shorter than a period past the next deadline: unchanged.
+  EXPECT_EQ(rested_deadline(10 * kMs, 10 * kMs, 1 * kMs, 0, rested), 10 * kMs);
+  EXPECT_EQ(rested, 0u);
+  EXPECT_EQ(rested_deadline(10 * kMs, 10 * kMs, 1 * kMs, 18 * kMs, rested), 10 * kMs);  // until 19 ms
+  EXPECT_EQ(rested, 0u);
+  // Until 20 ms: the 10 ms deadline is slept through, 20 ms is the next.
+  EXPECT_EQ(rested_deadline(10 * kMs, 10 * kMs, 1 * kMs, 19 * kMs, rested), 20 * kMs);
+  EXPECT_EQ(rested, 1u);
+  // Until 47 ms: 10, 20 and 30 rested, 40 ms is the last deadline before it.
+  EXPECT_EQ(rested_deadline(10 * kMs, 10 * kMs, 1 * kMs, 46 * kMs, rested), 40 * kMs);
+  EXPECT_EQ(rested, 3u);
+  EXPECT_EQ(rested_deadline(10 * kMs, 10 * kMs, 1 * kMs, -5 * kMs, rested), 10 * kMs);  // negative: none
+  EXPECT_EQ(rested, 0u);
 }
 
 // --- task table validation ---
@@ -200,6 +218,68 @@ TEST(Scheduler, CountsOverrunsSlipsAndSkipsExactlyOnSimulatedTime) {
   EXPECT_EQ(s.execution.min, 1 * kMs);
   EXPECT_EQ(s.latency.min, 0);
   EXPECT_EQ(s.latency.max, 35 * kMs);
+}
+
+// A task that asks to rest for a scripted time after each run.
+class RestingTask final : public Task {
+ public:
+  explicit RestingTask(SimulatedClock& clock) : clock_(clock) {}
+  void run(const TaskTick& tick) override {
+    clock_.advance_by(kMs);
+    started.push_back(tick.started);  // test thread reads after stop()
+    next_rest = tick.cycle < rests.size() ? rests[tick.cycle] : 0;
+  }
+  Nanos rest() noexcept override { return next_rest; }
+  std::array<Nanos, 4> rests{35 * kMs, 0, 9 * kMs, 19 * kMs};
+  std::vector<Nanos> started;
+  Nanos next_rest = 0;
+
+ private:
+  SimulatedClock& clock_;
+};
+
+TEST(Scheduler, ARestingTaskSleepsThroughWholePeriodsAndRunsOnTheGrid) {
+  SimulatedClock clock(0);
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  RestingTask task(clock);
+  task.started.reserve(16);
+  ASSERT_TRUE(scheduler.add({"resting", TaskKind::periodic, 100.0, 2 * kMs, 0, -1}, task));
+  ASSERT_TRUE(scheduler.start());
+  wait_for(scheduler, clock, 0);
+  clock.advance_to(10 * kMs);
+  wait_for(scheduler, clock, 1);
+  // Cycle 0 ends at 11 ms and rests 35 ms, until 46 ms: the 20 and 30 ms
+  // deadlines are slept through (the run at 40 ms is still within the rest,
+  // but the one after it would not be), so the next run is at 40 ms.
+  clock.advance_to(30 * kMs);
+  ASSERT_EQ(scheduler.stats(0).runs, 1u);
+  clock.advance_to(40 * kMs);
+  wait_for(scheduler, clock, 2);
+  // Cycle 1 asks for no rest: 50 ms. Cycle 2 (50 ms) rests 9 ms, until
+  // 60 ms, which is the next deadline anyway: nothing rested.
+  clock.advance_to(50 * kMs);
+  wait_for(scheduler, clock, 3);
+  clock.advance_to(60 * kMs);
+  wait_for(scheduler, clock, 4);
+  // Cycle 3 (60 ms) rests 19 ms, until 80 ms: 70 rested, 80 ms next.
+  clock.advance_to(70 * kMs);
+  ASSERT_EQ(scheduler.stats(0).runs, 4u);
+  clock.advance_to(80 * kMs);
+  wait_for(scheduler, clock, 5);
+  scheduler.stop();
+
+  const TaskStats s = scheduler.stats(0);
+  EXPECT_EQ(s.runs, 5u);
+  EXPECT_EQ(s.rested_periods, 3u);
+  EXPECT_EQ(s.skipped_periods, 0u);
+  EXPECT_EQ(s.slips, 0u);
+  EXPECT_EQ(s.overruns, 0u);  // 1 ms of CPU against 2 ms per period of input
+  ASSERT_EQ(task.started.size(), 5u);
+  EXPECT_EQ(task.started[0], 10 * kMs);
+  EXPECT_EQ(task.started[1], 40 * kMs);
+  EXPECT_EQ(task.started[2], 50 * kMs);
+  EXPECT_EQ(task.started[3], 60 * kMs);
+  EXPECT_EQ(task.started[4], 80 * kMs);
 }
 
 // --- the scheduler on the real clock ---

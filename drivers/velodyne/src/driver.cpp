@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstring>
 
+#include "trailnav/runtime/host_clock.hpp"
+
 namespace trailnav::velodyne {
 
 VelodyneDriver::Created VelodyneDriver::create(PacketDecoder decoder, const DriverOptions& options) {
@@ -109,6 +111,23 @@ void VelodyneDriver::run(const TaskTick& tick) {
     if (batch.size() < static_cast<std::size_t>(data_->options().batch)) break;
   }
   publish_counters();
+}
+
+Nanos VelodyneDriver::rest() noexcept {
+  const Nanos most = options_.max_rest_ns;
+  if (most <= 0) return 0;
+  const std::int64_t newest = local_.last_packet_ns;
+  const double left = assembler_->turn_to_cut();
+  if (newest == 0 || left < 0.0 || !(assembler_->rpm() > 0.0)) return most;  // no stream yet
+  const Nanos now = host_now_ns();
+  if (now - newest >= most) return most;  // the stream has stopped
+  // The packet that completes the revolution leaves the sensor after the
+  // firing at the cut. Wake ahead of that by 2 ms and 5 % of the time to it
+  // (the rate may change by a few per cent within a turn), then every period.
+  const double to_cut_ns = left * 60e9 / assembler_->rpm();
+  const auto cut_ns = newest + static_cast<Nanos>(to_cut_ns);
+  const Nanos ahead = 2 * kNanosPerMilli + static_cast<Nanos>(0.05 * to_cut_ns);
+  return std::clamp<Nanos>(cut_ns - ahead - now, 0, most);
 }
 
 void VelodyneDriver::publish_counters() noexcept {

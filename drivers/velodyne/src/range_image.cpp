@@ -102,6 +102,12 @@ RevolutionAssembler::RevolutionAssembler(const PacketDecoder& decoder, const Ass
   columns_ = columns_for_rpm(options.rpm);
 }
 
+double RevolutionAssembler::turn_to_cut() const noexcept {
+  const float after_cut = cut_.last_relative();
+  if (after_cut < 0.0f) return -1.0;
+  return static_cast<double>(kTurn - after_cut) / static_cast<double>(kTurn);
+}
+
 int RevolutionAssembler::columns_for_rpm(double rpm) const noexcept {
   const auto c = static_cast<int>(std::lround(firings_per_second_ * 60.0 / rpm));
   return std::clamp(c, 1, shape_.max_columns);

@@ -52,6 +52,15 @@ class Task {
  public:
   virtual ~Task() = default;
   virtual void run(const TaskTick& tick) = 0;
+  // Asked by the scheduler right after each run of a periodic task: for how
+  // long the task can do without running (0: it runs next period, as always).
+  // The scheduler then sleeps through the whole periods that fit in that
+  // time, counted as rested, never past it: the deadlines stay on the
+  // period's grid, and the next run drains those periods' input with one
+  // allowance per period. A task whose input matters only at known moments
+  // (the lidar's, where a revolution ends) saves the wake-ups in between,
+  // which on a virtual machine cost 25-55 us of CPU each (docs/performance.md).
+  virtual Nanos rest() noexcept { return 0; }
 };
 
 // Wakes an event-driven task. Producers call signal(); several signals before
@@ -83,6 +92,7 @@ struct TaskStats {
   std::uint64_t stalls = 0;    // runs over budget by the clock only (the thread was kept off its core)
   std::uint64_t slips = 0;
   std::uint64_t skipped_periods = 0;
+  std::uint64_t rested_periods = 0;  // slept through because the task asked to rest (Task::rest)
   DurationSummary execution;
   DurationSummary latency;  // start minus deadline (periodic) or minus signal (event)
   Nanos cpu_max = 0;        // most CPU time one run used
@@ -128,6 +138,7 @@ class TaskAccounting {
     cpu_per_period_.record(static_cast<Nanos>(static_cast<double>(cpu) / periods));
   }
   void record_skipped(std::uint64_t periods) noexcept { skipped_.fetch_add(periods, std::memory_order_relaxed); }
+  void record_rested(std::uint64_t periods) noexcept { rested_.fetch_add(periods, std::memory_order_relaxed); }
 
   TaskStats stats() const noexcept {
     TaskStats s;
@@ -137,6 +148,7 @@ class TaskAccounting {
     s.cpu_max = cpu_max_.load(std::memory_order_relaxed);
     s.slips = slips_.load(std::memory_order_relaxed);
     s.skipped_periods = skipped_.load(std::memory_order_relaxed);
+    s.rested_periods = rested_.load(std::memory_order_relaxed);
     s.execution = execution_.summary();
     s.latency = latency_.summary();
     s.cpu_per_period = cpu_per_period_.summary();
@@ -153,6 +165,7 @@ class TaskAccounting {
   std::atomic<Nanos> cpu_max_{0};  // single writer: load and store suffice
   std::atomic<std::uint64_t> slips_{0};
   std::atomic<std::uint64_t> skipped_{0};
+  std::atomic<std::uint64_t> rested_{0};
   DurationHistogram execution_;
   DurationHistogram latency_;
   DurationHistogram cpu_per_period_;
@@ -165,6 +178,11 @@ class TaskAccounting {
 // lies a full period or more in the past (the dropped periods are returned in
 // `skipped`), so a late task catches up without a burst of runs.
 Nanos next_periodic_deadline(Nanos scheduled, Nanos period, Nanos finished, std::uint64_t& skipped) noexcept;
+
+// The deadline after a rest: `next` moved on by the whole periods that end
+// no later than `finished + rest` (their count in `rested`); `next` itself
+// when the rest is shorter than a period past it. Never past the rest's end.
+Nanos rested_deadline(Nanos next, Nanos period, Nanos finished, Nanos rest, std::uint64_t& rested) noexcept;
 
 enum class RealtimePolicy : std::uint8_t {
   off,          // normal scheduling, no memory locking

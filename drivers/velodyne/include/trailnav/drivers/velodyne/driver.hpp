@@ -30,6 +30,11 @@ struct DriverOptions {
   ClockRelationOptions reference;  // the sensor clock against the host's (runtime/clock_relation.hpp)
   int max_batches_per_run = 32;  // bounds one run's work; the rest waits for the next run
   int revolution_readers = 1;    // threads that read revolutions (obstacles, terrain): one slot each
+  // Reads at most this far apart while a revolution is in progress, and
+  // every period of the task from shortly before its predicted end (rest());
+  // 0: every period. The packets wait in the socket meanwhile (HDL-64E: 36
+  // packets, about 80 kB of buffer in 10 ms).
+  Nanos max_rest_ns = 10 * kNanosPerMilli;
 
   DriverOptions() {
     data.bind.port = 2368;
@@ -74,6 +79,12 @@ class VelodyneDriver final : public Task {
   VelodyneDriver& operator=(const VelodyneDriver&) = delete;
 
   void run(const TaskTick& tick) override;
+  // How long the task can rest after a run: until shortly before the
+  // revolution in progress is predicted to end (from the newest packet's
+  // receive time, its azimuth and the rotation rate), at most
+  // options().max_rest_ns; once the stream has been quiet that long, the
+  // whole of it (no revolution can end without packets).
+  Nanos rest() noexcept override;
 
   // Reader i of the revolutions (i < options().revolution_readers), one per thread.
   Broadcast<RangeImage>::Reader& revolutions(std::size_t reader = 0) noexcept { return revolutions_.reader(reader); }

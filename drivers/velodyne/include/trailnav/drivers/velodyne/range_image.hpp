@@ -172,6 +172,11 @@ class RevolutionAssembler {
   PacketError add_packet(std::span<const std::uint8_t> payload, std::int64_t packet_time_ns, RevolutionSink& sink) noexcept;
   // The time of the newest firing placed so far (sensor clock).
   std::int64_t last_firing_ns() const noexcept { return last_firing_ns_; }
+  // The part of a turn from the newest firing to the cut, in (0, 1]: the
+  // revolution in progress ends that far ahead, at rpm(). Negative before
+  // the first packet.
+  double turn_to_cut() const noexcept;
+  double rpm() const noexcept { return current_rpm_; }
 
   const AssemblerCounters& counters() const noexcept { return counters_; }
 

@@ -27,6 +27,8 @@ class RevolutionCut {
   // The same for the last sequence of the packet before it; negative before
   // the second packet.
   float previous_relative() const noexcept { return previous_before_; }
+  // The newest sequence's azimuth after the cut; negative before any packet.
+  float last_relative() const noexcept { return last_; }
 
  private:
   float cut_;  // hundredths of a degree
