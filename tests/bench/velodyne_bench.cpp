@@ -53,12 +53,13 @@ void run(benchmark::State& state, Model model, const Calibration& calibration, c
   std::size_t i = 0;
   std::int64_t points = 0;
   for (auto _ : state) {
-    const PacketInfo info = created.decoder->decode(packets[i], out);
+    const PacketInfo info = created.decoder->decode(packets[i], out, static_cast<DecodeKernel>(state.range(0)));
     points += info.points;
     benchmark::DoNotOptimize(out.data());
     if (++i == packets.size()) i = 0;
   }
   state.SetItemsProcessed(points);  // items = points
+  state.SetLabel(state.range(0) == 0 ? "blocks" : "per point");
   state.counters["packets_per_s"] = benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
@@ -66,13 +67,13 @@ void BM_DecodeHdl32eRealCapture(benchmark::State& state) {
   static const auto packets = load_packets("../shared/data/velodyne/mrpt_sample_velodyne_hdl32.pcap");
   run(state, Model::hdl32e, *builtin_calibration(Model::hdl32e), packets);
 }
-BENCHMARK(BM_DecodeHdl32eRealCapture);
+BENCHMARK(BM_DecodeHdl32eRealCapture)->Arg(0)->Arg(1);  // DecodeKernel: blocks, per point
 
 void BM_DecodeVlp16DualRealCapture(benchmark::State& state) {
   static const auto packets = load_packets("../shared/data/velodyne/nebula-vlp16/vlp16_dual_rewrapped.pcap");
   run(state, Model::vlp16, *builtin_calibration(Model::vlp16), packets);
 }
-BENCHMARK(BM_DecodeVlp16DualRealCapture);
+BENCHMARK(BM_DecodeVlp16DualRealCapture)->Arg(0)->Arg(1);  // DecodeKernel: blocks, per point
 
 // HDL-64E with a real calibration (two-point and intensity corrections on),
 // every firing returning: the worst case per packet.
@@ -85,7 +86,7 @@ void BM_DecodeHdl64eFullPacket(benchmark::State& state) {
   const std::vector<std::uint8_t> packet = hdl64e_packet(1000.0, 17.0, 0);
   run(state, Model::hdl64e, *loaded.calibration, {packet});
 }
-BENCHMARK(BM_DecodeHdl64eFullPacket);
+BENCHMARK(BM_DecodeHdl64eFullPacket)->Arg(0)->Arg(1);  // DecodeKernel: blocks, per point
 
 // Decode plus revolution assembly into the range image, the driver's whole
 // per-packet work. Items are points.

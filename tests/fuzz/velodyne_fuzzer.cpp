@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <bit>
 #include <cstdlib>
 #include <memory>
 #include <vector>
@@ -39,6 +40,14 @@ class CheckingSink final : public RevolutionSink {
  private:
   RangeImage image_;
 };
+
+bool same_bits(const Point& a, const Point& b) {
+  const auto bits = [](float f) { return std::bit_cast<std::uint32_t>(f); };
+  return bits(a.x) == bits(b.x) && bits(a.y) == bits(b.y) && bits(a.z) == bits(b.z) &&
+         bits(a.distance) == bits(b.distance) && bits(a.azimuth) == bits(b.azimuth) &&
+         bits(a.intensity) == bits(b.intensity) && bits(a.time) == bits(b.time) && a.ring == b.ring &&
+         a.laser == b.laser && a.kind == b.kind && a.sequence == b.sequence;
+}
 
 // A synthetic HDL-64E calibration with every correction in use.
 Calibration hdl64e_calibration() {
@@ -98,6 +107,7 @@ std::vector<Model_>& models() {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static std::vector<Point> points(kMaxPointsPerPacket);
+  static std::vector<Point> reference(kMaxPointsPerPacket);
   std::vector<Model_>& all = models();
   std::vector<RevolutionAssembler> assemblers;
   std::vector<SensorClock> clocks(all.size());
@@ -114,6 +124,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       const PacketDecoder& decoder = all[k].decoder;
       const PacketInfo info = decoder.decode(packet, points);
       check(info.points >= 0 && info.points <= kMaxPointsPerPacket);
+      // Both ways of computing the points give the same bits.
+      const PacketInfo one_by_one = decoder.decode(packet, reference, DecodeKernel::per_point);
+      check(one_by_one.error == info.error && one_by_one.points == info.points);
+      for (int i = 0; i < info.points; ++i) {
+        check(same_bits(points[static_cast<std::size_t>(i)], reference[static_cast<std::size_t>(i)]));
+      }
       for (int i = 0; i < info.points; ++i) {
         const Point& q = points[static_cast<std::size_t>(i)];
         check(std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z));

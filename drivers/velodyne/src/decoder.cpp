@@ -5,12 +5,19 @@
 #include <numbers>
 #include <numeric>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace trailnav::velodyne {
 namespace {
 
 constexpr int kAzimuthSteps = 36000;  // hundredths of a degree per turn
 constexpr float kRadPerStep = static_cast<float>(std::numbers::pi / 18000.0);
 constexpr float kTwoPi = static_cast<float>(2.0 * std::numbers::pi);
+// DecodeKernel::blocks takes a block whole from this many returns on
+// (trailnav_velodyne_bench: a whole block costs about 22 returns one by one).
+constexpr int kBlockKernelMinReturns = 24;
 // Largest believable azimuth advance between two firing groups: 5 degrees.
 constexpr int kMaxGroupGap = 500;
 
@@ -99,6 +106,33 @@ PacketDecoder::Created PacketDecoder::create(Model model, const Calibration& cal
     d.lasers_.push_back(t);
   }
 
+  d.resolution_f_ = static_cast<float>(d.resolution_);
+  for (int lower = 0; lower < 2; ++lower) {
+    BlockTable& b = d.block_tables_[static_cast<std::size_t>(lower)];
+    const int lasers_per_sequence = kReturnsPerBlock / d.info_->sequences_per_block;
+    for (int k = 0; k < kReturnsPerBlock; ++k) {
+      const auto laser = static_cast<std::size_t>((lower != 0 ? 32 : 0) + k % lasers_per_sequence);
+      if (laser >= d.lasers_.size()) break;  // no lower block on this model
+      const LaserTable& t = d.lasers_[laser];
+      const auto i = static_cast<std::size_t>(k);
+      b.cos_vert[i] = t.cos_vert;
+      b.sin_vert[i] = t.sin_vert;
+      b.cos_rot[i] = t.cos_rot;
+      b.sin_rot[i] = t.sin_rot;
+      b.rot[i] = t.rot;
+      b.dist_correction[i] = t.dist_correction;
+      b.dist_correction_x[i] = t.two_pt ? t.dist_correction_x : t.dist_correction;
+      b.dist_correction_y[i] = t.two_pt ? t.dist_correction_y : t.dist_correction;
+      b.vert_offset[i] = t.vert_offset;
+      b.horiz_offset[i] = t.horiz_offset;
+      b.focal_offset[i] = t.intensity_correction ? t.focal_offset : 0.0f;
+      b.focal_slope[i] = t.intensity_correction ? t.focal_slope : 0.0f;
+      b.min_intensity[i] = t.intensity_correction ? t.min_intensity : 0.0f;
+      b.max_intensity[i] = t.intensity_correction ? t.max_intensity : 255.0f;
+      b.corrections = b.corrections || t.two_pt || t.intensity_correction;
+    }
+  }
+
   // Rings: lasers sorted by elevation, lowest first (ties by id).
   std::vector<int> order(calibration.lasers.size());
   std::iota(order.begin(), order.end(), 0);
@@ -165,6 +199,122 @@ void PacketDecoder::place(const LaserTable& t, float a, std::uint16_t raw, std::
   pt.intensity = intensity;
 }
 
+void PacketDecoder::place_block(const BlockTable& t, BlockReturns& r) const noexcept {
+  constexpr std::size_t n = kReturnsPerBlock;
+  // The table lookups one by one, then the arithmetic of place() for four
+  // slots at once (SSE2, part of every x86-64 CPU), else slot by slot. Every
+  // step is place()'s, in its order and in single precision, so that the
+  // points are the same bits either way (test).
+  std::array<float, n> s0, c0, delta;
+  for (std::size_t k = 0; k < n; ++k) {
+    const int ai = static_cast<int>(r.azimuth[k]);
+    delta[k] = (r.azimuth[k] - static_cast<float>(ai)) * kRadPerStep;
+    s0[k] = sin_table_[static_cast<std::size_t>(ai)];
+    c0[k] = cos_table_[static_cast<std::size_t>(ai)];
+  }
+  const float resolution = resolution_f_;
+#if defined(__SSE2__)
+  const __m128 res = _mm_set1_ps(resolution);
+  const __m128 sign = _mm_set1_ps(-0.0f);
+  const __m128 two_pt_x = _mm_set1_ps(2.4f), span_x = _mm_set1_ps(25.04f - 2.4f);
+  const __m128 two_pt_y = _mm_set1_ps(1.93f), span_y = _mm_set1_ps(25.04f - 1.93f);
+  const __m128 rad = _mm_set1_ps(kRadPerStep), one = _mm_set1_ps(1.0f);
+  const __m128 full = _mm_set1_ps(65535.0f), k256 = _mm_set1_ps(256.0f);
+  if (!t.corrections) {
+    // Without the HDL-64E's two-point and intensity corrections.
+    for (std::size_t k = 0; k < n; k += 4) {
+      const auto in = [k](const std::array<float, n>& a) noexcept { return _mm_loadu_ps(a.data() + k); };
+      const __m128 vs0 = in(s0), vc0 = in(c0), vdelta = in(delta);
+      const __m128 cos_rot = in(t.cos_rot), sin_rot = in(t.sin_rot), cos_vert = in(t.cos_vert), sin_vert = in(t.sin_vert);
+      const __m128 vo = in(t.vert_offset), ho = in(t.horiz_offset);
+      const __m128 sin_az = _mm_add_ps(vs0, _mm_mul_ps(vdelta, vc0));
+      const __m128 cos_az = _mm_sub_ps(vc0, _mm_mul_ps(vdelta, vs0));
+      const __m128 sa = _mm_sub_ps(_mm_mul_ps(sin_az, cos_rot), _mm_mul_ps(cos_az, sin_rot));
+      const __m128 ca = _mm_add_ps(_mm_mul_ps(cos_az, cos_rot), _mm_mul_ps(sin_az, sin_rot));
+      const __m128 distance = _mm_add_ps(_mm_mul_ps(in(r.raw), res), in(t.dist_correction));
+      const __m128 xy = _mm_sub_ps(_mm_mul_ps(distance, cos_vert), _mm_mul_ps(vo, sin_vert));
+      _mm_storeu_ps(r.x.data() + k, _mm_add_ps(_mm_mul_ps(xy, ca), _mm_mul_ps(ho, sa)));
+      _mm_storeu_ps(r.y.data() + k, _mm_xor_ps(sign, _mm_sub_ps(_mm_mul_ps(xy, sa), _mm_mul_ps(ho, ca))));
+      _mm_storeu_ps(r.z.data() + k, _mm_add_ps(_mm_mul_ps(distance, sin_vert), _mm_mul_ps(vo, cos_vert)));
+      _mm_storeu_ps(r.distance.data() + k, distance);
+      _mm_storeu_ps(r.pointing.data() + k, _mm_sub_ps(_mm_mul_ps(in(r.azimuth), rad), in(t.rot)));
+      _mm_storeu_ps(r.corrected.data() + k, in(r.intensity));
+    }
+    return;
+  }
+  for (std::size_t k = 0; k < n; k += 4) {
+    const auto in = [k](const std::array<float, n>& a) noexcept { return _mm_loadu_ps(a.data() + k); };
+    const __m128 vs0 = in(s0), vc0 = in(c0), vdelta = in(delta);
+    const __m128 cos_rot = in(t.cos_rot), sin_rot = in(t.sin_rot), cos_vert = in(t.cos_vert), sin_vert = in(t.sin_vert);
+    const __m128 dc = in(t.dist_correction), dcx = in(t.dist_correction_x), dcy = in(t.dist_correction_y);
+    const __m128 vo = in(t.vert_offset), ho = in(t.horiz_offset), raw = in(r.raw);
+    const __m128 sin_az = _mm_add_ps(vs0, _mm_mul_ps(vdelta, vc0));
+    const __m128 cos_az = _mm_sub_ps(vc0, _mm_mul_ps(vdelta, vs0));
+    const __m128 sa = _mm_sub_ps(_mm_mul_ps(sin_az, cos_rot), _mm_mul_ps(cos_az, sin_rot));
+    const __m128 ca = _mm_add_ps(_mm_mul_ps(cos_az, cos_rot), _mm_mul_ps(sin_az, sin_rot));
+    const __m128 distance = _mm_add_ps(_mm_mul_ps(raw, res), dc);
+    const __m128 vo_sin = _mm_mul_ps(vo, sin_vert);
+    const __m128 xy0 = _mm_sub_ps(_mm_mul_ps(distance, cos_vert), vo_sin);
+    const __m128 xx = _mm_andnot_ps(sign, _mm_sub_ps(_mm_mul_ps(xy0, sa), _mm_mul_ps(ho, ca)));
+    const __m128 yy = _mm_andnot_ps(sign, _mm_add_ps(_mm_mul_ps(xy0, ca), _mm_mul_ps(ho, sa)));
+    const __m128 distance_x = _mm_add_ps(
+        distance,
+        _mm_sub_ps(_mm_add_ps(_mm_div_ps(_mm_mul_ps(_mm_sub_ps(dc, dcx), _mm_sub_ps(xx, two_pt_x)), span_x), dcx), dc));
+    const __m128 distance_y = _mm_add_ps(
+        distance,
+        _mm_sub_ps(_mm_add_ps(_mm_div_ps(_mm_mul_ps(_mm_sub_ps(dc, dcy), _mm_sub_ps(yy, two_pt_y)), span_y), dcy), dc));
+    const __m128 xy_x = _mm_sub_ps(_mm_mul_ps(distance_x, cos_vert), vo_sin);
+    const __m128 xy_y = _mm_sub_ps(_mm_mul_ps(distance_y, cos_vert), vo_sin);
+    _mm_storeu_ps(r.x.data() + k, _mm_add_ps(_mm_mul_ps(xy_y, ca), _mm_mul_ps(ho, sa)));
+    _mm_storeu_ps(r.y.data() + k, _mm_xor_ps(sign, _mm_sub_ps(_mm_mul_ps(xy_x, sa), _mm_mul_ps(ho, ca))));
+    _mm_storeu_ps(r.z.data() + k, _mm_add_ps(_mm_mul_ps(distance_y, sin_vert), _mm_mul_ps(vo, cos_vert)));
+    _mm_storeu_ps(r.distance.data() + k, distance);
+    _mm_storeu_ps(r.pointing.data() + k, _mm_sub_ps(_mm_mul_ps(in(r.azimuth), rad), in(t.rot)));
+    const __m128 fall = _mm_sub_ps(one, _mm_div_ps(raw, full));
+    const __m128 focal = _mm_andnot_ps(sign, _mm_sub_ps(in(t.focal_offset), _mm_mul_ps(_mm_mul_ps(k256, fall), fall)));
+    _mm_storeu_ps(r.corrected.data() + k, _mm_add_ps(in(r.intensity), _mm_mul_ps(in(t.focal_slope), focal)));
+  }
+#else
+  for (std::size_t k = 0; k < n; ++k) {
+    const float sin_az = s0[k] + delta[k] * c0[k];
+    const float cos_az = c0[k] - delta[k] * s0[k];
+    const float sa = sin_az * t.cos_rot[k] - cos_az * t.sin_rot[k];
+    const float ca = cos_az * t.cos_rot[k] + sin_az * t.sin_rot[k];
+    const float dc = t.dist_correction[k];
+    const float distance = r.raw[k] * resolution + dc;
+    // Two-point correction; exactly + 0 for a laser without one (its x and
+    // y corrections are its plain one).
+    const float xy0 = distance * t.cos_vert[k] - t.vert_offset[k] * t.sin_vert[k];
+    const float xx = std::abs(xy0 * sa - t.horiz_offset[k] * ca);
+    const float yy = std::abs(xy0 * ca + t.horiz_offset[k] * sa);
+    const float distance_x = distance + ((dc - t.dist_correction_x[k]) * (xx - 2.4f) / (25.04f - 2.4f) + t.dist_correction_x[k] - dc);
+    const float distance_y = distance + ((dc - t.dist_correction_y[k]) * (yy - 1.93f) / (25.04f - 1.93f) + t.dist_correction_y[k] - dc);
+    const float xy_x = distance_x * t.cos_vert[k] - t.vert_offset[k] * t.sin_vert[k];
+    const float xy_y = distance_y * t.cos_vert[k] - t.vert_offset[k] * t.sin_vert[k];
+    r.x[k] = xy_y * ca + t.horiz_offset[k] * sa;
+    r.y[k] = -(xy_x * sa - t.horiz_offset[k] * ca);
+    r.z[k] = distance_y * t.sin_vert[k] + t.vert_offset[k] * t.cos_vert[k];
+    r.distance[k] = distance;
+    r.pointing[k] = r.azimuth[k] * kRadPerStep - t.rot[k];
+    // Focal intensity correction; exactly + 0 for a laser without.
+    const float fall = 1.0f - r.raw[k] / 65535.0f;
+    r.corrected[k] = r.intensity[k] + t.focal_slope[k] * std::abs(t.focal_offset[k] - 256.0f * fall * fall);
+  }
+#endif
+}
+
+void PacketDecoder::BlockReturns::finish(const BlockTable& t, std::size_t k, Point& pt) const noexcept {
+  pt.x = x[k];
+  pt.y = y[k];
+  pt.z = z[k];
+  pt.distance = distance[k];
+  float p = pointing[k];
+  if (p < 0.0f) p += kTwoPi;
+  if (p >= kTwoPi) p -= kTwoPi;
+  pt.azimuth = p;
+  pt.intensity = std::clamp(corrected[k], t.min_intensity[k], t.max_intensity[k]);  // no-op without the correction
+}
+
 Point PacketDecoder::point_of(int laser, float azimuth, std::uint16_t raw, std::uint8_t intensity) const noexcept {
   Point pt;
   while (azimuth >= static_cast<float>(kAzimuthSteps)) azimuth -= static_cast<float>(kAzimuthSteps);
@@ -175,7 +325,8 @@ Point PacketDecoder::point_of(int laser, float azimuth, std::uint16_t raw, std::
   return pt;
 }
 
-PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::span<Point> out) const noexcept {
+PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::span<Point> out,
+                                 DecodeKernel kernel) const noexcept {
   PacketInfo info;
   if (payload.size() != kDataPacketSize) {
     info.error = PacketError::wrong_size;
@@ -279,6 +430,30 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
     const float group_start_us = static_cast<float>(group) * group_period;
     const auto block_azimuth = static_cast<float>(azimuth[static_cast<std::size_t>(b)]);
     const auto group_gap = static_cast<float>(gap[static_cast<std::size_t>(group)]);
+    // Azimuth of a slot's firing, interpolated over the group's advance.
+    const auto slot_azimuth = [&](int k) noexcept {
+      float a = block_azimuth + group_gap * (firing_time_us_[static_cast<std::size_t>(k)] / group_period);
+      if (a >= static_cast<float>(kAzimuthSteps)) a -= static_cast<float>(kAzimuthSteps);
+      return a;
+    };
+    // A block with few returns (sky, dust) goes one by one: the block
+    // path costs about as much as 22 single returns, whatever it holds.
+    int returns = 0;
+    if (kernel == DecodeKernel::blocks) {
+      for (int k = 0; k < kReturnsPerBlock; ++k) returns += read_u16(block + 4 + static_cast<std::size_t>(k) * 3) != 0 ? 1 : 0;
+    }
+    const bool whole_block = returns >= kBlockKernelMinReturns;
+    BlockReturns block_returns;
+    if (whole_block) {
+      for (int k = 0; k < kReturnsPerBlock; ++k) {
+        const std::uint8_t* ret = block + 4 + static_cast<std::size_t>(k) * 3;
+        const auto i = static_cast<std::size_t>(k);
+        block_returns.azimuth[i] = slot_azimuth(k);
+        block_returns.raw[i] = static_cast<float>(read_u16(ret));
+        block_returns.intensity[i] = static_cast<float>(ret[2]);
+      }
+      place_block(block_tables_[lower ? 1 : 0], block_returns);
+    }
 
     for (int k = 0; k < kReturnsPerBlock; ++k) {
       const std::uint8_t* ret = block + 4 + static_cast<std::size_t>(k) * 3;
@@ -298,14 +473,14 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
         }
       }
       const int laser = (lower ? 32 : 0) + (k % lasers_per_sequence);
-      const LaserTable& t = lasers_[static_cast<std::size_t>(laser)];
       const float t_in_group = firing_time_us_[static_cast<std::size_t>(k)];
 
-      // Azimuth of this firing, interpolated over the group's advance.
-      float a = block_azimuth + group_gap * (t_in_group / group_period);
-      if (a >= static_cast<float>(kAzimuthSteps)) a -= static_cast<float>(kAzimuthSteps);
       Point& pt = out[static_cast<std::size_t>(n++)];
-      place(t, a, raw, ret[2], pt);
+      if (whole_block) {
+        block_returns.finish(block_tables_[lower ? 1 : 0], static_cast<std::size_t>(k), pt);
+      } else {
+        place(lasers_[static_cast<std::size_t>(laser)], slot_azimuth(k), raw, ret[2], pt);
+      }
       pt.time = (group_start_us + t_in_group) * 1e-6f;
       pt.ring = rings_[static_cast<std::size_t>(laser)];
       pt.laser = static_cast<std::uint8_t>(laser);
