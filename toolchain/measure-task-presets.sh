@@ -8,19 +8,21 @@
 # budgets in use (the presets' at the time of the run); per
 # model the daemon's CPU over the replay (% of one core) and the map latency.
 #
-# Usage: toolchain/measure-task-presets.sh [--models "VLP-16 HDL-64E"] [--runs N] [--seconds S]
+# Usage: toolchain/measure-task-presets.sh [--models "VLP-16 HDL-64E"] [--runs N] [--seconds S] [--summary-only]
+# (--summary-only: the tables of the runs already in build/task-presets, none made)
 # Needs the release tree (the README's first command builds it). Each run's
 # whole output stays in build/task-presets/MODEL-RUN.txt.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-models="VLP-16 HDL-64E" runs=3 seconds=60
+models="VLP-16 HDL-64E" runs=3 seconds=60 summary_only=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --models) models=$2; shift 2 ;;
     --runs) runs=$2; shift 2 ;;
     --seconds) seconds=$2; shift 2 ;;
-    -h|--help) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --summary-only) summary_only=1; shift ;;
+    -h|--help) sed -n "2,13p" "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "measure-task-presets: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -31,6 +33,8 @@ out=build/task-presets
 mkdir -p "$out"
 
 for m in $models; do
+  if [ "$summary_only" = 0 ]; then
+  rm -f "$out/$m"-[0-9]*.txt  # an earlier measurement's runs must not join this one's
   for ((r = 1; r <= runs; r++)); do
     f=$out/$m-$r.txt
     echo "measure-task-presets: $m, run $r of $runs ($seconds s)" >&2
@@ -39,6 +43,7 @@ for m in $models; do
       exit 1
     }
   done
+  fi
   echo
   echo "### $m ($runs runs of $seconds s, mixed-route)"
   echo
