@@ -576,11 +576,16 @@ void report(const DaemonRun& r, const char* what) {
               r.terrain_identical, r.terrain_known, r.stderr_text.c_str());
 }
 
+// The number just before " label" in the last place where one stands there
+// (the daemon's closing summary, "... 0 overruns, 0 stalls, 0 real-time
+// allocations"); a start-up warning that says "expect overruns" is no count.
 std::uint64_t number_before(const std::string& text, const std::string& label) {
-  const auto at = text.find(" " + label);
-  if (at == std::string::npos) return ~0ull;
-  auto start = text.rfind(' ', at - 1);
-  return std::stoull(text.substr(start + 1, at - start - 1));
+  for (auto at = text.rfind(" " + label); at != std::string::npos && at > 0; at = text.rfind(" " + label, at - 1)) {
+    const auto start = text.rfind(' ', at - 1);
+    const std::string word = text.substr(start == std::string::npos ? 0 : start + 1, at - (start == std::string::npos ? 0 : start + 1));
+    if (!word.empty() && word.find_first_not_of("0123456789") == std::string::npos) return std::stoull(word);
+  }
+  return ~0ull;
 }
 
 }  // namespace
