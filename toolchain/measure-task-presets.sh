@@ -34,15 +34,15 @@ mkdir -p "$out"
 
 for m in $models; do
   if [ "$summary_only" = 0 ]; then
-  rm -f "$out/$m"-[0-9]*.txt  # an earlier measurement's runs must not join this one's
-  for ((r = 1; r <= runs; r++)); do
-    f=$out/$m-$r.txt
-    echo "measure-task-presets: $m, run $r of $runs ($seconds s)" >&2
-    "$bin" demo --lidar "$m" --scenario mixed-route --seconds "$seconds" --png-every 0 --out "$out/$m-$r" > "$f" 2>&1 || {
-      echo "measure-task-presets: the demo failed; see $f" >&2
-      exit 1
-    }
-  done
+    rm -f "$out/$m"-[0-9]*.txt  # an earlier measurement's runs must not join this one's
+    for ((r = 1; r <= runs; r++)); do
+      f=$out/$m-$r.txt
+      echo "measure-task-presets: $m, run $r of $runs ($seconds s)" >&2
+      "$bin" demo --lidar "$m" --scenario mixed-route --seconds "$seconds" --png-every 0 --out "$out/$m-$r" > "$f" 2>&1 || {
+        echo "measure-task-presets: the demo failed; see $f" >&2
+        exit 1
+      }
+    done
   fi
   echo
   echo "### $m ($runs runs of $seconds s, mixed-route)"

@@ -33,25 +33,30 @@ Status validate_task_spec(const TaskSpec& spec, int cpu_count) {
   return Status::ok();
 }
 
-Nanos next_periodic_deadline(Nanos scheduled, Nanos period, Nanos finished, std::uint64_t& skipped) noexcept {
-  Nanos next = scheduled + period;
-  skipped = 0;
-  if (finished - next >= period) {
-    skipped = static_cast<std::uint64_t>((finished - next) / period);
-    next += static_cast<Nanos>(skipped) * period;
+namespace {
+
+// `next` moved on by whole periods while it lies a full period or more
+// before `until` (their count in `moved`): the deadline grid arithmetic of
+// both functions below.
+Nanos advance_whole_periods(Nanos next, Nanos period, Nanos until, std::uint64_t& moved) noexcept {
+  moved = 0;
+  if (until - next >= period) {
+    moved = static_cast<std::uint64_t>((until - next) / period);
+    next += static_cast<Nanos>(moved) * period;
   }
   return next;
+}
+
+}  // namespace
+
+Nanos next_periodic_deadline(Nanos scheduled, Nanos period, Nanos finished, std::uint64_t& skipped) noexcept {
+  return advance_whole_periods(scheduled + period, period, finished, skipped);
 }
 
 Nanos rested_deadline(Nanos next, Nanos period, Nanos finished, Nanos rest, std::uint64_t& rested) noexcept {
   rested = 0;
   if (rest <= 0 || period <= 0) return next;
-  const Nanos until = finished + rest;
-  if (until - next >= period) {
-    rested = static_cast<std::uint64_t>((until - next) / period);
-    next += static_cast<Nanos>(rested) * period;
-  }
-  return next;
+  return advance_whole_periods(next, period, finished + rest, rested);
 }
 
 bool TaskEvent::wait(std::uint32_t& seen) noexcept {

@@ -18,6 +18,11 @@ constexpr float kTwoPi = static_cast<float>(2.0 * std::numbers::pi);
 // DecodeKernel::blocks takes a block whole from this many returns on
 // (trailnav_velodyne_bench: a whole block costs about 22 returns one by one).
 constexpr int kBlockKernelMinReturns = 24;
+#if defined(__SSE2__)
+constexpr bool kHaveBlockKernel = true;
+#else
+constexpr bool kHaveBlockKernel = false;  // every return one by one
+#endif
 // Largest believable azimuth advance between two firing groups: 5 degrees.
 constexpr int kMaxGroupGap = 500;
 
@@ -106,7 +111,6 @@ PacketDecoder::Created PacketDecoder::create(Model model, const Calibration& cal
     d.lasers_.push_back(t);
   }
 
-  d.resolution_f_ = static_cast<float>(d.resolution_);
   for (int lower = 0; lower < 2; ++lower) {
     BlockTable& b = d.block_tables_[static_cast<std::size_t>(lower)];
     const int lasers_per_sequence = kReturnsPerBlock / d.info_->sequences_per_block;
@@ -199,12 +203,13 @@ void PacketDecoder::place(const LaserTable& t, float a, std::uint16_t raw, std::
   pt.intensity = intensity;
 }
 
+#if defined(__SSE2__)
 void PacketDecoder::place_block(const BlockTable& t, BlockReturns& r) const noexcept {
   constexpr std::size_t n = kReturnsPerBlock;
   // The table lookups one by one, then the arithmetic of place() for four
-  // slots at once (SSE2, part of every x86-64 CPU), else slot by slot. Every
-  // step is place()'s, in its order and in single precision, so that the
-  // points are the same bits either way (test).
+  // slots at once (SSE2, part of every x86-64 CPU; without it decode() takes
+  // every return one by one). Every step is place()'s, in its order and in
+  // single precision, so that the points are the same bits (test).
   std::array<float, n> s0, c0, delta;
   for (std::size_t k = 0; k < n; ++k) {
     const int ai = static_cast<int>(r.azimuth[k]);
@@ -212,9 +217,7 @@ void PacketDecoder::place_block(const BlockTable& t, BlockReturns& r) const noex
     s0[k] = sin_table_[static_cast<std::size_t>(ai)];
     c0[k] = cos_table_[static_cast<std::size_t>(ai)];
   }
-  const float resolution = resolution_f_;
-#if defined(__SSE2__)
-  const __m128 res = _mm_set1_ps(resolution);
+  const __m128 res = _mm_set1_ps(static_cast<float>(resolution_));
   const __m128 sign = _mm_set1_ps(-0.0f);
   const __m128 two_pt_x = _mm_set1_ps(2.4f), span_x = _mm_set1_ps(25.04f - 2.4f);
   const __m128 two_pt_y = _mm_set1_ps(1.93f), span_y = _mm_set1_ps(25.04f - 1.93f);
@@ -274,34 +277,8 @@ void PacketDecoder::place_block(const BlockTable& t, BlockReturns& r) const noex
     const __m128 focal = _mm_andnot_ps(sign, _mm_sub_ps(in(t.focal_offset), _mm_mul_ps(_mm_mul_ps(k256, fall), fall)));
     _mm_storeu_ps(r.corrected.data() + k, _mm_add_ps(in(r.intensity), _mm_mul_ps(in(t.focal_slope), focal)));
   }
-#else
-  for (std::size_t k = 0; k < n; ++k) {
-    const float sin_az = s0[k] + delta[k] * c0[k];
-    const float cos_az = c0[k] - delta[k] * s0[k];
-    const float sa = sin_az * t.cos_rot[k] - cos_az * t.sin_rot[k];
-    const float ca = cos_az * t.cos_rot[k] + sin_az * t.sin_rot[k];
-    const float dc = t.dist_correction[k];
-    const float distance = r.raw[k] * resolution + dc;
-    // Two-point correction; exactly + 0 for a laser without one (its x and
-    // y corrections are its plain one).
-    const float xy0 = distance * t.cos_vert[k] - t.vert_offset[k] * t.sin_vert[k];
-    const float xx = std::abs(xy0 * sa - t.horiz_offset[k] * ca);
-    const float yy = std::abs(xy0 * ca + t.horiz_offset[k] * sa);
-    const float distance_x = distance + ((dc - t.dist_correction_x[k]) * (xx - 2.4f) / (25.04f - 2.4f) + t.dist_correction_x[k] - dc);
-    const float distance_y = distance + ((dc - t.dist_correction_y[k]) * (yy - 1.93f) / (25.04f - 1.93f) + t.dist_correction_y[k] - dc);
-    const float xy_x = distance_x * t.cos_vert[k] - t.vert_offset[k] * t.sin_vert[k];
-    const float xy_y = distance_y * t.cos_vert[k] - t.vert_offset[k] * t.sin_vert[k];
-    r.x[k] = xy_y * ca + t.horiz_offset[k] * sa;
-    r.y[k] = -(xy_x * sa - t.horiz_offset[k] * ca);
-    r.z[k] = distance_y * t.sin_vert[k] + t.vert_offset[k] * t.cos_vert[k];
-    r.distance[k] = distance;
-    r.pointing[k] = r.azimuth[k] * kRadPerStep - t.rot[k];
-    // Focal intensity correction; exactly + 0 for a laser without.
-    const float fall = 1.0f - r.raw[k] / 65535.0f;
-    r.corrected[k] = r.intensity[k] + t.focal_slope[k] * std::abs(t.focal_offset[k] - 256.0f * fall * fall);
-  }
-#endif
 }
+#endif
 
 void PacketDecoder::BlockReturns::finish(const BlockTable& t, std::size_t k, Point& pt) const noexcept {
   pt.x = x[k];
@@ -439,11 +416,12 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
     // A block with few returns (sky, dust) goes one by one: the block
     // path costs about as much as 22 single returns, whatever it holds.
     int returns = 0;
-    if (kernel == DecodeKernel::blocks) {
+    if (kHaveBlockKernel && kernel == DecodeKernel::blocks) {
       for (int k = 0; k < kReturnsPerBlock; ++k) returns += read_u16(block + 4 + static_cast<std::size_t>(k) * 3) != 0 ? 1 : 0;
     }
     const bool whole_block = returns >= kBlockKernelMinReturns;
     BlockReturns block_returns;
+#if defined(__SSE2__)
     if (whole_block) {
       for (int k = 0; k < kReturnsPerBlock; ++k) {
         const std::uint8_t* ret = block + 4 + static_cast<std::size_t>(k) * 3;
@@ -454,6 +432,7 @@ PacketInfo PacketDecoder::decode(std::span<const std::uint8_t> payload, std::spa
       }
       place_block(block_tables_[lower ? 1 : 0], block_returns);
     }
+#endif
 
     for (int k = 0; k < kReturnsPerBlock; ++k) {
       const std::uint8_t* ret = block + 4 + static_cast<std::size_t>(k) * 3;

@@ -89,8 +89,8 @@ struct PacketInfo {
 
 // How decode() computes the points. `blocks` takes a block with at least 24
 // returns whole, the laser constants laid out by return slot, four at a time
-// (SSE2 on x86-64; elsewhere slot by slot), and sparser blocks one return
-// after another; `per_point` every return one after another. Both give
+// (SSE2, on x86-64; elsewhere, for now, it is `per_point`), and sparser blocks
+// one return after another; `per_point` every return one after another. Both give
 // bit-identical points (test); `blocks` a full HDL-64E packet in about two
 // thirds of the time (trailnav_velodyne_bench).
 enum class DecodeKernel : std::uint8_t { blocks, per_point };
@@ -155,7 +155,7 @@ class PacketDecoder {
     // Slot k's point: the pointing wrapped into [0, 2pi), the intensity limited.
     void finish(const BlockTable& t, std::size_t k, Point& pt) const noexcept;
   };
-  void place_block(const BlockTable& t, BlockReturns& r) const noexcept;
+  void place_block(const BlockTable& t, BlockReturns& r) const noexcept;  // SSE2 builds only
 
   const ModelInfo* info_ = nullptr;
   Calibration calibration_;
@@ -163,7 +163,6 @@ class PacketDecoder {
   double resolution_ = 0.002;
   std::vector<LaserTable> lasers_;
   std::vector<std::uint16_t> rings_;
-  float resolution_f_ = 0.002f;
   std::array<BlockTable, 2> block_tables_{};
   std::vector<float> sin_table_;  // sin of hundredths of a degree, 0..36000
   std::vector<float> cos_table_;
