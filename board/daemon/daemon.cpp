@@ -137,9 +137,10 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       d->pose_->add_pose_output(d->pose_queue_.get());
     }
   }
-  // The terrain thread: its own reader of the revolutions and its own pose
-  // queue; its class maps go to the obstacle fusion (reader 0), the
-  // publisher (reader 1) and navigation (reader 2).
+  // The terrain thread: the obstacle thread's aligned revolutions (or, on
+  // its own, its own reader of the revolutions and its own pose queue); its
+  // class maps go to the obstacle fusion (reader 0), the publisher (reader 1)
+  // and navigation (reader 2).
   if (config.terrain) {
     auto model = perception::RandomForest::load(config.terrain->model);
     if (!model.forest) return fail("terrain: " + model.error);
@@ -150,22 +151,32 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     }
     d->forest_ = std::move(model.forest);
     const perception::MountParams mount = config.obstacles ? config.obstacles->mount : perception::MountParams{};
-    auto made = perception::TerrainMapper::create(*config.terrain, mount, d->lidar_->revolution_shape(), &*d->forest_);
+    const perception::FeatureParams alignment = config.obstacles ? config.obstacles->features : perception::FeatureParams{};
+    const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
+    auto made = perception::TerrainMapper::create(*config.terrain, mount, shape, &*d->forest_, alignment);
     if (!made.mapper) return fail("terrain: " + made.error);
     d->terrain_mapper_ = std::move(made.mapper);
     d->terrain_out_ = std::make_unique<Broadcast<perception::TerrainClassMap>>(config.navigation ? 3 : 2, config.terrain->map);
-    if (d->pose_ && config.terrain_use_pose) {
-      d->terrain_pose_queue_ = std::make_unique<perception::PoseQueue>();
-      d->pose_->add_pose_output(d->terrain_pose_queue_.get());
+    if (config.terrain_shares_alignment()) {
+      d->aligned_ = std::make_unique<Mailbox<perception::AlignedRevolution>>(
+          perception::CloudShape{shape.rings, shape.max_columns});
+      d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_, *d->aligned_, *d->terrain_out_);
+    } else {
+      if (d->pose_ && config.terrain_use_pose) {
+        d->terrain_pose_queue_ = std::make_unique<perception::PoseQueue>();
+        d->pose_->add_pose_output(d->terrain_pose_queue_.get());
+      }
+      d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_,
+                                                             d->lidar_->revolutions(config.obstacles ? 1 : 0),
+                                                             d->terrain_pose_queue_.get(), *d->terrain_out_, 512,
+                                                             config.pose_wait);
     }
-    d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_, d->lidar_->revolutions(config.obstacles ? 1 : 0),
-                                                           d->terrain_pose_queue_.get(), *d->terrain_out_, 512,
-                                                           config.pose_wait);
   }
   if (config.obstacles) {
     d->obstacles_ = std::make_unique<perception::ObstacleTask>(
         *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
         d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_, 512, config.pose_wait);
+    d->obstacles_->set_aligned(d->aligned_.get());
     d->lidar_->set_revolution_event(&d->revolution_event_);
   }
 

@@ -99,6 +99,7 @@ class Daemon {
   std::optional<perception::RandomForest> forest_;
   std::unique_ptr<perception::TerrainMapper> terrain_mapper_;
   std::unique_ptr<perception::PoseQueue> terrain_pose_queue_;
+  std::unique_ptr<Mailbox<perception::AlignedRevolution>> aligned_;  // obstacle thread -> terrain thread
   std::unique_ptr<Broadcast<perception::TerrainClassMap>> terrain_out_;
   std::unique_ptr<perception::TerrainTask> terrain_;
   std::optional<osm::RoadGraph> graph_;

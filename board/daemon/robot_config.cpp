@@ -8,6 +8,7 @@
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/drivers/velodyne/calibration.hpp"
 #include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
 
 namespace trailnav::daemon {
 
@@ -264,6 +265,9 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
       const std::string e = perception::check_forest_lidar(*m.forest, velodyne::model_info(c.lidar->model).name, c.terrain->model);
       if (!e.empty()) n->fail("model", e);
     }
+    const std::string e =
+        perception::check_terrain_alignment(*c.terrain, c.obstacles ? c.obstacles->features : perception::FeatureParams{});
+    if (!e.empty()) root.fail("terrain", e);
   }
   if (auto n = root.optional_map("navigation")) {
     c.navigation = nav::parse_navigation_section(*n);
@@ -279,7 +283,13 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
       c.navigation->navigator.aligner.unknown_cost = c.terrain->unknown_cost;
     }
   }
-  if (c.lidar) c.lidar->driver.revolution_readers = std::max(1, (c.obstacles ? 1 : 0) + (c.terrain ? 1 : 0));
+  // The terrain thread reads the revolutions itself only without the
+  // obstacle thread, or when the two register with different poses (else it
+  // takes the obstacle thread's aligned points: RobotConfig::terrain_shares_alignment()).
+  if (c.lidar) {
+    c.lidar->driver.revolution_readers =
+        std::max(1, (c.obstacles ? 1 : 0) + (c.terrain && !c.terrain_shares_alignment() ? 1 : 0));
+  }
   if (c.pose && !c.imu && !c.can) root.fail("pose", "the pose needs wheel odometry ('can') or an IMU ('imu')");
   c.dds = parse_dds(root.map("dds"));
 

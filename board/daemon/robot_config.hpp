@@ -67,6 +67,14 @@ struct RobotConfig {
   perception::PoseWait pose_wait;  // how the obstacle and terrain threads wait for a late pose
   std::optional<nav::NavigationSection> navigation;
   DdsSection dds;
+
+  // The terrain thread registers the points the obstacle thread aligned
+  // (RevolutionCloud::hand_over_aligned()) instead of aligning every
+  // revolution again: with both maps, both registered with the pose or both
+  // without.
+  bool terrain_shares_alignment() const noexcept {
+    return obstacles.has_value() && terrain.has_value() && obstacles_use_pose == terrain_use_pose;
+  }
 };
 
 // Throws ConfigError. Relative paths are taken from the config file's directory.

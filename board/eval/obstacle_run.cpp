@@ -493,7 +493,8 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       report.error = e;
       return report;
     }
-    auto made_mapper = perception::TerrainMapper::create(options.terrain_config, config.mount, shape, options.terrain_forest);
+    auto made_mapper = perception::TerrainMapper::create(options.terrain_config, config.mount, shape, options.terrain_forest,
+                                                         config.features);
     if (!made_mapper.mapper) {
       report.error = "terrain: " + made_mapper.error;
       return report;

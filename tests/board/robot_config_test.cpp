@@ -57,7 +57,9 @@ TEST(RobotConfig, ShippedExamplesAreValid) {
     EXPECT_TRUE(r.config->pose.has_value()) << f;
     EXPECT_TRUE(r.config->terrain.has_value()) << f;
     EXPECT_TRUE(fs::exists(r.config->terrain->model)) << f;
-    EXPECT_EQ(r.config->lidar->driver.revolution_readers, 2) << f;  // obstacles and terrain
+    // The obstacle thread alone: the terrain thread takes the points it aligned.
+    EXPECT_TRUE(r.config->terrain_shares_alignment()) << f;
+    EXPECT_EQ(r.config->lidar->driver.revolution_readers, 1) << f;
     EXPECT_EQ(r.config->tasks.size(), 8u) << f;
     EXPECT_EQ(r.config->task_preset, velodyne::model_info(r.config->lidar->model).name) << f;
     // The HDL-64E's lidar task was measured to need more in its worst run
@@ -96,6 +98,30 @@ TEST(RobotConfig, TerrainNeedsAModelThatLoadsAndItsTask) {
   e = load_error(hdl);
   EXPECT_NE(e.find(":9:"), std::string::npos) << e;
   EXPECT_NE(e.find("trained on VLP-16 returns, this lidar is HDL-64E"), std::string::npos) << e;
+  // The terrain registers the points the obstacle pipeline aligned: its range lies within theirs.
+  e = load_error(std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf, max_range: 45}\n");
+  EXPECT_NE(e.find(":9: 'terrain': min_range..max_range 1..45 m reaches outside the 1..40 m of obstacles.features"),
+            std::string::npos)
+      << e;
+  std::string narrow = std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf}\n";
+  narrow.replace(narrow.find("obstacles: {model: PC}"), 22, "obstacles: {model: PC, features: {max_range: 25}}");
+  e = load_error(narrow);
+  EXPECT_NE(e.find("1..30 m reaches outside the 1..25 m"), std::string::npos) << e;
+}
+
+TEST(RobotConfig, TheTerrainSharesTheObstacleAlignmentWhenBothUseThePoseAlike) {
+  const std::string task = "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 30}\n";
+  const std::string base = std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf}\n";
+  auto r = load(base);
+  ASSERT_TRUE(r.config) << r.error;
+  EXPECT_TRUE(r.config->terrain_shares_alignment());
+  EXPECT_EQ(r.config->lidar->driver.revolution_readers, 1);
+  // The obstacle map with poses, the terrain map without: each aligns its own.
+  r.config->terrain_use_pose = false;
+  EXPECT_FALSE(r.config->terrain_shares_alignment());
+  r = load(std::string(kMinimal));
+  ASSERT_TRUE(r.config) << r.error;
+  EXPECT_FALSE(r.config->terrain_shares_alignment());
 }
 
 TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {

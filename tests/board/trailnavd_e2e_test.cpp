@@ -513,7 +513,8 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   EXPECT_TRUE(forest.forest) << forest.error;
   if (source.source && forest.forest) {
     auto mapper = perception::TerrainMapper::create(*robot.config->terrain, robot.config->obstacles->mount,
-                                                    source.source->shape(), &*forest.forest);
+                                                    source.source->shape(), &*forest.forest,
+                                                    robot.config->obstacles->features);
     EXPECT_TRUE(mapper.mapper) << mapper.error;
     std::map<std::int64_t, std::vector<std::uint8_t>> terrain_offline;
     const std::size_t cells = static_cast<std::size_t>(robot.config->terrain->map.size_x) *

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -20,6 +21,7 @@
 #include "test_data.hpp"
 #include "trailnav/perception/forest_training.hpp"
 #include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
 
@@ -532,6 +534,99 @@ TEST(TerrainMapper, RealKittiRoadCellsAreFlatAndSmooth) {
   EXPECT_GE(smooth, static_cast<int>(0.95 * static_cast<double>(collect.road.size())));
   std::nth_element(slopes.begin(), slopes.begin() + static_cast<std::ptrdiff_t>(slopes.size() / 2), slopes.end());
   EXPECT_LT(slopes[slopes.size() / 2], 6.0f);
+}
+
+// trailnavd's terrain thread registers the points the obstacle thread
+// aligned (RevolutionCloud::hand_over_aligned()) instead of aligning each
+// revolution again. On real KITTI revolutions (the robot driving 0.3 m a
+// revolution, so steps run), with a self box and the terrain's own 30 m
+// inside the obstacles' 40 m: the class map, the registered points and the
+// work grid are those of a mapper aligning for itself with the obstacle
+// config's alignment, bit for bit; and the pipeline that handed its arrays
+// away maps exactly as one that never did.
+TEST(TerrainMapper, TheObstacleThreadsAlignedPointsGiveTheSameMapBitForBit) {
+  std::array<velodyne::RangeImage, 2> scans{velodyne::RangeImage(kitti_shape()), velodyne::RangeImage(kitti_shape())};
+  std::vector<float> buffer;
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, scans[0]));
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, scans[1]));
+  auto model = RandomForest::load("board/models/terrain-sim.tnrf");
+  ASSERT_TRUE(model.forest) << model.error;
+  ObstacleConfig oc;
+  oc.mount.translation = {0.0, 0.0, 1.73};
+  oc.features.self_box = std::array<float, 6>{-2.5f, 2.5f, -1.0f, 1.0f, -2.0f, 0.2f};
+  TerrainConfig tc;
+  auto own = TerrainMapper::create(tc, oc.mount, kitti_shape(), &*model.forest, oc.features);
+  auto shared = TerrainMapper::create(tc, oc.mount, kitti_shape(), &*model.forest, oc.features);
+  ASSERT_TRUE(own.mapper && shared.mapper) << own.error;
+  auto handing = ObstaclePipeline::create(oc, kitti_shape());
+  auto keeping = ObstaclePipeline::create(oc, kitti_shape());
+  ASSERT_TRUE(handing.pipeline && keeping.pipeline) << handing.error;
+  AlignedRevolution slot(CloudShape{kitti_shape().rings, kitti_shape().max_columns});
+
+  PoseTrack poses(64);
+  std::uint64_t steps = 0;
+  const std::size_t cells = static_cast<std::size_t>(tc.map.size_x) * static_cast<std::size_t>(tc.map.size_y);
+  std::vector<std::uint8_t> a(2 * cells), b(2 * cells);
+  const auto map_cells = static_cast<std::size_t>(oc.map.size) * static_cast<std::size_t>(oc.map.size);
+  std::vector<std::int8_t> ga(map_cells), gb(map_cells);
+  for (int n = 1; n <= 12; ++n) {
+    const std::int64_t t = std::int64_t{n} * 100'000'000;
+    poses.push({t - 100'000'000, 0.3 * (n - 1), 0.02 * (n - 1), 0.0, 0.0, 0.0, 0.01 * (n - 1)});
+    poses.push({t, 0.3 * n, 0.02 * n, 0.0, 0.0, 0.0, 0.01 * n});
+    velodyne::RangeImage& image = scans[static_cast<std::size_t>(n % 2)];
+    image.sequence = static_cast<std::uint64_t>(n);
+    image.start_ns = t - 100'000'000;
+    image.end_ns = t;
+    const bool stepped = own.mapper->process(image, &poses);
+    handing.pipeline->process(image, &poses, nullptr);
+    keeping.pipeline->process(image, &poses, nullptr);
+    handing.pipeline->hand_over_aligned(slot.cloud);
+    EXPECT_EQ(shared.mapper->process_aligned(slot.cloud), stepped) << "revolution " << n;
+    steps += stepped ? 1 : 0;
+    own.mapper->map().export_classes(std::span(a).first(cells), std::span(a).subspan(cells));
+    shared.mapper->map().export_classes(std::span(b).first(cells), std::span(b).subspan(cells));
+    ASSERT_TRUE(a == b) << "class maps differ after revolution " << n;
+    handing.pipeline->map().export_occupancy(ga);
+    keeping.pipeline->map().export_occupancy(gb);
+    ASSERT_TRUE(ga == gb) << "obstacle maps differ after revolution " << n;
+  }
+  const TerrainCounters ca = own.mapper->counters(), cb = shared.mapper->counters();
+  EXPECT_GE(steps, 5u);
+  EXPECT_GT(ca.known_cells, 1000u);
+  EXPECT_EQ(cb.known_cells, ca.known_cells);
+  EXPECT_EQ(cb.points, ca.points);
+  EXPECT_EQ(cb.features, ca.features);
+  EXPECT_GT(cb.points, 12u * 50'000u);
+  // The points between the terrain's 30 m and the obstacles' 40 m were aligned, and left out here.
+  EXPECT_GT(cb.out_of_range, 12u * 1'000u);
+  EXPECT_EQ(cb.out_of_range, ca.out_of_range);
+  EXPECT_GT(ca.align.self_hits, 0u);
+  auto& wa = own.mapper->work();
+  const auto& wb = shared.mapper->work();
+  ASSERT_EQ(wa.origin().x, wb.origin().x);
+  ASSERT_EQ(wa.origin().y, wb.origin().y);
+  std::size_t compared = 0, differ = 0;
+  wa.for_each_in_window(wa.origin(), {wa.origin().x + wa.size_x(), wa.origin().y + wa.size_y()},
+                        [&](CellIndex i, const TerrainWorkCell& w) {
+                          differ += std::memcmp(&wb.at(i).stats, &w.stats, sizeof w.stats) != 0 ? 1u : 0u;
+                          ++compared;
+                        });
+  EXPECT_EQ(differ, 0u);
+  EXPECT_EQ(compared, cells);
+}
+
+TEST(TerrainMapper, ATerrainRangeBeyondTheAlignedPointsIsAnError) {
+  TerrainConfig tc;
+  FeatureParams alignment;
+  alignment.max_range = 25.0f;
+  const auto made = TerrainMapper::create(tc, MountParams{}, kitti_shape(), nullptr, alignment);
+  EXPECT_FALSE(made.mapper);
+  EXPECT_NE(made.error.find("1..30 m reaches outside the 1..25 m of obstacles.features"), std::string::npos) << made.error;
+  tc.max_range = 25.0f;
+  tc.min_range = 0.5f;
+  EXPECT_NE(check_terrain_alignment(tc, alignment).find("0.5..25 m"), std::string::npos);
+  tc.min_range = 2.0f;
+  EXPECT_EQ(check_terrain_alignment(tc, alignment), "");
 }
 
 TEST(TerrainCost, ExpectedClassCostOfACellAndUnknownCells) {

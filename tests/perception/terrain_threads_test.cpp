@@ -52,7 +52,10 @@ class Feeder final : public Task {
   std::int64_t n_ = 0;
 };
 
-TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) {
+// `shared`: the terrain thread registers the points the obstacle thread
+// aligned and handed over (as in trailnavd), else it reads the revolutions
+// and the poses itself.
+void run_together(bool shared) {
   ASSERT_TRUE(alloc_guard::hook_installed());
   alloc_guard::set_fatal(false);
   alloc_guard::reset_counters();
@@ -79,7 +82,15 @@ TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) {
   TaskEvent revolution;
   Feeder feeder(scans, revolutions, obstacle_poses, terrain_poses, revolution);
   ObstacleTask obstacles(*pipeline.pipeline, revolutions.reader(0), &obstacle_poses, &classes.reader(0), snapshots);
-  TerrainTask terrain(*mapper.mapper, revolutions.reader(1), &terrain_poses, classes);
+  Mailbox<AlignedRevolution> aligned(CloudShape{kitti_shape().rings, kitti_shape().max_columns});
+  std::unique_ptr<TerrainTask> own, taking;
+  if (shared) {
+    taking = std::make_unique<TerrainTask>(*mapper.mapper, aligned, classes);
+    obstacles.set_aligned(&aligned);
+  } else {
+    own = std::make_unique<TerrainTask>(*mapper.mapper, revolutions.reader(1), &terrain_poses, classes);
+  }
+  TerrainTask& terrain = shared ? *taking : *own;
 
   MonotonicClock clock;
   Scheduler scheduler(clock, {RealtimePolicy::off, false});
@@ -120,7 +131,21 @@ TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) {
   EXPECT_GT(class_maps, 0u);
   EXPECT_GT(known_cells, 50u);
   EXPECT_GT(obstacle_maps, 0u);
+  if (shared) {
+    // It aligned nothing itself, and took only revolutions the obstacle thread mapped.
+    EXPECT_EQ(tc_status.mapper.align.points, 0u);
+    EXPECT_GT(tc_status.mapper.points, 0u);
+    EXPECT_LE(tc_status.revolutions, oc_status.revolutions);
+  } else {
+    EXPECT_GT(tc_status.mapper.align.points, 0u);
+  }
   test::expect_no_realtime_allocations();
+}
+
+TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) { run_together(false); }
+
+TEST(TerrainAndObstacleThreads, TheTerrainThreadTakesTheObstacleThreadsAlignedPointsWithoutHeapOrRaces) {
+  run_together(true);
 }
 
 }  // namespace

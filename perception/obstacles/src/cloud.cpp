@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <numbers>
 
@@ -43,11 +44,40 @@ RevolutionCloud::RevolutionCloud(CloudShape shape) : shape_(shape) {
   z.assign(n, 0.0f);
   range.assign(n, 0.0f);
   intensity.assign(n, 0.0f);
+  state.assign(n, PointState::none);
+  column_transforms.assign(kTransformFloats * static_cast<std::size_t>(shape.max_columns), 0.0f);
+  if (!shape.features) return;
   step_height.assign(n, 0.0f);
   sin_incline.assign(n, 0.0f);
-  state.assign(n, PointState::none);
+  aligned_x.assign(n, 0.0f);
+  aligned_y.assign(n, 0.0f);
+  aligned_z.assign(n, 0.0f);
   ring_sums.assign(3 * (static_cast<std::size_t>(shape.max_columns) + 1), 0.0);
-  column_transforms.assign(kTransformFloats * static_cast<std::size_t>(shape.max_columns), 0.0f);
+}
+
+void RevolutionCloud::hand_over_aligned(RevolutionCloud& to) noexcept {
+  assert(to.shape_.rings == shape_.rings && to.shape_.max_columns == shape_.max_columns && shape_.features);
+  to.x.swap(aligned_x);
+  to.y.swap(aligned_y);
+  to.z.swap(aligned_z);
+  to.range.swap(range);
+  to.intensity.swap(intensity);
+  to.state.swap(state);
+  to.columns_ = columns_;
+  to.ref_x = ref_x;
+  to.ref_y = ref_y;
+  to.ref_z = ref_z;
+  to.robot_x = robot_x;
+  to.robot_y = robot_y;
+  to.robot_yaw = robot_yaw;
+  to.robot_z = robot_z;
+  to.robot_roll = robot_roll;
+  to.robot_pitch = robot_pitch;
+  to.time_ns = time_ns;
+  to.start_ns = start_ns;
+  to.clock_offset_ns = clock_offset_ns;
+  to.sequence = sequence;
+  to.full_turn = full_turn;
 }
 
 void RevolutionCloud::reset(int columns) noexcept {

@@ -15,9 +15,20 @@
 namespace trailnav::perception {
 
 void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept {
+  // The smoothed coordinates are written to aligned_x/y/z, which then trade
+  // places with x, y, z: the aligned ones stay there for whoever takes the
+  // revolution's points as aligned (RevolutionCloud::hand_over_aligned()).
   const int half = params.smoothing_half_window;
-  if (half <= 0) return;
   const int columns = cloud.columns();
+  if (half <= 0) {
+    for (int ring = 0; ring < cloud.rings(); ++ring) {
+      const auto base = static_cast<std::ptrdiff_t>(cloud.index(ring, 0));
+      std::copy_n(cloud.x.begin() + base, columns, cloud.aligned_x.begin() + base);
+      std::copy_n(cloud.y.begin() + base, columns, cloud.aligned_y.begin() + base);
+      std::copy_n(cloud.z.begin() + base, columns, cloud.aligned_z.begin() + base);
+    }
+    return;
+  }
   const auto stride = static_cast<std::size_t>(columns) + 1;
   double* sx = cloud.ring_sums.data();
   double* sy = sx + stride;
@@ -27,9 +38,12 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept 
     const std::size_t base = cloud.index(ring, 0);
     const PointState* st = cloud.state.data() + base;
     const float* r = cloud.range.data() + base;
-    float* px = cloud.x.data() + base;
-    float* py = cloud.y.data() + base;
-    float* pz = cloud.z.data() + base;
+    const float* px = cloud.x.data() + base;
+    const float* py = cloud.y.data() + base;
+    const float* pz = cloud.z.data() + base;
+    float* qx = cloud.aligned_x.data() + base;
+    float* qy = cloud.aligned_y.data() + base;
+    float* qz = cloud.aligned_z.data() + base;
     int a = 0;
     while (a < columns) {
       if (st[a] == PointState::none) {
@@ -39,7 +53,11 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept 
       // The segment [a, b): consecutive valid points without a range jump.
       int b = a + 1;
       while (b < columns && st[b] != PointState::none && std::abs(r[b] - r[b - 1]) <= jump) ++b;
-      if (b - a > 1) {
+      if (b - a == 1) {
+        qx[a] = px[a];
+        qy[a] = py[a];
+        qz[a] = pz[a];
+      } else {
         // Prefix sums over the segment (doubles: no drift over long rings).
         // The running sums stay in registers: read back from the arrays, each
         // step would wait for the store before it.
@@ -61,14 +79,17 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept 
           const auto lo = static_cast<std::size_t>(j - w - a);
           const auto hi = static_cast<std::size_t>(j + w + 1 - a);
           const double inv = 1.0 / static_cast<double>(2 * w + 1);
-          px[j] = static_cast<float>((sx[hi] - sx[lo]) * inv);
-          py[j] = static_cast<float>((sy[hi] - sy[lo]) * inv);
-          pz[j] = static_cast<float>((sz[hi] - sz[lo]) * inv);
+          qx[j] = static_cast<float>((sx[hi] - sx[lo]) * inv);
+          qy[j] = static_cast<float>((sy[hi] - sy[lo]) * inv);
+          qz[j] = static_cast<float>((sz[hi] - sz[lo]) * inv);
         }
       }
       a = b;
     }
   }
+  cloud.x.swap(cloud.aligned_x);
+  cloud.y.swap(cloud.aligned_y);
+  cloud.z.swap(cloud.aligned_z);
 }
 
 namespace {

@@ -53,6 +53,21 @@ void take_points(const ObstaclePipeline& pipeline, const TerrainClassMap* terrai
   out.count = n;
 }
 
+namespace {
+
+// A revolution that was not mapped, told to the aligned points' reader.
+void hand_over_outcome(Mailbox<AlignedRevolution>* out, const velodyne::RangeImage& image,
+                       AlignedRevolution::Outcome outcome) noexcept {
+  if (out == nullptr) return;
+  AlignedRevolution& a = out->write_slot();
+  a.sequence = image.sequence;
+  a.reference_end_ns = image.reference_end_ns();
+  a.outcome = outcome;
+  out->publish();
+}
+
+}  // namespace
+
 void ObstacleTask::run(const TaskTick&) {
   ++counters_.runs;
   if (poses_ != nullptr) counters_.poses += track_.drain(*poses_);
@@ -72,6 +87,7 @@ void ObstacleTask::run(const TaskTick&) {
   // The pose thread must have reached the revolution's end (see PoseWait).
   if (poses_ != nullptr) {
     if (!await_pose(track_, *poses_, image->reference_end_ns(), pose_wait_, counters_)) {
+      hand_over_outcome(aligned_out_, *image, AlignedRevolution::Outcome::pose_late);
       shared_.post(counters_);
       return;
     }
@@ -83,6 +99,7 @@ void ObstacleTask::run(const TaskTick&) {
   if (!track_.motion_known(image->reference_start_ns(), image->reference_end_ns())) {
     ++counters_.no_odometry;
     counters_.odometry_lost = true;
+    hand_over_outcome(aligned_out_, *image, AlignedRevolution::Outcome::no_odometry);
     shared_.post(counters_);
     return;
   }
@@ -106,6 +123,15 @@ void ObstacleTask::run(const TaskTick&) {
     ++counters_.point_clouds;
   }
   if (notify_ != nullptr) notify_->notify();
+  // Last: the hand-over trades the cloud's arrays away.
+  if (aligned_out_ != nullptr) {
+    AlignedRevolution& a = aligned_out_->write_slot();
+    pipeline_.hand_over_aligned(a.cloud);
+    a.sequence = image->sequence;
+    a.reference_end_ns = image->reference_end_ns();
+    a.outcome = AlignedRevolution::Outcome::aligned;
+    aligned_out_->publish();
+  }
   counters_.pipeline = pipeline_.counters();
   shared_.post(counters_);
 }

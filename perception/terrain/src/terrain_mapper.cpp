@@ -3,35 +3,41 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 
 #include "trailnav/runtime/prefetch.hpp"
 
 namespace trailnav::perception {
 
-namespace {
-FeatureParams alignment_params(const TerrainConfig& c) {
-  FeatureParams p;
-  p.min_range = c.min_range;
-  p.max_range = c.max_range;
-  return p;
+std::string check_terrain_alignment(const TerrainConfig& config, const FeatureParams& alignment) {
+  if (config.min_range >= alignment.min_range && config.max_range <= alignment.max_range) return {};
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "min_range..max_range %.6g..%.6g m reaches outside the %.6g..%.6g m of obstacles.features: the terrain "
+                "registers the points the obstacle pipeline aligned, so its range must lie within theirs",
+                static_cast<double>(config.min_range), static_cast<double>(config.max_range),
+                static_cast<double>(alignment.min_range), static_cast<double>(alignment.max_range));
+  return text;
 }
-}  // namespace
 
 TerrainMapper::Created TerrainMapper::create(const TerrainConfig& config, const MountParams& mount,
-                                             const velodyne::RangeImageShape& shape, const RandomForest* forest) {
+                                             const velodyne::RangeImageShape& shape, const RandomForest* forest,
+                                             const FeatureParams& alignment) {
   if (std::string problem = check_terrain_config(config); !problem.empty()) return {nullptr, problem};
+  if (std::string problem = check_terrain_alignment(config, alignment); !problem.empty()) return {nullptr, problem};
   if (shape.rings < 1 || shape.max_columns < 8) {
     return {nullptr, "range images of " + std::to_string(shape.rings) + " rings x " + std::to_string(shape.max_columns) +
                          " columns are too small for terrain analysis"};
   }
-  return {std::unique_ptr<TerrainMapper>(new TerrainMapper(config, mount, shape, forest)), {}};
+  return {std::unique_ptr<TerrainMapper>(new TerrainMapper(config, mount, shape, forest, alignment)), {}};
 }
 
 TerrainMapper::TerrainMapper(const TerrainConfig& config, const MountParams& mount,
-                             const velodyne::RangeImageShape& shape, const RandomForest* forest)
+                             const velodyne::RangeImageShape& shape, const RandomForest* forest,
+                             const FeatureParams& alignment)
     : config_(config),
-      aligner_(mount, alignment_params(config)),
-      cloud_(CloudShape{shape.rings, shape.max_columns}),
+      aligner_(mount, alignment),
+      cloud_(CloudShape{shape.rings, shape.max_columns, false}),
       forest_(forest),
       work_(config.map.size_x, config.map.size_y, config.map.resolution),
       map_(config.map),
@@ -53,6 +59,10 @@ void TerrainMapper::copy_state_from(const TerrainMapper& other) noexcept {
   step_x_ = other.step_x_;
   step_y_ = other.step_y_;
   step_ns_ = other.step_ns_;
+  robot_x_ = other.robot_x_;
+  robot_y_ = other.robot_y_;
+  time_ns_ = other.time_ns_;
+  clock_offset_ns_ = other.clock_offset_ns_;
 }
 
 bool TerrainMapper::process(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept {
@@ -63,25 +73,38 @@ bool TerrainMapper::process(const velodyne::RangeImage& image, const PoseTrack* 
   return true;
 }
 
+bool TerrainMapper::process_aligned(const RevolutionCloud& aligned) noexcept {
+  ++counters_.revolutions;
+  register_cloud(aligned);
+  if (!step_due()) return false;
+  step(aligned.time_ns);
+  return true;
+}
+
 void TerrainMapper::align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept {
   aligner_.align(image, poses, cloud_);
   ++counters_.revolutions;
 }
 
-void TerrainMapper::register_cloud() noexcept {
+void TerrainMapper::register_cloud(const RevolutionCloud& cloud) noexcept {
+  robot_x_ = cloud.robot_x;
+  robot_y_ = cloud.robot_y;
+  time_ns_ = cloud.time_ns;
+  clock_offset_ns_ = cloud.clock_offset_ns;
   // Both grids follow the robot together, so a cell and its class share a
   // world index; cells leaving the map are forgotten by both.
-  work_.move_to(cloud_.robot_x, cloud_.robot_y);
-  map_.grid().move_to(cloud_.robot_x, cloud_.robot_y);
+  work_.move_to(cloud.robot_x, cloud.robot_y);
+  map_.grid().move_to(cloud.robot_x, cloud.robot_y);
   const double res = work_.resolution();
   const double inv = 1.0 / res;
   const CellIndex lo = work_.origin();
   const std::int32_t nx = work_.size_x(), ny = work_.size_y();
   // Cell-centre offsets are taken in double from the reference point, then
   // the small remainders go to float.
-  const double ref_x = cloud_.ref_x, ref_y = cloud_.ref_y;
-  const auto ref_z = static_cast<float>(cloud_.ref_z);
-  std::uint64_t registered = 0, outside = 0;
+  const double ref_x = cloud.ref_x, ref_y = cloud.ref_y;
+  const auto ref_z = static_cast<float>(cloud.ref_z);
+  const float min_range = config_.min_range, max_range = config_.max_range;
+  std::uint64_t registered = 0, outside = 0, out_of_range = 0;
   // In batches, as the obstacle map: first each point's cell is found and
   // its sums are fetched ahead (the grid is megabytes; a cell's sums span two
   // cache lines), then the batch is added.
@@ -100,13 +123,17 @@ void TerrainMapper::register_cloud() noexcept {
     registered += n;
     n = 0;
   };
-  for (int ring = 0; ring < cloud_.rings(); ++ring) {
-    const std::size_t row = cloud_.index(ring, 0);
-    for (int col = 0; col < cloud_.columns(); ++col) {
+  for (int ring = 0; ring < cloud.rings(); ++ring) {
+    const std::size_t row = cloud.index(ring, 0);
+    for (int col = 0; col < cloud.columns(); ++col) {
       const std::size_t k = row + static_cast<std::size_t>(col);
-      if (cloud_.state[k] == PointState::none) continue;
-      const double wx = ref_x + static_cast<double>(cloud_.x[k]);
-      const double wy = ref_y + static_cast<double>(cloud_.y[k]);
+      if (cloud.state[k] == PointState::none) continue;
+      if (cloud.range[k] < min_range || cloud.range[k] > max_range) {
+        ++out_of_range;
+        continue;
+      }
+      const double wx = ref_x + static_cast<double>(cloud.x[k]);
+      const double wy = ref_y + static_cast<double>(cloud.y[k]);
       const auto ix = static_cast<std::int32_t>(std::floor(wx * inv));
       const auto iy = static_cast<std::int32_t>(std::floor(wy * inv));
       if (ix < lo.x || iy < lo.y || ix >= lo.x + nx || iy >= lo.y + ny) {
@@ -118,21 +145,22 @@ void TerrainMapper::register_cloud() noexcept {
       prefetch_for_write(bytes);
       prefetch_for_write(bytes + sizeof(CellStats) - 1);
       batch[n] = {static_cast<std::uint32_t>(offset), static_cast<float>(wx - (ix + 0.5) * res),
-                  static_cast<float>(wy - (iy + 0.5) * res), cloud_.z[k] + ref_z, cloud_.intensity[k]};
+                  static_cast<float>(wy - (iy + 0.5) * res), cloud.z[k] + ref_z, cloud.intensity[k]};
       if (++n == kBatch) add_batch();
     }
   }
   add_batch();
   counters_.points += registered;
   counters_.outside += outside;
+  counters_.out_of_range += out_of_range;
 }
 
 bool TerrainMapper::step_due() const noexcept {
   if (!have_step_) return true;  // the first revolution starts the first interval
-  const double moved = std::hypot(cloud_.robot_x - step_x_, cloud_.robot_y - step_y_);
+  const double moved = std::hypot(robot_x_ - step_x_, robot_y_ - step_y_);
   if (moved >= config_.step_distance) return true;
   return config_.max_step_interval > 0.0 &&
-         static_cast<double>(cloud_.time_ns - step_ns_) >= config_.max_step_interval * 1e9;
+         static_cast<double>(time_ns_ - step_ns_) >= config_.max_step_interval * 1e9;
 }
 
 void TerrainMapper::step(std::int64_t now_ns) noexcept {
@@ -140,13 +168,13 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
     // The first revolution only opens the first interval: points keep
     // accumulating until the robot has moved d.
     have_step_ = true;
-    step_x_ = cloud_.robot_x;
-    step_y_ = cloud_.robot_y;
+    step_x_ = robot_x_;
+    step_y_ = robot_y_;
     step_ns_ = now_ns;
     return;
   }
-  step_x_ = cloud_.robot_x;
-  step_y_ = cloud_.robot_y;
+  step_x_ = robot_x_;
+  step_y_ = robot_y_;
   step_ns_ = now_ns;
   ++counters_.steps;
   const CellIndex o = work_.origin();
@@ -185,7 +213,7 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   counters_.known_cells = known;
   map_.sequence = counters_.steps;
   map_.time_ns = now_ns;
-  map_.clock_offset_ns = cloud_.clock_offset_ns;
+  map_.clock_offset_ns = clock_offset_ns_;
 }
 
 void TerrainMapper::add_area_row(std::int32_t y) noexcept {

@@ -30,6 +30,11 @@ enum class PointState : std::uint8_t {
 struct CloudShape {
   int rings = 0;
   int max_columns = 0;
+  // False: only what alignment fills (the points' x, y, z, range, intensity,
+  // state and the column transforms), for a cloud that is only registered
+  // (the terrain's) or handed on (RevolutionCloud::hand_over_aligned()); the
+  // features' and the smoothing's arrays are not allocated.
+  bool features = true;
 };
 
 class RevolutionCloud {
@@ -54,12 +59,15 @@ class RevolutionCloud {
   }
 
   // Per point (index()).
-  std::vector<float> x, y, z;        // aligned (after smoothing() these are the smoothed values)
+  std::vector<float> x, y, z;        // aligned (after smooth_rings() these are the smoothed values)
   std::vector<float> range;          // m, as measured; 0 exactly where state is `none`
   std::vector<float> intensity;      // 0..255
   std::vector<float> step_height;    // m (Eq. 7.5)
   std::vector<float> sin_incline;    // sin of the incline (Eq. 7.6)
   std::vector<PointState> state;
+  // smooth_rings(): the coordinates as aligned, while x, y, z hold the
+  // smoothed ones (the smoothing writes here, then the two trade places).
+  std::vector<float> aligned_x, aligned_y, aligned_z;
   std::vector<double> ring_sums;     // smooth_rings(): prefix sums of one ring, 3 * (max_columns + 1)
   // CloudAligner: per column, the sensor -> reference transform (rotation
   // row-major, then translation).
@@ -80,9 +88,32 @@ class RevolutionCloud {
   std::uint64_t sequence = 0;
   bool full_turn = false;  // the columns close the circle: the last column neighbours the first
 
+  // Gives `to` this revolution's points as aligned, before smoothing: its
+  // x, y, z trade places with aligned_x/y/z, its range, intensity and state
+  // with these (pointers only: no copy, no allocation), and it takes the
+  // revolution's fields. Call after smooth_rings() and after the last look at
+  // this cloud's points: its range, intensity and state are `to`'s old ones
+  // then, until the next alignment resets them. Same rings and max_columns.
+  void hand_over_aligned(RevolutionCloud& to) noexcept;
+
  private:
   CloudShape shape_;
   int columns_ = 0;
+};
+
+// What the obstacle thread hands the terrain thread for each revolution it
+// takes (trailnavd): the points as aligned, or why there are none.
+struct AlignedRevolution {
+  enum class Outcome : std::uint8_t {
+    aligned,      // `cloud` holds the revolution's points
+    no_odometry,  // not aligned: the odometry did not know the robot's motion
+    pose_late,    // not aligned: the pose did not reach the revolution's end in time
+  };
+  explicit AlignedRevolution(CloudShape shape) : cloud(CloudShape{shape.rings, shape.max_columns, false}) {}
+  RevolutionCloud cloud;
+  std::uint64_t sequence = 0;  // RangeImage::sequence
+  std::int64_t reference_end_ns = 0;
+  Outcome outcome = Outcome::aligned;
 };
 
 struct AlignCounters {
@@ -128,7 +159,8 @@ struct FeatureCounters {
 // Averages close-by points along each ring with a sliding window of
 // 2 * half_window + 1 points, constant cost per point. A window never
 // reaches across a missing point or a range jump larger than
-// `smoothing_max_jump` (an object's edge), so edges stay sharp.
+// `smoothing_max_jump` (an object's edge), so edges stay sharp. x, y, z
+// then hold the smoothed coordinates, aligned_x/y/z the aligned ones.
 void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept;
 
 // How compute_features() searches: `fastest` takes eight points at once on

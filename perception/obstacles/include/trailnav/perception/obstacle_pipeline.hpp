@@ -50,6 +50,9 @@ class ObstaclePipeline {
 
   const ObstacleConfig& config() const noexcept { return config_; }
   const RevolutionCloud& cloud() const noexcept { return cloud_; }
+  // The last revolution's points as aligned, to `to` (RevolutionCloud::
+  // hand_over_aligned()): after process(), and after the last look at cloud().
+  void hand_over_aligned(RevolutionCloud& to) noexcept { cloud_.hand_over_aligned(to); }
   const ObstacleModels& models() const noexcept { return models_; }
   // The map of the configured model.
   const ObstacleMap& map() const noexcept { return *maps_[static_cast<std::size_t>(config_.model)]; }

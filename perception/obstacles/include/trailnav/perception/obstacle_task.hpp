@@ -106,6 +106,10 @@ class ObstacleTask final : public Task {
     points_out_ = out;
     points_period_ns_ = period_ns;
   }
+  // Also hands every revolution it takes to `out`: its points as aligned
+  // (before smoothing), or why it was not mapped (the terrain thread, which
+  // then need not align it again). Before the scheduler starts.
+  void set_aligned(Mailbox<AlignedRevolution>* out) noexcept { aligned_out_ = out; }
 
   void run(const TaskTick& tick) override;
   // The task thread's own counters.
@@ -127,6 +131,7 @@ class ObstacleTask final : public Task {
   StatusBoard<ObstacleTaskCounters> shared_;
   Wakeup* notify_ = nullptr;
   Mailbox<PointsSnapshot>* points_out_ = nullptr;
+  Mailbox<AlignedRevolution>* aligned_out_ = nullptr;
   std::int64_t points_period_ns_ = 0;
   std::int64_t last_points_ns_ = 0;
 };

@@ -22,6 +22,7 @@ struct TerrainCounters {
   std::uint64_t revolutions = 0;
   std::uint64_t points = 0;           // registered in a cell
   std::uint64_t outside = 0;          // aligned, but outside the grid
+  std::uint64_t out_of_range = 0;     // aligned, but outside [min_range, max_range] of the terrain config
   std::uint64_t steps = 0;            // classification steps (every d metres)
   std::uint64_t features = 0;         // computed and classified
   std::uint64_t frozen_skipped = 0;   // cells with enough points that were already classified
@@ -58,21 +59,38 @@ struct TerrainWorkCell {
   std::int64_t frozen_ns = 0;
 };
 
+// Empty when the terrain's [min_range, max_range] lies within the range the
+// points are aligned for (TerrainMapper::create()), else what is wrong.
+std::string check_terrain_alignment(const TerrainConfig& config, const FeatureParams& alignment);
+
 class TerrainMapper {
  public:
   struct Created;
   // `forest` may be null (features only, for training); it must outlive the mapper.
+  //
+  // The points are aligned as the obstacle pipeline aligns them, with
+  // `alignment` (the obstacle config's features: its range limits and
+  // self_box), and then only those within the terrain config's own
+  // [min_range, max_range] are registered: trailnavd's terrain thread takes
+  // the obstacle thread's aligned revolutions (process_aligned()) instead of
+  // aligning each one a second time, and an offline run that aligns itself
+  // (process()) gets the same cells bit for bit. The terrain's range must lie
+  // within the alignment's (an error otherwise).
   static Created create(const TerrainConfig& config, const MountParams& mount, const velodyne::RangeImageShape& shape,
-                        const RandomForest* forest);
+                        const RandomForest* forest, const FeatureParams& alignment = FeatureParams{});
 
   // Aligns and registers one revolution, then runs a classification step if
   // the robot moved d metres (or max_step_interval passed) since the last.
   // True when a step ran (the class map changed). `poses` may be null.
   bool process(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
+  // The same for a revolution aligned elsewhere with the same alignment (the
+  // points of RevolutionCloud::hand_over_aligned()).
+  bool process_aligned(const RevolutionCloud& aligned) noexcept;
 
   // The stages on their own, for benchmarks and tests.
   void align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
-  void register_cloud() noexcept;
+  void register_cloud() noexcept { register_cloud(cloud_); }
+  void register_cloud(const RevolutionCloud& aligned) noexcept;
   bool step_due() const noexcept;
   void step(std::int64_t now_ns) noexcept;
 
@@ -92,7 +110,7 @@ class TerrainMapper {
 
  private:
   TerrainMapper(const TerrainConfig& config, const MountParams& mount, const velodyne::RangeImageShape& shape,
-                const RandomForest* forest);
+                const RandomForest* forest, const FeatureParams& alignment);
   // Re-opens a frozen cell when its time has come; whether the cell gets a
   // feature at this step.
   bool due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept;
@@ -136,6 +154,10 @@ class TerrainMapper {
   bool have_step_ = false;
   double step_x_ = 0.0, step_y_ = 0.0;
   std::int64_t step_ns_ = 0;
+  // The revolution registered last.
+  double robot_x_ = 0.0, robot_y_ = 0.0;
+  std::int64_t time_ns_ = 0;
+  std::int64_t clock_offset_ns_ = 0;
 };
 
 struct TerrainMapper::Created {

@@ -1,6 +1,8 @@
 // The terrain thread (thesis §7.3): a thin scheduler task around
 // TerrainMapper, asynchronous to the obstacle thread. Each run takes the
-// newest revolution from its own reader of the lidar driver's revolutions and
+// newest revolution the obstacle thread aligned and handed on (its points as
+// aligned, RevolutionCloud::hand_over_aligned()), or, in a daemon without the
+// obstacle thread, from its own reader of the lidar driver's revolutions with
 // the poses the pose thread queued for it; after each classification step it
 // publishes a copy of the class map through a Broadcast (the obstacle fusion,
 // the DDS publisher and navigation each hold a reader). It never allocates
@@ -12,6 +14,7 @@
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/runtime/broadcast.hpp"
+#include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/status_board.hpp"
 #include "trailnav/runtime/wakeup.hpp"
@@ -43,6 +46,9 @@ class TerrainTask final : public Task {
   // `poses` may be null (no pose stream: the map stays where it started).
   TerrainTask(TerrainMapper& mapper, Broadcast<velodyne::RangeImage>::Reader& revolutions, PoseQueue* poses,
               Broadcast<TerrainClassMap>& out, std::size_t pose_history = 512, PoseWait pose_wait = {});
+  // Registers what the obstacle thread aligned (ObstacleTask::set_aligned()),
+  // with the same alignment (TerrainMapper::create()).
+  TerrainTask(TerrainMapper& mapper, Mailbox<AlignedRevolution>& aligned, Broadcast<TerrainClassMap>& out);
 
   // Woken after each published class map (the DDS publisher). Before the scheduler starts.
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
@@ -52,8 +58,14 @@ class TerrainTask final : public Task {
   TerrainTaskCounters status() const noexcept { return shared_.read(); }
 
  private:
+  // A revolution with this sequence number and end was taken: counts skips.
+  void took(std::uint64_t sequence, std::int64_t reference_end_ns) noexcept;
+  void run_aligned() noexcept;
+  void publish() noexcept;
+
   TerrainMapper& mapper_;
-  Broadcast<velodyne::RangeImage>::Reader& revolutions_;
+  Broadcast<velodyne::RangeImage>::Reader* revolutions_ = nullptr;
+  Mailbox<AlignedRevolution>* aligned_ = nullptr;
   PoseQueue* poses_;
   Broadcast<TerrainClassMap>& out_;
   PoseTrack track_;
