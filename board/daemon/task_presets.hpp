@@ -39,6 +39,7 @@ struct PresetRow {
   double need_ms;    // the largest CPU time of one run per period of input, measured with this lidar
   double budget_ms;  // what the table grants: derived from need_ms (above)
   int priority;      // SCHED_FIFO
+  std::string_view thread;  // shared with the other rows naming it (TaskSpec::thread); empty: its own
 };
 
 // The model's table (a VLP-16-HiRes sends a VLP-16's packets: its table).

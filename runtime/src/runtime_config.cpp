@@ -34,10 +34,12 @@ std::vector<TaskSpec> parse_task_table(const ConfigNode& parent, std::string_vie
     spec.budget = static_cast<Nanos>(entry.number("budget_ms", 0.001, 60'000.0) * 1e6);
     spec.priority = static_cast<int>(entry.integer("priority", 0, 99, 0));
     spec.cpu = static_cast<int>(entry.integer("cpu", -1, cpu_count - 1, -1));
+    spec.thread = entry.string("thread", "");
     entry.reject_unknown_keys();
     if (Status s = validate_task_spec(spec, cpu_count); !s) entry.fail("", s.message());
     for (const TaskSpec& other : table) {
       if (other.name == spec.name) entry.fail("name", "task name '" + spec.name + "' is used twice");
+      if (Status s = validate_thread_sharing(spec, other); !s) entry.fail("thread", s.message());
     }
     table.push_back(spec);
   }
@@ -67,8 +69,13 @@ void change_task_table(const ConfigNode& parent, std::string_view key, int cpu_c
     if (entry.has("budget_ms")) spec.budget = static_cast<Nanos>(entry.number("budget_ms", 0.001, 60'000.0) * 1e6);
     spec.priority = static_cast<int>(entry.integer("priority", 0, 99, spec.priority));
     spec.cpu = static_cast<int>(entry.integer("cpu", -1, cpu_count - 1, spec.cpu));
+    spec.thread = entry.string("thread", spec.thread);
     entry.reject_unknown_keys();
     if (Status s = validate_task_spec(spec, cpu_count); !s) entry.fail("", s.message());
+    for (const TaskSpec& other : table) {
+      if (other.name == spec.name) continue;
+      if (Status s = validate_thread_sharing(spec, other); !s) entry.fail("", s.message());
+    }
     *it = spec;
   }
 }

@@ -4,7 +4,9 @@
 #include <sched.h>
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 
 #include "trailnav/runtime/alloc_guard.hpp"
@@ -30,7 +32,25 @@ Status validate_task_spec(const TaskSpec& spec, int cpu_count) {
   if (spec.cpu < -1 || spec.cpu >= cpu_count) {
     return Status::error(who + "cpu must be -1 (any) or in [0, " + std::to_string(cpu_count - 1) + "]");
   }
+  if (spec.thread.size() > 15) {
+    return Status::error(who + "thread name is longer than 15 characters (thread names are limited to 15)");
+  }
+  if (!spec.thread.empty() && spec.kind == TaskKind::event) {
+    return Status::error(who + "an event-driven task runs on a thread of its own: only periodic tasks share a thread");
+  }
   return Status::ok();
+}
+
+Status validate_thread_sharing(const TaskSpec& spec, const TaskSpec& other) {
+  if (spec.thread.empty() || other.thread != spec.thread) return Status::ok();
+  if (other.rate_hz == spec.rate_hz && other.priority == spec.priority && other.cpu == spec.cpu) return Status::ok();
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "task '%s': thread '%s' runs task '%s' at %g Hz, priority %d, cpu %d; a task sharing it needs the same "
+                "(this one: %g Hz, priority %d, cpu %d)",
+                spec.name.c_str(), spec.thread.c_str(), other.name.c_str(), other.rate_hz, other.priority, other.cpu,
+                spec.rate_hz, spec.priority, spec.cpu);
+  return Status::error(text);
 }
 
 namespace {
@@ -94,6 +114,9 @@ Status Scheduler::add(const TaskSpec& spec, Task& task, TaskEvent* event) {
   if (spec.kind == TaskKind::periodic && event != nullptr) {
     return Status::error("task '" + spec.name + "': a periodic task is woken by its rate, not by an event");
   }
+  for (const auto& e : entries_) {
+    if (Status s = validate_thread_sharing(spec, e->spec); !s) return s;
+  }
   entries_.push_back(std::make_unique<Entry>(spec, task, event));
   return Status::ok();
 }
@@ -119,14 +142,28 @@ Status Scheduler::start() {
   for (auto& e : entries_) {
     if (e->event != nullptr) e->event->resume();
   }
+  // The threads: one per task, but one for all the tasks naming a thread.
+  threads_.clear();
+  for (auto& e : entries_) {
+    Thread* shared = nullptr;
+    for (auto& t : threads_) {
+      if (!e->spec.thread.empty() && t->entries.front()->spec.thread == e->spec.thread) shared = t.get();
+    }
+    if (shared == nullptr) {
+      threads_.push_back(std::make_unique<Thread>());
+      shared = threads_.back().get();
+      shared->name = e->spec.thread.empty() ? e->spec.name : e->spec.thread;
+    }
+    shared->entries.push_back(e.get());
+  }
   threads_ready_.store(0, std::memory_order_release);
   realtime_failures_.store(0, std::memory_order_release);
   running_.store(true, std::memory_order_release);
-  for (auto& e : entries_) {
-    Entry& entry = *e;
-    entry.thread = std::thread([this, &entry] { thread_main(entry); });
+  for (auto& t : threads_) {
+    Thread& thread = *t;
+    thread.thread = std::thread([this, &thread] { thread_main(thread); });
   }
-  while (threads_ready_.load(std::memory_order_acquire) < static_cast<int>(entries_.size())) {
+  while (threads_ready_.load(std::memory_order_acquire) < static_cast<int>(threads_.size())) {
     std::this_thread::yield();
   }
 
@@ -152,62 +189,74 @@ void Scheduler::stop() {
   for (auto& e : entries_) {
     if (e->event != nullptr) e->event->interrupt();
   }
-  for (auto& e : entries_) {
-    if (e->thread.joinable()) e->thread.join();
+  for (auto& t : threads_) {
+    if (t->thread.joinable()) t->thread.join();
   }
   if (memory_locked_) munlockall();  // memory_locked() keeps reporting what the run had
 }
 
-void Scheduler::apply_thread_settings(Entry& entry) noexcept {
-  pthread_setname_np(pthread_self(), entry.spec.name.c_str());
-  if (entry.spec.cpu >= 0) {
+void Scheduler::apply_thread_settings(const Thread& thread) noexcept {
+  const TaskSpec& spec = thread.entries.front()->spec;  // the tasks sharing a thread share these
+  pthread_setname_np(pthread_self(), thread.name.c_str());
+  if (spec.cpu >= 0) {
     cpu_set_t set;
     CPU_ZERO(&set);
-    CPU_SET(static_cast<unsigned>(entry.spec.cpu), &set);
+    CPU_SET(static_cast<unsigned>(spec.cpu), &set);
     if (pthread_setaffinity_np(pthread_self(), sizeof set, &set) != 0) {
-      TN_LOG_WARN("task '%s': could not pin to CPU %d", entry.spec.name.c_str(), entry.spec.cpu);
+      TN_LOG_WARN("thread '%s': could not pin to CPU %d", thread.name.c_str(), spec.cpu);
     }
   }
-  if (options_.realtime != RealtimePolicy::off && entry.spec.priority > 0) {
+  if (options_.realtime != RealtimePolicy::off && spec.priority > 0) {
     sched_param param{};
-    param.sched_priority = entry.spec.priority;
+    param.sched_priority = spec.priority;
     if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) != 0) {
-      realtime_failures_.fetch_add(1, std::memory_order_acq_rel);
+      realtime_failures_.fetch_add(static_cast<int>(thread.entries.size()), std::memory_order_acq_rel);
     }
   }
 }
 
-void Scheduler::thread_main(Entry& entry) noexcept {
-  apply_thread_settings(entry);
-  alloc_guard::mark_realtime_thread(entry.spec.name.c_str());
+void Scheduler::thread_main(Thread& thread) noexcept {
+  apply_thread_settings(thread);
+  alloc_guard::mark_realtime_thread(thread.name.c_str());
   threads_ready_.fetch_add(1, std::memory_order_acq_rel);
-  if (entry.spec.kind == TaskKind::periodic) {
-    run_periodic(entry);
+  if (thread.entries.front()->spec.kind == TaskKind::periodic) {
+    run_periodic(thread);
   } else {
-    run_event(entry);
+    run_event(*thread.entries.front());
   }
   alloc_guard::unmark_current_thread();
 }
 
-void Scheduler::run_periodic(Entry& entry) noexcept {
-  const Nanos period = entry.spec.period();
+void Scheduler::run_periodic(Thread& thread) noexcept {
+  const Nanos period = thread.entries.front()->spec.period();
   Nanos deadline = clock_.now() + period;
   std::uint64_t cycle = 0;
   while (running_.load(std::memory_order_acquire)) {
     if (!clock_.sleep_until(deadline)) break;
     if (!running_.load(std::memory_order_acquire)) break;
-    const Nanos started = clock_.now();
-    const Nanos cpu_start = clock_.thread_cpu_time();
-    entry.task.run(TaskTick{cycle, deadline, started});
-    const Nanos cpu = clock_.thread_cpu_time() - cpu_start;
-    const Nanos finished = clock_.now();
-    entry.accounting.record_run(deadline, started, finished, cpu);
+    // The tasks of a shared thread one after another, each measured on its
+    // own (its latency includes the runs before it in this period).
+    Nanos finished = 0;
+    Nanos rest = -1;
+    for (Entry* e : thread.entries) {
+      const Nanos started = clock_.now();
+      const Nanos cpu_start = clock_.thread_cpu_time();
+      e->task.run(TaskTick{cycle, deadline, started});
+      const Nanos cpu = clock_.thread_cpu_time() - cpu_start;
+      finished = clock_.now();
+      e->accounting.record_run(deadline, started, finished, cpu);
+      // A shared thread rests only as long as every task on it can.
+      const Nanos r = e->task.rest();
+      rest = rest < 0 ? r : std::min(rest, r);
+    }
     std::uint64_t skipped = 0;
     deadline = next_periodic_deadline(deadline, period, finished, skipped);
-    if (skipped > 0) entry.accounting.record_skipped(skipped);
     std::uint64_t rested = 0;
-    deadline = rested_deadline(deadline, period, finished, entry.task.rest(), rested);
-    if (rested > 0) entry.accounting.record_rested(rested);
+    deadline = rested_deadline(deadline, period, finished, rest, rested);
+    for (Entry* e : thread.entries) {
+      if (skipped > 0) e->accounting.record_skipped(skipped);
+      if (rested > 0) e->accounting.record_rested(rested);
+    }
     ++cycle;
   }
 }

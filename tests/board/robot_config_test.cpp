@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <iterator>
 #include <fstream>
 #include <string>
 
@@ -285,6 +286,39 @@ TEST(RobotConfig, TaskPresetIsTheLidarsMeasuredTableForThePartsConfigured) {
   EXPECT_NE(load_error(head + "tasks:\n  preset: auto\n  change:\n    - {name: obstacles, rate_hz: 9}\n").find("event-driven"),
             std::string::npos);
   EXPECT_NE(load_error(head + "tasks:\n  preset: auto\n  chnage: []\n").find("unknown key"), std::string::npos);
+  // Only periodic tasks share a thread.
+  const std::string e = load_error(head + "tasks:\n  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 0.5, thread: all}\n"
+                        "  - {name: obstacles, kind: event, budget_ms: 20, thread: all}\n");
+  EXPECT_NE(e.find("only periodic tasks share a thread"), std::string::npos) << e;
+}
+
+// The presets put the IMU, CAN and GPS readers and the pose estimator on one
+// thread; a row changed to another rate must leave it.
+TEST(RobotConfig, ThePresetsSensorsShareAThreadAndAChangedRateMustLeaveIt) {
+  std::ifstream in("board/robots/bench.yaml");
+  const std::string bench((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_NE(bench.find("  preset: auto\n"), std::string::npos);
+  auto r = load(bench);
+  ASSERT_TRUE(r.config) << r.error;
+  for (const TaskSpec& t : r.config->tasks) {
+    const bool sensor = t.name == "imu" || t.name == "can" || t.name == "gps" || t.name == "pose";
+    EXPECT_EQ(t.thread, sensor ? "sensors" : "") << t.name;
+    if (sensor) {
+      EXPECT_EQ(t.rate_hz, 100.0) << t.name;
+    }
+  }
+  std::string changed = bench;
+  changed.replace(changed.find("  preset: auto\n"), 15, "  preset: auto\n  change:\n    - {name: gps, rate_hz: 50}\n");
+  std::string e = load_error(changed);
+  EXPECT_NE(e.find("task 'gps': thread 'sensors' runs task 'imu' at 100 Hz, priority 65, cpu -1; a task sharing it "
+                   "needs the same (this one: 50 Hz, priority 65, cpu -1)"),
+            std::string::npos)
+      << e;
+  changed = bench;
+  changed.replace(changed.find("  preset: auto\n"), 15,
+                  "  preset: auto\n  change:\n    - {name: gps, rate_hz: 50, thread: \"\"}\n");
+  r = load(changed);
+  ASSERT_TRUE(r.config) << r.error;
 }
 
 // Every preset's budgets follow the stated rule from the measured needs:

@@ -1,10 +1,12 @@
 #include "trailnav/runtime/scheduler.hpp"
 
 #include <gtest/gtest.h>
+#include <pthread.h>
 
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -280,6 +282,111 @@ TEST(Scheduler, ARestingTaskSleepsThroughWholePeriodsAndRunsOnTheGrid) {
   EXPECT_EQ(task.started[2], 50 * kMs);
   EXPECT_EQ(task.started[3], 60 * kMs);
   EXPECT_EQ(task.started[4], 80 * kMs);
+}
+
+// Two tasks naming one thread: each period they run one after another on
+// that thread (in the order added), each with its own figures; one sleeper
+// waits for both; the thread rests only as long as both tasks can.
+class SharingTask final : public Task {
+ public:
+  SharingTask(SimulatedClock& clock, Nanos work, char tag, std::string& log) : clock_(clock), work_(work), tag_(tag), log_(log) {}
+  void run(const TaskTick& tick) override {
+    clock_.advance_by(work_);
+    log_.push_back(tag_);
+    threads.push_back(std::this_thread::get_id());
+    char name[16] = {};
+    pthread_getname_np(pthread_self(), name, sizeof name);
+    thread_name = name;
+    deadlines.push_back(tick.scheduled);
+  }
+  Nanos rest() noexcept override { return rest_for.load(); }
+  std::vector<std::thread::id> threads;
+  std::vector<Nanos> deadlines;
+  std::string thread_name;
+  std::atomic<Nanos> rest_for{0};
+
+ private:
+  SimulatedClock& clock_;
+  Nanos work_;
+  char tag_;
+  std::string& log_;
+};
+
+TEST(Scheduler, PeriodicTasksSharingAThreadRunInTurnOnItEachMeasuredOnItsOwn) {
+  SimulatedClock clock(0);
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  std::string log;
+  log.reserve(64);
+  SharingTask a(clock, kMs, 'a', log), b(clock, 2 * kMs, 'b', log);
+  for (SharingTask* t : {&a, &b}) {
+    t->threads.reserve(16);
+    t->deadlines.reserve(16);
+    t->thread_name.reserve(16);
+  }
+  a.rest_for = 35 * kMs;  // b does not rest: neither does the thread
+  TaskSpec sa{"a", TaskKind::periodic, 100.0, 2 * kMs, 0, -1, "pair"};
+  TaskSpec sb{"b", TaskKind::periodic, 100.0, kMs, 0, -1, "pair"};
+  ASSERT_TRUE(scheduler.add(sa, a));
+  ASSERT_TRUE(scheduler.add(sb, b));
+  ASSERT_TRUE(scheduler.start());
+  wait_for(scheduler, clock, 0);
+  EXPECT_EQ(clock.sleepers(), 1u);  // one thread for both
+  clock.advance_to(10 * kMs);
+  wait_for(scheduler, clock, 1);
+  clock.advance_to(20 * kMs);
+  wait_for(scheduler, clock, 2);
+  b.rest_for = 35 * kMs;  // read after b's next run: now both can rest
+  clock.advance_to(30 * kMs);
+  wait_for(scheduler, clock, 3);
+  // Cycle 2 ran at 30 ms and ended at 33 ms; resting until 68 ms sleeps
+  // through 40 and 50 ms (the run at 60 ms is still within the rest).
+  clock.advance_to(50 * kMs);
+  ASSERT_EQ(scheduler.stats(0).runs, 3u);
+  clock.advance_to(60 * kMs);
+  wait_for(scheduler, clock, 4);
+  scheduler.stop();
+
+  EXPECT_EQ(log, "abababab");
+  ASSERT_EQ(a.threads.size(), 4u);
+  ASSERT_EQ(b.threads.size(), 4u);
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(a.threads[i], b.threads[i]);
+    EXPECT_EQ(a.deadlines[i], b.deadlines[i]);  // one period, one deadline
+  }
+  EXPECT_EQ(a.thread_name, "pair");
+  const TaskStats ta = scheduler.stats(0), tb = scheduler.stats(1);
+  EXPECT_EQ(ta.runs, 4u);
+  EXPECT_EQ(tb.runs, 4u);
+  EXPECT_EQ(ta.execution.max, kMs);
+  EXPECT_EQ(tb.execution.max, 2 * kMs);
+  EXPECT_EQ(ta.latency.max, 0);
+  EXPECT_EQ(tb.latency.max, kMs);  // b starts when a is done
+  EXPECT_EQ(ta.overruns, 0u);
+  // 2 ms of work against b's own 1 ms, but the run after the rest drains
+  // three periods of input: an allowance of 3 ms.
+  EXPECT_EQ(tb.overruns, 3u);
+  // 40 and 50 ms, then 70 and 80 ms after the last run (it rested too).
+  EXPECT_EQ(ta.rested_periods, 4u);
+  EXPECT_EQ(tb.rested_periods, 4u);
+}
+
+TEST(Scheduler, OnlyPeriodicTasksOfOneRatePriorityAndCpuShareAThread) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  CountingTask task;
+  TaskEvent event;
+  ASSERT_TRUE(scheduler.add({"imu", TaskKind::periodic, 100.0, kMs, 65, -1, "sensors"}, task));
+  Status s = scheduler.add({"can", TaskKind::periodic, 200.0, kMs, 65, -1, "sensors"}, task);
+  EXPECT_EQ(s.message(),
+            "task 'can': thread 'sensors' runs task 'imu' at 100 Hz, priority 65, cpu -1; a task sharing it needs the "
+            "same (this one: 200 Hz, priority 65, cpu -1)");
+  EXPECT_FALSE(scheduler.add({"gps", TaskKind::periodic, 100.0, kMs, 60, -1, "sensors"}, task));
+  EXPECT_TRUE(scheduler.add({"pose", TaskKind::periodic, 100.0, kMs, 65, -1, "sensors"}, task));
+  EXPECT_TRUE(scheduler.add({"other", TaskKind::periodic, 200.0, kMs, 0, -1, "other-thread"}, task));
+  s = scheduler.add({"obstacles", TaskKind::event, 0.0, kMs, 0, -1, "sensors"}, task, &event);
+  EXPECT_NE(s.message().find("an event-driven task runs on a thread of its own"), std::string::npos) << s.message();
+  s = scheduler.add({"x", TaskKind::periodic, 100.0, kMs, 0, -1, "a-very-long-thread-name"}, task);
+  EXPECT_NE(s.message().find("thread name is longer than 15"), std::string::npos) << s.message();
 }
 
 // --- the scheduler on the real clock ---
