@@ -4,8 +4,6 @@
 #include <cmath>
 #include <numbers>
 
-#include "trailnav/runtime/prefetch.hpp"
-
 namespace trailnav::velodyne {
 namespace {
 
@@ -229,15 +227,6 @@ void RevolutionAssembler::place_points(const PacketInfo& info, int begin, int en
   RangeImage& image = *image_;
   const bool two_layers = image.layers() == 2;
   const double since_start_s = static_cast<double>(packet_time_ns - image.start_ns) * 1e-9;
-  // A packet's cells lie in every ring's row, megabytes apart, and the image
-  // was last read by other threads: each store would wait for its line. So
-  // all the lines are asked for first, then written while they come in.
-  for (int i = 0; i < info.points; ++i) {
-    const Point& p = points_[static_cast<std::size_t>(i)];
-    if (p.sequence < begin || p.sequence >= end) continue;
-    const int c = column_[p.sequence];
-    if (c >= 0) prefetch_for_write(&image.at(two_layers && p.kind == ReturnKind::dual_last ? 1 : 0, p.ring, c));
-  }
   for (int i = 0; i < info.points; ++i) {
     const Point& p = points_[static_cast<std::size_t>(i)];
     if (p.sequence < begin || p.sequence >= end) continue;

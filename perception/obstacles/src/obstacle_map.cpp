@@ -155,8 +155,6 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
   };
 
   const int columns = cloud.columns();
-  std::size_t last_offset = std::numeric_limits<std::size_t>::max();
-  std::size_t last_toffset = std::numeric_limits<std::size_t>::max();
   for (int ring = 0; ring < cloud.rings(); ++ring) {
     const std::size_t base = cloud.index(ring, 0);
     for (int j = 0; j < columns; ++j) {
@@ -170,23 +168,16 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
         continue;
       }
       const std::size_t offset = grid_.offset_from_origin(static_cast<std::int32_t>(lx), static_cast<std::int32_t>(ly));
-      // Neighbours along a ring often share a cell: its lines were asked for.
-      if (offset != last_offset) {
-        prefetch_for_write(&grid_.at_offset(offset));
-        prefetch_for_write(&occupancy_.at_offset(offset));
-        if constexpr (M == FusionModel::pw) prefetch_for_write(&hits_.at_offset(offset));
-        last_offset = offset;
-      }
+      prefetch_for_write(&grid_.at_offset(offset));
+      prefetch_for_write(&occupancy_.at_offset(offset));
+      if constexpr (M == FusionModel::pw) prefetch_for_write(&hits_.at_offset(offset));
       std::uint32_t toffset = kNoTerrain;
       if (tmap != nullptr) {
         const float tx = tox + cloud.x[k] * tfinv;
         const float ty = toy + cloud.y[k] * tfinv;
         if (tx >= 0.0f && tx < tsize_x && ty >= 0.0f && ty < tsize_y) {
           const std::size_t t = tmap->grid().offset_from_origin(static_cast<std::int32_t>(tx), static_cast<std::int32_t>(ty));
-          if (t != last_toffset) {
-            prefetch_for_read(&tmap->grid().at_offset(t));
-            last_toffset = t;
-          }
+          prefetch_for_read(&tmap->grid().at_offset(t));
           toffset = static_cast<std::uint32_t>(t);
         }
       }
