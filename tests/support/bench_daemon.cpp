@@ -8,10 +8,12 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <vector>
 
 #include "simulator.hpp"
+#include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/runtime/clock.hpp"
@@ -73,7 +75,30 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
   so.seed = options.seed;
   so.duration = options.seconds;
   so.out = (b->dir_ / "rec").string();
+  so.lidar = options.lidar;
   b->recording_ = so.out;
+  const auto model = velodyne::parse_model(options.lidar);
+  if (!model) {
+    error = "unknown lidar model '" + options.lidar + "'";
+    return nullptr;
+  }
+  std::string calibration = "builtin";
+  if (*model != velodyne::Model::vlp16) {
+    calibration = sim::default_calibration_file(*model);
+    if (calibration.empty()) {
+      error = "no calibration for the " + options.lidar + " in ../shared/data/velodyne/calibration/";
+      return nullptr;
+    }
+    calibration = fs::absolute(calibration).string();
+    so.calibration = calibration;
+  }
+  std::string terrain_model = "board/models/terrain-sim.tnrf";
+  switch (*model) {
+    case velodyne::Model::vlp32c: terrain_model = "board/models/terrain-sim-vlp32c.tnrf"; break;
+    case velodyne::Model::hdl32e: terrain_model = "board/models/terrain-sim-hdl32e.tnrf"; break;
+    case velodyne::Model::hdl64e: terrain_model = "board/models/terrain-sim-hdl64e.tnrf"; break;
+    default: break;
+  }
   if (const sim::SimReport sr = sim::run_simulation(so); !sr.error.empty()) {
     error = "simulation: " + sr.error;
     return nullptr;
@@ -101,7 +126,8 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
     };
     c << "runtime: {realtime: " << (options.realtime ? "best_effort, lock_memory: true" : "off, lock_memory: false")
       << ", log_level: warn, log_sink: stderr}\n"
-      << "lidar: {model: VLP-16, calibration: builtin, data: 127.0.0.1:" << base << ", position: 127.0.0.1:" << base + 1
+      << "lidar: {model: " << options.lidar << ", calibration: " << calibration << ", data: 127.0.0.1:" << base
+      << ", position: 127.0.0.1:" << base + 1
       << ", rpm: 600}\n"
       << "gps: {link: '" << serial_link("gps", "115200", 4) << "'}\n"
       << "imu: {link: '" << serial_link("imu", "921600", 5) << "', protocol: xsens}\n"
@@ -111,10 +137,13 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
       << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
       << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: " << nav << ", feed_terrain: " << nav << "}\n"
       << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
-      << "terrain: {model: " << fs::absolute("board/models/terrain-sim.tnrf").string() << ", max_step_interval: 1.0}\n"
+      << "terrain: {model: " << fs::absolute(terrain_model).string() << ", max_step_interval: 1.0}\n"
       << "dds: {domain: " << b->domain_ << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5"
-      << options.dds_yaml << "}\n"
-      << "tasks:\n"
+      << options.dds_yaml << "}\n";
+    if (options.preset_tasks) {
+      c << "tasks: {preset: auto}\n";
+    } else {
+      c << "tasks:\n"
       << "  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 1.0}\n"
       << "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 2.0}\n"
       << "  - {name: can, kind: periodic, rate_hz: 200, budget_ms: 1.0}\n"
@@ -123,11 +152,12 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
       << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1.0}\n"
       << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n"
       << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
+    }
     if (options.navigation) {
       char goal[120];
       std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", b->truth_.trajectory.back().lat, b->truth_.trajectory.back().lon);
-      c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n"
-        << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
+      if (!options.preset_tasks) c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n";
+      c << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
     }
     c << options.extra_yaml;
   }
@@ -216,6 +246,21 @@ long BenchDaemon::rss_kb() const {
     if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
   }
   return 0;
+}
+
+double BenchDaemon::cpu_s() const {
+  std::ifstream in("/proc/" + std::to_string(pid_) + "/stat");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // After the command's closing parenthesis: the state is field 3, utime and stime fields 14 and 15.
+  const std::size_t close = text.rfind(')');
+  if (close == std::string::npos) return 0.0;
+  std::istringstream fields(text.substr(close + 1));
+  std::string f;
+  double ticks = 0.0;
+  for (int i = 3; i <= 15 && fields >> f; ++i) {
+    if (i >= 14) ticks += std::stod(f);
+  }
+  return ticks / static_cast<double>(::sysconf(_SC_CLK_TCK));
 }
 
 }  // namespace trailnav::test

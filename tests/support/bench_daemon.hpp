@@ -41,6 +41,13 @@ struct BenchDaemonOptions {
   // session starved for seconds (docs/testing.md); the drivers' own tests and
   // the other daemon tests keep the pseudo-terminals.
   bool serial_over_udp = false;
+  // The lidar the drive is simulated with and trailnavd configured for
+  // (VLP-16, VLP-32C, HDL-32E, HDL-64E): the simulator's calibration (a real
+  // file in ../shared/data) and the terrain model trained for it.
+  std::string lidar = "VLP-16";
+  // The task table of the lidar's preset (`tasks: {preset: auto}`, as the
+  // shipped configs) instead of the tests' own generous one.
+  bool preset_tasks = false;
 };
 
 // A goal for orders: the vertex of the recording's world.osm farthest from
@@ -79,6 +86,8 @@ class BenchDaemon {
   int stop();
   const std::string& stderr_text() const noexcept { return stderr_text_; }
   long rss_kb() const;
+  // The daemon's CPU time so far (user + system, all threads), s.
+  double cpu_s() const;
 
   std::uint32_t domain() const noexcept { return domain_; }
   const std::string& recording() const noexcept { return recording_; }
