@@ -491,7 +491,9 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   eval::ObstacleRunOptions oo;
   oo.inputs = {bench->recording()};
   oo.config = *robot.config->obstacles;
-  oo.calibration = "builtin";
+  // The calibration trailnavd was given (a file for the 32- and 64-laser models).
+  const std::string calibration = robot.config->lidar->calibration.empty() ? "builtin" : robot.config->lidar->calibration;
+  oo.calibration = calibration;
   oo.truth_poses = false;
   std::map<std::int64_t, std::vector<std::int8_t>> offline;
   oo.on_processed = [&](const perception::ObstaclePipeline& p) {
@@ -521,7 +523,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   }
 
   // The offline terrain analysis on the same revolutions, same config, no pose stream.
-  auto source = eval::RevolutionSource::open({bench->recording()}, "builtin");
+  auto source = eval::RevolutionSource::open({bench->recording()}, calibration);
   EXPECT_TRUE(source.source) << source.error;
   auto forest = perception::RandomForest::load(robot.config->terrain->model);
   EXPECT_TRUE(forest.forest) << forest.error;

@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <thread>
 #include <vector>
@@ -136,6 +137,93 @@ TEST(RangeImage, RealCapturesAssembleIntoCompleteRevolutions) {
     const PacketDecoder d = decoder_for(Model::vlp16);
     expect_clean_revolutions(d, data_packets(shared_data("velodyne/mrpt_sample_velodyne_vlp16_gps.pcap")), 3);
   }
+}
+
+// The assembler clears each column of the image it fills right before its
+// first points land there, and the columns no firing reached at the
+// revolution's end, not the whole image at its start: whatever a slot held
+// before (a reader's old revolution), the revolution that leaves it is the
+// same, cell for cell. Real captures, one and two layers, with packets lost.
+class JunkSink final : public RevolutionSink {
+ public:
+  explicit JunkSink(RangeImageShape shape) : work_(shape) {}
+  RangeImage& next_image() noexcept override {
+    // A full image of a wrong revolution in every cell of the capacity.
+    work_.begin(work_.shape().max_columns);
+    RangeCell junk;
+    junk.x = junk.y = junk.z = 9.0f;
+    junk.distance = 7.0f;
+    junk.azimuth = 1.0f;
+    junk.time = 0.5f;
+    junk.intensity = 99.0f;
+    junk.kind = ReturnKind::dual_last;
+    for (int layer = 0; layer < work_.layers(); ++layer) {
+      for (int ring = 0; ring < work_.rings(); ++ring) {
+        for (int c = 0; c < work_.shape().max_columns; ++c) work_.at(layer, ring, c) = junk;
+      }
+    }
+    return work_;
+  }
+  void complete(RangeImage& image) noexcept override { images.push_back(image); }
+  std::vector<RangeImage> images;
+
+ private:
+  RangeImage work_;
+};
+
+void expect_same_cells_from_a_junk_filled_image(const PacketDecoder& d, const std::vector<Packet>& packets,
+                                                AssemblerOptions options = {}) {
+  const std::vector<RangeImage> clean = assemble(d, packets, options);
+  RevolutionAssembler assembler = assembler_for(d, options);
+  JunkSink sink(assembler.shape());
+  SensorClock clock;
+  for (const Packet& p : packets) {
+    const std::uint32_t ts = read_u32(p.bytes.data() + kTimestampOffset);
+    assembler.add_packet(p.bytes, clock.resolve(ts, p.host_ns != 0 ? p.host_ns : static_cast<std::int64_t>(ts) * 1000), sink);
+  }
+  ASSERT_EQ(sink.images.size(), clean.size());
+  ASSERT_GE(clean.size(), 3u);
+  for (std::size_t i = 0; i < clean.size(); ++i) {
+    const RangeImage& a = clean[i];
+    const RangeImage& b = sink.images[i];
+    ASSERT_EQ(a.columns(), b.columns());
+    EXPECT_EQ(a.points, b.points);
+    std::size_t differ = 0;
+    for (int layer = 0; layer < a.layers(); ++layer) {
+      for (int ring = 0; ring < a.rings(); ++ring) {
+        for (int c = 0; c < a.columns(); ++c) {
+          differ += std::memcmp(&a.at(layer, ring, c), &b.at(layer, ring, c), sizeof(RangeCell)) != 0 ? 1u : 0u;
+        }
+      }
+    }
+    EXPECT_EQ(differ, 0u) << "revolution " << i + 1;
+  }
+}
+
+TEST(RangeImage, AnImageIsTheSameWhateverItsSlotHeldBefore) {
+  std::vector<Packet> vlp16 = data_packets(shared_data("velodyne/einride_vlp16_recording_raw1206.bin"));
+  expect_same_cells_from_a_junk_filled_image(decoder_for(Model::vlp16), vlp16);
+  // Lost packets: their columns stay missing and empty, also the last ones
+  // before a cut (the columns after a revolution's last firing).
+  const PacketDecoder d = decoder_for(Model::vlp16);
+  std::vector<Point> buffer(kMaxPointsPerPacket);
+  RevolutionCut cut(0.0);
+  std::vector<std::size_t> crossings;
+  for (std::size_t k = 0; k < vlp16.size(); ++k) {
+    const PacketInfo info = d.decode(vlp16[k].bytes, buffer);
+    if (cut.first_new_sequence(info) < info.sequences) crossings.push_back(k);
+  }
+  ASSERT_GE(crossings.size(), 6u);
+  vlp16.erase(vlp16.begin() + static_cast<std::ptrdiff_t>(crossings[4]) - 3,
+              vlp16.begin() + static_cast<std::ptrdiff_t>(crossings[4]));
+  vlp16.erase(vlp16.begin() + 330, vlp16.begin() + 333);
+  expect_same_cells_from_a_junk_filled_image(d, vlp16);
+  DecoderOptions all;
+  all.selection = ReturnSelection::all;
+  AssemblerOptions dual;
+  dual.dual_returns = true;
+  expect_same_cells_from_a_junk_filled_image(decoder_for(Model::vlp16, "", all),
+                                             data_packets(shared_data("velodyne/nebula-vlp16/vlp16_dual_rewrapped.pcap")), dual);
 }
 
 TEST(RangeImage, DualReturnsFillTwoLayers) {

@@ -30,13 +30,24 @@ double RangeImage::column_azimuth(int column) const noexcept {
 }
 
 void RangeImage::reset(int columns) noexcept {
-  columns_ = std::clamp(columns, 1, shape_.max_columns);
+  begin(columns);
+  clear_columns(0, columns_);
+}
+
+void RangeImage::clear_columns(int first_column, int end_column) noexcept {
+  first_column = std::max(first_column, 0);
+  end_column = std::min(end_column, columns_);
+  if (first_column >= end_column) return;
   for (int layer = 0; layer < shape_.layers; ++layer) {
     for (int ring = 0; ring < shape_.rings; ++ring) {
       RangeCell* row_cells = cells_.data() + index(layer, ring, 0);
-      std::fill(row_cells, row_cells + columns_, RangeCell{});
+      std::fill(row_cells + first_column, row_cells + end_column, RangeCell{});
     }
   }
+}
+
+void RangeImage::begin(int columns) noexcept {
+  columns_ = std::clamp(columns, 1, shape_.max_columns);
   std::fill(column_state_.begin(), column_state_.begin() + columns_, ColumnState::missing);
   sequence = 0;
   start_ns = end_ns = 0;
@@ -174,6 +185,7 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   if (first_new > 0) {
     ++image_->packets;
     assign_columns(0, first_new, continuous);
+    clear_through_previous_column();
     place_points(info, 0, first_new, packet_time_ns);
   }
   if (first_new < n) {
@@ -181,12 +193,22 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
     start_revolution(sink, sequence_ns(first_new), false);
     ++image_->packets;
     assign_columns(first_new, n, first_new > 0 || continuous);
+    clear_through_previous_column();
     place_points(info, first_new, n, packet_time_ns);
   }
 
   have_previous_ = true;
   previous_timestamp_us_ = info.timestamp_us;
   return PacketError::none;
+}
+
+void RevolutionAssembler::clear_through_previous_column() noexcept {
+  // The columns placed into are assigned in increasing order (a firing
+  // whose column lies behind the last one is dropped), so each is cleared
+  // once, just before its first points land there.
+  if (previous_column_ < cleared_) return;
+  image_->clear_columns(cleared_, previous_column_ + 1);
+  cleared_ = previous_column_ + 1;
 }
 
 void RevolutionAssembler::assign_columns(int begin, int end, bool continuous) noexcept {
@@ -271,7 +293,8 @@ void RevolutionAssembler::start_revolution(RevolutionSink& sink, std::int64_t fi
   rate_azimuth_ = 0.0;
   rate_time_us_ = 0.0;
   if (image_ == nullptr) image_ = &sink.next_image();
-  image_->reset(columns_);
+  image_->begin(columns_);
+  cleared_ = 0;
   image_->start_ns = first_ns;
   image_->cut_azimuth = options_.cut_azimuth_rad;
   partial_ = partial;
@@ -283,6 +306,8 @@ void RevolutionAssembler::finish_revolution(RevolutionSink& sink, std::int64_t n
   RangeImage& image = *image_;
   // The firings up to the cut were seen when nothing was lost before it.
   if (continuous && previous_column_ >= 0) image.mark_received(previous_column_ + 1, image.columns());
+  image.clear_columns(cleared_, image.columns());  // the columns no firing was placed in
+  cleared_ = image.columns();
   image.end_ns = last_firing_ns_;
   image.finish();
   if (partial_) {
