@@ -46,9 +46,9 @@ constexpr std::array<Task, 9> kTasks = {{
 }};
 
 // The budget a need gets: need x 1.5 rounded up to 0.1 ms, at most 90 % of
-// the period. Where that cap bites (the lidar task of the 32- and 64-laser
-// models, whose worst runs took 2.2-5.5 ms, for reasons not yet found) the
-// budget is below the need and start-up says so.
+// the period. Where that cap bites the budget is below the need and start-up
+// says so (none of the presets since the lidar task stopped clearing a whole
+// range image in one run: docs/performance.md).
 constexpr double budget_for(double need_ms, TaskKind kind, double rate_hz) {
   const double tenths = need_ms * 15.0;
   auto whole = static_cast<long long>(tenths);
@@ -68,15 +68,15 @@ constexpr std::array<PresetRow, 9> rows(const std::array<double, 9>& need_ms) {
   return out;
 }
 
-// The needs, measured with toolchain/measure-task-presets.sh on 2026-12-02
-// (this 2-core VM; docs/performance.md "Task presets"): the largest CPU time
-// of one run per period of input over three 60 s replays of `mixed-route`;
-// the IMU and CAN rows again over two replays once they ran at 100 Hz.
+// The needs, measured with toolchain/measure-task-presets.sh --runs 2 on
+// 2026-12-02 at e55bc58 (this 2-core VM; docs/performance.md "Task presets"):
+// the largest CPU time of one run per period of input over two 60 s replays
+// of `mixed-route`, the sensors sharing their thread.
 //                                          gpio   lidar  imu    can    gps    pose   obstacles navigation terrain
-constexpr std::array<PresetRow, 9> kVlp16 = rows({0.886, 0.886, 0.678, 1.473, 0.513, 0.891, 4.668, 0.992, 10.623});
-constexpr std::array<PresetRow, 9> kVlp32c = rows({0.947, 5.537, 0.479, 0.775, 0.292, 2.806, 7.600, 1.188, 13.261});
-constexpr std::array<PresetRow, 9> kHdl32e = rows({0.660, 2.180, 0.816, 0.182, 4.783, 0.720, 5.947, 0.914, 11.118});
-constexpr std::array<PresetRow, 9> kHdl64e = rows({0.688, 3.807, 0.416, 0.243, 0.262, 2.108, 9.480, 1.613, 13.999});
+constexpr std::array<PresetRow, 9> kVlp16 = rows({0.812, 0.245, 0.344, 0.552, 0.170, 0.423, 4.468, 1.094, 8.639});
+constexpr std::array<PresetRow, 9> kVlp32c = rows({0.761, 0.321, 0.355, 0.629, 0.187, 0.712, 5.189, 1.561, 10.500});
+constexpr std::array<PresetRow, 9> kHdl32e = rows({0.417, 0.314, 0.369, 0.189, 0.139, 0.280, 9.325, 1.107, 8.959});
+constexpr std::array<PresetRow, 9> kHdl64e = rows({0.348, 0.347, 0.321, 0.227, 0.466, 0.750, 9.867, 0.995, 12.587});
 
 }  // namespace
 

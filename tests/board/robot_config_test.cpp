@@ -63,13 +63,8 @@ TEST(RobotConfig, ShippedExamplesAreValid) {
     EXPECT_EQ(r.config->lidar->driver.revolution_readers, 1) << f;
     EXPECT_EQ(r.config->tasks.size(), 8u) << f;
     EXPECT_EQ(r.config->task_preset, velodyne::model_info(r.config->lidar->model).name) << f;
-    // The HDL-64E's lidar task was measured to need more in its worst run
-    // than 90 % of its 1 ms period, the most its preset grants: said at start.
-    const bool hdl64e = r.config->lidar->model == velodyne::Model::hdl64e;
-    ASSERT_EQ(r.config->warnings.size(), hdl64e ? 1u : 0u) << f << ": " << (r.config->warnings.empty() ? "" : r.config->warnings[0]);
-    if (hdl64e) {
-      EXPECT_NE(r.config->warnings[0].find("task 'lidar'"), std::string::npos) << r.config->warnings[0];
-    }
+    // Every preset's budgets cover what its tasks were measured to need: nothing said at start.
+    EXPECT_TRUE(r.config->warnings.empty()) << f << ": " << (r.config->warnings.empty() ? "" : r.config->warnings[0]);
   }
   const auto bench = daemon::load_robot_config("board/robots/bench.yaml");
   EXPECT_NE(bench.config->dds.cyclone_xml.find("<AllowMulticast>false</AllowMulticast>"), std::string::npos);
@@ -258,7 +253,7 @@ TEST(RobotConfig, TaskPresetIsTheLidarsMeasuredTableForThePartsConfigured) {
     EXPECT_GT(row->need_ms, 0.0) << t.name << ": a preset row without a measurement";
     EXPECT_EQ(t.priority, row->priority) << t.name;
   }
-  ASSERT_EQ(r.config->warnings.size(), 1u);  // the lidar task's, as in the shipped HDL-64E configs
+  EXPECT_TRUE(r.config->warnings.empty());  // the preset's budgets cover the needs
   // Another model's table by name; a row changed.
   r = load(head + "tasks:\n  preset: VLP-16\n  change:\n    - {name: lidar, cpu: 0, budget_ms: 0.9}\n");
   ASSERT_TRUE(r.config) << r.error;
