@@ -939,11 +939,12 @@ TEST(Trailnavd, TakesGoalsOverDdsAndRefusesImpossibleOnes) {
   EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
 }
 
-// The 60 s measurement of the issue: latency percentiles, RSS, overruns.
-TEST(Trailnavd, SixtySecondsAtTheLidarRate) {
-  if (std::getenv("TRAILNAV_LONG_TESTS") == nullptr) GTEST_SKIP() << "set TRAILNAV_LONG_TESTS=1 (benchmarks)";
-  const DaemonRun r = run_daemon(60.0, "long", true);  // SCHED_FIFO and mlockall where permitted
-  report(r, "60 s");
+namespace {
+
+// What every 60 s run at the lidar's rate must show: a clean exit, the
+// offline pipeline's maps bit for bit, a map each revolution, no real-time
+// allocation, no overrun, no growth of the resident memory.
+void expect_sixty_clean_seconds(const DaemonRun& r) {
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_EQ(r.identical, r.matched);
   EXPECT_GE(r.maps, 590u);
@@ -952,22 +953,28 @@ TEST(Trailnavd, SixtySecondsAtTheLidarRate) {
   EXPECT_LE(r.rss_end_kb, r.rss_start_kb + 1024);
 }
 
+}  // namespace
+
+// The 60 s measurement of the issue: latency percentiles, RSS, overruns.
+TEST(Trailnavd, SixtySecondsAtTheLidarRate) {
+  if (std::getenv("TRAILNAV_LONG_TESTS") == nullptr) GTEST_SKIP() << "set TRAILNAV_LONG_TESTS=1 (benchmarks)";
+  const DaemonRun r = run_daemon(60.0, "long", true);  // SCHED_FIFO and mlockall where permitted
+  report(r, "60 s");
+  expect_sixty_clean_seconds(r);
+}
+
 // Issue 42's acceptance with the thesis' lidar: a 60 s drive of street, dirt
 // road and grass track simulated with an HDL-64E (its real sztaki
 // calibration), the lidar's task preset, replayed at real time: the whole
 // daemon within 15 % of one core, no overrun, no real-time allocation, map
-// latency p99 within 5 ms. Label `slow`: toolchain/measure-task-presets.sh
-// and docs/performance.md give the figures.
+// latency p99 within 5 ms. Run with TRAILNAV_LONG_TESTS=1 (outside CI, as
+// the VLP-16 one); toolchain/measure-task-presets.sh and docs/performance.md
+// give the figures.
 TEST(Trailnavd, SixtySecondsOfTheHdl64eAtTheLidarRate) {
   if (std::getenv("TRAILNAV_LONG_TESTS") == nullptr) GTEST_SKIP() << "set TRAILNAV_LONG_TESTS=1 (benchmarks)";
   const DaemonRun r = run_daemon(60.0, "long-hdl64e", true, false, "mixed-route", {}, "", "HDL-64E", true);
   report(r, "60 s HDL-64E");
-  EXPECT_EQ(r.exit_code, 0);
-  EXPECT_EQ(r.identical, r.matched);
-  EXPECT_GE(r.maps, 590u);
-  EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
-  EXPECT_EQ(number_before(r.stderr_text, "overruns"), 0u);
+  expect_sixty_clean_seconds(r);
   EXPECT_LE(r.cpu_percent, 15.0);
   EXPECT_LE(nanos_to_seconds(r.latency.p99) * 1e3, 5.0);
-  EXPECT_LE(r.rss_end_kb, r.rss_start_kb + 1024);
 }
