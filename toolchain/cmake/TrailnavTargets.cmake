@@ -49,8 +49,10 @@ endfunction()
 # GoogleTest executable whose cases are registered with CTest one by one. Each
 # executable carries exactly one label: its module (runtime, drivers, ...), or
 # `slow` for long runs that CI leaves to the benchmarks job.
+# SLOW <gtest filter>: the tests of the executable that match it carry
+# `slow` instead (timeout 900 s), the others the module's label.
 function(trailnav_add_test name)
-  cmake_parse_arguments(ARG "" "TIMEOUT;LABEL" "SOURCES;DEPENDS" ${ARGN})
+  cmake_parse_arguments(ARG "" "TIMEOUT;LABEL;SLOW" "SOURCES;DEPENDS" ${ARGN})
   if(NOT ARG_LABEL)
     message(FATAL_ERROR "trailnav_add_test(${name}): LABEL is required")
   endif()
@@ -60,10 +62,23 @@ function(trailnav_add_test name)
   if(NOT ARG_TIMEOUT)
     set(ARG_TIMEOUT 120)
   endif()
-  gtest_discover_tests(${name}
-    WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
-    PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT}
-    DISCOVERY_TIMEOUT 60)
+  if(ARG_SLOW)
+    gtest_discover_tests(${name}
+      WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+      TEST_FILTER "-${ARG_SLOW}"
+      PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT}
+      DISCOVERY_TIMEOUT 60)
+    gtest_discover_tests(${name}
+      WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+      TEST_FILTER "${ARG_SLOW}"
+      PROPERTIES LABELS slow TIMEOUT 900
+      DISCOVERY_TIMEOUT 60)
+  else()
+    gtest_discover_tests(${name}
+      WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+      PROPERTIES LABELS ${ARG_LABEL} TIMEOUT ${ARG_TIMEOUT}
+      DISCOVERY_TIMEOUT 60)
+  endif()
 endfunction()
 
 # trailnav_add_benchmark(<name> SOURCES ... DEPENDS ...): a Google Benchmark
