@@ -177,6 +177,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
         *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
         d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_, 512, config.pose_wait);
     d->obstacles_->set_aligned(d->aligned_.get());
+    d->obstacles_->set_streaming(config.obstacles->streaming);
     d->lidar_->set_revolution_event(&d->revolution_event_);
   }
 
@@ -365,6 +366,18 @@ std::string Daemon::task_report() const {
                   nanos_to_seconds(st.latency.p99) * 1e3);
     out += line;
   }
+  if (obstacles_) {
+    const DurationSummary d = obstacles_->map_delay();
+    const perception::ObstacleTaskCounters c = obstacles_->status();
+    char line[300];
+    std::snprintf(line, sizeof line,
+                  "  obstacle maps: %llu, from the completing packet's receipt to the snapshot p50 %.3f p99 %.3f max %.3f ms; "
+                  "%llu taken while they arrived (%llu block steps early), %llu dropped by the lidar half-way\n",
+                  static_cast<unsigned long long>(d.count), nanos_to_seconds(d.p50) * 1e3, nanos_to_seconds(d.p99) * 1e3,
+                  nanos_to_seconds(d.max) * 1e3, static_cast<unsigned long long>(c.streamed),
+                  static_cast<unsigned long long>(c.early_blocks), static_cast<unsigned long long>(c.abandoned));
+    out += line;
+  }
   return out;
 }
 
@@ -531,6 +544,13 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("pose_wait_max_ms", static_cast<double>(c.pose_wait_max_ns) * 1e-6, 1);
     m.value("poses", c.poses);
     m.value("terrain_maps", c.terrain_maps);
+    const DurationSummary delay = obstacles_->map_delay();
+    m.value("map_delay_p50_ms", nanos_to_seconds(delay.p50) * 1e3, 3);
+    m.value("map_delay_p99_ms", nanos_to_seconds(delay.p99) * 1e3, 3);
+    m.value("map_delay_max_ms", nanos_to_seconds(delay.max) * 1e3, 3);
+    m.value("streamed", c.streamed);
+    m.value("early_blocks", c.early_blocks);
+    m.value("abandoned", c.abandoned);
   }
   if (terrain_) {
     const perception::TerrainTaskCounters c = terrain_->status();

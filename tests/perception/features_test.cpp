@@ -185,9 +185,9 @@ TEST(Smoothing, AveragesNoiseAndKeepsEdges) {
   for (int j = 0; j < kColumns; ++j) {
     const std::size_t k = c.index(0, j);
     const bool far = j >= 180;
-    c.x[k] = 0.03f * static_cast<float>(j);
-    c.y[k] = 0.0f;
-    c.z[k] = (far ? 0.5f : 0.0f) + (j % 2 ? 0.02f : -0.02f);
+    c.aligned_x[k] = 0.03f * static_cast<float>(j);
+    c.aligned_y[k] = 0.0f;
+    c.aligned_z[k] = (far ? 0.5f : 0.0f) + (j % 2 ? 0.02f : -0.02f);
     c.range[k] = far ? 7.0f : 5.0f;
     c.state[k] = PointState::valid;
   }

@@ -67,7 +67,7 @@ TEST(ObstacleMap, UnknownFreeAndOccupiedAreDistinct) {
   for (FusionModel m : {FusionModel::pw, FusionModel::ps, FusionModel::pc}) {
     ObstacleMap map(mp, m);
     for (int rev = 0; rev < 5; ++rev) {
-      c.time_ns = rev * 100'000'000LL;
+      c.start_ns = rev * 100'000'000LL;
       map.integrate(c, models, street);
     }
     const auto& g = map.grid();
@@ -126,7 +126,8 @@ TEST(ObstacleMap, LogOddsFollowEquation710) {
 CellState dirac_revolution(ObstacleMap& map, RevolutionCloud& c, const ObstacleModels& models,
                            const TerrainSource& terrain, int n, float step, float z) {
   const std::size_t k = c.index(0, 0);
-  c.time_ns = n * 100'000'000LL;
+  c.start_ns = n * 100'000'000LL;  // the map measures the rate from the revolutions' starts
+  c.time_ns = c.start_ns + 99'000'000LL;
   c.step_height[k] = step;
   c.sin_incline[k] = step > 0 ? 1.0f : 0.0f;
   c.z[k] = z;
@@ -380,15 +381,15 @@ TEST(CloudAligner, LevelsThePitchAndCompensatesMotion) {
   aligner.align(image, &poses, cloud);
   const std::size_t a = cloud.index(0, 0), b = cloud.index(0, 99);
   ASSERT_EQ(cloud.state[a], PointState::valid);
-  EXPECT_NEAR(cloud.ref_x + static_cast<double>(cloud.x[a]), 5.005, 1e-3);
-  EXPECT_NEAR(cloud.ref_x + static_cast<double>(cloud.x[b]), 4.0 + 0.995, 1e-3);
+  EXPECT_NEAR(cloud.ref_x + static_cast<double>(cloud.aligned_x[a]), 5.005, 1e-3);
+  EXPECT_NEAR(cloud.ref_x + static_cast<double>(cloud.aligned_x[b]), 4.0 + 0.995, 1e-3);
 
   // No pose stream: the fixed pitch levels the sensor. Nose down by 10
   // degrees, a point 5 m along the sensor's x lies 5 sin(10 deg) below it.
   mount.fixed_pitch_deg = 10.0;
   CloudAligner fixed(mount, fp);
   fixed.align(image, nullptr, cloud);
-  EXPECT_NEAR(static_cast<double>(cloud.z[a]), -5.0 * std::sin(10.0 * std::numbers::pi / 180.0), 1e-5);
+  EXPECT_NEAR(static_cast<double>(cloud.aligned_z[a]), -5.0 * std::sin(10.0 * std::numbers::pi / 180.0), 1e-5);
   EXPECT_EQ(fixed.counters().no_pose, 1u);
 }
 

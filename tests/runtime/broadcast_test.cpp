@@ -4,6 +4,7 @@
 
 #include <array>
 #include <atomic>
+#include <cstdio>
 #include <thread>
 #include <vector>
 
@@ -78,6 +79,102 @@ TEST(Broadcast, ConcurrentReadersNeverSeeATornOrOlderSnapshot) {
     EXPECT_GT(seen[r], 0u);
     EXPECT_EQ(b.reader(r).last_read_sequence(), kSnapshots) << r;  // every reader ends on the newest
   }
+}
+
+// Following the slot being filled: only what the progress word vouches for
+// is read; published, the slot comes once through completed(); dropped
+// (refill()), it is abandoned() and the writer fills another.
+TEST(Broadcast, AFollowerReadsWhatTheProgressVouchesForThenTheCompleteSnapshotOnce) {
+  Broadcast<Snapshot> b(1, 0);
+  Broadcast<Snapshot>::Reader& r = b.reader(0);
+  const Snapshot* f = r.follow();
+  ASSERT_NE(f, nullptr);
+  EXPECT_EQ(r.progress(), 0u);
+  EXPECT_EQ(r.completed(), nullptr);
+  EXPECT_FALSE(r.abandoned());
+  for (std::size_t i = 0; i < 100; ++i) b.write_slot().v[i] = 1;
+  b.progress(100);
+  EXPECT_EQ(r.progress(), 100u);
+  EXPECT_EQ(f->v[99], 1u);
+  for (std::size_t i = 100; i < 256; ++i) b.write_slot().v[i] = 1;
+  b.publish();
+  const Snapshot* done = r.completed();
+  ASSERT_EQ(done, f);
+  EXPECT_EQ(r.completed(), nullptr);  // once
+  EXPECT_EQ(r.try_read(), nullptr);   // already read
+  EXPECT_EQ(r.last_read_sequence(), 1u);
+  // The next one: followed, then dropped by the writer.
+  const Snapshot* g = r.follow();
+  ASSERT_NE(g, nullptr);
+  EXPECT_NE(g, f);
+  b.write_slot().v[0] = 2;
+  b.progress(1);
+  b.refill();
+  EXPECT_TRUE(r.abandoned());
+  EXPECT_EQ(r.completed(), nullptr);
+  EXPECT_NE(&b.write_slot(), g);  // the slot followed is not filled again while held
+  const Snapshot* h = r.follow();
+  EXPECT_NE(h, g);
+  EXPECT_EQ(h, &b.write_slot());
+  EXPECT_EQ(r.progress(), 0u);
+  EXPECT_FALSE(r.abandoned());
+  // Nobody follows it: a refill may give the same slot again.
+  Broadcast<Snapshot> lone(1, 0);
+  Snapshot* before = &lone.write_slot();
+  EXPECT_EQ(&lone.refill(), before);
+}
+
+// A writer that fills snapshots part by part, publishing most and dropping
+// some half-way, and a reader following it on another thread: every value
+// the reader reads under a progress word is the one written for that word's
+// snapshot, and every completed snapshot is whole.
+TEST(Broadcast, AConcurrentFollowerNeverReadsPastTheProgressOrATornSnapshot) {
+  Broadcast<Snapshot> b(1, 0);
+  constexpr std::uint64_t kSnapshots = 3000;
+  std::atomic<bool> done{false};
+  std::atomic<int> failures{0};
+  std::uint64_t completed = 0, checked = 0, abandoned = 0;
+  std::thread reader([&] {
+    Broadcast<Snapshot>::Reader& r = b.reader(0);
+    const Snapshot* f = r.follow();
+    for (;;) {
+      const bool finished = done.load();
+      if (const Snapshot* c = r.completed()) {
+        const std::uint64_t id = c->v[0];
+        for (std::uint64_t x : c->v) failures += x != id ? 1 : 0;
+        ++completed;
+        f = r.follow();
+      } else if (r.abandoned()) {
+        ++abandoned;
+        f = r.follow();
+      } else if (const std::uint64_t word = r.progress(); word != 0) {
+        const std::uint64_t id = word >> 16;
+        const std::size_t n = word & 0xffff;
+        for (std::size_t i = 0; i < n; ++i) failures += f->v[i] != id ? 1 : 0;
+        ++checked;
+      }
+      if (finished) break;
+    }
+  });
+  for (std::uint64_t id = 1; id <= kSnapshots; ++id) {
+    Snapshot& s = b.write_slot();
+    for (std::size_t part = 0; part < 8; ++part) {
+      for (std::size_t i = part * 32; i < part * 32 + 32; ++i) s.v[i] = id;
+      b.progress((id << 16) | (part * 32 + 32));
+      if (id % 7 == 0 && part == 3) break;
+    }
+    if (id % 7 == 0) {
+      b.refill();
+    } else {
+      b.publish();
+    }
+  }
+  done = true;
+  reader.join();
+  EXPECT_EQ(failures.load(), 0);
+  EXPECT_GT(completed + abandoned, 0u);
+  std::printf("completed %llu, abandoned %llu, progress checks %llu\n", static_cast<unsigned long long>(completed),
+              static_cast<unsigned long long>(abandoned), static_cast<unsigned long long>(checked));
 }
 
 }  // namespace

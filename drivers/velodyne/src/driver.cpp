@@ -21,6 +21,7 @@ VelodyneDriver::Created VelodyneDriver::create(PacketDecoder decoder, const Driv
   std::unique_ptr<VelodyneDriver> d(new VelodyneDriver(std::move(decoder), options, shape));
   // The assembler refers to the decoder: built on the driver's own.
   d->assembler_.emplace(std::move(*RevolutionAssembler::create(d->decoder_, options.assembler).assembler));
+  d->sink_.assembler = &*d->assembler_;
 
   auto data = udp::UdpReceiver::open(options.data);
   if (!data.receiver) {
@@ -58,7 +59,11 @@ std::optional<udp::Endpoint> VelodyneDriver::position_endpoint() const noexcept 
 
 void VelodyneDriver::Sink::complete(RangeImage& image) noexcept {
   image.completed_receive_ns = receive_ns;
-  image.clock_offset_ns = reference != nullptr ? reference->offset_ns() : 0;
+  // A revolution followed while it arrived keeps the offset it was followed
+  // with (publish_progress()).
+  if (assembler == nullptr || assembler->generation() != offset_generation) {
+    image.clock_offset_ns = reference != nullptr ? reference->offset_ns() : 0;
+  }
   mailbox.publish();
   if (event != nullptr) event->signal(run_started);
 }
@@ -110,7 +115,37 @@ void VelodyneDriver::run(const TaskTick& tick) {
     }
     if (batch.size() < static_cast<std::size_t>(data_->options().batch)) break;
   }
+  publish_progress(tick.started);
   publish_counters();
+}
+
+void VelodyneDriver::publish_progress(Nanos started) noexcept {
+  if (options_.progress_signals <= 0) return;
+  const RevolutionAssembler::Filling f = assembler_->filling();
+  if (f.image == nullptr || f.partial || f.final_columns <= 0) return;
+  if (f.generation != sink_.offset_generation) {
+    // A revolution begun: the clock offset it is read with, before the first
+    // word that vouches for it.
+    sink_.offset_generation = f.generation;
+    revolutions_.write_slot().clock_offset_ns = reference_.offset_ns();
+    next_signal_columns_ = 0;
+  }
+  const std::uint64_t word = revolution_progress(f.generation, f.final_columns);
+  if (word == progress_word_) return;
+  progress_word_ = word;
+  revolutions_.progress(word);
+  if (sink_.event != nullptr && f.final_columns >= next_signal_columns_) {
+    if (next_signal_columns_ > 0) sink_.event->signal(started);
+    // Every 1/progress_signals of a turn, and four times as often in the
+    // last such part: what is left for the reader when the revolution
+    // completes is then what arrived since its last wake-up, the lidar
+    // task reading every period near the end (rest()).
+    const int columns = f.image->columns();
+    const int step = std::max(1, columns / options_.progress_signals);
+    const int fine = std::max(1, step / 4);
+    next_signal_columns_ = f.final_columns < columns - step ? (f.final_columns / step + 1) * step
+                                                           : (f.final_columns / fine + 1) * fine;
+  }
 }
 
 Nanos VelodyneDriver::rest() noexcept {

@@ -20,7 +20,8 @@ RangeImage::RangeImage(RangeImageShape shape)
     : shape_(shape),
       cells_(static_cast<std::size_t>(shape.layers) * static_cast<std::size_t>(shape.rings) *
              static_cast<std::size_t>(shape.max_columns)),
-      column_state_(static_cast<std::size_t>(shape.max_columns), ColumnState::missing) {}
+      column_state_(static_cast<std::size_t>(shape.max_columns), ColumnState::missing),
+      column_time_(static_cast<std::size_t>(shape.max_columns), kNoTime) {}
 
 double RangeImage::column_azimuth(int column) const noexcept {
   const double width = 2.0 * std::numbers::pi / static_cast<double>(columns_);
@@ -49,6 +50,7 @@ void RangeImage::clear_columns(int first_column, int end_column) noexcept {
 void RangeImage::begin(int columns) noexcept {
   columns_ = std::clamp(columns, 1, shape_.max_columns);
   std::fill(column_state_.begin(), column_state_.begin() + columns_, ColumnState::missing);
+  std::fill(column_time_.begin(), column_time_.begin() + columns_, kNoTime);
   sequence = 0;
   start_ns = end_ns = 0;
   rpm = 0.0;
@@ -62,9 +64,22 @@ void RangeImage::mark_received(int first_column, int end_column) noexcept {
   for (int c = first_column; c < end_column; ++c) column_state_[static_cast<std::size_t>(c)] = ColumnState::received;
 }
 
+void RangeImage::set_column_time(int first_column, int end_column, std::int64_t time_ns) noexcept {
+  first_column = std::max(first_column, 0);
+  end_column = std::min(end_column, columns_);
+  for (int c = first_column; c < end_column; ++c) column_time_[static_cast<std::size_t>(c)] = time_ns;
+}
+
 void RangeImage::finish() noexcept {
   missing_columns = static_cast<int>(
       std::count(column_state_.begin(), column_state_.begin() + columns_, ColumnState::missing));
+  const double span = static_cast<double>(end_ns - start_ns);
+  for (int c = 0; c < columns_; ++c) {
+    auto& t = column_time_[static_cast<std::size_t>(c)];
+    if (t == kNoTime && column_state_[static_cast<std::size_t>(c)] == ColumnState::received) {
+      t = start_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns_);
+    }
+  }
 }
 
 namespace {
@@ -111,6 +126,9 @@ RevolutionAssembler::RevolutionAssembler(const PacketDecoder& decoder, const Ass
       cut_(options.cut_azimuth_rad),
       points_(kMaxPointsPerPacket) {
   columns_ = columns_for_rpm(options.rpm);
+  for (const LaserCorrection& l : decoder.calibration().lasers) {
+    max_rotation_correction_ = std::max(max_rotation_correction_, std::abs(l.rot_correction));
+  }
 }
 
 double RevolutionAssembler::turn_to_cut() const noexcept {
@@ -184,7 +202,7 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
   const bool continuous = have_previous_ && lost == 0;
   if (first_new > 0) {
     ++image_->packets;
-    assign_columns(0, first_new, continuous);
+    assign_columns(info, packet_time_ns, 0, first_new, continuous);
     clear_through_previous_column();
     place_points(info, 0, first_new, packet_time_ns);
   }
@@ -192,7 +210,7 @@ PacketError RevolutionAssembler::add_packet(std::span<const std::uint8_t> payloa
     finish_revolution(sink, sequence_ns(first_new), first_new > 0 || continuous);
     start_revolution(sink, sequence_ns(first_new), false);
     ++image_->packets;
-    assign_columns(first_new, n, first_new > 0 || continuous);
+    assign_columns(info, packet_time_ns, first_new, n, first_new > 0 || continuous);
     clear_through_previous_column();
     place_points(info, first_new, n, packet_time_ns);
   }
@@ -211,28 +229,42 @@ void RevolutionAssembler::clear_through_previous_column() noexcept {
   cleared_ = previous_column_ + 1;
 }
 
-void RevolutionAssembler::assign_columns(int begin, int end, bool continuous) noexcept {
+void RevolutionAssembler::assign_columns(const PacketInfo& info, std::int64_t packet_time_ns, int begin, int end,
+                                         bool continuous) noexcept {
   RangeImage& image = *image_;
   const int columns = image.columns();
   const float scale = static_cast<float>(columns) / kTurn;
+  // Each column covered takes the time of the first firing that covered it
+  // (a column behind the newest one no longer changes: trailnavd's obstacle
+  // thread may have read it already).
+  const auto receive = [&](int first, int last, std::int64_t time_ns) {
+    image.mark_received(first, last);
+    first = std::max(first, 0);
+    last = std::min(last, columns);
+    for (int c = first; c < last; ++c) {
+      if (image.column_time_ns(c) == RangeImage::kNoTime) image.set_column_time(c, c + 1, time_ns);
+    }
+  };
   for (int s = begin; s < end; ++s) {
+    const std::int64_t time_ns =
+        packet_time_ns + std::llround(static_cast<double>(info.sequence_time_us[static_cast<std::size_t>(s)]) * 1e3);
     const float position = cut_.relative(s) * scale;
     int c = std::min(static_cast<int>(position), columns - 1);
     // Coverage: everything since the previous firing when nothing was lost
     // in between, else only this firing's own column.
     const bool joined = s > begin || continuous;
     if (joined && previous_column_ >= 0) {
-      image.mark_received(previous_column_ + 1, c + 1);
+      receive(previous_column_ + 1, c + 1, time_ns);
     } else if (joined && previous_column_ < 0) {
-      image.mark_received(0, c + 1);  // first firing after the cut
+      receive(0, c + 1, time_ns);  // first firing after the cut
     }
-    image.mark_received(c, c + 1);
+    receive(c, c + 1, time_ns);
     // Two firings in one bin (the bins are one firing wide, but azimuth
     // jitters): the later one moves one bin on when that one is free.
     if (c <= previous_column_) {
       if (previous_column_ == c && c + 1 < columns) {
         c += 1;
-        image.mark_received(c, c + 1);
+        receive(c, c + 1, time_ns);
       } else {
         column_[static_cast<std::size_t>(s)] = -1;
         ++image.collisions;
@@ -292,8 +324,14 @@ void RevolutionAssembler::start_revolution(RevolutionSink& sink, std::int64_t fi
   }
   rate_azimuth_ = 0.0;
   rate_time_us_ = 0.0;
-  if (image_ == nullptr) image_ = &sink.next_image();
+  if (image_ == nullptr) {
+    image_ = &sink.next_image();
+  } else if (!partial_) {
+    image_ = &sink.restart_image(*image_);  // a full revolution dropped (a restart): a reader may follow it
+  }
+  ++generation_;
   image_->begin(columns_);
+  image_->azimuth_spread = max_rotation_correction_ + 2.0 * 2.0 * std::numbers::pi / static_cast<double>(columns_);
   cleared_ = 0;
   image_->start_ns = first_ns;
   image_->cut_azimuth = options_.cut_azimuth_rad;
@@ -305,7 +343,10 @@ void RevolutionAssembler::start_revolution(RevolutionSink& sink, std::int64_t fi
 void RevolutionAssembler::finish_revolution(RevolutionSink& sink, std::int64_t next_start_ns, bool continuous) noexcept {
   RangeImage& image = *image_;
   // The firings up to the cut were seen when nothing was lost before it.
-  if (continuous && previous_column_ >= 0) image.mark_received(previous_column_ + 1, image.columns());
+  if (continuous && previous_column_ >= 0) {
+    image.mark_received(previous_column_ + 1, image.columns());
+    image.set_column_time(previous_column_ + 1, image.columns(), last_firing_ns_);
+  }
   image.clear_columns(cleared_, image.columns());  // the columns no firing was placed in
   cleared_ = image.columns();
   image.end_ns = last_firing_ns_;

@@ -52,7 +52,8 @@ RevolutionCloud::RevolutionCloud(CloudShape shape) : shape_(shape) {
   aligned_x.assign(n, 0.0f);
   aligned_y.assign(n, 0.0f);
   aligned_z.assign(n, 0.0f);
-  ring_sums.assign(3 * (static_cast<std::size_t>(shape.max_columns) + 1), 0.0);
+  ring_sums.assign(3 * (static_cast<std::size_t>(shape.max_columns) + 1), 0);
+  ring_reach.assign(static_cast<std::size_t>(shape.max_columns), 0);
 }
 
 void RevolutionCloud::hand_over_aligned(RevolutionCloud& to) noexcept {
@@ -67,6 +68,8 @@ void RevolutionCloud::hand_over_aligned(RevolutionCloud& to) noexcept {
   to.ref_x = ref_x;
   to.ref_y = ref_y;
   to.ref_z = ref_z;
+  to.start_robot_x = start_robot_x;
+  to.start_robot_y = start_robot_y;
   to.robot_x = robot_x;
   to.robot_y = robot_y;
   to.robot_yaw = robot_yaw;
@@ -102,48 +105,68 @@ CloudAligner::CloudAligner(const MountParams& mount, const FeatureParams& featur
   for (int i = 0; i < 3; ++i) mount_t_[i] = static_cast<float>(mount.translation[static_cast<std::size_t>(i)]);
 }
 
-void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
-  const int columns = std::min(image.columns(), out.shape().max_columns);
-  const int rings = std::min(image.rings(), out.rings());
-  out.reset(columns);
+void CloudAligner::begin(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
+  columns_ = std::min(image.columns(), out.shape().max_columns);
+  out.reset(columns_);
   out.sequence = image.sequence;
-  out.time_ns = image.end_ns;
+  out.time_ns = image.start_ns;  // finish() sets the end
   out.start_ns = image.start_ns;
   out.clock_offset_ns = image.clock_offset_ns;
   out.full_turn = true;
+  moving_ = poses != nullptr && poses->size() > 0;
+  spread_columns_ =
+      static_cast<int>(std::ceil(image.azimuth_spread * columns_ / (2.0 * std::numbers::pi))) + 1;
 
-  double mount_r[9];
-  for (int i = 0; i < 9; ++i) mount_r[i] = static_cast<double>(mount_r_[i]);
-  const bool moving = poses != nullptr && poses->size() > 0;
-
-  // The reference: the sensor at the end of the revolution.
-  Pose end{};
-  if (moving) {
+  // The reference: the sensor at the revolution's first firing.
+  Pose start{};
+  if (moving_) {
     // Poses are on the reference clock (docs/dds.md, "One clock").
-    poses->at(image.reference_end_ns(), end);
+    poses->at(image.reference_start_ns(), start);
   } else {
-    end.roll = fixed_roll_;
-    end.pitch = fixed_pitch_;
+    start.roll = fixed_roll_;
+    start.pitch = fixed_pitch_;
     ++counters_.no_pose;
   }
-  double r_end[9];
-  rotation(end.roll, end.pitch, end.yaw, r_end);
+  double r[9];
+  rotation(start.roll, start.pitch, start.yaw, r);
   const double mt[3] = {mount_t_[0], mount_t_[1], mount_t_[2]};
-  out.ref_x = end.x + r_end[0] * mt[0] + r_end[1] * mt[1] + r_end[2] * mt[2];
-  out.ref_y = end.y + r_end[3] * mt[0] + r_end[4] * mt[1] + r_end[5] * mt[2];
-  out.ref_z = end.z + r_end[6] * mt[0] + r_end[7] * mt[1] + r_end[8] * mt[2];
-  out.robot_x = end.x;
-  out.robot_y = end.y;
-  out.robot_yaw = end.yaw;
-  out.robot_z = end.z;
-  out.robot_roll = end.roll;
-  out.robot_pitch = end.pitch;
+  out.ref_x = start.x + r[0] * mt[0] + r[1] * mt[1] + r[2] * mt[2];
+  out.ref_y = start.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2];
+  out.ref_z = start.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2];
+  out.start_robot_x = start.x;
+  out.start_robot_y = start.y;
+  set_robot(start, out);
+  fixed_pose_ = start;
+}
+
+void CloudAligner::set_robot(const Pose& p, RevolutionCloud& out) noexcept {
+  out.robot_x = p.x;
+  out.robot_y = p.y;
+  out.robot_yaw = p.yaw;
+  out.robot_z = p.z;
+  out.robot_roll = p.roll;
+  out.robot_pitch = p.pitch;
+}
+
+void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTrack* poses, int first, int end,
+                                 RevolutionCloud& out) noexcept {
+  const int columns = columns_;
+  first = std::max(first, 0);
+  end = std::min(end, columns);
+  if (first >= end) return;
+  const int rings = std::min(image.rings(), out.rings());
+  double mount_r[9];
+  for (int i = 0; i < 9; ++i) mount_r[i] = static_cast<double>(mount_r_[i]);
+  const double mt[3] = {mount_t_[0], mount_t_[1], mount_t_[2]};
 
   // Each column's sensor -> reference transform (rotation row-major, then
-  // translation), computed once per column; the points are then read ring
-  // by ring, the order both the range image and the cloud are stored in.
+  // translation), computed once per column from the pose at its firing;
+  // the points are then read ring by ring, the order both the range image
+  // and the cloud are stored in.
   float* const xf = out.column_transforms.data();
-  auto set_transform = [&](const Pose& p, const double r[9], float* t) {
+  auto set_transform = [&](const Pose& p, float* t) {
+    double r[9];
+    rotation(p.roll, p.pitch, p.yaw, r);
     double rt[9];
     multiply(r, mount_r, rt);
     for (int i = 0; i < 9; ++i) t[i] = static_cast<float>(rt[i]);
@@ -151,48 +174,46 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
     t[10] = static_cast<float>(p.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2] - out.ref_y);
     t[11] = static_cast<float>(p.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2] - out.ref_z);
   };
-  float fixed[RevolutionCloud::kTransformFloats];
-  set_transform(end, r_end, fixed);
-
-  const double span = static_cast<double>(image.end_ns - image.start_ns);
-  for (int c = 0; c < columns; ++c) {
+  for (int c = first; c < end; ++c) {
     float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
     if (image.column_state(c) != velodyne::ColumnState::received) continue;
-    if (moving) {
-      const auto when = image.start_ns + image.clock_offset_ns + static_cast<std::int64_t>(span * (c + 0.5) / columns);
+    if (moving_) {
       Pose p{};
-      if (poses->at(when, p) == PoseLookup::interpolated) {
+      if (poses->at(image.column_time_ns(c) + image.clock_offset_ns, p) == PoseLookup::interpolated) {
         ++counters_.pose_interpolated;
       } else {
         ++counters_.pose_clamped;
       }
-      double r[9];
-      rotation(p.roll, p.pitch, p.yaw, r);
-      set_transform(p, r, t);
+      set_transform(p, t);
     } else {
-      std::copy_n(fixed, RevolutionCloud::kTransformFloats, t);
+      set_transform(fixed_pose_, t);
     }
   }
 
   // Each point goes to the column of its own azimuth: lasers with a
   // rotation correction (the HDL-64E's are several degrees) fire in one
   // column but point into another, and the features need the rings'
-  // neighbours in a column to look the same way.
+  // neighbours in a column to look the same way. A point goes at most
+  // spread_columns_ from its firing's column (RangeImage::azimuth_spread),
+  // so that a column's points are all there once the firings that far
+  // past it are (trailnavd works on a revolution while it arrives).
   const double columns_per_rad = columns / (2.0 * std::numbers::pi);
   const auto cut = static_cast<float>(image.cut_azimuth);
   const float min_r = min_range_;
   const float max_r = max_range_;
-  std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0;
+  const int spread = spread_columns_;
+  const bool smoothing = out.shape().features;
+  std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0, beyond = 0;
   for (int i = 0; i < rings; ++i) {
     const velodyne::RangeCell* row = image.row(0, i).data();
     const std::size_t base = out.index(i, 0);
     PointState* st = out.state.data() + base;
-    float* ox = out.x.data() + base;
-    float* oy = out.y.data() + base;
-    float* oz = out.z.data() + base;
+    float* ox = (smoothing ? out.aligned_x : out.x).data() + base;
+    float* oy = (smoothing ? out.aligned_y : out.y).data() + base;
+    float* oz = (smoothing ? out.aligned_z : out.z).data() + base;
     float* orange = out.range.data() + base;
     float* ointensity = out.intensity.data() + base;
-    for (int c = 0; c < columns; ++c) {
+    for (int c = first; c < end; ++c) {
       const velodyne::RangeCell& cell = row[c];
       if (!cell.valid() || image.column_state(c) != velodyne::ColumnState::received) continue;
       ++points;
@@ -207,24 +228,47 @@ void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* pos
       }
       double rel = static_cast<double>(cell.azimuth - cut);
       if (rel < 0.0) rel += 2.0 * std::numbers::pi;
-      const auto target = static_cast<std::size_t>(std::min(columns - 1, static_cast<int>(rel * columns_per_rad)));
-      if (st[target] != PointState::none) {
+      const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
+      int apart = std::abs(target - c);
+      apart = std::min(apart, columns - apart);
+      if (apart > spread) {
+        ++beyond;
+        continue;
+      }
+      const auto k = static_cast<std::size_t>(target);
+      if (st[k] != PointState::none) {
         ++collisions;
         continue;
       }
       const float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
-      ox[target] = t[0] * cell.x + t[1] * cell.y + t[2] * cell.z + t[9];
-      oy[target] = t[3] * cell.x + t[4] * cell.y + t[5] * cell.z + t[10];
-      oz[target] = t[6] * cell.x + t[7] * cell.y + t[8] * cell.z + t[11];
-      orange[target] = cell.distance;
-      ointensity[target] = cell.intensity;
-      st[target] = PointState::valid;
+      ox[k] = t[0] * cell.x + t[1] * cell.y + t[2] * cell.z + t[9];
+      oy[k] = t[3] * cell.x + t[4] * cell.y + t[5] * cell.z + t[10];
+      oz[k] = t[6] * cell.x + t[7] * cell.y + t[8] * cell.z + t[11];
+      orange[k] = cell.distance;
+      ointensity[k] = cell.intensity;
+      st[k] = PointState::valid;
     }
   }
   counters_.points += points;
   counters_.out_of_range += out_of_range;
   counters_.collisions += collisions;
   counters_.self_hits += self_hits;
+  counters_.beyond_spread += beyond;
+}
+
+void CloudAligner::finish(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
+  out.time_ns = image.end_ns;
+  if (moving_) {
+    Pose end{};
+    poses->at(image.reference_end_ns(), end);
+    set_robot(end, out);
+  }
+}
+
+void CloudAligner::align(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
+  begin(image, poses, out);
+  align_columns(image, poses, 0, columns_, out);
+  finish(image, poses, out);
 }
 
 }  // namespace trailnav::perception

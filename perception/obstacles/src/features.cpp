@@ -1,6 +1,7 @@
 // Smoothing along the rings and the geometric features of thesis §7.1.2.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 
 #if defined(__x86_64__)
@@ -15,81 +16,105 @@
 namespace trailnav::perception {
 
 void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept {
-  // The smoothed coordinates are written to aligned_x/y/z, which then trade
-  // places with x, y, z: the aligned ones stay there for whoever takes the
-  // revolution's points as aligned (RevolutionCloud::hand_over_aligned()).
+  smooth_rings(cloud, params, 0, cloud.columns());
+}
+
+namespace {
+
+// The smoothing's sums are kept in fixed point, 2^-24 m, in 64-bit
+// integers: exact, so a window's sum (the difference of two prefix sums)
+// has the same bits wherever the prefix began, and a block of columns
+// smoothed on its own matches the whole ring smoothed at once.
+constexpr float kFixedScale = 16777216.0f;  // 2^24
+constexpr double kFixedUnit = 1.0 / 16777216.0;
+inline std::int64_t fixed(float v) noexcept { return static_cast<std::int64_t>(v * kFixedScale); }
+
+}  // namespace
+
+void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, int first, int end) noexcept {
   const int half = params.smoothing_half_window;
   const int columns = cloud.columns();
+  first = std::max(first, 0);
+  end = std::min(end, columns);
+  if (first >= end) return;
   if (half <= 0) {
     for (int ring = 0; ring < cloud.rings(); ++ring) {
-      const auto base = static_cast<std::ptrdiff_t>(cloud.index(ring, 0));
-      std::copy_n(cloud.x.begin() + base, columns, cloud.aligned_x.begin() + base);
-      std::copy_n(cloud.y.begin() + base, columns, cloud.aligned_y.begin() + base);
-      std::copy_n(cloud.z.begin() + base, columns, cloud.aligned_z.begin() + base);
+      const auto base = static_cast<std::ptrdiff_t>(cloud.index(ring, first));
+      std::copy_n(cloud.aligned_x.begin() + base, end - first, cloud.x.begin() + base);
+      std::copy_n(cloud.aligned_y.begin() + base, end - first, cloud.y.begin() + base);
+      std::copy_n(cloud.aligned_z.begin() + base, end - first, cloud.z.begin() + base);
     }
     return;
   }
-  const auto stride = static_cast<std::size_t>(columns) + 1;
-  double* sx = cloud.ring_sums.data();
-  double* sy = sx + stride;
-  double* sz = sy + stride;
+  // The stretch a window of the range can reach.
+  const int lo = std::max(0, first - half);
+  const int hi = std::min(columns, end + half);
+  const auto stride = static_cast<std::size_t>(hi - lo) + 1;
+  std::int64_t* sx = cloud.ring_sums.data();
+  std::int64_t* sy = sx + stride;
+  std::int64_t* sz = sy + stride;
+  std::int32_t* reach = cloud.ring_reach.data();  // per column of [lo, hi): how far the window may reach
   const float jump = params.smoothing_max_jump;
   for (int ring = 0; ring < cloud.rings(); ++ring) {
     const std::size_t base = cloud.index(ring, 0);
     const PointState* st = cloud.state.data() + base;
     const float* r = cloud.range.data() + base;
-    const float* px = cloud.x.data() + base;
-    const float* py = cloud.y.data() + base;
-    const float* pz = cloud.z.data() + base;
-    float* qx = cloud.aligned_x.data() + base;
-    float* qy = cloud.aligned_y.data() + base;
-    float* qz = cloud.aligned_z.data() + base;
-    int a = 0;
-    while (a < columns) {
-      if (st[a] == PointState::none) {
-        ++a;
+    const float* px = cloud.aligned_x.data() + base;
+    const float* py = cloud.aligned_y.data() + base;
+    const float* pz = cloud.aligned_z.data() + base;
+    float* qx = cloud.x.data() + base;
+    float* qy = cloud.y.data() + base;
+    float* qz = cloud.z.data() + base;
+    // A window stays within its segment: consecutive points without a range
+    // jump between neighbours. Points to the segment's start, then to its end,
+    // each capped at `half` (so the counts from `lo` are exact from `first` on).
+    const auto joined = [&](int j) {  // j - 1 and j lie in one segment
+      return st[j] != PointState::none && st[j - 1] != PointState::none && std::abs(r[j] - r[j - 1]) <= jump;
+    };
+    int run = 0;
+    for (int j = lo; j < hi; ++j) {
+      run = (j > lo && joined(j)) ? std::min(run + 1, half) : 0;
+      reach[j - lo] = run;
+    }
+    run = 0;
+    for (int j = hi - 1; j >= lo; --j) {
+      run = (j < hi - 1 && joined(j + 1)) ? std::min(run + 1, half) : 0;
+      reach[j - lo] = std::min(reach[j - lo], run);
+    }
+    // Prefix sums over the stretch (a missing point adds nothing: no window
+    // reaches it). The running sums stay in registers.
+    sx[0] = sy[0] = sz[0] = 0;
+    std::int64_t ax = 0, ay = 0, az = 0;
+    for (int j = lo; j < hi; ++j) {
+      if (st[j] != PointState::none) {
+        ax += fixed(px[j]);
+        ay += fixed(py[j]);
+        az += fixed(pz[j]);
+      }
+      const auto q = static_cast<std::size_t>(j - lo) + 1;
+      sx[q] = ax;
+      sy[q] = ay;
+      sz[q] = az;
+    }
+    for (int j = first; j < end; ++j) {
+      if (st[j] == PointState::none) continue;
+      // A symmetric window, narrowed near the segment's ends so the average
+      // stays centred on the point.
+      const int w = reach[j - lo];
+      if (w == 0) {
+        qx[j] = px[j];
+        qy[j] = py[j];
+        qz[j] = pz[j];
         continue;
       }
-      // The segment [a, b): consecutive valid points without a range jump.
-      int b = a + 1;
-      while (b < columns && st[b] != PointState::none && std::abs(r[b] - r[b - 1]) <= jump) ++b;
-      if (b - a == 1) {
-        qx[a] = px[a];
-        qy[a] = py[a];
-        qz[a] = pz[a];
-      } else {
-        // Prefix sums over the segment (doubles: no drift over long rings).
-        // The running sums stay in registers: read back from the arrays, each
-        // step would wait for the store before it.
-        sx[0] = sy[0] = sz[0] = 0.0;
-        double ax = 0.0, ay = 0.0, az = 0.0;
-        for (int j = a; j < b; ++j) {
-          const auto q = static_cast<std::size_t>(j - a);
-          ax += static_cast<double>(px[j]);
-          ay += static_cast<double>(py[j]);
-          az += static_cast<double>(pz[j]);
-          sx[q + 1] = ax;
-          sy[q + 1] = ay;
-          sz[q + 1] = az;
-        }
-        for (int j = a; j < b; ++j) {
-          // A symmetric window, narrowed near the segment's ends so the
-          // average stays centred on the point.
-          const int w = std::min({half, j - a, b - 1 - j});
-          const auto lo = static_cast<std::size_t>(j - w - a);
-          const auto hi = static_cast<std::size_t>(j + w + 1 - a);
-          const double inv = 1.0 / static_cast<double>(2 * w + 1);
-          qx[j] = static_cast<float>((sx[hi] - sx[lo]) * inv);
-          qy[j] = static_cast<float>((sy[hi] - sy[lo]) * inv);
-          qz[j] = static_cast<float>((sz[hi] - sz[lo]) * inv);
-        }
-      }
-      a = b;
+      const auto a = static_cast<std::size_t>(j - w - lo);
+      const auto b = static_cast<std::size_t>(j + w + 1 - lo);
+      const double scale = kFixedUnit / static_cast<double>(2 * w + 1);
+      qx[j] = static_cast<float>(static_cast<double>(sx[b] - sx[a]) * scale);
+      qy[j] = static_cast<float>(static_cast<double>(sy[b] - sy[a]) * scale);
+      qz[j] = static_cast<float>(static_cast<double>(sz[b] - sz[a]) * scale);
     }
   }
-  cloud.x.swap(cloud.aligned_x);
-  cloud.y.swap(cloud.aligned_y);
-  cloud.z.swap(cloud.aligned_z);
 }
 
 namespace {
@@ -367,7 +392,15 @@ bool wide_features_available() noexcept { return kSimd && cpu_has_avx2(); }
 
 void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters,
                       FeatureKernel kernel) noexcept {
+  compute_features(cloud, params, counters, 0, cloud.columns(), kernel);
+}
+
+void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters, int first, int end,
+                      FeatureKernel kernel) noexcept {
   const int columns = cloud.columns();
+  first = std::max(first, 0);
+  end = std::min(end, columns);
+  if (first >= end) return;
   const int rings = cloud.rings();
   const int k_max = std::min(params.ring_neighbours, std::max(columns / 2 - 1, 0));
   const int l_max = params.cross_neighbours;
@@ -401,17 +434,18 @@ void compute_features(RevolutionCloud& cloud, const FeatureParams& params, Featu
   };
   for (int i = 0; i < rings; ++i) {
     const std::size_t row = cloud.index(i, 0);
-    int j = 0;
-    for (; j < std::min(simd_begin, columns); ++j) one_point(i, row, j);
+    int j = first;
+    for (; j < std::min(simd_begin, end); ++j) one_point(i, row, j);
 #if defined(__GNUC__)
     if (simd) {
       const RowSearch r{row,  k_max, static_cast<std::ptrdiff_t>(stride), std::min(l_max, i), std::min(l_max, rings - 1 - i),
                         x2,   reach};
-      if (eight) j = search_row8(v, r, j, simd_end, out);
-      j = search_row4(v, r, j, simd_end, out);
+      const int stop = std::min(simd_end, end);
+      if (eight) j = search_row8(v, r, j, stop, out);
+      j = search_row4(v, r, j, stop, out);
     }
 #endif
-    for (; j < columns; ++j) one_point(i, row, j);
+    for (; j < end; ++j) one_point(i, row, j);
   }
   const std::uint64_t measured = out.measured, flat = out.flat, isolated = out.isolated;
   counters.measured += measured;

@@ -68,6 +68,7 @@ ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
   }
   c.unknown_class = class_choice(node, "unknown_terrain", c.unknown_class);
   c.compare_models = node.boolean("compare_models", c.compare_models);
+  c.streaming = node.boolean("streaming", c.streaming);
 
   if (auto f = node.optional_map("features")) {
     FeatureParams& p = c.features;

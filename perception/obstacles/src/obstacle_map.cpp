@@ -25,10 +25,15 @@ ObstacleMap::ObstacleMap(const MapParams& params, FusionModel model)
 }
 
 void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept {
+  begin_revolution(cloud, models);
+  integrate_columns(cloud, models, terrain, 0, cloud.columns());
+}
+
+void ObstacleMap::begin_revolution(const RevolutionCloud& cloud, const ObstacleModels& models) noexcept {
   ++revolution_;
   // The hold of PW maps, in revolutions at the rate measured so far.
-  if (revolution_ == 1) first_ns_ = cloud.time_ns;
-  last_ns_ = cloud.time_ns;
+  if (revolution_ == 1) first_ns_ = cloud.start_ns;
+  last_ns_ = cloud.start_ns;
   const double period_s = revolution_ > 1 ? static_cast<double>(last_ns_ - first_ns_) * 1e-9 / (revolution_ - 1) : 0.1;
   const auto revolutions_in = [&](float seconds) {
     return static_cast<std::uint32_t>(std::lround(static_cast<double>(seconds) / std::max(period_s, 1e-3)));
@@ -37,19 +42,28 @@ void ObstacleMap::integrate(const RevolutionCloud& cloud, const ObstacleModels& 
   for (int t = 0; t < kTerrainClasses; ++t) {
     top_hold_revolutions_[static_cast<std::size_t>(t)] = revolutions_in(models.top_hold_s(t));
   }
-  counters_.cells_cleared += grid_.move_to(cloud.robot_x, cloud.robot_y);
-  occupancy_.move_to(cloud.robot_x, cloud.robot_y);
-  if (model_ == FusionModel::pw) hits_.move_to(cloud.robot_x, cloud.robot_y);
+  // Centred on where the robot was when the revolution began: its points
+  // may go in before it ends.
+  counters_.cells_cleared += grid_.move_to(cloud.start_robot_x, cloud.start_robot_y);
+  occupancy_.move_to(cloud.start_robot_x, cloud.start_robot_y);
+  if (model_ == FusionModel::pw) hits_.move_to(cloud.start_robot_x, cloud.start_robot_y);
+}
+
+void ObstacleMap::integrate_columns(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain,
+                                    int first, int end) noexcept {
+  first = std::max(first, 0);
+  end = std::min(end, cloud.columns());
+  if (first >= end) return;
   switch (model_) {
-    case FusionModel::pw: integrate_points<FusionModel::pw>(cloud, models, terrain); break;
-    case FusionModel::ps: integrate_points<FusionModel::ps>(cloud, models, terrain); break;
-    case FusionModel::pc: integrate_points<FusionModel::pc>(cloud, models, terrain); break;
+    case FusionModel::pw: integrate_points<FusionModel::pw>(cloud, models, terrain, first, end); break;
+    case FusionModel::ps: integrate_points<FusionModel::ps>(cloud, models, terrain, first, end); break;
+    case FusionModel::pc: integrate_points<FusionModel::pc>(cloud, models, terrain, first, end); break;
   }
 }
 
 template <FusionModel M>
 void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models,
-                                   const TerrainSource& terrain) noexcept {
+                                   const TerrainSource& terrain, int first, int end) noexcept {
   const float lo = params_.logit_min;
   const float hi = params_.logit_max;
   const float prior = prior_logit_;
@@ -154,10 +168,9 @@ void ObstacleMap::integrate_points(const RevolutionCloud& cloud, const ObstacleM
     batch = 0;
   };
 
-  const int columns = cloud.columns();
   for (int ring = 0; ring < cloud.rings(); ++ring) {
     const std::size_t base = cloud.index(ring, 0);
-    for (int j = 0; j < columns; ++j) {
+    for (int j = first; j < end; ++j) {
       const std::size_t k = base + static_cast<std::size_t>(j);
       const PointState st = cloud.state[k];
       if (st != PointState::measured && st != PointState::flat) continue;

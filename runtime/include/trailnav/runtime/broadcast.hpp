@@ -11,6 +11,14 @@
 // the writer a free one. Both sides use sequentially consistent
 // atomics, which is what makes "announce, then re-check" safe against "publish,
 // then look for a free slot".
+//
+// A reader may also follow the slot the writer is filling (follow()), to work
+// on a snapshot while it is made (trailnavd's obstacle thread on a lidar
+// revolution): the writer tells how far it is with a progress word, stored
+// after the contents it vouches for, and a reader reads only those. Following
+// is holding: the slot stays the reader's until it follows or reads another,
+// so it is never refilled under it; a writer that drops what it filled
+// (refill()) takes a fresh slot instead.
 #pragma once
 
 #include <atomic>
@@ -38,22 +46,70 @@ class Broadcast {
         if (latest == kNone) return nullptr;
         Slot& s = *b.slots_[latest];
         if (held_ == latest) {
-          if (s.sequence == sequence_) return nullptr;  // nothing newer
+          if (s.sequence.load() == sequence_) return nullptr;  // nothing newer
         }
         s.readers.fetch_add(1);
         if (b.latest_.load() != latest) {  // the writer moved on meanwhile: try again
           s.readers.fetch_sub(1);
           continue;
         }
-        if (s.sequence == sequence_) {  // already seen (we held it before and let go)
+        if (s.sequence.load() == sequence_) {  // already seen (we held it before and let go)
           s.readers.fetch_sub(1);
           return nullptr;
         }
         if (held_ != kNone) b.slots_[held_]->readers.fetch_sub(1);
         held_ = latest;
-        sequence_ = s.sequence;
+        sequence_ = s.sequence.load();
         return &s.value;
       }
+    }
+
+    // The slot the writer is filling (or has just published), held from
+    // now on in place of the one held before. Its contents are the writer's
+    // to change, except what its progress() vouches for; published, it
+    // becomes completed()'s. Valid until the next follow() or try_read().
+    const T* follow() noexcept {
+      Broadcast& b = *owner_;
+      for (;;) {
+        const std::size_t filling = b.filling_.load();
+        if (held_ == filling) return &b.slots_[filling]->value;
+        Slot& s = *b.slots_[filling];
+        s.readers.fetch_add(1);
+        if (b.filling_.load() != filling) {  // published or dropped meanwhile: try again
+          s.readers.fetch_sub(1);
+          continue;
+        }
+        if (held_ != kNone) b.slots_[held_]->readers.fetch_sub(1);
+        held_ = filling;
+        sequence_ = s.sequence.load();  // its last publication: the next one is news
+        // Unless it was published as the reader came (the latest is never
+        // filled): then completed() gives it.
+        if (b.latest_.load() == filling) sequence_ = 0;
+        return &s.value;
+      }
+    }
+    // The writer's progress word on the slot held (0 before it said any),
+    // with everything it wrote before it.
+    std::uint64_t progress() const noexcept {
+      return held_ == kNone ? 0 : owner_->slots_[held_]->progress.load();
+    }
+    // The slot held, when the writer has published it since the reader took
+    // it (then no more: it counts as read), else nullptr.
+    const T* completed() noexcept {
+      if (held_ == kNone) return nullptr;
+      Slot& s = *owner_->slots_[held_];
+      const std::uint64_t published = s.sequence.load();
+      if (published == sequence_) return nullptr;
+      sequence_ = published;
+      return &s.value;
+    }
+    // The slot followed was dropped by the writer (refill()): neither
+    // filled nor published any more.
+    bool abandoned() const noexcept {
+      if (held_ == kNone) return false;
+      const Broadcast& b = *owner_;
+      if (b.filling_.load() == held_) return false;
+      return b.slots_[held_]->sequence.load() == sequence_;
     }
     // The snapshot most recently returned by try_read(). Before the first
     // one: the first slot's initial value, to be looked at only before the
@@ -91,17 +147,23 @@ class Broadcast {
 
   // Makes the write slot the latest snapshot and picks a free one to fill next.
   void publish() noexcept {
-    slots_[back_]->sequence = ++published_;
+    slots_[back_]->sequence.store(++published_);
     latest_.store(back_);
-    const std::size_t just_published = back_;
-    for (std::size_t i = 0; i < slots_.size(); ++i) {
-      if (i != just_published && slots_[i]->readers.load() == 0) {
-        back_ = i;
-        return;
-      }
-    }
-    // Unreachable: R readers are announced on at most 2R slots, the latest is one more.
-    assert(false);
+    next_slot(back_);
+  }
+
+  // How far the write slot is, for readers following it (Reader::follow()):
+  // a word both sides agree on, 0 for "nothing yet"; it vouches for what the
+  // writer wrote before it. (All of it sequentially consistent: a reader
+  // that comes to a slot just picked anew must not see its old word.)
+  void progress(std::uint64_t word) noexcept { slots_[back_]->progress.store(word); }
+
+  // Drops what the write slot holds and gives a fresh one (the same one when
+  // no reader follows it): when the writer starts its snapshot anew.
+  T& refill() noexcept {
+    slots_[back_]->progress.store(0);  // before looking for readers: a newcomer sees 0, not the old word
+    next_slot(kNone);
+    return write_slot();
   }
 
   std::uint64_t published() const noexcept { return published_; }
@@ -112,13 +174,30 @@ class Broadcast {
     template <typename... Args>
     explicit Slot(const Args&... args) : value(args...) {}
     T value;
-    std::uint64_t sequence = 0;
+    std::atomic<std::uint64_t> sequence{0};  // of its last publication
+    std::atomic<std::uint64_t> progress{0};  // while filled
     std::atomic<std::uint32_t> readers{0};
   };
+
+  // Picks a slot no reader holds, other than `not_this` and the latest, to fill next.
+  void next_slot(std::size_t not_this) noexcept {
+    const std::size_t latest = latest_.load();
+    for (std::size_t i = 0; i < slots_.size(); ++i) {
+      if (i != not_this && i != latest && slots_[i]->readers.load() == 0) {
+        back_ = i;
+        slots_[i]->progress.store(0);
+        filling_.store(i);
+        return;
+      }
+    }
+    // Unreachable: R readers are announced on at most 2R slots, the latest is one more.
+    assert(false);
+  }
 
   std::vector<std::unique_ptr<Slot>> slots_;  // behind pointers: Slot holds an atomic
   std::vector<Reader> readers_;
   std::atomic<std::size_t> latest_{kNone};
+  std::atomic<std::size_t> filling_{0};  // back_, for followers
   std::size_t back_ = 0;
   std::uint64_t published_ = 0;
 };

@@ -5,8 +5,12 @@
 // elevation), column j an azimuth bin, stored as separate arrays (x, y, z,
 // ...) so the per-point loops stream through memory. Coordinates are in the
 // gravity-aligned odometry frame, in metres from the revolution's reference
-// point (the sensor's position at the end of the revolution), which keeps
-// them small enough for floats far from the odometry origin.
+// point (the sensor's position at the revolution's first firing, known as
+// soon as the revolution begins), which keeps them small enough for floats
+// far from the odometry origin.
+//
+// Everything here also works on a range of columns, so that trailnavd can
+// take a revolution in blocks while it arrives (ObstaclePipeline).
 #pragma once
 
 #include <array>
@@ -59,16 +63,19 @@ class RevolutionCloud {
   }
 
   // Per point (index()).
-  std::vector<float> x, y, z;        // aligned (after smooth_rings() these are the smoothed values)
+  // The coordinates the features and the maps use: smoothed (smooth_rings())
+  // in a cloud with features, as aligned in one without.
+  std::vector<float> x, y, z;
   std::vector<float> range;          // m, as measured; 0 exactly where state is `none`
   std::vector<float> intensity;      // 0..255
   std::vector<float> step_height;    // m (Eq. 7.5)
   std::vector<float> sin_incline;    // sin of the incline (Eq. 7.6)
   std::vector<PointState> state;
-  // smooth_rings(): the coordinates as aligned, while x, y, z hold the
-  // smoothed ones (the smoothing writes here, then the two trade places).
+  // A cloud with features: the coordinates as aligned (CloudAligner writes
+  // them here; smooth_rings() reads them and writes x, y, z).
   std::vector<float> aligned_x, aligned_y, aligned_z;
-  std::vector<double> ring_sums;     // smooth_rings(): prefix sums of one ring, 3 * (max_columns + 1)
+  std::vector<std::int64_t> ring_sums;  // smooth_rings(): prefix sums of a stretch of one ring, 3 * (max_columns + 1)
+  std::vector<std::int32_t> ring_reach;  // smooth_rings(): per column of that stretch, the window's half width
   // CloudAligner: per column, the sensor -> reference transform (rotation
   // row-major, then translation).
   static constexpr std::size_t kTransformFloats = 12;
@@ -78,11 +85,13 @@ class RevolutionCloud {
   double ref_x = 0.0;  // odometry-frame position of the reference point
   double ref_y = 0.0;
   double ref_z = 0.0;
-  double robot_x = 0.0;  // odometry-frame position of the robot at the end of the revolution
+  double start_robot_x = 0.0;  // odometry-frame position of the robot at the revolution's first firing
+  double start_robot_y = 0.0;
+  double robot_x = 0.0;  // odometry-frame pose of the robot at the end of the revolution (CloudAligner::finish)
   double robot_y = 0.0;
   double robot_yaw = 0.0;
   double robot_z = 0.0, robot_roll = 0.0, robot_pitch = 0.0;
-  std::int64_t time_ns = 0;  // end of the revolution, on the lidar's clock
+  std::int64_t time_ns = 0;  // end of the revolution, on the lidar's clock (its start until CloudAligner::finish)
   std::int64_t start_ns = 0;  // its first firing, same clock
   std::int64_t clock_offset_ns = 0;  // reference clock minus the lidar's (RangeImage::clock_offset_ns)
   std::uint64_t sequence = 0;
@@ -91,9 +100,9 @@ class RevolutionCloud {
   // Gives `to` this revolution's points as aligned, before smoothing: its
   // x, y, z trade places with aligned_x/y/z, its range, intensity and state
   // with these (pointers only: no copy, no allocation), and it takes the
-  // revolution's fields. Call after smooth_rings() and after the last look at
-  // this cloud's points: its range, intensity and state are `to`'s old ones
-  // then, until the next alignment resets them. Same rings and max_columns.
+  // revolution's fields. Call after the last look at this cloud's points:
+  // its range, intensity and state are `to`'s old ones then, until the next
+  // alignment resets them. Same rings and max_columns.
   void hand_over_aligned(RevolutionCloud& to) noexcept;
 
  private:
@@ -124,21 +133,41 @@ struct AlignCounters {
   std::uint64_t no_pose = 0;            // revolutions aligned with the fixed orientation
   std::uint64_t collisions = 0;         // points whose azimuth column a point of their ring already took: dropped
   std::uint64_t self_hits = 0;          // returns inside features.self_box (the robot itself): dropped
+  std::uint64_t beyond_spread = 0;      // points farther from their firing's column than RangeImage::azimuth_spread: dropped
 };
 
 // Range image -> gravity-aligned cloud, compensating the sensor's motion
-// column by column when a pose history is given.
+// column by column (the pose at each column's firing) when a pose history is
+// given. Writes x, y, z of a cloud without features, aligned_x/y/z of one
+// with them.
 class CloudAligner {
  public:
   CloudAligner(const MountParams& mount, const FeatureParams& features) noexcept;
 
+  // The whole revolution: begin(), align_columns() over every column, finish().
   // `poses` may be null or empty: the fixed orientation is used, at the
   // odometry origin. Reads layer 0 (the strongest return).
   void align(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept;
 
+  // In parts, for a revolution still arriving: begin() once its first firing
+  // is in `image` (resets `out`, takes the reference from the pose then);
+  // align_columns() for the firings of columns [first, end), in increasing
+  // order, each range once, after the assembler has passed them; finish()
+  // when the revolution is complete (its end time and the robot's pose then).
+  // The same `poses` throughout.
+  void begin(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept;
+  void align_columns(const velodyne::RangeImage& image, const PoseTrack* poses, int first, int end,
+                     RevolutionCloud& out) noexcept;
+  void finish(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept;
+  // Of the revolution begun: how many columns a point may land from its
+  // firing's column, either way (from RangeImage::azimuth_spread).
+  int spread_columns() const noexcept { return spread_columns_; }
+
   const AlignCounters& counters() const noexcept { return counters_; }
 
  private:
+  static void set_robot(const Pose& p, RevolutionCloud& out) noexcept;
+
   float mount_r_[9];  // sensor -> robot
   float mount_t_[3];
   double fixed_roll_ = 0.0;
@@ -148,6 +177,11 @@ class CloudAligner {
   bool self_filter_ = false;
   std::array<float, 6> self_box_{};
   AlignCounters counters_;
+  // The revolution begun.
+  int columns_ = 0;
+  int spread_columns_ = 0;
+  bool moving_ = false;
+  Pose fixed_pose_{};
 };
 
 struct FeatureCounters {
@@ -159,9 +193,13 @@ struct FeatureCounters {
 // Averages close-by points along each ring with a sliding window of
 // 2 * half_window + 1 points, constant cost per point. A window never
 // reaches across a missing point or a range jump larger than
-// `smoothing_max_jump` (an object's edge), so edges stay sharp. x, y, z
-// then hold the smoothed coordinates, aligned_x/y/z the aligned ones.
+// `smoothing_max_jump` (an object's edge), so edges stay sharp. Reads the
+// aligned coordinates (aligned_x/y/z), writes the smoothed ones (x, y, z).
+// The columns [first, end) of every ring (all by default); they depend on
+// the aligned points of half_window + 1 columns either side (not across the
+// cut), and are the same bits whichever range they were smoothed in.
 void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params) noexcept;
+void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, int first, int end) noexcept;
 
 // How compute_features() searches: `fastest` takes eight points at once on
 // x86-64 CPUs with AVX2 (checked at run time), else four (SSE2 on x86-64,
@@ -175,6 +213,10 @@ bool wide_features_available() noexcept;  // eight at a time (AVX2)
 // the first neighbour farther than x in each of the four directions (Eqs.
 // 7.1-7.4): at most 2 (K + L) comparisons per point.
 void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters,
+                      FeatureKernel kernel = FeatureKernel::fastest) noexcept;
+// The columns [first, end) of every ring: they depend on the smoothed points
+// of ring_neighbours columns either side (around the cut on a full turn).
+void compute_features(RevolutionCloud& cloud, const FeatureParams& params, FeatureCounters& counters, int first, int end,
                       FeatureKernel kernel = FeatureKernel::fastest) noexcept;
 
 }  // namespace trailnav::perception

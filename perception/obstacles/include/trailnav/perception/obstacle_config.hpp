@@ -100,6 +100,10 @@ struct ObstacleConfig {
   std::optional<TerrainClass> fixed_class;
   TerrainClass unknown_class = TerrainClass::other;  // for cells the terrain map does not know
   bool compare_models = false;  // also keep PW, PS and PC maps side by side (KL, §7.4.4)
+  // trailnavd: work on each revolution while it arrives, so that only its last
+  // blocks are left when it is complete (ObstacleTask::set_streaming); the
+  // maps are the same bits either way. False: each revolution once complete.
+  bool streaming = true;
 };
 
 // Reads the `obstacles:` mapping; ConfigError (file, line, key) on bad values.

@@ -1,5 +1,5 @@
 // The robot-centred obstacle map (thesis §7.1.3, §7.3): a rolling grid
-// perpendicular to gravity, moved with the odometry, updated once per
+// perpendicular to gravity, moved with the odometry, updated each
 // revolution point by point with the recursive log-odds rule (Eq. 7.10).
 //
 // Every cell is unknown until a point with features lands in it; unknown is
@@ -74,8 +74,15 @@ class ObstacleMap {
   const MapParams& params() const noexcept { return params_; }
   const RollingGrid<ObstacleCell>& grid() const noexcept { return grid_; }
 
-  // Re-centres on the robot and integrates one revolution's points.
+  // Re-centres on the robot and integrates one revolution's points:
+  // begin_revolution(), then integrate_columns() over every column.
   void integrate(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept;
+  // In parts: begin_revolution() once the cloud's revolution has begun
+  // (re-centres on the robot at its first firing), then the points of
+  // columns [first, end), ring by ring, in the order the parts come.
+  void begin_revolution(const RevolutionCloud& cloud, const ObstacleModels& models) noexcept;
+  void integrate_columns(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain,
+                         int first, int end) noexcept;
 
   // P(o) of a cell; NaN when unknown.
   float probability(const ObstacleCell& c) const noexcept {
@@ -104,7 +111,8 @@ class ObstacleMap {
 
  private:
   template <FusionModel M>
-  void integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain) noexcept;
+  void integrate_points(const RevolutionCloud& cloud, const ObstacleModels& models, const TerrainSource& terrain, int first,
+                        int end) noexcept;
 
   static constexpr int kPercentSteps = 1024;
   std::int8_t percent(float logit) const noexcept {

@@ -1,8 +1,22 @@
 // One lidar revolution in, the obstacle map(s) updated: alignment, smoothing,
 // features and the map update, with everything allocated by create().
+//
+// The work goes in blocks of kBlockColumns columns, each stage of a block as
+// soon as what it reads is final: a block's firings once the assembler has
+// passed them; its smoothing once the points of the columns within reach
+// are all aligned (a point lands up to CloudAligner::spread_columns() from
+// its firing's column); its features once the smoothed columns within
+// ring_neighbours are there; its map update in a fixed order, the blocks
+// after the cut first and the first blocks, which need the revolution's
+// last columns, at the end. So trailnavd can take a revolution while it
+// arrives (begin / advance / finish) and be left with the last block's work
+// when its last packet comes, and the maps are the same bits however the
+// revolution was cut into steps, offline or live (tests).
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
@@ -28,11 +42,27 @@ class ObstaclePipeline {
   // `shape`: the range images this pipeline will be given.
   static Created create(const ObstacleConfig& config, const velodyne::RangeImageShape& shape);
 
+  static constexpr int kBlockColumns = 64;
+
   // Aligns, smooths, computes features and updates every map kept. `poses`
   // and `terrain` may be null (fixed orientation; no terrain map).
   void process(const velodyne::RangeImage& image, const PoseTrack* poses, const TerrainClassMap* terrain) noexcept;
 
-  // The stages on their own (process() runs them in order), for benchmarks.
+  // The same, while the revolution arrives: begin() once the assembler has
+  // started it in `image` (its start time, columns and cut are set); then
+  // advance() whenever it has passed more columns (`final_columns`: columns
+  // [0, final_columns) and their times no longer change); finish() when it is
+  // complete. Same image, poses (samples may be added in between) and
+  // terrain map (it must stay valid) throughout. Returns the blocks worked on.
+  void begin(const velodyne::RangeImage& image, const PoseTrack* poses, const TerrainClassMap* terrain) noexcept;
+  int advance(const velodyne::RangeImage& image, const PoseTrack* poses, int final_columns) noexcept;
+  void finish(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
+  // Of the revolution begun: columns aligned so far, and whether every block is mapped.
+  int aligned_columns() const noexcept { return std::min(aligned_blocks_ * kBlockColumns, columns_); }
+  bool mapped() const noexcept { return mapped_ == blocks_; }
+
+  // The stages on their own (process() runs them in order, block by block),
+  // for benchmarks and the offline timings; the same bits as process().
   void align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
   void features() noexcept;
   void update_maps(const TerrainClassMap* terrain) noexcept;
@@ -69,6 +99,15 @@ class ObstaclePipeline {
  private:
   ObstaclePipeline(const ObstacleConfig& config, const velodyne::RangeImageShape& shape);
 
+  // Block b holds columns [b * kBlockColumns, min(columns, (b + 1) * kBlockColumns)).
+  int block_begin(int b) const noexcept { return b * kBlockColumns; }
+  int block_end(int b) const noexcept { return std::min(columns_, (b + 1) * kBlockColumns); }
+  bool aligned_through(int lo, int hi) const noexcept;      // every point of columns [lo, hi) aligned
+  bool smoothed_through(int lo, int hi) const noexcept;     // columns [lo, hi) smoothed (around the cut)
+  int map_block(int m) const noexcept { return (m + head_blocks_) % blocks_; }  // m-th block to map
+  void start_blocks(int columns) noexcept;
+  int work_blocks(const PoseTrack* poses, const velodyne::RangeImage* image, int final_columns) noexcept;
+
   ObstacleConfig config_;
   CloudAligner aligner_;
   RevolutionCloud cloud_;
@@ -76,6 +115,14 @@ class ObstaclePipeline {
   std::array<std::unique_ptr<ObstacleMap>, kFusionModels> maps_;
   FeatureCounters feature_counters_;
   std::uint64_t revolutions_ = 0;
+  // The revolution in progress.
+  const TerrainClassMap* terrain_ = nullptr;
+  int columns_ = 0;
+  int blocks_ = 0;
+  int head_blocks_ = 0;   // the first blocks, mapped last (they need the revolution's end)
+  int aligned_blocks_ = 0;
+  int mapped_ = 0;        // map_block(0 .. mapped_ - 1) done
+  std::vector<std::uint8_t> smoothed_, featured_;  // per block
 };
 
 struct ObstaclePipeline::Created {

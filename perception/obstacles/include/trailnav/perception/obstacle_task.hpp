@@ -6,6 +6,13 @@
 // obstacle map and publishes a snapshot of it through its own mailbox. It
 // never allocates after construction; it waits only for a pose thread that
 // has fallen behind the revolution, and at most PoseWait::max_wait_ns.
+//
+// Streaming (set_streaming()): the task follows the revolution the lidar
+// task is filling (Broadcast::Reader::follow()) and works on its blocks as
+// the lidar's progress word vouches for them (ObstaclePipeline::advance()),
+// the pose track permitting; when the revolution is published only its last
+// blocks are left. A revolution it did not follow from its start it maps
+// whole, as without streaming. The maps are the same bits either way.
 #pragma once
 
 #include <cstdint>
@@ -15,6 +22,7 @@
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/runtime/broadcast.hpp"
+#include "trailnav/runtime/histogram.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/spsc_queue.hpp"
@@ -88,8 +96,15 @@ struct ObstacleTaskCounters {
   std::uint64_t pose_late = 0;
   std::int64_t pose_wait_max_ns = 0;  // longest wait
   bool pose_behind = false;           // the newest revolution was left out for that reason
+  // Streaming: revolutions mapped while they arrived, blocks worked on before
+  // their revolution was complete, and revolutions followed that the lidar
+  // started anew (a jump in its clock) before completing them.
+  std::uint64_t streamed = 0;
+  std::uint64_t early_blocks = 0;
+  std::uint64_t abandoned = 0;
   PipelineCounters pipeline;
 };
+
 
 class ObstacleTask final : public Task {
  public:
@@ -110,14 +125,35 @@ class ObstacleTask final : public Task {
   // (before smoothing), or why it was not mapped (the terrain thread, which
   // then need not align it again). Before the scheduler starts.
   void set_aligned(Mailbox<AlignedRevolution>* out) noexcept { aligned_out_ = out; }
+  // Works on each revolution while it arrives (above). Before the scheduler starts.
+  void set_streaming(bool on) noexcept { streaming_ = on; }
 
   void run(const TaskTick& tick) override;
   // The task thread's own counters.
   const ObstacleTaskCounters& counters() const noexcept { return counters_; }
   // A copy for other threads (health).
   ObstacleTaskCounters status() const noexcept { return shared_.read(); }
+  // Host time from the receipt of the packet that completed a revolution to
+  // its map's snapshot published (the lidar task's pick-up, this task's
+  // wake-up and the work left at the revolution's end); any thread.
+  DurationSummary map_delay() const noexcept { return map_delay_.summary(); }
 
  private:
+  void take_terrain() noexcept;
+  // Maps a complete revolution not followed: the whole of it.
+  void map_whole(const velodyne::RangeImage& image) noexcept;
+  // The checks before mapping `image`, whole or at its end: false when not
+  // to publish it (its outcome handed over).
+  bool pose_ready(const velodyne::RangeImage& image) noexcept;
+  bool odometry_ready(const velodyne::RangeImage& image) noexcept;
+  // After the pipeline mapped `image`: snapshot, points, hand-over.
+  void publish(const velodyne::RangeImage& image) noexcept;
+  // Streaming: one step on the revolution followed; false when there is
+  // nothing more to do this run.
+  bool follow_step() noexcept;
+  // The columns of `image`, of those final, whose poses the track has (within the lag).
+  int posed_columns(const velodyne::RangeImage& image, int final_columns) const noexcept;
+
   ObstaclePipeline& pipeline_;
   Broadcast<velodyne::RangeImage>::Reader& revolutions_;
   PoseQueue* poses_;
@@ -134,6 +170,12 @@ class ObstacleTask final : public Task {
   Mailbox<AlignedRevolution>* aligned_out_ = nullptr;
   std::int64_t points_period_ns_ = 0;
   std::int64_t last_points_ns_ = 0;
+  bool streaming_ = false;
+  DurationHistogram map_delay_;
+  // The revolution followed: none, followed (slot held), begun (in the pipeline).
+  const velodyne::RangeImage* followed_ = nullptr;
+  bool begun_ = false;
+  std::uint32_t generation_ = 0;
 };
 
 // Fills a snapshot from a map (no allocation when the sizes match).

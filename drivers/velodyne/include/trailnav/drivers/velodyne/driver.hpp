@@ -35,6 +35,14 @@ struct DriverOptions {
   // 0: every period. The packets wait in the socket meanwhile (HDL-64E: 36
   // packets, about 80 kB of buffer in 10 ms).
   Nanos max_rest_ns = 10 * kNanosPerMilli;
+  // Follow-up for a reader that works on a revolution while it arrives
+  // (trailnavd's obstacle thread, Broadcast::Reader::follow()): the driver
+  // stores each run how far the revolution in progress is (the word of
+  // revolution_progress(): the assembler's generation, columns final), and
+  // signals the revolutions' event this many times a turn (four times as
+  // often in the last of these parts) as well as at the end. 0: only at the
+  // end, no progress stored.
+  int progress_signals = 0;
 
   DriverOptions() {
     data.bind.port = 2368;
@@ -103,6 +111,7 @@ class VelodyneDriver final : public Task {
   VelodyneDriver(PacketDecoder decoder, const DriverOptions& options, RangeImageShape shape);
   void handle_position(std::span<const std::uint8_t> payload, std::int64_t receive_ns) noexcept;
   void publish_counters() noexcept;
+  void publish_progress(Nanos started) noexcept;
 
   DriverOptions options_;
   PacketDecoder decoder_;
@@ -111,8 +120,11 @@ class VelodyneDriver final : public Task {
   struct Sink final : RevolutionSink {
     explicit Sink(Broadcast<RangeImage>& m) noexcept : mailbox(m) {}
     RangeImage& next_image() noexcept override { return mailbox.write_slot(); }
+    RangeImage& restart_image(RangeImage&) noexcept override { return mailbox.refill(); }
     void complete(RangeImage& image) noexcept override;
     Broadcast<RangeImage>& mailbox;
+    const RevolutionAssembler* assembler = nullptr;
+    std::uint32_t offset_generation = 0;  // the generation whose image has its clock offset (0: none)
     TaskEvent* event = nullptr;
     const ClockRelation* reference = nullptr;
     std::int64_t receive_ns = 0;  // of the packet being added
@@ -128,6 +140,8 @@ class VelodyneDriver final : public Task {
   std::unique_ptr<udp::UdpReceiver> data_;
   std::unique_ptr<udp::UdpReceiver> position_;
   DriverCounters local_;  // the task thread's own
+  std::uint64_t progress_word_ = 0;  // the last one stored (DriverOptions::progress_signals)
+  int next_signal_columns_ = 0;      // signal the readers once this many columns are final
 
   StatusBoard<DriverCounters> shared_;  // the published copy
 };

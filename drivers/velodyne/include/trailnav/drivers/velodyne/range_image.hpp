@@ -66,12 +66,24 @@ class RangeImage {
     return {cells_.data() + index(layer, ring, 0), static_cast<std::size_t>(columns_)};
   }
   ColumnState column_state(int column) const noexcept { return column_state_[static_cast<std::size_t>(column)]; }
+  // When the firing of a received column took place (the sensor's clock, as
+  // start_ns): set by whoever fills the column, else by finish() from the
+  // column's place between start_ns and end_ns. A reader of a revolution in
+  // progress (trailnavd's obstacle thread) finds it set for every column the
+  // assembler has passed.
+  static constexpr std::int64_t kNoTime = INT64_MIN;  // column_time_ns() of a column not received
+  std::int64_t column_time_ns(int column) const noexcept { return column_time_[static_cast<std::size_t>(column)]; }
+  void set_column_time(int first_column, int end_column, std::int64_t time_ns) noexcept;  // [first, end)
   double column_azimuth(int column) const noexcept;  // rad, centre of the bin (firing azimuth)
 
   // Revolution metadata.
   std::uint64_t sequence = 0;   // revolution number since the assembler started (first complete: 1)
   std::int64_t start_ns = 0;    // time of the first firing
   std::int64_t end_ns = 0;      // time of the last firing
+  // How far (rad) a point's own azimuth may lie from its column's bin: the
+  // lasers' rotation corrections and a firing's own sweep (RangeCell::azimuth).
+  // Whoever fills the image sets it (the assembler from the calibration).
+  double azimuth_spread = 0.0;
   double rpm = 0.0;             // rotation rate measured over this revolution
   double cut_azimuth = 0.0;     // rad
   int points = 0;               // valid cells over all layers
@@ -100,7 +112,7 @@ class RangeImage {
   void begin(int columns) noexcept;
   void clear_columns(int first_column, int end_column) noexcept;  // [first, end) of every ring and layer
   void mark_received(int first_column, int end_column) noexcept;  // [first, end)
-  void finish() noexcept;  // counts the missing columns
+  void finish() noexcept;  // counts the missing columns, gives received columns without a time theirs
 
  private:
   std::size_t index(int layer, int ring, int column) const noexcept {
@@ -113,7 +125,17 @@ class RangeImage {
   int columns_ = 0;
   std::vector<RangeCell> cells_;
   std::vector<ColumnState> column_state_;
+  std::vector<std::int64_t> column_time_;  // kNoTime: not set this revolution
 };
+
+// The progress word a driver stores (Broadcast::progress()) for a revolution
+// it is filling, for a reader that follows it: which one (the assembler's
+// generation) and how many of its columns no longer change.
+constexpr std::uint64_t revolution_progress(std::uint32_t generation, int final_columns) noexcept {
+  return (static_cast<std::uint64_t>(generation) << 32) | static_cast<std::uint32_t>(final_columns);
+}
+constexpr std::uint32_t progress_generation(std::uint64_t word) noexcept { return static_cast<std::uint32_t>(word >> 32); }
+constexpr int progress_columns(std::uint64_t word) noexcept { return static_cast<int>(word & 0xffffffffu); }
 
 // Where finished revolutions go. The assembler writes into next_image() and
 // hands it back through complete(); the two calls alternate.
@@ -122,6 +144,10 @@ class RevolutionSink {
   virtual ~RevolutionSink() = default;
   virtual RangeImage& next_image() noexcept = 0;
   virtual void complete(RangeImage& image) noexcept = 0;
+  // The revolution in `image` is dropped and starts anew (a jump in the
+  // sensor's clock): where to fill it. Someone may be reading the old one
+  // while it arrives (trailnavd), so a sink that lets them gives a fresh image.
+  virtual RangeImage& restart_image(RangeImage& image) noexcept { return image; }
 };
 
 // Publishes every revolution as one snapshot through a Mailbox.
@@ -183,6 +209,19 @@ class RevolutionAssembler {
   // the first packet.
   double turn_to_cut() const noexcept;
   double rpm() const noexcept { return current_rpm_; }
+  // The revolution being filled, for a reader that follows it: its image
+  // (null before the first packet), a number that changes each time a
+  // revolution begins in it, how many of its columns no longer change (the
+  // firings arrive in column order: those before the newest firing's), and
+  // whether it began mid-turn (the first one: it is not published).
+  struct Filling {
+    const RangeImage* image = nullptr;
+    std::uint32_t generation = 0;
+    int final_columns = 0;
+    bool partial = true;
+  };
+  Filling filling() const noexcept { return {image_, generation_, previous_column_ + 1, partial_}; }
+  std::uint32_t generation() const noexcept { return generation_; }
 
   const AssemblerCounters& counters() const noexcept { return counters_; }
 
@@ -193,13 +232,14 @@ class RevolutionAssembler {
   void finish_revolution(RevolutionSink& sink, std::int64_t next_start_ns, bool continuous) noexcept;
   // Columns of the sequences [begin, end) of the current packet in image_.
   void clear_through_previous_column() noexcept;
-  void assign_columns(int begin, int end, bool continuous) noexcept;
+  void assign_columns(const PacketInfo& info, std::int64_t packet_time_ns, int begin, int end, bool continuous) noexcept;
   void place_points(const PacketInfo& info, int begin, int end, std::int64_t packet_time_ns) noexcept;
 
   const PacketDecoder* decoder_;
   AssemblerOptions options_;
   RangeImageShape shape_;
   double firings_per_second_ = 0.0;
+  double max_rotation_correction_ = 0.0;  // rad, over the calibration's lasers
   double current_rpm_ = 0.0;
   int columns_ = 0;
   double rate_azimuth_ = 0.0;  // hundredths of a degree turned since the revolution began
@@ -217,6 +257,7 @@ class RevolutionAssembler {
   std::uint32_t previous_timestamp_us_ = 0;
   int previous_column_ = -1;         // of its last sequence, in image_
   int cleared_ = 0;                  // image_'s columns below this were cleared this revolution (RangeImage::begin)
+  std::uint32_t generation_ = 0;     // revolutions begun
   AssemblerCounters counters_;
 };
 
