@@ -290,8 +290,11 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     c.lidar->driver.revolution_readers =
         std::max(1, (c.obstacles ? 1 : 0) + (c.terrain && !c.terrain_shares_alignment() ? 1 : 0));
     // The obstacle thread, working on each revolution while it arrives, is
-    // woken eight times a turn (and at its end) with the lidar's progress.
-    c.lidar->driver.progress_signals = c.obstacles && c.obstacles->streaming ? 8 : 0;
+    // woken every quarter turn (every 1/32 in the last quarter, and at its
+    // end) with the lidar's progress: each wake-up costs more than the work
+    // it spreads (docs/performance.md), and what counts for the latency is
+    // how little is left at the end.
+    c.lidar->driver.progress_signals = c.obstacles && c.obstacles->streaming ? 4 : 0;
   }
   if (c.pose && !c.imu && !c.can) root.fail("pose", "the pose needs wheel odometry ('can') or an IMU ('imu')");
   c.dds = parse_dds(root.map("dds"));

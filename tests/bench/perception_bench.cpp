@@ -194,6 +194,27 @@ void BM_Revolution(benchmark::State& state) {
 }
 BENCHMARK(BM_Revolution)->ArgsProduct({{0, 1}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
 
+// The same revolution taken as trailnavd takes it while it arrives: begun,
+// advanced in `steps` equal parts, finished (the same maps, test
+// ObstacleStreaming.*): what the blocks cost over the whole at once.
+void BM_RevolutionInSteps(benchmark::State& state) {
+  Fixture f(static_cast<int>(state.range(0)), FusionModel::pw);
+  PoseTrack poses(8);
+  poses.push({-1'000'000, 0, 0, 0, 0.01, -0.02, 0.1});
+  poses.push({200'000'000, 0.2, 0.01, 0, 0.012, -0.018, 0.12});
+  const auto steps = static_cast<int>(state.range(1));
+  std::size_t i = 0;
+  for (auto _ : state) {
+    const velodyne::RangeImage& image = *f.images[i++ % 2];
+    f.pipeline->begin(image, &poses, &f.terrain);
+    for (int s = 1; s < steps; ++s) f.pipeline->advance(image, &poses, image.columns() * s / steps);
+    f.pipeline->finish(image, &poses);
+  }
+  state.SetLabel(std::string(source_name(state.range(0))) + ", PW, " + std::to_string(steps) + " steps");
+  points_counter(state, f);
+}
+BENCHMARK(BM_RevolutionInSteps)->ArgsProduct({{0, 1}, {1, 10}})->Unit(benchmark::kMillisecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -22,13 +22,19 @@ namespace {
 
 // Stands in for the lidar driver: every run publishes the next revolution
 // (two real scans in turn, 0.1 s apart, the robot driving 0.2 m per
-// revolution) and the poses for both threads.
+// revolution) and the poses for both threads. With `parts` > 1 it fills each
+// revolution in that many runs, storing its progress word and waking the
+// obstacle thread after each, as the driver does for a streaming reader.
 class Feeder final : public Task {
  public:
   Feeder(const std::array<velodyne::RangeImage, 2>& scans, Broadcast<velodyne::RangeImage>& out, PoseQueue& a,
-         PoseQueue& b, TaskEvent& event)
-      : scans_(scans), out_(out), a_(a), b_(b), event_(event) {}
+         PoseQueue& b, TaskEvent& event, int parts = 1)
+      : scans_(scans), out_(out), a_(a), b_(b), event_(event), parts_(parts) {}
   void run(const TaskTick& tick) override {
+    if (parts_ > 1) {
+      run_part(tick);
+      return;
+    }
     ++n_;
     const std::int64_t t = n_ * 100'000'000LL;
     const Pose p{t, 0.2 * static_cast<double>(n_), 0.0, 0.0, 0.0, 0.0, 0.0};
@@ -43,19 +49,59 @@ class Feeder final : public Task {
     event_.signal(tick.started);
   }
 
+  void run_part(const TaskTick& tick) {
+    if (part_ == 0) ++n_;
+    const std::int64_t t = n_ * 100'000'000LL;
+    const velodyne::RangeImage& scan = scans_[static_cast<std::size_t>(n_ % 2)];
+    velodyne::RangeImage& slot = out_.write_slot();
+    const int columns = scan.columns();
+    if (part_ == 0) {
+      slot.begin(columns);
+      slot.start_ns = t - 100'000'000LL;
+      slot.cut_azimuth = scan.cut_azimuth;
+      slot.azimuth_spread = scan.azimuth_spread;
+      slot.clock_offset_ns = 0;
+    }
+    const int first = part_ * columns / parts_;
+    const int end = (part_ + 1) * columns / parts_;
+    for (int ring = 0; ring < scan.rings(); ++ring) {
+      for (int c = first; c < end; ++c) slot.at(0, ring, c) = scan.at(0, ring, c);
+    }
+    slot.mark_received(first, end);
+    for (int c = first; c < end; ++c) slot.set_column_time(c, c + 1, scan.column_time_ns(c) + slot.start_ns);
+    // The poses reach the part's end.
+    const Pose p{slot.start_ns + 100'000'000LL * end / columns, 0.2 * (static_cast<double>(n_) - 1.0 + 1.0 * end / columns),
+                 0.0, 0.0, 0.0, 0.0, 0.0};
+    a_.try_push(p);
+    b_.try_push(p);
+    if (++part_ < parts_) {
+      out_.progress(velodyne::revolution_progress(static_cast<std::uint32_t>(n_), end));
+    } else {
+      part_ = 0;
+      slot.sequence = static_cast<std::uint64_t>(n_);
+      slot.end_ns = t;
+      slot.finish();
+      out_.publish();
+    }
+    event_.signal(tick.started);
+  }
+
  private:
   const std::array<velodyne::RangeImage, 2>& scans_;
   Broadcast<velodyne::RangeImage>& out_;
   PoseQueue& a_;
   PoseQueue& b_;
   TaskEvent& event_;
+  int parts_;
+  int part_ = 0;
   std::int64_t n_ = 0;
 };
 
 // `shared`: the terrain thread registers the points the obstacle thread
 // aligned and handed over (as in trailnavd), else it reads the revolutions
-// and the poses itself.
-void run_together(bool shared) {
+// and the poses itself. `streaming`: the obstacle thread works on each
+// revolution while the feeder fills it in eight parts.
+void run_together(bool shared, bool streaming = false) {
   ASSERT_TRUE(alloc_guard::hook_installed());
   alloc_guard::set_fatal(false);
   alloc_guard::reset_counters();
@@ -80,8 +126,10 @@ void run_together(bool shared) {
   Mailbox<ObstacleSnapshot> snapshots(oc.map.size, oc.map.size);
   PoseQueue obstacle_poses, terrain_poses;
   TaskEvent revolution;
-  Feeder feeder(scans, revolutions, obstacle_poses, terrain_poses, revolution);
+  const int parts = streaming ? 8 : 1;
+  Feeder feeder(scans, revolutions, obstacle_poses, terrain_poses, revolution, parts);
   ObstacleTask obstacles(*pipeline.pipeline, revolutions.reader(0), &obstacle_poses, &classes.reader(0), snapshots);
+  obstacles.set_streaming(streaming);
   Mailbox<AlignedRevolution> aligned(CloudShape{kitti_shape().rings, kitti_shape().max_columns});
   std::unique_ptr<TerrainTask> own, taking;
   if (shared) {
@@ -94,7 +142,7 @@ void run_together(bool shared) {
 
   MonotonicClock clock;
   Scheduler scheduler(clock, {RealtimePolicy::off, false});
-  ASSERT_TRUE(scheduler.add({"lidar", TaskKind::periodic, 10.0, 50 * kNanosPerMilli, 0, -1}, feeder));
+  ASSERT_TRUE(scheduler.add({"lidar", TaskKind::periodic, 10.0 * parts, (streaming ? 10 : 50) * kNanosPerMilli, 0, -1}, feeder));
   ASSERT_TRUE(scheduler.add({"obstacles", TaskKind::event, 0.0, 200 * kNanosPerMilli, 0, -1}, obstacles, &revolution));
   ASSERT_TRUE(scheduler.add({"terrain", TaskKind::periodic, 10.0, 100 * kNanosPerMilli, 0, -1}, terrain));
   ASSERT_TRUE(scheduler.start());
@@ -139,6 +187,15 @@ void run_together(bool shared) {
   } else {
     EXPECT_GT(tc_status.mapper.align.points, 0u);
   }
+  if (streaming) {
+    // Revolutions taken while they arrived (how many depends on how fast
+    // this machine is: one the thread falls behind on it maps whole).
+    EXPECT_GT(oc_status.streamed, 0u);
+    EXPECT_GT(oc_status.early_blocks, 0u);
+    EXPECT_EQ(oc_status.abandoned, 0u);
+  } else {
+    EXPECT_EQ(oc_status.streamed, 0u);
+  }
   test::expect_no_realtime_allocations();
 }
 
@@ -146,6 +203,10 @@ TEST(TerrainAndObstacleThreads, RunTogetherOnTheSchedulerWithoutHeapOrRaces) { r
 
 TEST(TerrainAndObstacleThreads, TheTerrainThreadTakesTheObstacleThreadsAlignedPointsWithoutHeapOrRaces) {
   run_together(true);
+}
+
+TEST(TerrainAndObstacleThreads, TheObstacleThreadTakesEachRevolutionWhileItArrivesWithoutHeapOrRaces) {
+  run_together(true, true);
 }
 
 }  // namespace

@@ -136,13 +136,13 @@ void VelodyneDriver::publish_progress(Nanos started) noexcept {
   revolutions_.progress(word);
   if (sink_.event != nullptr && f.final_columns >= next_signal_columns_) {
     if (next_signal_columns_ > 0) sink_.event->signal(started);
-    // Every 1/progress_signals of a turn, and four times as often in the
-    // last such part: what is left for the reader when the revolution
-    // completes is then what arrived since its last wake-up, the lidar
-    // task reading every period near the end (rest()).
+    // Every 1/progress_signals of a turn, and every 1/32 turn in the last
+    // such part: what is left for the reader when the revolution completes
+    // is then what arrived since its last wake-up, the lidar task reading
+    // every period near the end (rest()).
     const int columns = f.image->columns();
     const int step = std::max(1, columns / options_.progress_signals);
-    const int fine = std::max(1, step / 4);
+    const int fine = std::max(1, std::min(step, columns / 32));
     next_signal_columns_ = f.final_columns < columns - step ? (f.final_columns / step + 1) * step
                                                            : (f.final_columns / fine + 1) * fine;
   }

@@ -53,7 +53,6 @@ RevolutionCloud::RevolutionCloud(CloudShape shape) : shape_(shape) {
   aligned_y.assign(n, 0.0f);
   aligned_z.assign(n, 0.0f);
   ring_sums.assign(3 * (static_cast<std::size_t>(shape.max_columns) + 1), 0);
-  ring_reach.assign(static_cast<std::size_t>(shape.max_columns), 0);
 }
 
 void RevolutionCloud::hand_over_aligned(RevolutionCloud& to) noexcept {
@@ -107,8 +106,10 @@ CloudAligner::CloudAligner(const MountParams& mount, const FeatureParams& featur
 
 void CloudAligner::begin(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
   columns_ = std::min(image.columns(), out.shape().max_columns);
+  // Only what the assembler sets when the revolution begins: the rest (its
+  // sequence, its end) is the lidar task's to write until it is complete.
   out.reset(columns_);
-  out.sequence = image.sequence;
+  out.sequence = 0;
   out.time_ns = image.start_ns;  // finish() sets the end
   out.start_ns = image.start_ns;
   out.clock_offset_ns = image.clock_offset_ns;
@@ -257,6 +258,7 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
 }
 
 void CloudAligner::finish(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
+  out.sequence = image.sequence;
   out.time_ns = image.end_ns;
   if (moving_) {
     Pose end{};

@@ -46,14 +46,15 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, int first
     }
     return;
   }
-  // The stretch a window of the range can reach.
+  // The stretch a window of the range can reach. Its ends count as segment
+  // ends below: a window of a point in [first, end) is at most `half` wide,
+  // so an end `half` away from it never narrows it.
   const int lo = std::max(0, first - half);
   const int hi = std::min(columns, end + half);
-  const auto stride = static_cast<std::size_t>(hi - lo) + 1;
   std::int64_t* sx = cloud.ring_sums.data();
+  const auto stride = static_cast<std::size_t>(hi - lo) + 1;
   std::int64_t* sy = sx + stride;
   std::int64_t* sz = sy + stride;
-  std::int32_t* reach = cloud.ring_reach.data();  // per column of [lo, hi): how far the window may reach
   const float jump = params.smoothing_max_jump;
   for (int ring = 0; ring < cloud.rings(); ++ring) {
     const std::size_t base = cloud.index(ring, 0);
@@ -65,54 +66,58 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, int first
     float* qx = cloud.x.data() + base;
     float* qy = cloud.y.data() + base;
     float* qz = cloud.z.data() + base;
-    // A window stays within its segment: consecutive points without a range
-    // jump between neighbours. Points to the segment's start, then to its end,
-    // each capped at `half` (so the counts from `lo` are exact from `first` on).
-    const auto joined = [&](int j) {  // j - 1 and j lie in one segment
-      return st[j] != PointState::none && st[j - 1] != PointState::none && std::abs(r[j] - r[j - 1]) <= jump;
-    };
-    int run = 0;
-    for (int j = lo; j < hi; ++j) {
-      run = (j > lo && joined(j)) ? std::min(run + 1, half) : 0;
-      reach[j - lo] = run;
-    }
-    run = 0;
-    for (int j = hi - 1; j >= lo; --j) {
-      run = (j < hi - 1 && joined(j + 1)) ? std::min(run + 1, half) : 0;
-      reach[j - lo] = std::min(reach[j - lo], run);
-    }
-    // Prefix sums over the stretch (a missing point adds nothing: no window
-    // reaches it). The running sums stay in registers.
-    sx[0] = sy[0] = sz[0] = 0;
-    std::int64_t ax = 0, ay = 0, az = 0;
-    for (int j = lo; j < hi; ++j) {
-      if (st[j] != PointState::none) {
-        ax += fixed(px[j]);
-        ay += fixed(py[j]);
-        az += fixed(pz[j]);
-      }
-      const auto q = static_cast<std::size_t>(j - lo) + 1;
-      sx[q] = ax;
-      sy[q] = ay;
-      sz[q] = az;
-    }
-    for (int j = first; j < end; ++j) {
-      if (st[j] == PointState::none) continue;
-      // A symmetric window, narrowed near the segment's ends so the average
-      // stays centred on the point.
-      const int w = reach[j - lo];
-      if (w == 0) {
-        qx[j] = px[j];
-        qy[j] = py[j];
-        qz[j] = pz[j];
+    int a = lo;
+    while (a < hi) {
+      if (st[a] == PointState::none) {
+        ++a;
         continue;
       }
-      const auto a = static_cast<std::size_t>(j - w - lo);
-      const auto b = static_cast<std::size_t>(j + w + 1 - lo);
-      const double scale = kFixedUnit / static_cast<double>(2 * w + 1);
-      qx[j] = static_cast<float>(static_cast<double>(sx[b] - sx[a]) * scale);
-      qy[j] = static_cast<float>(static_cast<double>(sy[b] - sy[a]) * scale);
-      qz[j] = static_cast<float>(static_cast<double>(sz[b] - sz[a]) * scale);
+      // The segment [a, b): consecutive points without a range jump.
+      int b = a + 1;
+      while (b < hi && st[b] != PointState::none && std::abs(r[b] - r[b - 1]) <= jump) ++b;
+      const int from = std::max(a, first), to = std::min(b, end);
+      if (from < to) {
+        if (b - a == 1) {
+          qx[a] = px[a];
+          qy[a] = py[a];
+          qz[a] = pz[a];
+        } else {
+          // Prefix sums over the part of the segment the windows reach, in
+          // registers while they run.
+          const int start = std::max(a, first - half);
+          const int last = std::min(b, end + half);
+          const auto zero = static_cast<std::size_t>(start - lo);
+          sx[zero] = sy[zero] = sz[zero] = 0;
+          std::int64_t ax = 0, ay = 0, az = 0;
+          for (int j = start; j < last; ++j) {
+            const auto q = static_cast<std::size_t>(j - lo) + 1;
+            ax += fixed(px[j]);
+            ay += fixed(py[j]);
+            az += fixed(pz[j]);
+            sx[q] = ax;
+            sy[q] = ay;
+            sz[q] = az;
+          }
+          for (int j = from; j < to; ++j) {
+            // A symmetric window, narrowed near the segment's ends so the
+            // average stays centred on the point.
+            const int w = std::min({half, j - a, b - 1 - j});
+            if (w == 0) {
+              qx[j] = px[j];
+              qy[j] = py[j];
+              qz[j] = pz[j];
+              continue;
+            }
+            const auto wa = static_cast<std::size_t>(j - w - lo);
+            const auto wb = static_cast<std::size_t>(j + w + 1 - lo);
+            const double scale = kFixedUnit / static_cast<double>(2 * w + 1);
+            qx[j] = static_cast<float>(static_cast<double>(sx[wb] - sx[wa]) * scale);
+            qy[j] = static_cast<float>(static_cast<double>(sy[wb] - sy[wa]) * scale);
+            qz[j] = static_cast<float>(static_cast<double>(sz[wb] - sz[wa]) * scale);
+          }
+        }
+      }
+      a = b;
     }
   }
 }

@@ -75,45 +75,50 @@ bool ObstaclePipeline::smoothed_through(int lo, int hi) const noexcept {
 }
 
 int ObstaclePipeline::work_blocks(const PoseTrack* poses, const velodyne::RangeImage* image, int final_columns) noexcept {
-  int worked = 0;
-  // The firings, in order (a point whose column is taken is dropped: the
-  // first one there keeps it, whatever the steps).
-  if (image != nullptr) {
-    while (aligned_blocks_ < blocks_ && block_end(aligned_blocks_) <= final_columns) {
-      aligner_.align_columns(*image, poses, block_begin(aligned_blocks_), block_end(aligned_blocks_), cloud_);
-      ++aligned_blocks_;
-      ++worked;
-    }
-  }
   const int half = config_.features.smoothing_half_window;
   const int k = std::min(config_.features.ring_neighbours, std::max(columns_ / 2 - 1, 0));
-  for (int b = 0; b < blocks_; ++b) {
-    const auto i = static_cast<std::size_t>(b);
-    if (smoothed_[i] == 0 &&
-        aligned_through(std::max(0, block_begin(b) - half - 1), std::min(columns_, block_end(b) + half + 1))) {
-      smooth_rings(cloud_, config_.features, block_begin(b), block_end(b));
-      smoothed_[i] = 1;
-      ++worked;
-    }
-  }
-  for (int b = 0; b < blocks_; ++b) {
-    const auto i = static_cast<std::size_t>(b);
-    if (featured_[i] == 0 && smoothed_[i] != 0 && smoothed_through(block_begin(b) - k, block_end(b) + k)) {
-      compute_features(cloud_, config_.features, feature_counters_, block_begin(b), block_end(b));
-      featured_[i] = 1;
-      ++worked;
-    }
-  }
   const TerrainSource source = terrain_source(terrain_);
-  while (mapped_ < blocks_ && featured_[static_cast<std::size_t>(map_block(mapped_))] != 0) {
-    const int b = map_block(mapped_);
-    for (auto& m : maps_) {
-      if (m) m->integrate_columns(cloud_, models_, source, block_begin(b), block_end(b));
+  // Block by block: after each block aligned, whatever that made ready (a
+  // block or two behind it) while its points are still in the cache. The
+  // smoothing and the features of a block do not depend on when they run;
+  // the firings go in order (a point whose column is taken is dropped: the
+  // first one there keeps it, whatever the steps) and so do the map updates.
+  int worked = 0;
+  for (;;) {
+    int done = 0;
+    if (image != nullptr && aligned_blocks_ < blocks_ && block_end(aligned_blocks_) <= final_columns) {
+      aligner_.align_columns(*image, poses, block_begin(aligned_blocks_), block_end(aligned_blocks_), cloud_);
+      ++aligned_blocks_;
+      ++done;
     }
-    ++mapped_;
-    ++worked;
+    for (int b = 0; b < blocks_; ++b) {
+      const auto i = static_cast<std::size_t>(b);
+      if (smoothed_[i] == 0 &&
+          aligned_through(std::max(0, block_begin(b) - half - 1), std::min(columns_, block_end(b) + half + 1))) {
+        smooth_rings(cloud_, config_.features, block_begin(b), block_end(b));
+        smoothed_[i] = 1;
+        ++done;
+      }
+    }
+    for (int b = 0; b < blocks_; ++b) {
+      const auto i = static_cast<std::size_t>(b);
+      if (featured_[i] == 0 && smoothed_[i] != 0 && smoothed_through(block_begin(b) - k, block_end(b) + k)) {
+        compute_features(cloud_, config_.features, feature_counters_, block_begin(b), block_end(b));
+        featured_[i] = 1;
+        ++done;
+      }
+    }
+    while (mapped_ < blocks_ && featured_[static_cast<std::size_t>(map_block(mapped_))] != 0) {
+      const int b = map_block(mapped_);
+      for (auto& m : maps_) {
+        if (m) m->integrate_columns(cloud_, models_, source, block_begin(b), block_end(b));
+      }
+      ++mapped_;
+      ++done;
+    }
+    worked += done;
+    if (done == 0) return worked;
   }
-  return worked;
 }
 
 void ObstaclePipeline::begin(const velodyne::RangeImage& image, const PoseTrack* poses,

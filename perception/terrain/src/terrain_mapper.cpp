@@ -98,10 +98,15 @@ void TerrainMapper::register_cloud(const RevolutionCloud& cloud) noexcept {
   const double res = work_.resolution();
   const double inv = 1.0 / res;
   const CellIndex lo = work_.origin();
-  const std::int32_t nx = work_.size_x(), ny = work_.size_y();
-  // Cell-centre offsets are taken in double from the reference point, then
-  // the small remainders go to float.
-  const double ref_x = cloud.ref_x, ref_y = cloud.ref_y;
+  // Cell coordinates relative to the grid's origin, in float from the
+  // reference point (as the obstacle map does): a point's cell is
+  // (offset + x / resolution), no per-point double floor of a large number.
+  const auto ox = static_cast<float>(cloud.ref_x * inv - lo.x);
+  const auto oy = static_cast<float>(cloud.ref_y * inv - lo.y);
+  const auto finv = static_cast<float>(inv);
+  const auto fres = static_cast<float>(res);
+  const auto size_x = static_cast<float>(work_.size_x());
+  const auto size_y = static_cast<float>(work_.size_y());
   const auto ref_z = static_cast<float>(cloud.ref_z);
   const float min_range = config_.min_range, max_range = config_.max_range;
   std::uint64_t registered = 0, outside = 0, out_of_range = 0;
@@ -132,20 +137,21 @@ void TerrainMapper::register_cloud(const RevolutionCloud& cloud) noexcept {
         ++out_of_range;
         continue;
       }
-      const double wx = ref_x + static_cast<double>(cloud.x[k]);
-      const double wy = ref_y + static_cast<double>(cloud.y[k]);
-      const auto ix = static_cast<std::int32_t>(std::floor(wx * inv));
-      const auto iy = static_cast<std::int32_t>(std::floor(wy * inv));
-      if (ix < lo.x || iy < lo.y || ix >= lo.x + nx || iy >= lo.y + ny) {
+      const float lx = ox + cloud.x[k] * finv;
+      const float ly = oy + cloud.y[k] * finv;
+      if (!(lx >= 0.0f && lx < size_x && ly >= 0.0f && ly < size_y)) {
         ++outside;
         continue;
       }
-      const std::size_t offset = work_.offset_from_origin(ix - lo.x, iy - lo.y);
+      const auto ix = static_cast<std::int32_t>(lx);
+      const auto iy = static_cast<std::int32_t>(ly);
+      const std::size_t offset = work_.offset_from_origin(ix, iy);
       const auto* bytes = reinterpret_cast<const char*>(&work_.at_offset(offset).stats);
       prefetch_for_write(bytes);
       prefetch_for_write(bytes + sizeof(CellStats) - 1);
-      batch[n] = {static_cast<std::uint32_t>(offset), static_cast<float>(wx - (ix + 0.5) * res),
-                  static_cast<float>(wy - (iy + 0.5) * res), cloud.z[k] + ref_z, cloud.intensity[k]};
+      // The point from its cell's centre.
+      batch[n] = {static_cast<std::uint32_t>(offset), (lx - static_cast<float>(ix) - 0.5f) * fres,
+                  (ly - static_cast<float>(iy) - 0.5f) * fres, cloud.z[k] + ref_z, cloud.intensity[k]};
       if (++n == kBatch) add_batch();
     }
   }

@@ -75,7 +75,6 @@ class RevolutionCloud {
   // them here; smooth_rings() reads them and writes x, y, z).
   std::vector<float> aligned_x, aligned_y, aligned_z;
   std::vector<std::int64_t> ring_sums;  // smooth_rings(): prefix sums of a stretch of one ring, 3 * (max_columns + 1)
-  std::vector<std::int32_t> ring_reach;  // smooth_rings(): per column of that stretch, the window's half width
   // CloudAligner: per column, the sensor -> reference transform (rotation
   // row-major, then translation).
   static constexpr std::size_t kTransformFloats = 12;

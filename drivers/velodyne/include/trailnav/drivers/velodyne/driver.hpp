@@ -39,9 +39,9 @@ struct DriverOptions {
   // (trailnavd's obstacle thread, Broadcast::Reader::follow()): the driver
   // stores each run how far the revolution in progress is (the word of
   // revolution_progress(): the assembler's generation, columns final), and
-  // signals the revolutions' event this many times a turn (four times as
-  // often in the last of these parts) as well as at the end. 0: only at the
-  // end, no progress stored.
+  // signals the revolutions' event this many times a turn (every 1/32 turn
+  // in the last of these parts) as well as at the end. 0: only at the end,
+  // no progress stored.
   int progress_signals = 0;
 
   DriverOptions() {
