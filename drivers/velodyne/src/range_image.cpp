@@ -258,7 +258,9 @@ void RevolutionAssembler::assign_columns(const PacketInfo& info, std::int64_t pa
     } else if (joined && previous_column_ < 0) {
       receive(0, c + 1, time_ns);  // first firing after the cut
     }
-    receive(c, c + 1, time_ns);
+    // The columns up to the newest firing's are final (a reader may be
+    // working on them: trailnavd's obstacle thread): a firing behind it marks nothing.
+    if (c > previous_column_) receive(c, c + 1, time_ns);
     // Two firings in one bin (the bins are one firing wide, but azimuth
     // jitters): the later one moves one bin on when that one is free.
     if (c <= previous_column_) {
