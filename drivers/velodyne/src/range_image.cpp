@@ -234,16 +234,12 @@ void RevolutionAssembler::assign_columns(const PacketInfo& info, std::int64_t pa
   RangeImage& image = *image_;
   const int columns = image.columns();
   const float scale = static_cast<float>(columns) / kTurn;
-  // Each column covered takes the time of the first firing that covered it
-  // (a column behind the newest one no longer changes: trailnavd's obstacle
-  // thread may have read it already).
+  // Each column covered takes the time of the firing that covered it; only
+  // columns past the newest firing's are covered (those behind it no longer
+  // change: trailnavd's obstacle thread may have read them already).
   const auto receive = [&](int first, int last, std::int64_t time_ns) {
     image.mark_received(first, last);
-    first = std::max(first, 0);
-    last = std::min(last, columns);
-    for (int c = first; c < last; ++c) {
-      if (image.column_time_ns(c) == RangeImage::kNoTime) image.set_column_time(c, c + 1, time_ns);
-    }
+    image.set_column_time(first, last, time_ns);
   };
   for (int s = begin; s < end; ++s) {
     const std::int64_t time_ns =
