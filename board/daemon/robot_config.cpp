@@ -140,6 +140,7 @@ gpio::GpioDriverOptions parse_gpio(const ConfigNode& n) {
   o.heartbeat_line = n.string("heartbeat_line", "");
   o.status_line = n.string("status_line", "");
   o.outputs_active_low = n.boolean("outputs_active_low", o.outputs_active_low);
+  o.max_rest = n.number("max_rest_ms", 0.0, 1000.0, o.max_rest * 1e3) * 1e-3;
   n.reject_unknown_keys();
   return o;
 }

@@ -1,6 +1,9 @@
 #include "trailnav/runtime/clock.hpp"
 
+#include <poll.h>
+
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <ctime>
 
@@ -38,6 +41,22 @@ bool MonotonicClock::sleep_until(Nanos deadline) noexcept {
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
     }
     if (step_end == deadline) return !interrupted_.load(std::memory_order_acquire);
+  }
+}
+
+Clock::Wake MonotonicClock::sleep_until_readable(Nanos deadline, std::span<const int> fds) noexcept {
+  std::array<pollfd, 8> polled{};
+  const std::size_t n = std::min(fds.size(), polled.size());
+  for (std::size_t i = 0; i < n; ++i) polled[i] = pollfd{fds[i], POLLIN, 0};
+  for (;;) {
+    if (interrupted_.load(std::memory_order_acquire)) return Wake::interrupted;
+    const Nanos t = now();
+    if (t >= deadline) return Wake::deadline;
+    const timespec timeout = to_timespec(std::min(deadline - t, kInterruptCheck));
+    const int ready = ppoll(polled.data(), n, &timeout, nullptr);
+    // POLLERR, POLLHUP and POLLNVAL wake too: the task's next run reads the
+    // descriptor and reports what happened to it.
+    if (ready > 0) return interrupted_.load(std::memory_order_acquire) ? Wake::interrupted : Wake::readable;
   }
 }
 

@@ -155,6 +155,7 @@ Status Scheduler::start() {
       shared->name = e->spec.thread.empty() ? e->spec.name : e->spec.thread;
     }
     shared->entries.push_back(e.get());
+    if (const int fd = e->task.wake_fd(); fd >= 0) shared->wake_fds.push_back(fd);
   }
   threads_ready_.store(0, std::memory_order_release);
   realtime_failures_.store(0, std::memory_order_release);
@@ -229,10 +230,31 @@ void Scheduler::thread_main(Thread& thread) noexcept {
 
 void Scheduler::run_periodic(Thread& thread) noexcept {
   const Nanos period = thread.entries.front()->spec.period();
+  // Rests end early when a descriptor of the thread's tasks is ready, where
+  // the clock can wait on descriptors; elsewhere such tasks do not rest.
+  const bool watch_fds = !thread.wake_fds.empty() && clock_.wakes_on_descriptors();
   Nanos deadline = clock_.now() + period;
   std::uint64_t cycle = 0;
+  bool watching = false;     // this sleep is a rest that a descriptor may end
+  Nanos rest_from = 0;       // the deadline the rest skipped from
+  std::uint64_t planned = 0; // the periods that rest skips
   while (running_.load(std::memory_order_acquire)) {
-    if (!clock_.sleep_until(deadline)) break;
+    if (watching) {
+      const Clock::Wake wake = clock_.sleep_until_readable(deadline, thread.wake_fds);
+      if (wake == Clock::Wake::interrupted) break;
+      std::uint64_t rested = planned;
+      if (wake == Clock::Wake::readable) {
+        // Run now: the periods rested are those that passed.
+        const Nanos woke = clock_.now();
+        rested = woke > rest_from ? static_cast<std::uint64_t>((woke - rest_from) / period) : 0;
+        deadline = std::min(deadline, woke);
+      }
+      for (Entry* e : thread.entries) {
+        if (rested > 0) e->accounting.record_rested(rested);
+      }
+    } else if (!clock_.sleep_until(deadline)) {
+      break;
+    }
     if (!running_.load(std::memory_order_acquire)) break;
     // The tasks of a shared thread one after another, each measured on its
     // own (its latency includes the runs before it in this period).
@@ -246,16 +268,19 @@ void Scheduler::run_periodic(Thread& thread) noexcept {
       finished = clock_.now();
       e->accounting.record_run(deadline, started, finished, cpu);
       // A shared thread rests only as long as every task on it can.
-      const Nanos r = e->task.rest();
+      const Nanos r = e->task.wake_fd() >= 0 && !watch_fds ? 0 : e->task.rest();
       rest = rest < 0 ? r : std::min(rest, r);
     }
     std::uint64_t skipped = 0;
-    deadline = next_periodic_deadline(deadline, period, finished, skipped);
+    const Nanos next = next_periodic_deadline(deadline, period, finished, skipped);
     std::uint64_t rested = 0;
-    deadline = rested_deadline(deadline, period, finished, rest, rested);
+    deadline = rested_deadline(next, period, finished, rest, rested);
+    watching = watch_fds && rested > 0;
+    rest_from = next;
+    planned = rested;
     for (Entry* e : thread.entries) {
       if (skipped > 0) e->accounting.record_skipped(skipped);
-      if (rested > 0) e->accounting.record_rested(rested);
+      if (rested > 0 && !watching) e->accounting.record_rested(rested);
     }
     ++cycle;
   }

@@ -17,6 +17,7 @@
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_sender.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/scheduler.hpp"
 #include "../support/no_allocations.hpp"
 
 using namespace trailnav;
@@ -276,6 +277,81 @@ TEST(GpioDriver, TunnelLevelsDriveTheEstopAndTheOutputsFollow) {
   EXPECT_EQ(static_cast<std::uint64_t>(heartbeats), d.status().heartbeat_toggles);
   EXPECT_GE(heartbeats, 3);
   EXPECT_EQ(status, (std::vector<bool>{false, true, false, true, false}));
+}
+
+TEST(GpioDriver, RestsUntilTheHeartbeatOrTheReleaseIsDue) {
+  GpioDriverOptions o = tunnel_options();  // heartbeat every 100 ms
+  o.estop_release_debounce = 0.03;
+  o.max_rest = 1.0;
+  auto made = GpioDriver::create(o);
+  ASSERT_TRUE(made.driver) << made.error;
+  GpioDriver& d = *made.driver;
+  EXPECT_GE(d.wake_fd(), 0);  // the tunnel's socket
+  tick(d, ms(1000));
+  EXPECT_EQ(d.rest(), ms(100));  // the next toggle
+  auto sender = udp::UdpSender::open(d.tunnel_endpoint());
+  ASSERT_TRUE(sender.sender);
+  sender.sender->send(encode_tunnel("ESTOP", false, 0).view());
+  settle(d, ms(1010), 1);
+  EXPECT_EQ(d.status().estop, EstopState::engaged);
+  EXPECT_EQ(d.rest(), ms(30));  // the release, 30 ms after the inactive level
+  tick(d, ms(1040));
+  EXPECT_EQ(d.status().estop, EstopState::released);
+  EXPECT_EQ(d.rest(), ms(60));  // the toggle at 1.1 s again
+  o.max_rest = 0.02;
+  auto capped = GpioDriver::create(o);
+  ASSERT_TRUE(capped.driver);
+  tick(*capped.driver, ms(1000));
+  EXPECT_EQ(capped.driver->rest(), ms(20));
+  o.max_rest = 0.0;  // every period
+  auto every = GpioDriver::create(o);
+  ASSERT_TRUE(every.driver);
+  tick(*every.driver, ms(1000));
+  EXPECT_EQ(every.driver->rest(), 0);
+}
+
+// Under the scheduler on the real clock: between levels the task sleeps
+// through its 200 Hz periods, and a level sent to the tunnel wakes it at
+// once (its rests here are 5 s long).
+TEST(GpioDriver, ALevelWakesTheRestingTaskAtOnce) {
+  GpioDriverOptions o = tunnel_options();
+  o.heartbeat_period = 5.0;
+  o.max_rest = 5.0;
+  o.estop_release_debounce = 0.02;
+  auto made = GpioDriver::create(o);
+  ASSERT_TRUE(made.driver) << made.error;
+  GpioDriver& d = *made.driver;
+  auto sender = udp::UdpSender::open(d.tunnel_endpoint());
+  ASSERT_TRUE(sender.sender);
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  ASSERT_TRUE(scheduler.add({"gpio", TaskKind::periodic, 200.0, 2 * kNanosPerMilli, 0, -1}, d));
+  ASSERT_TRUE(scheduler.start());
+  const auto wait_for_state = [&](EstopState want) {
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+    while (d.status().estop != want && std::chrono::steady_clock::now() < give_up) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    return d.status().estop == want;
+  };
+  // Released 20 ms after the first inactive level (the debounce's wake-up).
+  sender.sender->send(encode_tunnel("ESTOP", false, 0).view());
+  ASSERT_TRUE(wait_for_state(EstopState::released));
+  const std::uint64_t runs_before = scheduler.stats(0).runs;
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const std::uint64_t runs_quiet = scheduler.stats(0).runs - runs_before;
+  EXPECT_LE(runs_quiet, 2u) << "60 periods of 5 ms passed: the task should have rested through them";
+  // A press: engaged long before the 5 s rest would end.
+  const auto pressed = std::chrono::steady_clock::now();
+  sender.sender->send(encode_tunnel("ESTOP", true, 0).view());
+  ASSERT_TRUE(wait_for_state(EstopState::engaged));
+  EXPECT_LT(std::chrono::steady_clock::now() - pressed, std::chrono::seconds(3));
+  const EstopReading* r = d.estop().try_read();
+  ASSERT_NE(r, nullptr);
+  EXPECT_EQ(r->state, EstopState::engaged);
+  scheduler.stop();
+  const TaskStats s = scheduler.stats(0);
+  EXPECT_GT(s.rested_periods, 50u);
 }
 
 TEST(GpioDriver, ArmedDriverNeverTouchesTheHeap) {

@@ -1,7 +1,9 @@
 #include "trailnav/runtime/scheduler.hpp"
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
 #include <pthread.h>
+#include <unistd.h>
 
 #include <array>
 #include <atomic>
@@ -282,6 +284,101 @@ TEST(Scheduler, ARestingTaskSleepsThroughWholePeriodsAndRunsOnTheGrid) {
   EXPECT_EQ(task.started[2], 50 * kMs);
   EXPECT_EQ(task.started[3], 60 * kMs);
   EXPECT_EQ(task.started[4], 80 * kMs);
+}
+
+// A task that rests long and gives a pipe's read end as its wake-up
+// descriptor: each run drains the pipe and notes when it started.
+class DescriptorTask final : public Task {
+ public:
+  DescriptorTask(int fd, Nanos rest) : fd_(fd), rest_(rest) { started.reserve(64); }
+  void run(const TaskTick& tick) override {
+    char buffer[16];
+    while (read(fd_, buffer, sizeof buffer) > 0) ++drained;
+    started.push_back(tick.started);  // the test thread reads after stop()
+    scheduled.push_back(tick.scheduled);
+    runs.fetch_add(1, std::memory_order_release);
+  }
+  Nanos rest() noexcept override { return rest_; }
+  int wake_fd() const noexcept override { return fd_; }
+  std::vector<Nanos> started, scheduled;
+  int drained = 0;
+  std::atomic<int> runs{0};
+
+ private:
+  int fd_;
+  Nanos rest_;
+};
+
+struct Pipe {
+  Pipe() {
+    EXPECT_EQ(pipe2(fds, O_NONBLOCK | O_CLOEXEC), 0);
+  }
+  ~Pipe() {
+    close(fds[0]);
+    close(fds[1]);
+  }
+  int fds[2] = {-1, -1};
+};
+
+TEST(Scheduler, ARestIsEndedAtOnceByTheTasksDescriptor) {
+  MonotonicClock clock;
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  Pipe p;
+  // 100 Hz, resting 20 s after each run: only the pipe can wake it in time.
+  DescriptorTask task(p.fds[0], 20'000 * kMs);
+  ASSERT_TRUE(scheduler.add({"watching", TaskKind::periodic, 100.0, 5 * kMs, 0, -1}, task));
+  ASSERT_TRUE(scheduler.start());
+  for (int k = 0; k < 2000 && task.runs.load(std::memory_order_acquire) < 1; ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ(task.runs.load(std::memory_order_acquire), 1);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(task.runs.load(std::memory_order_acquire), 1);  // resting
+  Nanos written = 0;
+  for (int wake = 0; wake < 2; ++wake) {
+    written = clock.now();
+    ASSERT_EQ(write(p.fds[1], "x", 1), 1);
+    // Woken by the byte, not by the end of the 20 s rest.
+    for (int k = 0; k < 10'000 && task.runs.load(std::memory_order_acquire) < 2 + wake; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    ASSERT_EQ(task.runs.load(std::memory_order_acquire), 2 + wake);
+  }
+  scheduler.stop();
+  ASSERT_EQ(task.started.size(), 3u);
+  EXPECT_EQ(task.drained, 2);
+  // The woken run starts at its wake-up, off the 10 ms grid: its deadline is
+  // when the descriptor woke the thread, after the byte was written.
+  EXPECT_GE(task.scheduled[2], written);
+  EXPECT_LE(task.scheduled[2], task.started[2]);
+  EXPECT_LT(task.started[2] - written, 10'000 * kMs);
+  const TaskStats s = scheduler.stats(0);
+  EXPECT_EQ(s.runs, 3u);
+  // The periods that passed while it rested, counted when it woke: at least
+  // the 50 ms waited before the first byte, far fewer than 2 x 20 s.
+  EXPECT_GE(s.rested_periods, 4u);
+  EXPECT_LT(s.rested_periods, 1000u);
+  EXPECT_EQ(s.skipped_periods, 0u);
+}
+
+TEST(Scheduler, OnAClockThatCannotWaitOnDescriptorsATaskWithOneDoesNotRest) {
+  SimulatedClock clock(0);
+  Scheduler scheduler(clock, {RealtimePolicy::off, false});
+  Pipe p;
+  DescriptorTask task(p.fds[0], 35 * kMs);
+  ASSERT_TRUE(scheduler.add({"watching", TaskKind::periodic, 100.0, 5 * kMs, 0, -1}, task));
+  ASSERT_TRUE(scheduler.start());
+  wait_for(scheduler, clock, 0);
+  for (int k = 1; k <= 5; ++k) {
+    clock.advance_to(k * 10 * kMs);
+    wait_for(scheduler, clock, static_cast<std::uint64_t>(k));
+  }
+  scheduler.stop();
+  const TaskStats s = scheduler.stats(0);
+  EXPECT_EQ(s.runs, 5u);  // every period: a simulated clock never sees the pipe
+  EXPECT_EQ(s.rested_periods, 0u);
+  ASSERT_EQ(task.started.size(), 5u);
+  EXPECT_EQ(task.started[4], 50 * kMs);
 }
 
 // Two tasks naming one thread: each period they run one after another on

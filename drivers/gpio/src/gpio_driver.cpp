@@ -133,6 +133,7 @@ GpioDriver::Created GpioDriver::create(const GpioDriverOptions& options) {
       return r;
     }
     d->tunnel_ = std::move(opened.receiver);
+    d->wake_fd_ = d->tunnel_->fd();
     if (options.tunnel_outputs) {
       auto sender = udp::UdpSender::open(*options.tunnel_outputs, 1 << 16);
       if (!sender.sender) {
@@ -191,6 +192,7 @@ GpioDriver::Created GpioDriver::create(const GpioDriverOptions& options) {
       return r;
     }
   }
+  if (d->estop_line_ != nullptr) d->wake_fd_ = gpiod_line_event_get_fd(d->estop_line_);
   r.driver = std::move(d);
   return r;
 }
@@ -291,8 +293,18 @@ void GpioDriver::drive_outputs(Nanos now) noexcept {
   local_.status_output = status;
 }
 
+Nanos GpioDriver::rest() noexcept {
+  const Nanos most = seconds_to_nanos(options_.max_rest);
+  if (most <= 0 || local_.health == GpioHealth::failed) return 0;
+  Nanos until = last_run_ + most;
+  if (!options_.heartbeat_line.empty() && next_toggle_ >= 0) until = std::min(until, next_toggle_);
+  if (const Nanos release = debouncer_.release_due(); release >= 0) until = std::min(until, release);
+  return std::max<Nanos>(0, until - last_run_);
+}
+
 void GpioDriver::run(const TaskTick& tick) {
   const Nanos now = tick.started;
+  last_run_ = now;
   if (options_.transport == GpioTransport::tunnel) {
     read_tunnel(now);
   } else {

@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <mutex>
+#include <span>
 
 namespace trailnav {
 
@@ -38,6 +39,15 @@ class Clock {
   // Sleeps until the clock reads at least `deadline`. Returns early (false)
   // once interrupt_sleepers() was called; true when the deadline was reached.
   virtual bool sleep_until(Nanos deadline) noexcept = 0;
+  // Sleeps until `deadline` or until one of `fds` is readable (or reports an
+  // error or hang-up), whichever comes first. A clock that cannot wait on
+  // descriptors (wakes_on_descriptors() false) sleeps to the deadline.
+  enum class Wake : std::uint8_t { deadline, readable, interrupted };
+  virtual Wake sleep_until_readable(Nanos deadline, std::span<const int> fds) noexcept {
+    (void)fds;
+    return sleep_until(deadline) ? Wake::deadline : Wake::interrupted;
+  }
+  virtual bool wakes_on_descriptors() const noexcept { return false; }
   // Wakes every sleeper now and makes later sleeps return at once, until
   // resume_sleepers(); used to stop threads promptly.
   virtual void interrupt_sleepers() noexcept = 0;
@@ -52,6 +62,9 @@ class MonotonicClock final : public Clock {
   // CLOCK_THREAD_CPUTIME_ID.
   Nanos thread_cpu_time() const noexcept override;
   bool sleep_until(Nanos deadline) noexcept override;
+  // ppoll(2) on the descriptors, in steps as sleep_until's (at most 8 descriptors).
+  Wake sleep_until_readable(Nanos deadline, std::span<const int> fds) noexcept override;
+  bool wakes_on_descriptors() const noexcept override { return true; }
   void interrupt_sleepers() noexcept override;
   void resume_sleepers() noexcept override;
 

@@ -72,6 +72,14 @@ class Task {
   // (the lidar's, where a revolution ends) saves the wake-ups in between,
   // which on a virtual machine cost 25-55 us of CPU each (docs/performance.md).
   virtual Nanos rest() noexcept { return 0; }
+  // A descriptor whose readiness ends the task's rest at once (-1: none),
+  // for a task that waits for rare input but must act on it without delay
+  // (the e-stop line's edges). Such a task rests only where the clock can
+  // wait on descriptors (Clock::wakes_on_descriptors): elsewhere, as on a
+  // simulated clock, its rest is ignored and it runs every period. A run
+  // woken by its descriptor starts at once, off the period's grid (its
+  // deadline is the wake-up), and the grid goes on from there.
+  virtual int wake_fd() const noexcept { return -1; }
 };
 
 // Wakes an event-driven task. Producers call signal(); several signals before
@@ -245,6 +253,7 @@ class Scheduler {
   struct Thread {
     std::string name;
     std::vector<Entry*> entries;
+    std::vector<int> wake_fds;  // the entries' Task::wake_fd, gathered at start
     std::thread thread;
   };
 

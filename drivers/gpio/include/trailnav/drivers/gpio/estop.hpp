@@ -41,6 +41,12 @@ class EstopDebouncer {
   bool engaged() const noexcept { return state_ != EstopState::released; }
   // When the current state began (-1 while unknown).
   Nanos since() const noexcept { return since_; }
+  // When update() releases the stop if the line stays inactive (-1: no
+  // release is coming: released already, or the line active or unread).
+  Nanos release_due() const noexcept {
+    return state_ == EstopState::engaged && !raw_active_ && inactive_since_ >= 0 ? inactive_since_ + release_debounce_
+                                                                                 : -1;
+  }
   const EstopCounters& counters() const noexcept { return counters_; }
 
  private:

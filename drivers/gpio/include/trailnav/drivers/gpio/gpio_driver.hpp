@@ -58,6 +58,12 @@ struct GpioDriverOptions {
   double estop_release_debounce = 0.2;  // s the line must stay inactive before the stop is released
   std::string heartbeat_line;           // empty: no heartbeat output
   double heartbeat_period = 0.5;        // s between toggles
+  // While nothing happens on the e-stop line, the task sleeps up to this
+  // long between runs (Task::rest), woken at once by an edge (chip) or a
+  // datagram (tunnel), and in time for the heartbeat and a debounced
+  // release. The status output follows set_ready within it. 0: run every
+  // period of the task (each wake-up costs CPU: docs/performance.md).
+  double max_rest = 0.05;
   std::string status_line;              // empty: no status output
   bool outputs_active_low = false;
   udp::Endpoint tunnel{0x7F000001u, kDefaultTunnelPort};  // tunnel: address to listen on
@@ -100,6 +106,11 @@ class GpioDriver final : public Task {
   GpioDriver& operator=(const GpioDriver&) = delete;
 
   void run(const TaskTick& tick) override;
+  // Until the next heartbeat toggle or debounced release, at most
+  // options().max_rest; 0 once the chip failed (its descriptor is not read).
+  Nanos rest() noexcept override;
+  // The e-stop line's event descriptor (chip) or the tunnel's socket.
+  int wake_fd() const noexcept override { return wake_fd_; }
 
   // The rest of the system says whether it is ready to drive (any thread).
   void set_ready(bool ready) noexcept { ready_.store(ready, std::memory_order_relaxed); }
@@ -127,6 +138,8 @@ class GpioDriver final : public Task {
   std::unique_ptr<udp::UdpSender> mirror_;
   std::atomic<bool> ready_{false};
   Nanos next_toggle_ = -1;
+  Nanos last_run_ = 0;
+  int wake_fd_ = -1;
   bool status_written_ = false;
   EstopState published_state_ = EstopState::unknown;
   bool published_once_ = false;
