@@ -4,7 +4,8 @@
 # `trailnav demo --lidar MODEL --scenario mixed-route` replayed into trailnavd
 # at real time, RUNS times per model, nothing else running. Prints, per model
 # and task, the largest CPU time of one run per period of input over all runs
-# (the need), the largest 99th percentile, and the overruns against the
+# (the need; a periodic task's run longer than 90 % of its period is listed
+# apart, as the VM's stall it is), the largest 99th percentile, and the overruns against the
 # budgets in use (the presets' at the time of the run); per
 # model the daemon's CPU over the replay (% of one core) and the map latency.
 #
@@ -47,18 +48,30 @@ for m in $models; do
   echo
   echo "### $m ($runs runs of $seconds s, mixed-route)"
   echo
-  echo "| task | need: largest CPU of one run per period of input [ms] | largest CPU per period, p99 [ms] | overruns (all runs) |"
-  echo "|---|---|---|---|"
+  echo "| task | need: largest CPU of one run per period of input [ms] | largest CPU per period, p99 [ms] | longer than 90 % of the period: the VM's stalls, not needs [ms] | overruns (all runs) |"
+  echo "|---|---|---|---|---|"
   # Task lines of the daemon's report: "<name> runs N overruns N ... cpu p99 X max Y ms ...".
+  # A periodic task's run that took more CPU than 90 % of its period (the most
+  # a preset can grant it) is not a need: on this VM it is the hypervisor
+  # keeping the core while the thread ran (a 10 us task charged 28 ms), and
+  # it is listed apart. The periods are the presets' rates
+  # (board/daemon/task_presets.cpp, kTasks); obstacles run on events.
   cat "$out/$m"-[0-9]*.txt | awk '
+    BEGIN { period["gpio"] = 5; period["lidar"] = 1; period["imu"] = 10; period["can"] = 10; period["gps"] = 10
+            period["pose"] = 10; period["navigation"] = 100; period["terrain"] = 50 }
     $2 == "runs" && $4 == "overruns" {
       name = $1; ov[name] += $5
       for (i = 1; i < NF; ++i) if ($i == "cpu/period" && $(i + 1) == "p99") { p = $(i + 2); x = $(i + 4) }
-      if (!(name in need) || x + 0 > need[name] + 0) need[name] = x
+      if ((name in period) && x + 0 > 0.9 * period[name]) {
+        prior = (name in stall) ? stall[name] ", " : ""
+        stall[name] = prior x
+      } else if (!(name in need) || x + 0 > need[name] + 0) {
+        need[name] = x
+      }
       if (!(name in p99) || p + 0 > p99[name] + 0) p99[name] = p
       if (!(name in seen)) { seen[name] = 1; order[n++] = name }
     }
-    END { for (i = 0; i < n; ++i) { t = order[i]; printf "| %s | %s | %s | %d |\n", t, need[t], p99[t], ov[t] } }'
+    END { for (i = 0; i < n; ++i) { t = order[i]; printf "| %s | %s | %s | %s | %d |\n", t, need[t], p99[t], (t in stall) ? stall[t] : "", ov[t] } }'
   echo
   grep -h "CPU over the replay" "$out/$m"-[0-9]*.txt | sed 's/^ */- /'
   grep -h "^4. received" "$out/$m"-[0-9]*.txt | sed -n 's/.*(latency from the revolution.s last packet: \([^)]*\)).*/- map latency \1/p'

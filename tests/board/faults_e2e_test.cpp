@@ -123,8 +123,25 @@ struct FaultRun {
     };
     return n("skipped") + n("pose_late");
   }
-  // Maps made in [a, b), and those the daemon counted as left out.
-  std::size_t accounted_between(double a, double b) const { return fresh_between(a, b) + maps_left_out(); }
+  // Maps the daemon made in [a, b) by its own count: the obstacle task's
+  // `revolutions` in the health received by b minus that received by a
+  // (health comes once a second). A subscriber starved by a loaded machine
+  // misses maps (the writer keeps only the newest for a reader that has not
+  // acknowledged the one before); this count cannot.
+  std::size_t made_between(double a, double b) const {
+    const auto revolutions = [&](double t) {
+      const Health* h = at("trailnavd: obstacles", t);
+      const double v = h == nullptr ? 0.0 : h->number("revolutions");
+      return std::isnan(v) ? 0.0 : v;
+    };
+    return static_cast<std::size_t>(std::max(0.0, revolutions(b) - revolutions(a)));
+  }
+  // Maps made in [a, b) (received, or counted by the daemon where it made
+  // more than a starved subscriber received), and those the daemon counted
+  // as left out.
+  std::size_t accounted_between(double a, double b) const {
+    return std::max(fresh_between(a, b), made_between(a, b)) + maps_left_out();
+  }
 };
 
 std::int64_t stamp_ns(const builtin_interfaces_msg_dds__Time_& s) {
