@@ -86,6 +86,9 @@ LidarSection parse_lidar(const ConfigNode& n) {
   // Between revolutions' ends the task reads its socket at most this far
   // apart (VelodyneDriver::rest); 0: every period of its rate.
   s.driver.max_rest_ns = static_cast<Nanos>(n.number("max_rest_ms", 0.0, 50.0, 10.0) * 1e6);
+  // From this long before a revolution's predicted end the task also wakes
+  // at each packet (VelodyneDriver::watching); 0: every period only.
+  s.driver.watch_before_end_ns = static_cast<Nanos>(n.number("watch_before_end_ms", 0.0, 20.0, 1.5) * 1e6);
   n.reject_unknown_keys();
   return s;
 }

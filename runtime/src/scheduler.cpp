@@ -235,7 +235,7 @@ void Scheduler::run_periodic(Thread& thread) noexcept {
   const bool watch_fds = !thread.wake_fds.empty() && clock_.wakes_on_descriptors();
   Nanos deadline = clock_.now() + period;
   std::uint64_t cycle = 0;
-  bool watching = false;     // this sleep is a rest that a descriptor may end
+  bool watching = false;     // this sleep may be ended by a descriptor
   Nanos rest_from = 0;       // the deadline the rest skipped from
   std::uint64_t planned = 0; // the periods that rest skips
   while (running_.load(std::memory_order_acquire)) {
@@ -260,6 +260,7 @@ void Scheduler::run_periodic(Thread& thread) noexcept {
     // own (its latency includes the runs before it in this period).
     Nanos finished = 0;
     Nanos rest = -1;
+    bool watch = false;
     for (Entry* e : thread.entries) {
       const Nanos started = clock_.now();
       const Nanos cpu_start = clock_.thread_cpu_time();
@@ -267,15 +268,17 @@ void Scheduler::run_periodic(Thread& thread) noexcept {
       const Nanos cpu = clock_.thread_cpu_time() - cpu_start;
       finished = clock_.now();
       e->accounting.record_run(deadline, started, finished, cpu);
+      const bool wants = e->task.wake_fd() >= 0 && e->task.watching();
+      watch = watch || wants;
       // A shared thread rests only as long as every task on it can.
-      const Nanos r = e->task.wake_fd() >= 0 && !watch_fds ? 0 : e->task.rest();
+      const Nanos r = wants && !watch_fds ? 0 : e->task.rest();
       rest = rest < 0 ? r : std::min(rest, r);
     }
     std::uint64_t skipped = 0;
     const Nanos next = next_periodic_deadline(deadline, period, finished, skipped);
     std::uint64_t rested = 0;
     deadline = rested_deadline(next, period, finished, rest, rested);
-    watching = watch_fds && rested > 0;
+    watching = watch_fds && watch;
     rest_from = next;
     planned = rested;
     for (Entry* e : thread.entries) {

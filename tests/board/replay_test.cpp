@@ -214,16 +214,19 @@ TEST(Replay, TheLidarRestsBetweenRevolutionsButNeverPastTheEndOfOne) {
   options.data.bind = {0x7F000001u, 0};
   options.position.reset();
   ASSERT_EQ(options.max_rest_ns, 10 * kNanosPerMilli);  // the default
+  options.watch_before_end_ns = 1500 * kNanosPerMicro;     // trailnavd's default
   auto created = VelodyneDriver::create(make_decoder(Model::vlp16, ""), options);
   ASSERT_TRUE(created.driver) << created.error;
   VelodyneDriver& driver = *created.driver;
   auto sender = udp::UdpSender::open(driver.data_endpoint());
   ASSERT_TRUE(sender.sender) << sender.error;
 
+  ASSERT_GE(driver.wake_fd(), 0);  // the data socket
   struct Run {
     std::int64_t made;     // host time right after rest() returned
     std::int64_t wake_by;  // when the rest asked for ends
     Nanos rest;
+    bool watching;         // whether the next packet ends the sleep
   };
   std::vector<Run> runs;
   std::vector<std::int64_t> completed_at;  // receive times of the packets that completed a revolution
@@ -241,13 +244,14 @@ TEST(Replay, TheLidarRestsBetweenRevolutionsButNeverPastTheEndOfOne) {
       completed_at.push_back(image->completed_receive_ns);
     }
     const Nanos rest = driver.rest();
+    const bool watching = driver.watching();
     const std::int64_t now = host_now_ns();
     ASSERT_GE(rest, 0);
     ASSERT_LE(rest, 10 * kNanosPerMilli);
-    runs.push_back({now, now + rest, rest});
+    runs.push_back({now, now + rest, rest, watching});
   }
   ASSERT_GE(completed_at.size(), 5u);
-  std::size_t far = 0, far_full = 0;
+  std::size_t far = 0, far_full = 0, far_watching = 0, near = 0, near_watching = 0;
   for (const Run& run : runs) {
     const auto next = std::upper_bound(completed_at.begin(), completed_at.end(), run.made);
     if (next == completed_at.end()) break;
@@ -257,13 +261,34 @@ TEST(Replay, TheLidarRestsBetweenRevolutionsButNeverPastTheEndOfOne) {
       ++far;
       far_full += run.rest == 10 * kNanosPerMilli ? 1 : 0;
     }
+    // Watching: from 1.5 ms before the predicted end (the VLP-16's packets
+    // come 1.33 ms apart: the last one or two of each revolution), never far
+    // from it (each packet would wake the task).
+    // (From the first revolution completed on: before it the end of the
+    // partial revolution the stream began in is not predicted well.)
+    if (next != completed_at.begin() && *next - run.made > 5 * kNanosPerMilli && run.watching) {
+      ++far_watching;
+      ADD_FAILURE() << "watching " << static_cast<double>(*next - run.made) * 1e-6 << " ms before an end, run "
+                    << (&run - runs.data()) << ", completion " << (next - completed_at.begin());
+    }
+  }
+  // The last run before each completing packet.
+  for (const std::int64_t end : completed_at) {
+    const auto last = std::find_if(runs.rbegin(), runs.rend(), [&](const Run& r) { return r.made < end; });
+    if (last == runs.rend()) continue;
+    ++near;
+    near_watching += last->watching ? 1u : 0u;
   }
   ASSERT_GT(far, 100u);
   EXPECT_GE(far_full, far * 9 / 10) << far_full << " of " << far << " runs over 25 ms before an end rested 10 ms";
+  EXPECT_EQ(far_watching, 0u) << "runs over 5 ms before an end watched the socket";
+  ASSERT_GE(near, 5u);
+  EXPECT_GE(near_watching, near * 9 / 10) << near_watching << " of " << near << " runs just before an end watched";
   // The stream stopped: no revolution can end, the whole rest.
   std::this_thread::sleep_for(std::chrono::milliseconds(12));
   driver.run(TaskTick{packets.size(), 0, 0});
   EXPECT_EQ(driver.rest(), 10 * kNanosPerMilli);
+  EXPECT_FALSE(driver.watching());
 }
 
 TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileHostTimed) {

@@ -290,7 +290,7 @@ TEST(Scheduler, ARestingTaskSleepsThroughWholePeriodsAndRunsOnTheGrid) {
 // descriptor: each run drains the pipe and notes when it started.
 class DescriptorTask final : public Task {
  public:
-  DescriptorTask(int fd, Nanos rest) : fd_(fd), rest_(rest) { started.reserve(64); }
+  DescriptorTask(int fd, Nanos rest, bool watch = true) : fd_(fd), rest_(rest), watch_(watch) { started.reserve(64); }
   void run(const TaskTick& tick) override {
     char buffer[16];
     while (read(fd_, buffer, sizeof buffer) > 0) ++drained;
@@ -300,6 +300,7 @@ class DescriptorTask final : public Task {
   }
   Nanos rest() noexcept override { return rest_; }
   int wake_fd() const noexcept override { return fd_; }
+  bool watching() noexcept override { return watch_; }
   std::vector<Nanos> started, scheduled;
   int drained = 0;
   std::atomic<int> runs{0};
@@ -307,6 +308,7 @@ class DescriptorTask final : public Task {
  private:
   int fd_;
   Nanos rest_;
+  bool watch_;
 };
 
 struct Pipe {
@@ -359,6 +361,42 @@ TEST(Scheduler, ARestIsEndedAtOnceByTheTasksDescriptor) {
   EXPECT_GE(s.rested_periods, 4u);
   EXPECT_LT(s.rested_periods, 1000u);
   EXPECT_EQ(s.skipped_periods, 0u);
+}
+
+// Without a rest, a watching task's sleep to its next period ends when the
+// descriptor is readable (the lidar task near a revolution's end); a task
+// that does not watch sleeps its whole period whatever the descriptor says.
+TEST(Scheduler, AWatchingTasksSleepToTheNextPeriodEndsAtTheDescriptor) {
+  for (const bool watch : {true, false}) {
+    MonotonicClock clock;
+    Scheduler scheduler(clock, {RealtimePolicy::off, false});
+    Pipe p;
+    DescriptorTask task(p.fds[0], 0, watch);
+    ASSERT_TRUE(scheduler.add({"watching", TaskKind::periodic, 0.5, 50 * kMs, 0, -1}, task));  // 2 s period
+    ASSERT_TRUE(scheduler.start());
+    for (int k = 0; k < 5000 && task.runs.load(std::memory_order_acquire) < 1; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    ASSERT_EQ(task.runs.load(std::memory_order_acquire), 1);
+    const Nanos written = clock.now();
+    ASSERT_EQ(write(p.fds[1], "x", 1), 1);
+    for (int k = 0; k < 10'000 && task.runs.load(std::memory_order_acquire) < 2; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    scheduler.stop();
+    ASSERT_GE(task.started.size(), 2u) << "watch " << watch;
+    if (watch) {
+      // Woken by the byte: at least a little after it was written, and
+      // (a run never comes early) before the period would have ended.
+      EXPECT_GE(task.scheduled[1], written);
+      EXPECT_LT(task.scheduled[1], task.scheduled[0] + 2000 * kMs);
+    } else {
+      // On the grid: a whole period after the first run's deadline.
+      EXPECT_EQ(task.scheduled[1], task.scheduled[0] + 2000 * kMs);
+      EXPECT_GE(task.started[1], task.scheduled[0] + 2000 * kMs);
+    }
+    EXPECT_EQ(scheduler.stats(0).rested_periods, 0u);
+  }
 }
 
 TEST(Scheduler, OnAClockThatCannotWaitOnDescriptorsATaskWithOneDoesNotRest) {

@@ -148,21 +148,40 @@ void VelodyneDriver::publish_progress(Nanos started) noexcept {
   }
 }
 
+Nanos VelodyneDriver::to_predicted_end(Nanos now) const noexcept {
+  const std::int64_t newest = local_.last_packet_ns;
+  const double left = assembler_->turn_to_cut();
+  if (newest == 0 || left < 0.0 || !(assembler_->rpm() > 0.0)) return kNoPrediction;  // no stream yet
+  // The packet that completes the revolution leaves the sensor after the
+  // firing at the cut.
+  const double to_cut_ns = left * 60e9 / assembler_->rpm();
+  return newest + static_cast<Nanos>(to_cut_ns) - now;
+}
+
 Nanos VelodyneDriver::rest() noexcept {
   const Nanos most = options_.max_rest_ns;
   if (most <= 0) return 0;
-  const std::int64_t newest = local_.last_packet_ns;
-  const double left = assembler_->turn_to_cut();
-  if (newest == 0 || left < 0.0 || !(assembler_->rpm() > 0.0)) return most;  // no stream yet
   const Nanos now = host_now_ns();
-  if (now - newest >= most) return most;  // the stream has stopped
-  // The packet that completes the revolution leaves the sensor after the
-  // firing at the cut. Wake ahead of that by 2 ms and 5 % of the time to it
-  // (the rate may change by a few per cent within a turn), then every period.
-  const double to_cut_ns = left * 60e9 / assembler_->rpm();
-  const auto cut_ns = newest + static_cast<Nanos>(to_cut_ns);
-  const Nanos ahead = 2 * kNanosPerMilli + static_cast<Nanos>(0.05 * to_cut_ns);
-  return std::clamp<Nanos>(cut_ns - ahead - now, 0, most);
+  const Nanos to_end = to_predicted_end(now);
+  if (to_end == kNoPrediction) return most;
+  if (now - local_.last_packet_ns >= most) return most;  // the stream has stopped
+  // Wake ahead of the predicted end by 2 ms and 5 % of the time to it (the
+  // rate may change by a few per cent within a turn), then every period.
+  const Nanos to_cut_from_newest = to_end + (now - local_.last_packet_ns);
+  const Nanos ahead = 2 * kNanosPerMilli + static_cast<Nanos>(0.05 * static_cast<double>(to_cut_from_newest));
+  return std::clamp<Nanos>(to_end - ahead, 0, most);
+}
+
+int VelodyneDriver::wake_fd() const noexcept { return options_.watch_before_end_ns > 0 ? data_->fd() : -1; }
+
+bool VelodyneDriver::watching() noexcept {
+  if (options_.watch_before_end_ns <= 0) return false;
+  const Nanos now = host_now_ns();
+  const Nanos to_end = to_predicted_end(now);
+  if (to_end == kNoPrediction || now - local_.last_packet_ns >= options_.max_rest_ns) return false;
+  // Past the predicted end and still not complete: watch on (the rate
+  // slowed); the revolution's completion moves the prediction a turn on.
+  return to_end <= options_.watch_before_end_ns;
 }
 
 void VelodyneDriver::publish_counters() noexcept {

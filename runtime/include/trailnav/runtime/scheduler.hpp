@@ -72,14 +72,19 @@ class Task {
   // (the lidar's, where a revolution ends) saves the wake-ups in between,
   // which on a virtual machine cost 25-55 us of CPU each (docs/performance.md).
   virtual Nanos rest() noexcept { return 0; }
-  // A descriptor whose readiness ends the task's rest at once (-1: none),
-  // for a task that waits for rare input but must act on it without delay
-  // (the e-stop line's edges). Such a task rests only where the clock can
-  // wait on descriptors (Clock::wakes_on_descriptors): elsewhere, as on a
-  // simulated clock, its rest is ignored and it runs every period. A run
-  // woken by its descriptor starts at once, off the period's grid (its
-  // deadline is the wake-up), and the grid goes on from there.
+  // A descriptor whose readiness can end the task's sleep at once (-1:
+  // none), for input that must be acted on without delay: the e-stop line's
+  // edges, or the lidar packet that completes a revolution. Asked once, when
+  // the scheduler starts.
   virtual int wake_fd() const noexcept { return -1; }
+  // Asked after each run of a task with a wake_fd: whether the coming sleep
+  // (a rest, or only to the next period) ends when that descriptor is
+  // readable. A task that watches rests only where the clock can wait on
+  // descriptors (Clock::wakes_on_descriptors): elsewhere, as on a simulated
+  // clock, its rest is ignored and it runs every period. A run woken by its
+  // descriptor starts at once, off the period's grid (its deadline is the
+  // wake-up), and the grid goes on from there.
+  virtual bool watching() noexcept { return true; }
 };
 
 // Wakes an event-driven task. Producers call signal(); several signals before

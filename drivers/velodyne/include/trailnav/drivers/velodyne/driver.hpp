@@ -35,6 +35,12 @@ struct DriverOptions {
   // 0: every period. The packets wait in the socket meanwhile (HDL-64E: 36
   // packets, about 80 kB of buffer in 10 ms).
   Nanos max_rest_ns = 10 * kNanosPerMilli;
+  // From this long before the revolution's predicted end the task wakes as
+  // each packet arrives (the data socket readable, Task::watching) as well
+  // as every period, so the packet that completes the revolution is read at
+  // once instead of at the next period (half a period later on average).
+  // 0: every period only.
+  Nanos watch_before_end_ns = 0;
   // Follow-up for a reader that works on a revolution while it arrives
   // (trailnavd's obstacle thread, Broadcast::Reader::follow()): the driver
   // stores each run how far the revolution in progress is (the word of
@@ -93,6 +99,11 @@ class VelodyneDriver final : public Task {
   // options().max_rest_ns; once the stream has been quiet that long, the
   // whole of it (no revolution can end without packets).
   Nanos rest() noexcept override;
+  // The data socket, and whether the coming sleep ends when a packet
+  // arrives: from options().watch_before_end_ns before the revolution's
+  // predicted end until it is complete.
+  int wake_fd() const noexcept override;
+  bool watching() noexcept override;
 
   // Reader i of the revolutions (i < options().revolution_readers), one per thread.
   Broadcast<RangeImage>::Reader& revolutions(std::size_t reader = 0) noexcept { return revolutions_.reader(reader); }
@@ -108,6 +119,10 @@ class VelodyneDriver final : public Task {
   const PacketDecoder& decoder() const noexcept { return decoder_; }
 
  private:
+  static constexpr Nanos kNoPrediction = INT64_MIN;
+  // Time from `now` to the revolution's predicted end (negative once past
+  // it); kNoPrediction before the stream has a rate and a cut.
+  Nanos to_predicted_end(Nanos now) const noexcept;
   VelodyneDriver(PacketDecoder decoder, const DriverOptions& options, RangeImageShape shape);
   void handle_position(std::span<const std::uint8_t> payload, std::int64_t receive_ns) noexcept;
   void publish_counters() noexcept;
