@@ -233,7 +233,21 @@ FaultRun run_with_faults(const std::vector<std::string>& faults, double seconds 
   EXPECT_TRUE(maps.subscriber && poses.subscriber && utm.subscriber && health.subscriber);
   if (!(maps.subscriber && poses.subscriber && utm.subscriber && health.subscriber)) return out;
 
-  bench->start_replay(1.5);
+  // The drive starts once the daemon is up: its first health message comes
+  // after the real-time tasks have run and opened their links (the IMU's and
+  // the GPS's sockets are bound by their tasks' first runs). Under a sanitizer,
+  // with another daemon starting on the other core, start-up took longer than
+  // a fixed delay, and the first second of IMU datagrams went to a port no
+  // one had bound yet.
+  {
+    bool up = false;
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!up && std::chrono::steady_clock::now() < give_up && ::kill(bench->pid(), 0) == 0) {
+      health.subscriber->take(0.1, [&](const dds::ReceivedSample&) { up = true; });
+    }
+    EXPECT_TRUE(up) << "no health from trailnavd within 60 s of its start";
+  }
+  bench->start_replay(0.5);
   std::map<std::int64_t, bool> map_stamps;
   struct Pending {
     std::int64_t stamp;
@@ -374,6 +388,9 @@ FaultRun run_with_faults(const std::vector<std::string>& faults, double seconds 
   for (const auto& f : faults) std::printf(" %s", f.c_str());
   std::printf("\n[ faults ] %zu fresh maps, %zu resent stale; %zu maps checked, %zu free cells, %zu unseen; exit %d\n",
               out.fresh_maps.size(), out.stale_maps.size(), out.maps_checked, out.free_cells, out.unseen_free, out.exit_code);
+  std::printf("[ faults ] replay sent late: p50 %.2f ms, p99 %.2f ms, max %.2f ms; %llu events over 1 ms late\n",
+              static_cast<double>(out.report.send_error.p50) * 1e-6, static_cast<double>(out.report.send_error.p99) * 1e-6,
+              static_cast<double>(out.report.send_error.max) * 1e-6, static_cast<unsigned long long>(out.report.late_over_1ms));
   if (std::getenv("TRAILNAV_FAULTS_DUMP") != nullptr) {
     std::map<std::string, const Health*> last;
     for (const Health& h : out.health) last[h.name] = &h;

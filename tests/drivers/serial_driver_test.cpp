@@ -28,6 +28,7 @@
 #include "trailnav/drivers/imu/imu_driver.hpp"
 #include "trailnav/drivers/link/byte_link.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "../support/no_allocations.hpp"
 
@@ -274,6 +275,50 @@ TEST(ByteLink, UdpAndTcpOnLoopback) {
   }
   EXPECT_EQ(l.counters().opens, 2u);
   ::close(server);
+}
+
+TEST(ByteLink, UdpBytesAreStampedWithTheKernelsArrivalNotTheRead) {
+  // An IMU or GPS over UDP read 200 ms late (a busy core, a stalled task)
+  // must still be stamped when its datagram came: the clock relations and
+  // the pose take these stamps as the data's time. On loopback the kernel
+  // stamps a datagram inside the sender's sendto() (net.core.
+  // netdev_tstamp_prequeue, on by default), so the stamp lies between the
+  // host times read around that call.
+  link::LinkOptions u;
+  u.kind = link::LinkKind::udp;
+  u.endpoint = {0x7F000001u, 0};
+  auto made = link::ByteLink::create(u);
+  ASSERT_TRUE(made.link);
+  Nanos now = 0;
+  made.link->poll(now);
+  ASSERT_EQ(made.link->state(), link::LinkState::open) << made.link->last_error();
+  const int tx = socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_addr.s_addr = htonl(0x7F000001u);
+  to.sin_port = htons(made.link->bound_port());
+  // The kernel turns its receive stamps on for the first socket that asks
+  // (net_enable_timestamp) from a work queue, a moment later: until then a
+  // datagram is stamped when read. Probe until it is on.
+  bool stamping = false;
+  for (int i = 0; i < 200 && !stamping; ++i) {
+    sendto(tx, "probe", 5, 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+    const std::int64_t probe_sent = host_now_ns();
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!poll_bytes(*made.link, now).empty() && made.link->receive_ns() <= probe_sent) stamping = true;
+  }
+  ASSERT_TRUE(stamping) << "no datagram in 2 s carried a kernel stamp from before its read";
+  std::int64_t sent_after = 0;
+  for (const char* d : {"$TNIMU,1\r\n", "$TNIMU,2\r\n"}) {
+    sendto(tx, d, std::strlen(d), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+    sent_after = host_now_ns();  // the newest datagram's stamp is before this
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const std::int64_t read_from = host_now_ns();
+  EXPECT_EQ(poll_bytes(*made.link, now), "$TNIMU,1\r\n$TNIMU,2\r\n");
+  EXPECT_LE(made.link->receive_ns(), sent_after);
+  EXPECT_GE(read_from - made.link->receive_ns(), 200'000'000) << "stamped when read, not when it arrived";
+  ::close(tx);
 }
 
 namespace {

@@ -141,6 +141,21 @@ TEST(GyroOdometry, WithoutAnImuTheWheelsPoseIsAMeasuredOne) {
   EXPECT_TRUE(odo.pose().translation_valid);
 }
 
+// A robot with an IMU whose first reading has not come yet (the device still
+// starting): the wheels' pose is a stand-in, not a measured rotation.
+TEST(GyroOdometry, WithAnImuConfiguredTheWheelsAloneAreNotAMeasuredRotationBeforeItSpeaks) {
+  GyroOdometryOptions o;
+  o.imu_expected = true;
+  GyroOdometry odo(o);
+  for (int k = 0; k <= 50; ++k) odo.add_wheels(wheels(kStart + ms(10.0 * k), 1.0, 0.1));
+  EXPECT_EQ(odo.pose().source, PoseSource::wheels_only);
+  EXPECT_FALSE(odo.pose().rotation_valid);
+  EXPECT_TRUE(odo.pose().translation_valid);
+  odo.add_imu(attitude(kStart + ms(510.0), 0.1));
+  EXPECT_TRUE(odo.pose().rotation_valid);
+  EXPECT_EQ(odo.pose().source, PoseSource::gyro_odometry);
+}
+
 TEST(UtmAlignment, FindsTheTransformDespiteOutliersAndFollowsAJump) {
   UtmAlignmentOptions o;
   o.zone = 32;
@@ -328,4 +343,50 @@ TEST(PoseTask, ASilentIMULetsTheHeldWheelReadingsGo) {
   EXPECT_GT(s.odometry_counters.wheel_steps, 30u);
   EXPECT_EQ(s.local.source, PoseSource::wheels_only);
   EXPECT_NEAR(s.local.distance, 0.49, 1e-9);
+}
+
+// At start-up the CAN bus can speak before the IMU (the device starting, its
+// thread late on a busy core). The wheel readings wait for the IMU's first
+// readings as they wait for late ones: the odometry starts on the IMU's
+// heading, and no pose is turned by the wheels' yaw rate alone.
+TEST(PoseTask, WheelReadingsBeforeTheIMUsFirstOneWaitForIt) {
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+  PoseEstimatorOptions o;
+  PoseTask task(o, &imu_queue, &wheel_queue, nullptr);
+  const double rate = 0.5;  // rad/s
+  push_wheels(wheel_queue, 0, 300);
+  task.run(TaskTick{0, 0, ms(100)});
+  task.run(TaskTick{1, 0, ms(900)});  // 0.8 s without the IMU: still waited for (imu_wait 3 s)
+  EXPECT_EQ(task.status().wheels_held, 30u);
+  EXPECT_EQ(task.status().odometry_counters.wheel_steps, 0u);
+  push_imu(imu_queue, 0, 300, rate);
+  task.run(TaskTick{2, 0, ms(1000)});
+  const PoseTaskStatus s = task.status();
+  EXPECT_EQ(s.odometry_counters.imu_steps, 30u);
+  EXPECT_EQ(s.odometry_counters.wheel_steps, 1u);  // the first reading (t = 0, before the IMU's) starts the odometry
+  EXPECT_EQ(s.odometry_counters.gaps, 0u);
+  EXPECT_EQ(s.wheels_released_early, 0u);
+  EXPECT_NEAR(s.local.yaw, rate * 0.29, 1e-9);
+  EXPECT_TRUE(s.local.rotation_valid);
+}
+
+// An IMU configured that never speaks: after imu_wait the wheels carry the
+// pose, and it says its rotation is not measured (the map waits; health
+// names the silent IMU).
+TEST(PoseTask, AnIMUThatNeverSpeaksLetsTheWheelsGoUnmeasured) {
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+  PoseEstimatorOptions o;
+  PoseTask task(o, &imu_queue, &wheel_queue, nullptr);
+  push_wheels(wheel_queue, 0, 300);
+  task.run(TaskTick{0, 0, ms(100)});
+  EXPECT_EQ(task.status().odometry_counters.wheel_steps, 0u);
+  task.run(TaskTick{1, 0, ms(3200)});  // 3.1 s after the first wheel reading
+  const PoseTaskStatus s = task.status();
+  EXPECT_EQ(s.wheels_released_early, 30u);
+  EXPECT_EQ(s.odometry_counters.wheel_steps, 30u);
+  EXPECT_EQ(s.local.source, PoseSource::wheels_only);
+  EXPECT_FALSE(s.local.rotation_valid);
+  EXPECT_NEAR(s.local.distance, 0.29, 1e-9);
 }

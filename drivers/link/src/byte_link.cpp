@@ -7,10 +7,12 @@
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 #include <termios.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
@@ -225,6 +227,9 @@ void ByteLink::try_open(Nanos now) noexcept {
     if (options_.kind == LinkKind::udp) {
       const int one = 1;
       setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+      // The kernel stamps each datagram as it arrives, so a task that reads
+      // late (a busy core, a stall) still learns when its bytes came.
+      if (setsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof one) != 0) return fail(now, "SO_TIMESTAMPNS for", errno);
       if (::bind(fd_, reinterpret_cast<const sockaddr*>(&a), sizeof a) != 0) return fail(now, "bind", errno);
       sockaddr_in bound{};
       socklen_t len = sizeof bound;
@@ -276,6 +281,7 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
   }
   if (state_ != LinkState::open) return {};
   std::size_t got = 0;
+  std::int64_t kernel_receive_ns = 0;  // udp: the kernel's stamp of the newest datagram read
   while (got < options_.buffer_bytes) {
     ssize_t n = 0;
     if (options_.kind == LinkKind::udp) {
@@ -283,10 +289,27 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
       // returns the real length, so a datagram that was cut is known and counted.
       const std::size_t limit = options_.max_datagram_bytes;
       if (options_.buffer_bytes - got < limit) break;
-      n = ::recv(fd_, buffer_.get() + got, limit, MSG_TRUNC | MSG_DONTWAIT);
+      iovec iov{buffer_.get() + got, limit};
+      alignas(cmsghdr) std::array<std::uint8_t, CMSG_SPACE(sizeof(timespec))> control{};
+      msghdr m{};
+      m.msg_iov = &iov;
+      m.msg_iovlen = 1;
+      m.msg_control = control.data();
+      m.msg_controllen = control.size();
+      n = ::recvmsg(fd_, &m, MSG_TRUNC | MSG_DONTWAIT);
       if (n > 0 && static_cast<std::size_t>(n) > limit) {
         ++counters_.truncated;
         n = static_cast<ssize_t>(limit);
+      }
+      if (n >= 0) {
+        // The newest datagram's arrival: no byte returned arrived later.
+        for (cmsghdr* c = CMSG_FIRSTHDR(&m); c != nullptr; c = CMSG_NXTHDR(&m, c)) {
+          if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+            timespec ts{};
+            std::memcpy(&ts, CMSG_DATA(c), sizeof ts);
+            kernel_receive_ns = static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec - host_clock_step_ns();
+          }
+        }
       }
     } else if (options_.kind == LinkKind::serial) {
       // Only what the line discipline already holds. A read (or poll) of an
@@ -331,7 +354,7 @@ std::span<const std::uint8_t> ByteLink::poll(Nanos now) noexcept {
   if (got > 0) {
     counters_.bytes += got;
     last_byte_ = now;
-    receive_ns_ = host_now_ns();
+    receive_ns_ = kernel_receive_ns != 0 ? kernel_receive_ns : host_now_ns();
     current_backoff_ = options_.backoff;
     return {buffer_.get(), got};
   }

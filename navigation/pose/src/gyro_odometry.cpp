@@ -86,7 +86,8 @@ void GyroOdometry::step(std::int64_t t, double yaw_rate, double roll, double pit
   pose_.time_ns = t;
   pose_.source = source;
   pose_.translation_valid = fresh || wheel_time_ < 0;  // a robot without wheel odometry has nothing better
-  pose_.rotation_valid = source == PoseSource::gyro_odometry || last_imu_ < 0;  // nor one without an IMU
+  // Nor one without an IMU; but one whose IMU has not spoken yet waits for it.
+  pose_.rotation_valid = source == PoseSource::gyro_odometry || (last_imu_ < 0 && !options_.imu_expected);
   remember();
 }
 

@@ -28,10 +28,19 @@ void PoseEstimator::snapshot(PoseSnapshot& out) const noexcept {
   out.utm_counters = alignment_.counters();
 }
 
+namespace {
+
+PoseEstimatorOptions with_imu(PoseEstimatorOptions options, bool imu) noexcept {
+  options.odometry.imu_expected = options.odometry.imu_expected || imu;
+  return options;
+}
+
+}  // namespace
+
 PoseTask::PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReading, imu::kImuQueueCapacity>* imu,
                    SpscQueue<can::OdometryState, can::kOdometryQueueCapacity>* wheels,
                    Mailbox<gps::GpsReading>* gps)
-    : estimator_(options), imu_(imu), wheels_(wheels), gps_(gps) {}
+    : estimator_(with_imu(options, imu != nullptr)), imu_(imu), wheels_(wheels), gps_(gps) {}
 
 void PoseTask::run(const TaskTick& tick) {
   ++local_.runs;
@@ -58,9 +67,14 @@ void PoseTask::run(const TaskTick& tick) {
   // (gaps): the heading would drift. So wheel readings later than the newest
   // IMU reading wait for it (held here, across runs), as long as the IMU
   // spoke within imu_wait of host time; a silent IMU lets them go, and the
-  // wheels alone carry the pose as designed.
+  // wheels alone carry the pose as designed. Before the IMU's first reading
+  // they wait as long, from the first wheel reading on: at start-up the IMU
+  // may begin later than the CAN bus (its device starting, its thread late).
   const Nanos imu_wait = seconds_to_nanos(estimator_.options().imu_wait);
-  const bool imu_live = imu_ != nullptr && imu_arrival_ >= 0 && tick.started - imu_arrival_ <= imu_wait;
+  if (nw > 0 && first_wheels_arrival_ < 0) first_wheels_arrival_ = tick.started;
+  const bool imu_live = imu_ != nullptr && (imu_arrival_ >= 0 ? tick.started - imu_arrival_ <= imu_wait
+                                                                : first_wheels_arrival_ >= 0 &&
+                                                                      tick.started - first_wheels_arrival_ <= imu_wait);
   std::size_t usable = nw;
   if (imu_live) {
     usable = 0;

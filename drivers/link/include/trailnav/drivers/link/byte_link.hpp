@@ -84,7 +84,10 @@ class ByteLink {
   // The last failure ("open /dev/ttyUSB0: No such file or directory"); empty if none.
   const char* last_error() const noexcept { return error_.data(); }
   Nanos last_byte() const noexcept { return last_byte_; }
-  // The kernel receive time of the bytes just returned (host time, runtime/host_clock.hpp).
+  // When the bytes just returned arrived (host time, runtime/host_clock.hpp):
+  // for udp the kernel's stamp of the newest datagram among them (SO_TIMESTAMPNS),
+  // so a task that reads late still stamps them right; for serial and tcp,
+  // which carry no such stamp, the time of the read.
   std::int64_t receive_ns() const noexcept { return receive_ns_; }
   // The UDP port bound (chosen by the kernel when 0); 0 for other kinds.
   std::uint16_t bound_port() const noexcept { return bound_port_; }

@@ -52,6 +52,12 @@ struct GyroOdometryOptions {
   double standstill_speed = 0.01;  // m/s
   double standstill_yaw_rate = 0.005;  // rad/s (wheel odometry's)
   std::size_t history = 1024;      // poses kept for lookups by time (about 10 s at 100 Hz)
+  // An IMU is configured (trailnavd sets it when it runs one). Then a pose
+  // the wheels alone turned is never a measured rotation, also before the
+  // IMU's first reading: at start-up the IMU may speak later than the CAN
+  // bus, and a map made with the wheels' slipping yaw rate and continued
+  // with the IMU's would not fit together.
+  bool imu_expected = false;
 };
 
 struct GyroOdometryCounters {

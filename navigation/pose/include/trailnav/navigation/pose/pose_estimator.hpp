@@ -127,6 +127,7 @@ class PoseTask final : public Task {
   std::size_t wheels_pending_ = 0;   // held at the front of wheel_batch_, in arrival order
   std::int64_t imu_newest_ns_ = -1;  // time of the newest IMU reading taken
   Nanos imu_arrival_ = -1;           // host time of the last run that took IMU readings
+  Nanos first_wheels_arrival_ = -1;  // host time of the first run that took wheel readings
   Mailbox<PoseSnapshot> poses_;
   Mailbox<PoseSnapshot> navigation_poses_;
   std::array<perception::PoseQueue*, kMaxPoseOutputs> pose_out_{};
