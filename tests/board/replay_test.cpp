@@ -118,12 +118,28 @@ std::vector<RangeImage> replay_live(const std::string& capture, Model model, con
   return images;
 }
 
-void expect_same_revolutions(const std::vector<RangeImage>& live, const std::vector<RangeImage>& file, bool exact_time) {
-  ASSERT_EQ(live.size(), file.size());
+// The driver made as many revolutions as the offline decode (its counter),
+// and each one the reader caught is the file's of the same sequence. The
+// reader takes the newest revolution every 0.5 ms: on a loaded machine (TSan
+// beside another test) it lost its core long enough to miss 4 of 29, so
+// which ones it sees depends on scheduling; the newest, read after the
+// replay ended, it always sees.
+void expect_same_revolutions(const std::vector<RangeImage>& live, const std::vector<RangeImage>& file, bool exact_time,
+                             const DriverCounters& counters) {
   ASSERT_FALSE(file.empty());
-  for (std::size_t i = 0; i < file.size(); ++i) {
+  EXPECT_EQ(counters.assembler.revolutions, file.size());
+  ASSERT_FALSE(live.empty());
+  EXPECT_EQ(live.back().sequence, file.back().sequence);
+  std::printf("[ replay ] the reader caught %zu of the %zu revolutions\n", live.size(), file.size());
+  for (std::size_t i = 0; i < live.size(); ++i) {
     const RangeImage& a = live[i];
-    const RangeImage& b = file[i];
+    const auto same_sequence = std::find_if(file.begin(), file.end(),
+                                            [&](const RangeImage& f) { return f.sequence == a.sequence; });
+    ASSERT_NE(same_sequence, file.end()) << "revolution " << a.sequence << " is not in the file";
+    if (i > 0) {
+      EXPECT_GT(a.sequence, live[i - 1].sequence);
+    }
+    const RangeImage& b = *same_sequence;
     SCOPED_TRACE("revolution " + std::to_string(b.sequence));
     EXPECT_EQ(a.sequence, b.sequence);
     ASSERT_EQ(a.columns(), b.columns());
@@ -164,7 +180,7 @@ TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileGpsTimed) {
   EXPECT_EQ(counters.assembler.malformed, 0u);
   EXPECT_EQ(counters.time_source, TimeSource::gps);
   // GPS time depends on the packets alone: the revolutions match bit for bit, times included.
-  expect_same_revolutions(live, file, true);
+  expect_same_revolutions(live, file, true, counters);
 }
 
 TEST(Replay, ASimulatedRecordingReplaysInRealTimeIntoTheDriver) {
@@ -186,8 +202,7 @@ TEST(Replay, ASimulatedRecordingReplaysInRealTimeIntoTheDriver) {
   EXPECT_EQ(counters.time_source, TimeSource::gps);
   EXPECT_GE(wall, 2.9);
   EXPECT_LT(wall, 4.5);
-  EXPECT_GE(live.size(), 28u);
-  expect_same_revolutions(live, file, true);
+  expect_same_revolutions(live, file, true, counters);
   fs::remove_all(dir);
 }
 
@@ -300,7 +315,7 @@ TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileHostTimed) {
   EXPECT_EQ(counters.assembler.lost_packets, 0u);
   EXPECT_EQ(counters.time_source, TimeSource::host);
   // Host time: absolute times differ (live is now, the file is 2013), the rest is identical.
-  expect_same_revolutions(live, file, false);
+  expect_same_revolutions(live, file, false, counters);
 }
 
 TEST(Replay, SerialAndCanStreamsArriveIntact) {
