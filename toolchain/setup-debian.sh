@@ -11,6 +11,7 @@ packages=(
   clang clang-format clang-tidy libclang-rt-14-dev
   # libraries
   libeigen3-dev
+  libsuitesparse-dev
   cyclonedds-dev cyclonedds-tools
   libgeographiclib-dev
   libgpiod-dev gpiod

@@ -1,0 +1,77 @@
+// The exact solver: Levenberg–Marquardt on Eq. 2.3 (min Σ e_ijᵀ Ω_ij e_ij),
+// each step solving (H + λI) δ = −g with H = Σ Jᵀ Ω J and g = Σ Jᵀ Ω e,
+// assembled block by block into the upper triangle of a sparse matrix and
+// factorised by SparseCholesky. λ starts at 1e-5 × the largest diagonal entry
+// of H and follows the gain ratio ρ (actual over predicted decrease): a step
+// with ρ > 0 is taken and λ ×= max(1/3, 1 − (2ρ − 1)³); otherwise it is undone
+// and λ grows by ν, ν doubling (Nielsen's rule, as g2o's).
+//
+// The gauge: fixed vertices (FIX) are constants; a graph with none has its
+// first vertex held, which changes the poses by one rigid motion and χ² not
+// at all.
+//
+// Stopping: when a taken step lowers χ² by less than `relative_tolerance` of
+// it (Ceres' function tolerance, so that the side-by-side stops alike), after
+// `max_iterations` steps, or when λ has grown past 1e30 (no step lowers χ²:
+// a minimum within the float precision).
+//
+// Memory: every array is reserved for the capacity given at construction
+// (vertices, edges); the factorisation lives in the Arena. Solving any graph
+// within the capacity allocates nothing more on the heap.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "trailnav/navigation/slam/pose_graph.hpp"
+#include "trailnav/navigation/slam/sparse_cholesky.hpp"
+
+namespace trailnav::slam {
+
+struct LmOptions {
+  int max_iterations = 500;  // ETHCampus from its odometry guess takes about 220
+  double relative_tolerance = 1e-6;
+};
+
+struct LmReport {
+  bool ok = false;
+  std::string error;
+  double initial_chi2 = 0.0;
+  double chi2 = 0.0;
+  int iterations = 0;        // steps tried (taken or not)
+  int steps_taken = 0;
+  bool converged = false;    // stopped by the tolerance (not the iteration limit)
+  int variables = 0;         // rows of H
+  double factor_nonzeros = 0.0;
+};
+
+template <class Pose>
+class LmSolver {
+ public:
+  static constexpr int kDim = Pose::kDim;
+  LmSolver(GraphCapacity capacity, Arena& arena);
+
+  // Optimises `graph`'s poses in place. `held` (may be empty) marks vertices
+  // held constant beside the graph's own fixed ones (the refinement of a part
+  // holds its separators).
+  LmReport solve(PoseGraph<Pose>& graph, const LmOptions& options, const std::vector<std::uint8_t>& held = {});
+
+ private:
+  bool structure(const PoseGraph<Pose>& graph, const std::vector<std::uint8_t>& held, std::string& error);
+  double assemble(const PoseGraph<Pose>& graph);  // H, g, returns χ²
+
+  GraphCapacity capacity_;
+  SparseCholesky cholesky_;
+  std::vector<std::int32_t> variable_;   // per vertex: its variable index, −1 when constant
+  std::vector<std::int32_t> pair_;       // per edge: index of its off-diagonal block in the column's list, −1 none
+  std::vector<std::uint64_t> pairs_;     // scratch: (column var << 32 | row var) of off-diagonal blocks
+  std::vector<int> colptr_, rows_;
+  std::vector<int> upper_;               // per variable: off-diagonal blocks above its diagonal block
+  std::vector<double> gradient_, rhs_, step_;
+  std::vector<Pose> backup_;
+  std::vector<double> diagonal_;         // H's diagonal before damping
+};
+
+}  // namespace trailnav::slam

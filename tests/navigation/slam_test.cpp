@@ -1,0 +1,200 @@
+// The pose-graph library: poses and their Jacobians, g2o reading and
+// writing with its errors, the arena, and the exact solver on the thesis'
+// own graphs (../shared/data/g2o, Table 3.1).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "trailnav/navigation/slam/arena.hpp"
+#include "trailnav/navigation/slam/g2o_io.hpp"
+#include "trailnav/navigation/slam/lm_solver.hpp"
+
+namespace trailnav::slam {
+namespace {
+
+const std::string kData = "../shared/data/g2o/";
+constexpr GraphCapacity kCapacity{20000, 40000};
+
+// Central differences of the edge error with respect to each increment.
+template <class Pose>
+void numeric_jacobians(const Pose& z, const Pose& xi, const Pose& xj, typename Pose::Matrix& ji, typename Pose::Matrix& jj) {
+  constexpr double h = 1e-6;
+  for (int k = 0; k < Pose::kDim; ++k) {
+    typename Pose::Vector d = Pose::Vector::Zero();
+    d[k] = h;
+    ji.col(k) = (edge_error(z, xi.plus(d), xj) - edge_error(z, xi.plus(-d), xj)) / (2 * h);
+    jj.col(k) = (edge_error(z, xi, xj.plus(d)) - edge_error(z, xi, xj.plus(-d))) / (2 * h);
+  }
+}
+
+Se3 random_se3(std::mt19937& rng, double scale) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Se3 x;
+  x.t = Eigen::Vector3d(u(rng), u(rng), u(rng)) * scale;
+  x.q = Eigen::Quaterniond(Eigen::AngleAxisd(3.0 * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()));
+  return x;
+}
+
+TEST(SlamPoses, Se2JacobiansMatchNumericDifferences) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    const Se2 z{u(rng), u(rng), u(rng)}, xi{u(rng), u(rng), u(rng)};
+    const Se2 xj = xi * z * Se2{0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng)};  // near the measurement: no wrap in between
+    EdgeLinearisation<Se2> lin;
+    linearise(z, xi, xj, lin);
+    Se2::Matrix ji, jj;
+    numeric_jacobians(z, xi, xj, ji, jj);
+    EXPECT_LT((lin.ji - ji).cwiseAbs().maxCoeff(), 1e-6) << trial;
+    EXPECT_LT((lin.jj - jj).cwiseAbs().maxCoeff(), 1e-6) << trial;
+  }
+}
+
+TEST(SlamPoses, Se3JacobiansMatchNumericDifferences) {
+  std::mt19937 rng(4);
+  for (int trial = 0; trial < 50; ++trial) {
+    const Se3 z = random_se3(rng, 3.0), xi = random_se3(rng, 5.0);
+    // Far from the measurement too: the error's rotation part is large.
+    const Se3 xj = xi * z * random_se3(rng, trial < 25 ? 0.1 : 1.0);
+    EdgeLinearisation<Se3> lin;
+    linearise(z, xi, xj, lin);
+    Se3::Matrix ji, jj;
+    numeric_jacobians(z, xi, xj, ji, jj);
+    EXPECT_LT((lin.ji - ji).cwiseAbs().maxCoeff(), 1e-6) << trial;
+    EXPECT_LT((lin.jj - jj).cwiseAbs().maxCoeff(), 1e-6) << trial;
+  }
+}
+
+TEST(SlamG2o, ReadsTheThesisGraphs) {
+  struct Case {
+    const char* file;
+    GraphKind kind;
+    std::size_t vertices, edges;
+  };
+  for (const Case& c : {Case{"se-sync_intel_suger.g2o", GraphKind::planar, 1728, 2512},
+                        Case{"se-sync_ETHCampus_suger.g2o", GraphKind::planar, 7065, 7427},
+                        Case{"se-sync_m3500.g2o", GraphKind::planar, 3500, 5598},
+                        Case{"se-sync_sphere2500.g2o", GraphKind::spatial, 2500, 4949}}) {
+    G2oGraph g;
+    const G2oReadResult r = read_g2o_file(kData + c.file, kCapacity, g);
+    ASSERT_TRUE(r.ok) << r.error;
+    EXPECT_EQ(g.kind, c.kind) << c.file;
+    EXPECT_EQ(g.vertex_count(), c.vertices) << c.file;
+    EXPECT_EQ(g.edge_count(), c.edges) << c.file;
+  }
+}
+
+TEST(SlamG2o, WrittenAndReadBackIsTheSameBits) {
+  for (const char* file : {"se-sync_intel_suger.g2o", "se-sync_sphere2500.g2o"}) {
+    G2oGraph g, back;
+    ASSERT_TRUE(read_g2o_file(kData + file, kCapacity, g).ok);
+    const std::string text = write_g2o(g);
+    const G2oReadResult r = read_g2o(text, "written", kCapacity, back);
+    ASSERT_TRUE(r.ok) << r.error;
+    EXPECT_EQ(write_g2o(back), text) << file;
+  }
+}
+
+TEST(SlamG2o, EveryMalformedLineIsNamedWithItsLine) {
+  struct Case {
+    std::string text, message;
+  };
+  const std::vector<Case> cases = {
+      {"VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0\n", "in.g2o:2: VERTEX_SE2 takes 4 fields after the tag, found 3"},
+      {"VERTEX_SE2 0 0 0 zero\n", "in.g2o:1: field 'zero' is not a number"},
+      {"VERTEX_SE2 0 0 0 nan\n", "in.g2o:1: field 'nan' is not finite"},
+      {"VERTEX_SE2 x 0 0 0\n", "in.g2o:1: vertex id 'x' is not a whole number"},
+      {"VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 -1\n",
+       "in.g2o:3: the information matrix is not positive definite"},
+      {"VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 7 1 0 0 1 0 0 1 0 1\n", "in.g2o:2: the edge names vertex 7, which the file never gives"},
+      {"VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 0 1 0 0 1 0 0 1 0 1\n", "in.g2o:2: the edge joins vertex 0 to itself"},
+      {"VERTEX_SE2 0 0 0 0\nVERTEX_SE2 0 1 0 0\n", "in.g2o: vertex 0 is given twice"},
+      {"VERTEX_SE2 0 0 0 0\nFIX 3\n", "in.g2o:2: FIX names vertex 3, which the file never gives"},
+      {"VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0 1\n", "in.g2o:2: a SE(3) element in a file of SE(2) elements"},
+      {"VERTEX_SE3:QUAT 1 0 0 0 0 0 0 2\n", "in.g2o:1: the quaternion's norm is 2, not 1"},
+      {"VERTEX_XY 1 0 0\n", "in.g2o:1: 'VERTEX_XY' is not read by trailnav"},
+      {"# nothing\n\n", "in.g2o: no vertex and no edge in the file"},
+  };
+  for (const Case& c : cases) {
+    G2oGraph g;
+    const G2oReadResult r = read_g2o(c.text, "in.g2o", kCapacity, g);
+    EXPECT_FALSE(r.ok) << c.text;
+    EXPECT_EQ(r.error.rfind(c.message, 0), 0u) << "got: " << r.error << "\nwanted: " << c.message;
+  }
+  G2oGraph g;
+  const G2oReadResult r = read_g2o("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nVERTEX_SE2 2 0 0 0\n", "in.g2o", {2, 2}, g);
+  EXPECT_EQ(r.error, "in.g2o:3: more vertices than the capacity of 2");
+}
+
+TEST(SlamArena, HandsOutAlignedBlocksMergesFreedOnesAndRefusesWhenFull) {
+  Arena a(1 << 16);
+  std::vector<void*> blocks;
+  for (int i = 0; i < 10; ++i) {
+    void* p = a.allocate(1000);
+    ASSERT_NE(p, nullptr);
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(p) % 16, 0u);
+    EXPECT_TRUE(a.owns(p));
+    blocks.push_back(p);
+  }
+  const std::size_t peak = a.in_use();
+  EXPECT_EQ(a.high_water(), peak);
+  for (void* p : blocks) a.release(p);
+  EXPECT_EQ(a.in_use(), 0u);
+  // Everything merged back: one block of nearly the whole arena fits again.
+  void* big = a.allocate((1 << 16) - 64);
+  ASSERT_NE(big, nullptr);
+  EXPECT_EQ(a.allocate(16), nullptr);
+  EXPECT_EQ(a.failures(), 1u);
+  a.release(big);
+  // realloc keeps the contents.
+  auto* p = static_cast<int*>(a.allocate(4 * sizeof(int)));
+  for (int i = 0; i < 4; ++i) p[i] = i * 7;
+  void* filler = a.allocate(64);
+  auto* q = static_cast<int*>(a.reallocate(p, 1000 * sizeof(int)));
+  ASSERT_NE(q, nullptr);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(q[i], i * 7);
+  a.release(q);
+  a.release(filler);
+  EXPECT_EQ(a.in_use(), 0u);
+  EXPECT_EQ(a.high_water(), peak > a.high_water() ? peak : a.high_water());
+}
+
+struct Exact {
+  const char* file;
+  double chi2;  // thesis Table 3.1, the exact solvers' column
+};
+
+TEST(SlamExactSolver, ReachesTheExactChi2OfTable31) {
+  for (const Exact& c : {Exact{"se-sync_intel_suger.g2o", 45.0}, Exact{"se-sync_ETHCampus_suger.g2o", 25.0},
+                         Exact{"se-sync_m3500.g2o", 146.1}}) {
+    G2oGraph g;
+    ASSERT_TRUE(read_g2o_file(kData + c.file, kCapacity, g).ok);
+    Arena arena(256u << 20);
+    LmSolver<Se2> solver(kCapacity, arena);
+    const LmReport r = solver.solve(g.planar, LmOptions{});
+    ASSERT_TRUE(r.ok) << r.error;
+    std::printf("[ slam ] %s: chi2 %.4f -> %.4f in %d iterations (%d taken), arena high water %.1f MiB\n", c.file,
+                r.initial_chi2, r.chi2, r.iterations, r.steps_taken, static_cast<double>(arena.high_water()) / (1 << 20));
+    EXPECT_NEAR(r.chi2, c.chi2, 0.005 * c.chi2) << c.file;
+    EXPECT_NEAR(g.planar.chi2(), r.chi2, 1e-9 * r.chi2);
+  }
+}
+
+TEST(SlamExactSolver, Sphere2500ConvergesIn3d) {
+  G2oGraph g;
+  ASSERT_TRUE(read_g2o_file(kData + "se-sync_sphere2500.g2o", kCapacity, g).ok);
+  Arena arena(256u << 20);
+  LmSolver<Se3> solver(kCapacity, arena);
+  const LmReport r = solver.solve(g.spatial, LmOptions{});
+  ASSERT_TRUE(r.ok) << r.error;
+  std::printf("[ slam ] sphere2500: chi2 %.4f -> %.4f in %d iterations, arena high water %.1f MiB\n", r.initial_chi2, r.chi2,
+              r.iterations, static_cast<double>(arena.high_water()) / (1 << 20));
+  EXPECT_TRUE(r.converged);
+  EXPECT_LT(r.chi2, r.initial_chi2);
+}
+
+}  // namespace
+}  // namespace trailnav::slam
