@@ -233,20 +233,13 @@ FaultRun run_with_faults(const std::vector<std::string>& faults, double seconds 
   EXPECT_TRUE(maps.subscriber && poses.subscriber && utm.subscriber && health.subscriber);
   if (!(maps.subscriber && poses.subscriber && utm.subscriber && health.subscriber)) return out;
 
-  // The drive starts once the daemon is up: its first health message comes
-  // after the real-time tasks have run and opened their links (the IMU's and
-  // the GPS's sockets are bound by their tasks' first runs). Under a sanitizer,
-  // with another daemon starting on the other core, start-up took longer than
-  // a fixed delay, and the first second of IMU datagrams went to a port no
-  // one had bound yet.
-  {
+  // The drive starts once the daemon is up (its first health; see
+  // BenchDaemon::wait_until_up), then 0.5 s for discovery to settle.
+  EXPECT_TRUE(bench->wait_until_up([&](double wait_s) {
     bool up = false;
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (!up && std::chrono::steady_clock::now() < give_up && ::kill(bench->pid(), 0) == 0) {
-      health.subscriber->take(0.1, [&](const dds::ReceivedSample&) { up = true; });
-    }
-    EXPECT_TRUE(up) << "no health from trailnavd within 60 s of its start";
-  }
+    health.subscriber->take(wait_s, [&](const dds::ReceivedSample&) { up = true; });
+    return up;
+  })) << "no health from trailnavd within 60 s of its start";
   bench->start_replay(0.5);
   std::map<std::int64_t, bool> map_stamps;
   struct Pending {

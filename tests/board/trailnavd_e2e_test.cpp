@@ -258,7 +258,17 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   std::map<std::int64_t, std::vector<std::int8_t>> received;
   std::map<std::int64_t, std::vector<std::uint8_t>> terrain_received;  // class ids then confidences
   DurationHistogram latency;
-  bench->start_replay(1.5);  // the daemon opens its links and discovery settles meanwhile
+  // The drive starts once the daemon is up (its first health; see
+  // BenchDaemon::wait_until_up), then 0.5 s for discovery to settle.
+  EXPECT_TRUE(bench->wait_until_up([&](double wait_s) {
+    bool up = false;
+    health.subscriber->take(wait_s, [&](const dds::ReceivedSample&) {
+      up = true;
+      ++out.health;
+    });
+    return up;
+  })) << "no health from trailnavd within 60 s of its start";
+  bench->start_replay(0.5);
   double cpu_at_start = -1.0;
   std::chrono::steady_clock::time_point replay_started;
   auto take_all = [&](double wait) {

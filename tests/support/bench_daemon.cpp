@@ -179,6 +179,14 @@ BenchDaemon::~BenchDaemon() {
   fs::remove_all(dir_);
 }
 
+bool BenchDaemon::wait_until_up(const std::function<bool(double wait_s)>& arrived, double timeout_s) const {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < give_up && ::kill(pid_, 0) == 0) {
+    if (arrived(0.1)) return true;
+  }
+  return false;
+}
+
 void BenchDaemon::start_replay(double delay_s) {
   replay::ReplayOptions ro;
   const auto port = [&](int k) { return static_cast<std::uint16_t>(base_port_ + k); };

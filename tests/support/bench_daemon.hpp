@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <thread>
@@ -74,6 +75,15 @@ class BenchDaemon {
   // Replays the recording on a thread after `delay_s` (the daemon opens its
   // links and DDS discovery settles meanwhile).
   void start_replay(double delay_s = 1.5);
+  // Waits until the daemon is up: `arrived(wait_s)` takes what came on the
+  // test's own subscriber to `diagnostics` (any DDS), waiting up to wait_s,
+  // and says whether a health message was among it. The first one comes after
+  // the real-time tasks have run and opened their links (the IMU's and GPS's
+  // sockets are bound in their tasks' first runs): a drive replayed before
+  // that loses its first datagrams, as a fixed delay did under a sanitizer
+  // with another daemon starting on the other core. False when none came
+  // within `timeout_s` or the daemon exited.
+  bool wait_until_up(const std::function<bool(double wait_s)>& arrived, double timeout_s = 60.0) const;
   bool replaying() const noexcept { return replaying_.load(); }
   void join_replay();
   // What the replayer did (after join_replay()); its error when it could not start.
