@@ -11,7 +11,7 @@ packages=(
   clang clang-format clang-tidy libclang-rt-14-dev
   # libraries
   libeigen3-dev
-  libsuitesparse-dev
+  libsuitesparse-dev libmetis-dev
   cyclonedds-dev cyclonedds-tools
   libgeographiclib-dev
   libgpiod-dev gpiod

@@ -1,0 +1,105 @@
+// The thesis' small-memory-footprint method (SMF, chapter 3): the graph is
+// cut into parts of at most `max_part` vertices (§3.1.1), each part is solved
+// on its own and replaced, for the level above, by a tree of virtual
+// measurements between its separators (§3.1.2, Eq. 3.10–3.11), the levels
+// above are built the same way until one fits in a part, that top level is
+// solved, and then, level by level down, every part's interior is solved
+// again with its separators held (§3.1.3). No solve ever sees more than one
+// part: the linear algebra is bounded by max_part whatever the graph.
+//
+// What the thesis leaves open, decided here (docs/slam.md):
+//   - Gauge of a part while coarsening: its root is held at its current
+//     pose (a vertex the file fixes if the part has one, else its first
+//     separator, else its first vertex). The virtual measurements are
+//     relative poses, the same whichever vertex is held.
+//   - Vertices the file fixes are separators at every level, so they reach
+//     the top and keep their poses there and on the way down.
+//   - The virtual measurement of a tree path from separator a to separator s
+//     is x̂_a⁻¹ x̂_s (Eq. 3.10: the compound of the optimised relative poses
+//     along the path telescopes to it); its covariance (Eq. 3.11) is the
+//     edges' covariances propagated along the path to first order, each
+//     moved into a's frame by the adjoint of the path so far and the sum
+//     then into s's: Σ* = Ad(z*⁻¹) (Σ_k Ad(P_k) Σ'_k Ad(P_k)ᵀ) Ad(z*⁻¹)ᵀ with
+//     P_k = x̂_a⁻¹ x̂_k and Σ'_k an edge's covariance on the right of the
+//     direction travelled.
+//   - Stopping rule for levels: a level of at most max_part vertices is
+//     the top. A level that does not shrink (as many separators as
+//     vertices) is an error naming the level, not an endless loop.
+//   - Warm starts: each part's solve starts from the poses the level holds
+//     (the file's guess at the bottom, the parts' solutions above; on the
+//     way down, the interior keeps its coarsening solution and only the
+//     separators move), so each solve after the first is short.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "trailnav/navigation/slam/lm_solver.hpp"
+#include "trailnav/navigation/slam/pose_graph.hpp"
+
+namespace trailnav::slam {
+
+class Arena;
+
+struct SmfOptions {
+  int max_part = 500;             // vertices of a part (the thesis: 500)
+  std::size_t max_part_edges = 0; // edges a part's solve holds (0: 20 × max_part)
+  int max_levels = 64;
+  LmOptions lm;                   // every part's and the top's solve
+};
+
+struct SmfLevel {
+  std::size_t vertices = 0, edges = 0;
+  int parts = 0;  // 1 at the top
+};
+
+struct SmfReport {
+  bool ok = false;
+  std::string error;
+  double initial_chi2 = 0.0;
+  double chi2 = 0.0;          // of the whole graph at the end
+  int levels = 0;             // including the bottom (1: the graph fit in one part)
+  std::vector<SmfLevel> level; // bottom first
+  int part_solves = 0;
+  int iterations = 0;          // LM steps over all solves
+};
+
+template <class Pose>
+class SmfSolver {
+ public:
+  // `capacity`: the largest graph to be solved; `arena` holds the parts'
+  // factorisations (sized for one part).
+  SmfSolver(GraphCapacity capacity, const SmfOptions& options, Arena& arena);
+  SmfReport solve(PoseGraph<Pose>& graph);
+
+ private:
+  struct Level {
+    PoseGraph<Pose>* graph = nullptr;
+    PoseGraph<Pose> owned;                 // levels above the bottom
+    std::vector<std::int32_t> below;       // per vertex: its index in the level below
+    std::vector<std::int32_t> part;        // per vertex: its part
+    std::vector<std::uint8_t> separator;
+    std::vector<std::int32_t> order, start;  // vertices by part
+    std::vector<std::int32_t> edge_order, edge_start;  // internal edges by part
+    int parts = 0;
+  };
+  bool coarsen(Level& level, Level& above, SmfReport& report);
+  // Solves part p of `level` with `held` vertices constant (level indices
+  // marked in held_); copies the solution back.
+  bool solve_part(Level& level, int p, SmfReport& report);
+  void virtual_edges(Level& level, int p, std::vector<GraphEdge<Pose>>& out);
+
+  GraphCapacity capacity_;
+  SmfOptions options_;
+  LmSolver<Pose> part_solver_;
+  PoseGraph<Pose> part_graph_;
+  std::vector<std::int32_t> local_;      // level index -> part-local index (−1 none)
+  std::vector<std::uint8_t> held_;        // per level vertex, for solve_part
+  std::vector<std::uint8_t> part_held_;   // per part-local vertex
+  std::vector<Level> levels_;
+  std::vector<Pose> moved_;               // per level vertex: how the level above moved a separator
+};
+
+}  // namespace trailnav::slam
