@@ -12,6 +12,7 @@
 #include "trailnav/navigation/slam/compare.hpp"
 #include "trailnav/navigation/slam/g2o_io.hpp"
 #include "trailnav/navigation/slam/lm_solver.hpp"
+#include "trailnav/navigation/slam/manhattan.hpp"
 #include "trailnav/navigation/slam/smf.hpp"
 
 namespace trailnav::slam {
@@ -263,6 +264,39 @@ TEST(SlamCompare, ARigidMotionOfASolutionIsNoError) {
   b.planar.pose(100).x += 0.5;  // one vertex moved: its edges show it
   const EdgeErrorStats moved = compare_graphs(a.planar, b.planar);
   EXPECT_NEAR(moved.max, 0.5, 1e-6);
+}
+
+
+// Simulated truth: the generator's own noise-free poses.
+TEST(SlamManhattan, SameSeedSameGraphAndTheSolutionIsStatisticallyConsistent) {
+  ManhattanOptions o;
+  o.nodes = 3000;
+  o.seed = 7;
+  PoseGraph2d a({o.nodes, 4 * o.nodes}), b({o.nodes, 4 * o.nodes}), truth({o.nodes, 4 * o.nodes});
+  ASSERT_TRUE(generate_manhattan(o, a, &truth).ok);
+  ASSERT_TRUE(generate_manhattan(o, b).ok);
+  EXPECT_EQ(write_g2o(a), write_g2o(b));
+  const double per_vertex = static_cast<double>(a.edge_count()) / static_cast<double>(a.vertex_count());
+  EXPECT_GT(per_vertex, 2.8);  // the thesis' 200,000-pose worlds: 3.2 on average
+  EXPECT_LT(per_vertex, 3.5);
+  o.seed = 8;
+  ASSERT_TRUE(generate_manhattan(o, b).ok);
+  EXPECT_NE(write_g2o(a), write_g2o(b));
+
+  const EdgeErrorStats before = compare_graphs(a, truth);
+  Arena arena(128u << 20);
+  LmSolver<Se2> solver({o.nodes, 4 * o.nodes}, arena);
+  const LmReport r = solver.solve(a, LmOptions{});
+  ASSERT_TRUE(r.ok) << r.error;
+  // At the minimum, χ² of Gaussian noise is about the residual degrees of
+  // freedom: 3 per edge less 3 per free vertex.
+  const double dof = 3.0 * static_cast<double>(a.edge_count()) - 3.0 * static_cast<double>(a.vertex_count() - 1);
+  EXPECT_NEAR(r.chi2, dof, 0.05 * dof);
+  const EdgeErrorStats after = compare_graphs(a, truth);
+  std::printf("[ slam ] manhattan 3000: %zu edges, chi2 %.0f (dof %.0f); per-edge error to the truth mean %.4f -> %.4f m\n",
+              a.edge_count(), r.chi2, dof, before.mean, after.mean);
+  EXPECT_LT(after.mean, before.mean / 5.0);
+  EXPECT_LT(after.max, 0.5);
 }
 
 }  // namespace
