@@ -20,5 +20,6 @@ void add_echo_command(CLI::App& app);
 void add_terrain_commands(CLI::App& app);
 void add_route_command(CLI::App& app);
 void add_subgoal_eval_command(CLI::App& app);
+void add_pose_graph_command(CLI::App& app);
 
 }  // namespace trailnav::cli

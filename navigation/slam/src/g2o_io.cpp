@@ -115,11 +115,14 @@ const char* graph_kind_name(GraphKind k) noexcept {
   return "?";
 }
 
-G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapacity capacity, G2oGraph& out) {
+namespace {
+
+// The parser proper: `next_line` hands out the lines one by one (false at
+// the end), so a file is read as a stream and never held whole.
+template <class NextLine>
+G2oReadResult read_lines(NextLine&& next_line, const std::string& name, GraphCapacity capacity, G2oGraph& out) {
   G2oReadResult result;
   out.kind = GraphKind::none;
-  out.planar.reserve(capacity);
-  out.spatial.reserve(capacity);
   out.planar.clear();
   out.spatial.clear();
   Parser p{name, 0, {}};
@@ -127,7 +130,14 @@ G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapa
   pending.reserve(capacity.edges);
   std::vector<std::pair<std::int64_t, std::size_t>> fixes;  // id, line
   auto kind = [&](GraphKind k) {
-    if (out.kind == GraphKind::none) out.kind = k;
+    if (out.kind == GraphKind::none) {
+      out.kind = k;
+      if (k == GraphKind::spatial) {
+        out.spatial.reserve(capacity);
+      } else {
+        out.planar.reserve(capacity);
+      }
+    }
     if (out.kind != k) {
       return p.fail(std::string("a ") + graph_kind_name(k) + " element in a file of " + graph_kind_name(out.kind) +
                     " elements: one file holds one kind");
@@ -151,12 +161,8 @@ G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapa
   auto vertex_full = [&] { return p.fail("more vertices than the capacity of " + std::to_string(capacity.vertices)); };
   auto edge_full = [&] { return p.fail("more edges than the capacity of " + std::to_string(capacity.edges)); };
 
-  std::size_t pos = 0;
-  while (pos < text.size()) {
-    std::size_t end = text.find('\n', pos);
-    if (end == std::string_view::npos) end = text.size();
-    const std::string_view line = text.substr(pos, end - pos);
-    pos = end + 1;
+  std::string_view line;
+  while (next_line(line)) {
     ++p.line;
     const Tokens t = split(line);
     if (t.count == 0 || t.token[0][0] == '#') continue;
@@ -279,10 +285,10 @@ G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapa
       edge.to = b;
     }
   }
-  for (const auto& [id, line] : fixes) {
+  for (const auto& [id, fix_line] : fixes) {
     if (!p.error.empty()) break;
     const std::int32_t a = find(id);
-    p.line = line;
+    p.line = fix_line;
     if (a < 0) {
       p.fail("FIX names vertex " + std::to_string(id) + ", which the file never gives");
       break;
@@ -305,6 +311,21 @@ G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapa
   return result;
 }
 
+}  // namespace
+
+G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapacity capacity, G2oGraph& out) {
+  std::size_t pos = 0;
+  auto next_line = [&](std::string_view& line) {
+    if (pos >= text.size()) return false;
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string_view::npos) end = text.size();
+    line = text.substr(pos, end - pos);
+    pos = end + 1;
+    return true;
+  };
+  return read_lines(next_line, name, capacity, out);
+}
+
 G2oReadResult read_g2o_file(const std::string& path, GraphCapacity capacity, G2oGraph& out) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
@@ -312,9 +333,37 @@ G2oReadResult read_g2o_file(const std::string& path, GraphCapacity capacity, G2o
     r.error = path + ": cannot open for reading";
     return r;
   }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return read_g2o(ss.str(), path, capacity, out);
+  std::string buffer;
+  auto next_line = [&](std::string_view& line) {
+    if (!std::getline(in, buffer)) return false;
+    line = buffer;
+    return true;
+  };
+  G2oReadResult r = read_lines(next_line, path, capacity, out);
+  if (r.ok && in.bad()) {
+    r.ok = false;
+    r.error = path + ": read error after line " + std::to_string(r.lines);
+  }
+  return r;
+}
+
+G2oCounts count_g2o_file(const std::string& path) {
+  G2oCounts c;
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    c.error = path + ": cannot open for reading";
+    return c;
+  }
+  std::string line;
+  while (std::getline(in, line)) {
+    std::size_t i = 0;
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t')) ++i;
+    if (line.compare(i, 7, "VERTEX_") == 0) ++c.vertices;
+    if (line.compare(i, 5, "EDGE_") == 0) ++c.edges;
+  }
+  c.ok = !in.bad();
+  if (!c.ok) c.error = path + ": read error";
+  return c;
 }
 
 namespace {

@@ -165,6 +165,7 @@ LmReport LmSolver<Pose>::solve(PoseGraph<Pose>& graph, const LmOptions& options,
   (void)nvars;
   backup_.resize(graph.vertex_count());
   while (report.iterations < options.max_iterations) {
+    if (options.progress && report.iterations > 0) options.progress(report.iterations, chi2);
     ++report.iterations;
     for (std::size_t i = 0; i < dims; ++i) h[diagonal_index(i)] = diagonal_[i] + lambda;
     std::string error;

@@ -113,6 +113,8 @@ bool SmfSolver<Pose>::solve_part(Level& level, int p, SmfReport& report) {
   }
   ++report.part_solves;
   report.iterations += r.iterations;
+  work_done_ += static_cast<double>(part_graph_.vertex_count());
+  if (options_.progress) options_.progress(std::min(0.99, work_done_ / work_total_));
   for (std::size_t k = 0; k < part_graph_.vertex_count(); ++k) {
     const auto v = static_cast<std::size_t>(part_graph_.id(k));
     g.pose(v) = part_graph_.pose(k);
@@ -325,6 +327,8 @@ SmfReport SmfSolver<Pose>::solve(PoseGraph<Pose>& graph) {
   levels_.clear();
   levels_.emplace_back();
   levels_[0].graph = &graph;
+  work_done_ = 0.0;
+  work_total_ = 2.0 * 4.0 / 3.0 * static_cast<double>(std::max<std::size_t>(graph.vertex_count(), 1));
   // Leaves to root.
   while (levels_.back().graph->vertex_count() > static_cast<std::size_t>(options_.max_part)) {
     if (static_cast<int>(levels_.size()) > options_.max_levels) {

@@ -47,8 +47,17 @@ struct G2oReadResult {
 // Parses `text` (named `name` in errors) into `out`, whose graphs are reserved
 // for `capacity` first (the storage of both kinds: only the kind read is used).
 G2oReadResult read_g2o(std::string_view text, const std::string& name, GraphCapacity capacity, G2oGraph& out);
-// Reads the file at `path`.
+// Reads the file at `path`, line by line (never held whole).
 G2oReadResult read_g2o_file(const std::string& path, GraphCapacity capacity, G2oGraph& out);
+
+// How many vertices and edges a file holds (lines starting VERTEX_ and
+// EDGE_), to size a graph for it before reading it.
+struct G2oCounts {
+  bool ok = false;
+  std::string error;
+  std::size_t vertices = 0, edges = 0;
+};
+G2oCounts count_g2o_file(const std::string& path);
 
 std::string write_g2o(const PoseGraph2d& graph);
 std::string write_g2o(const PoseGraph3d& graph);

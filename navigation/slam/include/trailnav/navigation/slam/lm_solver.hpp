@@ -22,6 +22,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -33,6 +34,8 @@ namespace trailnav::slam {
 struct LmOptions {
   int max_iterations = 500;  // ETHCampus from its odometry guess takes about 220
   double relative_tolerance = 1e-6;
+  // After each iteration (its number, χ² then): a progress bar's hook.
+  std::function<void(int iteration, double chi2)> progress;
 };
 
 struct LmReport {

@@ -33,6 +33,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,10 @@ struct SmfOptions {
   std::size_t max_part_edges = 0; // edges a part's solve holds (0: 20 × max_part)
   int max_levels = 64;
   LmOptions lm;                   // every part's and the top's solve
+  // After each part's solve: the share of the work done, estimated (the
+  // vertices solved over twice those of all levels, taken as 4/3 of the
+  // bottom's until the levels are known), below 1 until the end.
+  std::function<void(double fraction)> progress;
 };
 
 struct SmfLevel {
@@ -99,7 +104,8 @@ class SmfSolver {
   std::vector<std::uint8_t> held_;        // per level vertex, for solve_part
   std::vector<std::uint8_t> part_held_;   // per part-local vertex
   std::vector<Level> levels_;
-  std::vector<Pose> moved_;               // per level vertex: how the level above moved a separator
+  std::vector<Pose> moved_;
+  double work_done_ = 0.0, work_total_ = 1.0;  // vertices solved, for progress               // per level vertex: how the level above moved a separator
 };
 
 }  // namespace trailnav::slam
