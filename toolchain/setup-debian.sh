@@ -12,6 +12,8 @@ packages=(
   # libraries
   libeigen3-dev
   libsuitesparse-dev libmetis-dev
+  # the peer of the pose-graph side-by-side (tests/bench/ceres_pose_graph.hpp)
+  libceres-dev
   cyclonedds-dev cyclonedds-tools
   libgeographiclib-dev
   libgpiod-dev gpiod

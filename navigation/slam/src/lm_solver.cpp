@@ -151,7 +151,6 @@ LmReport LmSolver<Pose>::solve(PoseGraph<Pose>& graph, const LmOptions& options,
     return report;
   }
   std::span<double> h = cholesky_.values();
-  const std::size_t nvars = dims / static_cast<std::size_t>(d);
   auto diagonal_index = [&](std::size_t i) {
     const std::size_t v = i / static_cast<std::size_t>(d), k = i % static_cast<std::size_t>(d);
     return static_cast<std::size_t>(colptr_[i]) + static_cast<std::size_t>(d * upper_[v]) + k;
@@ -160,14 +159,14 @@ LmReport LmSolver<Pose>::solve(PoseGraph<Pose>& graph, const LmOptions& options,
     for (std::size_t i = 0; i < dims; ++i) diagonal_[i] = h[diagonal_index(i)];
   };
   save_diagonal();
-  double lambda = 1e-5 * *std::max_element(diagonal_.begin(), diagonal_.end());
+  auto damping = [&](std::size_t i) { return std::clamp(diagonal_[i], 1e-6, 1e32); };
+  double lambda = 1e-4;
   double nu = 2.0;
-  (void)nvars;
   backup_.resize(graph.vertex_count());
   while (report.iterations < options.max_iterations) {
     if (options.progress && report.iterations > 0) options.progress(report.iterations, chi2);
     ++report.iterations;
-    for (std::size_t i = 0; i < dims; ++i) h[diagonal_index(i)] = diagonal_[i] + lambda;
+    for (std::size_t i = 0; i < dims; ++i) h[diagonal_index(i)] = diagonal_[i] + lambda * damping(i);
     std::string error;
     if (!cholesky_.factorise(error)) {
       if (error != "not positive definite") {
@@ -189,7 +188,7 @@ LmReport LmSolver<Pose>::solve(PoseGraph<Pose>& graph, const LmOptions& options,
     }
     const double new_chi2 = graph.chi2();
     double predicted = 0.0;
-    for (std::size_t i = 0; i < dims; ++i) predicted += step_[i] * (lambda * step_[i] - gradient_[i]);
+    for (std::size_t i = 0; i < dims; ++i) predicted += step_[i] * (lambda * damping(i) * step_[i] - gradient_[i]);
     const double rho = (chi2 - new_chi2) / predicted;
     if (std::isfinite(new_chi2) && rho > 0.0 && std::isfinite(rho)) {
       ++report.steps_taken;
