@@ -61,19 +61,20 @@ struct Solved {
   int iterations = 0, levels = 1, part_solves = 0;
   std::size_t top_vertices = 0;
   std::size_t solver_bytes = 0, arena_bytes = 0;
+  std::size_t hierarchy_bytes = 0, hierarchy_arena_bytes = 0;  // SMF's levels (high-water, arena)
 };
 
 template <class Pose>
 Solved solve(PoseGraph<Pose>& graph, GraphCapacity capacity, const OptimizeOptions& o) {
   Solved s;
-  constexpr double kD = Pose::kDim;
   const bool smf = o.method == "smf";
   // The arena: for SMF one part's factor (at worst dense: its lower
   // triangle, twice for CHOLMOD's workspace) and 16 MiB; for the exact
   // solver what --memory-mb says (2 GiB by default: untouched pages cost
   // nothing, and a cap on the process is what bounds it).
-  const double part = kD * o.max_part;
-  const double bytes = o.memory_mb > 0.0 ? o.memory_mb * 1048576.0 : smf ? 8.0 * part * part + 16.0 * 1048576.0 : 2048.0 * 1048576.0;
+  const double bytes = o.memory_mb > 0.0 ? o.memory_mb * 1048576.0
+                       : smf         ? static_cast<double>(smf_part_arena_bytes(Pose::kDim, o.max_part))
+                                     : 2048.0 * 1048576.0;
   s.arena_bytes = static_cast<std::size_t>(bytes);
   Arena arena(s.arena_bytes);
   ProgressBar bar(smf ? "SMF" : "Levenberg-Marquardt", 100.0, "%");
@@ -95,7 +96,9 @@ Solved solve(PoseGraph<Pose>& graph, GraphCapacity capacity, const OptimizeOptio
     s.iterations = r.iterations;
     s.levels = r.levels;
     s.part_solves = r.part_solves;
-    s.top_vertices = r.level.empty() ? 0 : r.level.back().vertices;
+    s.hierarchy_bytes = solver.hierarchy_arena().high_water();
+    s.hierarchy_arena_bytes = solver.hierarchy_arena().capacity();
+    s.top_vertices = r.levels == 0 ? 0 : r.level[static_cast<std::size_t>(r.levels) - 1].vertices;
   } else {
     if (!o.quiet) lm.progress = [&](int it, double) { bar.update(100.0 * it / o.max_iterations); };
     LmSolver<Pose> solver(capacity, arena);
@@ -151,9 +154,10 @@ int optimize(const OptimizeOptions& o) {
     std::printf(
         "{\"file\": \"%s\", \"method\": \"%s\", \"kind\": \"%s\", \"vertices\": %zu, \"edges\": %zu, \"initial_chi2\": %.6f, "
         "\"chi2\": %.6f, \"iterations\": %d, \"levels\": %d, \"part_solves\": %d, \"max_part\": %d, \"seconds\": %.3f, "
-        "\"peak_bytes\": %zu, \"solver_bytes\": %zu}\n",
+        "\"peak_bytes\": %zu, \"solver_bytes\": %zu, \"hierarchy_bytes\": %zu}\n",
         o.in.c_str(), o.method.c_str(), g.kind == GraphKind::spatial ? "SE3" : "SE2", g.vertex_count(), g.edge_count(),
-        s.initial_chi2, s.chi2, s.iterations, s.levels, s.part_solves, o.max_part, seconds, peak, s.solver_bytes);
+        s.initial_chi2, s.chi2, s.iterations, s.levels, s.part_solves, o.max_part, seconds, peak, s.solver_bytes,
+        s.hierarchy_bytes);
   } else {
     std::printf("%s: %s graph, %zu vertices, %zu edges\n", o.in.c_str(), graph_kind_name(g.kind), g.vertex_count(), g.edge_count());
     std::printf("method %s: chi2 %.4f -> %.4f, %d iterations", o.method.c_str(), s.initial_chi2, s.chi2, s.iterations);
@@ -161,6 +165,10 @@ int optimize(const OptimizeOptions& o) {
     std::printf("\ntime %.3f s (reading included); peak resident memory %.1f MiB, of it the solver's factorisations %.1f MiB (of an arena of %.0f MiB)\n",
                 seconds, static_cast<double>(peak) / 1048576.0, static_cast<double>(s.solver_bytes) / 1048576.0,
                 static_cast<double>(s.arena_bytes) / 1048576.0);
+    if (o.method == "smf") {
+      std::printf("the hierarchy's levels %.1f MiB (of an arena of %.0f MiB sized for the capacity)\n",
+                  static_cast<double>(s.hierarchy_bytes) / 1048576.0, static_cast<double>(s.hierarchy_arena_bytes) / 1048576.0);
+    }
     if (!o.out.empty()) std::printf("written to %s\n", o.out.c_str());
   }
   return 0;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "trailnav/navigation/slam/arena.hpp"
@@ -14,6 +15,8 @@
 #include "trailnav/navigation/slam/lm_solver.hpp"
 #include "trailnav/navigation/slam/manhattan.hpp"
 #include "trailnav/navigation/slam/smf.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::slam {
 namespace {
@@ -246,10 +249,89 @@ TEST(SlamSmf, EveryPartIsAtMostMaxPartAndEveryLevelShrinks) {
   SmfSolver<Se2> solver(kCapacity, o, arena);
   const SmfReport r = solver.solve(g.planar);
   ASSERT_TRUE(r.ok) << r.error;
-  ASSERT_GE(r.level.size(), 3u);
-  for (std::size_t l = 1; l < r.level.size(); ++l) EXPECT_LT(r.level[l].vertices, r.level[l - 1].vertices);
-  EXPECT_LE(r.level.back().vertices, 100u);
+  ASSERT_GE(r.levels, 3);
+  for (std::size_t l = 1; l < static_cast<std::size_t>(r.levels); ++l) EXPECT_LT(r.level[l].vertices, r.level[l - 1].vertices);
+  EXPECT_LE(r.level[static_cast<std::size_t>(r.levels) - 1].vertices, 100u);
   EXPECT_LT(r.chi2, r.initial_chi2 / 100.0);
+}
+
+// Bounded memory: once the solver is built for a configuration (capacity,
+// parts of 500), a solve takes nothing more from the heap, whatever graph it
+// is given: no operator new, no malloc (METIS' workspace included, served
+// from the hierarchy's arena), so the solver's memory is its arenas, whose
+// sizes follow from the configuration alone. The three graphs differ in size
+// (1,228 to 10,000 vertices) and shape (a building, a city, a grid of
+// streets).
+TEST(SlamMemory, ASolveTakesNothingFromTheHeapWhateverTheGraph) {
+  constexpr GraphCapacity cap{10000, 40000};
+  SmfOptions o;
+  Arena part_arena(smf_part_arena_bytes(3, o.max_part));
+  SmfSolver<Se2> solver(cap, o, part_arena);
+  G2oGraph intel, m3500;
+  ASSERT_TRUE(read_g2o_file(kData + "se-sync_intel_suger.g2o", cap, intel).ok);
+  ASSERT_TRUE(read_g2o_file(kData + "se-sync_m3500.g2o", cap, m3500).ok);
+  ManhattanOptions mo;
+  mo.nodes = 10000;
+  mo.seed = 3;
+  PoseGraph2d city(cap);
+  ASSERT_TRUE(generate_manhattan(mo, city).ok);
+  const bool redirected = heap_redirect::supported() && alloc_guard::hook_installed();
+
+  struct Case {
+    const char* name;
+    PoseGraph2d* graph;
+  };
+  std::size_t previous_high_water = 0;
+  for (const Case& c : {Case{"intel", &intel.planar}, Case{"m3500", &m3500.planar}, Case{"manhattan 10000", &city}}) {
+    solver.hierarchy_arena().reset_high_water();
+    part_arena.reset_high_water();
+    alloc_guard::reset_counters();
+    SmfReport r;
+    std::thread worker([&] {
+      alloc_guard::mark_realtime_thread("slam-solve");
+      if (std::getenv("SLAM_FATAL") != nullptr) alloc_guard::set_fatal(true);  // abort at the first heap operation, for a backtrace
+      alloc_guard::arm();
+      r = solver.solve(*c.graph);
+      alloc_guard::disarm();
+      alloc_guard::unmark_current_thread();
+    });
+    worker.join();
+    ASSERT_TRUE(r.ok) << c.name << ": " << r.error;
+    EXPECT_LT(r.chi2, r.initial_chi2) << c.name;
+    const std::uint64_t heap = alloc_guard::total_allocations();
+    const double v = static_cast<double>(c.graph->vertex_count());
+    std::printf("[ slam ] %s: %zu vertices, %d levels; heap operations %llu; hierarchy arena high-water %.2f MiB "
+                "(%.0f bytes a vertex) of %.1f MiB; part arena %.2f MiB of %.1f MiB\n",
+                c.name, c.graph->vertex_count(), r.levels, static_cast<unsigned long long>(heap),
+                static_cast<double>(solver.hierarchy_arena().high_water()) / 1048576.0,
+                static_cast<double>(solver.hierarchy_arena().high_water()) / v,
+                static_cast<double>(solver.hierarchy_arena().capacity()) / 1048576.0,
+                static_cast<double>(part_arena.high_water()) / 1048576.0,
+                static_cast<double>(part_arena.capacity()) / 1048576.0);
+    if (redirected) {
+      EXPECT_EQ(heap, 0u) << c.name << ": the solve touched the heap";
+    }
+    EXPECT_EQ(solver.hierarchy_arena().failures(), 0u) << c.name;
+    EXPECT_EQ(solver.hierarchy_arena().in_use(), 0u) << c.name << ": the hierarchy did not give back all it took";
+    // The arena is what holds the hierarchy: a larger graph uses more of it.
+    EXPECT_GT(solver.hierarchy_arena().high_water(), previous_high_water) << c.name;
+    previous_high_water = solver.hierarchy_arena().high_water();
+  }
+  if (!redirected) GTEST_SKIP() << "this build cannot redirect METIS' malloc (sanitizer): the heap was not checked";
+}
+
+// At its configured capacity the solver refuses a larger graph with a
+// message, and the graph is left as it was.
+TEST(SlamMemory, AGraphAboveTheCapacityIsRefusedUntouched) {
+  G2oGraph m3500;
+  ASSERT_TRUE(read_g2o_file(kData + "se-sync_m3500.g2o", kCapacity, m3500).ok);
+  Arena part_arena(smf_part_arena_bytes(3, 500));
+  SmfSolver<Se2> solver({2000, 8000}, SmfOptions{}, part_arena);
+  const std::string before = write_g2o(m3500.planar);
+  const SmfReport r = solver.solve(m3500.planar);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.error.find("exceeds the solver's capacity (2000, 8000)"), std::string::npos) << r.error;
+  EXPECT_EQ(write_g2o(m3500.planar), before);
 }
 
 TEST(SlamCompare, ARigidMotionOfASolutionIsNoError) {

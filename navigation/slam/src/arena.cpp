@@ -49,6 +49,10 @@ bool Arena::owns(const void* p) const noexcept {
   return b >= base_ && b < base_ + capacity_;
 }
 
+std::size_t Arena::usable_size(const void* p) const noexcept {
+  return reinterpret_cast<const Header*>(static_cast<const std::byte*>(p) - kHeader)->size - kHeader;
+}
+
 // Cuts h to `size` bytes when the rest makes a block of its own.
 void Arena::split(Header* h, std::size_t size) noexcept {
   if (h->size < size + kMinBlock) return;

@@ -6,7 +6,8 @@
 namespace trailnav::slam {
 
 template <class Pose>
-LmSolver<Pose>::LmSolver(GraphCapacity capacity, Arena& arena) : capacity_(capacity), cholesky_(arena) {
+LmSolver<Pose>::LmSolver(GraphCapacity capacity, Arena& arena, Factorisation kind)
+    : capacity_(capacity), cholesky_(arena, kind) {
   const std::size_t d = static_cast<std::size_t>(kDim);
   variable_.reserve(capacity.vertices);
   pair_.reserve(capacity.edges);

@@ -4,18 +4,38 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
+
+#include "trailnav/navigation/slam/arena.hpp"
+#include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::slam {
 namespace {
 
+// METIS takes its workspace with malloc: inside partition_graph the calling
+// thread's malloc is served from the caller's arena (runtime/heap_redirect).
+class ArenaRedirect final : public heap_redirect::Redirect {
+ public:
+  explicit ArenaRedirect(Arena& arena) noexcept : arena_(arena) {}
+  void* allocate(std::size_t bytes) noexcept override { return arena_.allocate(bytes); }
+  void* reallocate(void* p, std::size_t bytes) noexcept override { return arena_.reallocate(p, bytes); }
+  void release(void* p) noexcept override { arena_.release(p); }
+  bool owns(const void* p) const noexcept override { return arena_.owns(p); }
+  std::size_t usable_size(const void* p) const noexcept override { return arena_.usable_size(p); }
+
+ private:
+  Arena& arena_;
+};
+
 struct Adjacency {
-  std::vector<idx_t> start, neighbours;
+  explicit Adjacency(std::pmr::memory_resource* r) : start(r), neighbours(r) {}
+  std::pmr::vector<idx_t> start, neighbours;
 };
 
 template <class Pose>
-void adjacency(const PoseGraph<Pose>& g, Adjacency& a) {
+void adjacency(const PoseGraph<Pose>& g, Adjacency& a, std::pmr::memory_resource* scratch) {
   const std::size_t n = g.vertex_count();
-  std::vector<std::uint64_t> pairs;
+  std::pmr::vector<std::uint64_t> pairs(scratch);
   pairs.reserve(2 * g.edge_count());
   for (const auto& e : g.edges()) {
     if (e.from == e.to) continue;
@@ -36,7 +56,8 @@ void adjacency(const PoseGraph<Pose>& g, Adjacency& a) {
 }  // namespace
 
 template <class Pose>
-PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std::vector<std::int32_t>& part) {
+PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std::pmr::vector<std::int32_t>& part,
+                                std::pmr::memory_resource* scratch, Arena* workspace) {
   PartitionResult r;
   const std::size_t n = graph.vertex_count();
   part.assign(n, 0);
@@ -44,8 +65,8 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
     r.error = "a part must hold at least 2 vertices";
     return r;
   }
-  Adjacency a;
-  adjacency(graph, a);
+  Adjacency a(scratch);
+  adjacency(graph, a, scratch);
   idx_t nparts = static_cast<idx_t>(std::ceil(static_cast<double>(n) / (0.9 * max_part)));
   if (nparts > 1) {
     idx_t nv = static_cast<idx_t>(n), ncon = 1, cut = 0;
@@ -54,7 +75,13 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
     options[METIS_OPTION_SEED] = 1;
     options[METIS_OPTION_CONTIG] = 1;
     options[METIS_OPTION_NUMBERING] = 0;
-    std::vector<idx_t> out(n);
+    std::pmr::vector<idx_t> out(n, scratch);
+    std::optional<ArenaRedirect> redirect;
+    std::optional<heap_redirect::Scope> scope;
+    if (workspace != nullptr) {
+      redirect.emplace(*workspace);
+      scope.emplace(*redirect);
+    }
     int status = METIS_PartGraphKway(&nv, &ncon, a.start.data(), a.neighbours.data(), nullptr, nullptr, nullptr, &nparts,
                                      nullptr, nullptr, options, &cut, out.data());
     if (status != METIS_OK) {
@@ -63,6 +90,7 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
       status = METIS_PartGraphKway(&nv, &ncon, a.start.data(), a.neighbours.data(), nullptr, nullptr, nullptr, &nparts,
                                    nullptr, nullptr, options, &cut, out.data());
     }
+    scope.reset();
     if (status != METIS_OK) {
       r.error = "METIS could not partition the graph (status " + std::to_string(status) + ")";
       return r;
@@ -72,7 +100,7 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
   // Each part's connected components in breadth-first order, cut into pieces
   // of at most max_part; a piece (a stretch of that order) may fall apart, so
   // a second pass takes the pieces' components: the final parts.
-  std::vector<std::int32_t> final_part, queue;
+  std::pmr::vector<std::int32_t> final_part(scratch), queue(scratch);
   queue.reserve(n);
   std::int32_t next = 0;
   auto components = [&](int limit) {
@@ -102,7 +130,7 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
       }
       ++next;
     }
-    part.swap(final_part);
+    part.assign(final_part.begin(), final_part.end());
   };
   components(max_part);
   components(max_part + 1);  // the pieces are at most max_part: components only
@@ -111,7 +139,7 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
   return r;
 }
 
-template PartitionResult partition_graph(const PoseGraph<Se2>&, int, std::vector<std::int32_t>&);
-template PartitionResult partition_graph(const PoseGraph<Se3>&, int, std::vector<std::int32_t>&);
+template PartitionResult partition_graph(const PoseGraph<Se2>&, int, std::pmr::vector<std::int32_t>&, std::pmr::memory_resource*, Arena*);
+template PartitionResult partition_graph(const PoseGraph<Se3>&, int, std::pmr::vector<std::int32_t>&, std::pmr::memory_resource*, Arena*);
 
 }  // namespace trailnav::slam

@@ -4,6 +4,7 @@
 #include <Eigen/LU>
 
 #include <algorithm>
+#include <new>
 #include <numeric>
 
 #include "trailnav/navigation/slam/partition.hpp"
@@ -52,15 +53,15 @@ M symmetric_inverse(const M& m) {
 
 // Counting sort of items into buckets: order holds items bucket by bucket,
 // start[b] .. start[b+1] bucket b's.
-void bucket(const std::vector<std::int32_t>& key, int buckets, std::vector<std::int32_t>& order,
-            std::vector<std::int32_t>& start) {
+void bucket(const std::pmr::vector<std::int32_t>& key, int buckets, std::pmr::vector<std::int32_t>& order,
+            std::pmr::vector<std::int32_t>& start) {
   start.assign(static_cast<std::size_t>(buckets) + 1, 0);
   for (std::int32_t k : key) {
     if (k >= 0) ++start[static_cast<std::size_t>(k) + 1];
   }
   for (std::size_t b = 0; b < static_cast<std::size_t>(buckets); ++b) start[b + 1] += start[b];
   order.assign(static_cast<std::size_t>(start.back()), 0);
-  std::vector<std::int32_t> fill(start.begin(), start.end() - 1);
+  std::pmr::vector<std::int32_t> fill(start.begin(), start.end() - 1, order.get_allocator().resource());
   for (std::size_t i = 0; i < key.size(); ++i) {
     if (key[i] >= 0) order[static_cast<std::size_t>(fill[static_cast<std::size_t>(key[i])]++)] = static_cast<std::int32_t>(i);
   }
@@ -68,20 +69,55 @@ void bucket(const std::vector<std::int32_t>& key, int buckets, std::vector<std::
 
 }  // namespace
 
+std::size_t smf_hierarchy_bytes(GraphCapacity capacity, int pose_dim, int max_part) {
+  // What one solve can hold at once, with the thesis' bound that the levels
+  // above the bottom hold at most as many vertices as the bottom (Eq. 3.12)
+  // and at most its edges plus one virtual edge per vertex:
+  //   bottom level: parts, separator flags, orders (4 + 1 + 4 + 4 bytes a
+  //     vertex, 4 + 4 an edge: its part and its order);
+  //   levels above: the same, plus their graphs (id, pose, fixed flag; edges)
+  //     and each vertex's index below;
+  //   the coarsening's scratch for the largest level: the partitioner's
+  //     adjacency (16 + 8 bytes an edge, 12 a vertex), the next level's index
+  //     of each vertex, the virtual edges (at most one a vertex);
+  //   one part's tree walk (edges, weights, order: 20 bytes an edge; per
+  //     vertex a covariance and 16 bytes).
+  // Then a quarter on top for the arena's block headers and fragmentation,
+  // and 1 MiB.
+  const double v = static_cast<double>(capacity.vertices), e = static_cast<double>(capacity.edges);
+  const double pose = pose_dim == 3 ? sizeof(Se2) : sizeof(Se3);
+  const double edge = pose_dim == 3 ? sizeof(GraphEdge<Se2>) : sizeof(GraphEdge<Se3>);
+  const double d2 = 8.0 * pose_dim * pose_dim;
+  const double bottom = v * 13.0 + e * 8.0;
+  const double above = v * (13.0 + 4.0 + 8.0 + pose + 1.0) + (e + v) * (8.0 + edge);
+  const double scratch = (e + v) * 24.0 + v * 12.0 + v * 4.0 + v * edge;
+  const double part = 20.0 * 20.0 * max_part + max_part * (d2 + 16.0);
+  return static_cast<std::size_t>(1.25 * (bottom + above + scratch + part) + 1048576.0);
+}
+
+std::size_t smf_part_arena_bytes(int pose_dim, int max_part) {
+  const double n = static_cast<double>(pose_dim) * max_part;
+  return static_cast<std::size_t>(8.0 * n * n + 16.0 * 1048576.0);
+}
+
 template <class Pose>
 SmfSolver<Pose>::SmfSolver(GraphCapacity capacity, const SmfOptions& options, Arena& arena)
     : capacity_(capacity),
       options_(options),
       part_solver_({static_cast<std::size_t>(options.max_part),
                     options.max_part_edges != 0 ? options.max_part_edges : 20u * static_cast<std::size_t>(options.max_part)},
-                   arena),
+                   arena, Factorisation::simplicial),
       part_graph_({static_cast<std::size_t>(options.max_part),
-                   options.max_part_edges != 0 ? options.max_part_edges : 20u * static_cast<std::size_t>(options.max_part)}) {
+                   options.max_part_edges != 0 ? options.max_part_edges : 20u * static_cast<std::size_t>(options.max_part)}),
+      hierarchy_arena_(smf_hierarchy_bytes(capacity, Pose::kDim, options.max_part)),
+      hierarchy_(hierarchy_arena_) {
   if (options_.max_part_edges == 0) options_.max_part_edges = 20u * static_cast<std::size_t>(options.max_part);
   local_.assign(capacity.vertices, -1);
   held_.assign(capacity.vertices, 0);
   part_held_.reserve(static_cast<std::size_t>(options.max_part));
-  levels_.reserve(static_cast<std::size_t>(options.max_levels) + 1);
+  options_.max_levels = std::clamp(options_.max_levels, 1, kSmfMaxLevels - 1);
+  levels_.reserve(static_cast<std::size_t>(options_.max_levels) + 1);
+  moved_.reserve(capacity.vertices);
 }
 
 template <class Pose>
@@ -127,7 +163,8 @@ bool SmfSolver<Pose>::solve_part(Level& level, int p, SmfReport& report) {
 // from its root a depth-first walk: each separator gets one virtual edge
 // from its nearest separator ancestor (Fig. 3.2), Eq. 3.10–3.11.
 template <class Pose>
-void SmfSolver<Pose>::virtual_edges(Level& level, int p, std::vector<GraphEdge<Pose>>& out) {
+void SmfSolver<Pose>::virtual_edges(Level& level, int p, std::pmr::vector<GraphEdge<Pose>>& out) {
+  std::pmr::memory_resource* r = &hierarchy_;
   using Matrix = typename Pose::Matrix;
   const PoseGraph<Pose>& g = *level.graph;
   const auto ps = static_cast<std::size_t>(p);
@@ -136,13 +173,15 @@ void SmfSolver<Pose>::virtual_edges(Level& level, int p, std::vector<GraphEdge<P
   for (std::size_t k = 0; k < m; ++k) local_[static_cast<std::size_t>(level.order[static_cast<std::size_t>(first) + k])] = static_cast<std::int32_t>(k);
   auto vertex = [&](std::size_t k) { return static_cast<std::size_t>(level.order[static_cast<std::size_t>(first) + k]); };
   // Kruskal on det(Ω), largest first (ties: the earlier edge).
-  std::vector<std::int32_t> edges(level.edge_order.begin() + level.edge_start[ps], level.edge_order.begin() + level.edge_start[ps + 1]);
-  std::vector<double> weight(edges.size());
+  Ints edges(level.edge_order.begin() + level.edge_start[ps], level.edge_order.begin() + level.edge_start[ps + 1], r);
+  std::pmr::vector<double> weight(edges.size(), r);
   for (std::size_t i = 0; i < edges.size(); ++i) weight[i] = g.edge(static_cast<std::size_t>(edges[i])).information.determinant();
-  std::vector<std::size_t> by_weight(edges.size());
+  std::pmr::vector<std::size_t> by_weight(edges.size(), r);
   std::iota(by_weight.begin(), by_weight.end(), 0u);
-  std::stable_sort(by_weight.begin(), by_weight.end(), [&](std::size_t a, std::size_t b) { return weight[a] > weight[b]; });
-  std::vector<std::int32_t> root_of(m);
+  // The order of a stable sort (ties: the earlier edge), without its heap buffer.
+  std::sort(by_weight.begin(), by_weight.end(),
+            [&](std::size_t a, std::size_t b) { return weight[a] > weight[b] || (weight[a] == weight[b] && a < b); });
+  Ints root_of(m, r);
   std::iota(root_of.begin(), root_of.end(), 0);
   auto find = [&](std::int32_t x) {
     while (root_of[static_cast<std::size_t>(x)] != x) {
@@ -151,8 +190,9 @@ void SmfSolver<Pose>::virtual_edges(Level& level, int p, std::vector<GraphEdge<P
     }
     return x;
   };
-  std::vector<std::int32_t> tree_start(m + 1, 0), tree;  // adjacency: (neighbour, level edge) pairs
-  std::vector<std::int32_t> chosen;
+  Ints tree_start(m + 1, 0, r), tree(r);  // adjacency: (neighbour, level edge) pairs
+  Ints chosen(r);
+  chosen.reserve(m);
   for (std::size_t i : by_weight) {
     const auto& e = g.edge(static_cast<std::size_t>(edges[i]));
     const std::int32_t a = find(local_[static_cast<std::size_t>(e.from)]), b = find(local_[static_cast<std::size_t>(e.to)]);
@@ -168,7 +208,7 @@ void SmfSolver<Pose>::virtual_edges(Level& level, int p, std::vector<GraphEdge<P
   for (std::size_t k = 0; k < m; ++k) tree_start[k + 1] += tree_start[k];
   tree.assign(2 * static_cast<std::size_t>(tree_start[m]), 0);
   {
-    std::vector<std::int32_t> fill(tree_start.begin(), tree_start.end() - 1);
+    Ints fill(tree_start.begin(), tree_start.end() - 1, r);
     for (std::int32_t ei : chosen) {
       const auto& e = g.edge(static_cast<std::size_t>(ei));
       const auto a = static_cast<std::size_t>(local_[static_cast<std::size_t>(e.from)]);
@@ -187,10 +227,11 @@ void SmfSolver<Pose>::virtual_edges(Level& level, int p, std::vector<GraphEdge<P
   for (std::size_t k = 0; k < m && root == m; ++k) {
     if (level.separator[vertex(k)] != 0) root = k;
   }
-  std::vector<std::int32_t> ancestor(m, -1);
-  std::vector<Matrix> sigma(m, Matrix::Zero());  // Σ_L from the ancestor separator
-  std::vector<std::uint8_t> seen(m, 0);
-  std::vector<std::int32_t> stack;
+  Ints ancestor(m, -1, r);
+  std::pmr::vector<Matrix> sigma(m, Matrix::Zero(), r);  // Σ_L from the ancestor separator
+  std::pmr::vector<std::uint8_t> seen(m, 0, r);
+  Ints stack(r);
+  stack.reserve(m);
   stack.push_back(static_cast<std::int32_t>(root));
   seen[root] = 1;
   ancestor[root] = static_cast<std::int32_t>(root);
@@ -237,14 +278,14 @@ template <class Pose>
 bool SmfSolver<Pose>::coarsen(Level& level, Level& above, SmfReport& report) {
   PoseGraph<Pose>& g = *level.graph;
   const std::size_t n = g.vertex_count();
-  const PartitionResult pr = partition_graph(g, options_.max_part, level.part);
+  const PartitionResult pr = partition_graph(g, options_.max_part, level.part, &hierarchy_, &hierarchy_arena_);
   if (!pr.ok) {
     report.error = pr.error;
     return false;
   }
   level.parts = pr.parts;
   level.separator.assign(n, 0);
-  std::vector<std::int32_t> edge_part(g.edge_count(), -1);
+  Ints edge_part(g.edge_count(), -1, &hierarchy_);
   for (std::size_t k = 0; k < g.edge_count(); ++k) {
     const auto& e = g.edge(k);
     const auto a = static_cast<std::size_t>(e.from), b = static_cast<std::size_t>(e.to);
@@ -261,7 +302,8 @@ bool SmfSolver<Pose>::coarsen(Level& level, Level& above, SmfReport& report) {
   bucket(level.part, level.parts, level.order, level.start);
   bucket(edge_part, level.parts, level.edge_order, level.edge_start);
 
-  std::vector<GraphEdge<Pose>> virtuals;
+  std::pmr::vector<GraphEdge<Pose>> virtuals(&hierarchy_);
+  virtuals.reserve(n);
   for (int p = 0; p < level.parts; ++p) {
     // Coarsening: the part alone, its root held (Sec. 3.1.2: "we optimize
     // the subgraph without considering the separator edges").
@@ -292,7 +334,7 @@ bool SmfSolver<Pose>::coarsen(Level& level, Level& above, SmfReport& report) {
   above.owned.clear();
   above.graph = &above.owned;
   above.below.clear();
-  std::vector<std::int32_t> up(n, -1);
+  Ints up(n, -1, &hierarchy_);
   for (std::size_t v = 0; v < n; ++v) {
     if (level.separator[v] == 0) continue;
     up[v] = static_cast<std::int32_t>(above.owned.vertex_count());
@@ -317,6 +359,21 @@ bool SmfSolver<Pose>::coarsen(Level& level, Level& above, SmfReport& report) {
 template <class Pose>
 SmfReport SmfSolver<Pose>::solve(PoseGraph<Pose>& graph) {
   SmfReport report;
+  try {
+    report = run(graph);
+  } catch (const std::bad_alloc&) {
+    report = SmfReport{};
+    report.error = "the hierarchy needs more than its arena of " + std::to_string(hierarchy_arena_.capacity() >> 20) +
+                   " MiB (sized for " + std::to_string(capacity_.vertices) + " vertices and " +
+                   std::to_string(capacity_.edges) + " edges; its levels did not halve)";
+  }
+  levels_.clear();  // back into the arena
+  return report;
+}
+
+template <class Pose>
+SmfReport SmfSolver<Pose>::run(PoseGraph<Pose>& graph) {
+  SmfReport report;
   report.initial_chi2 = graph.chi2();
   if (graph.vertex_count() > capacity_.vertices || graph.edge_count() > capacity_.edges) {
     report.error = "the graph (" + std::to_string(graph.vertex_count()) + " vertices, " + std::to_string(graph.edge_count()) +
@@ -325,7 +382,7 @@ SmfReport SmfSolver<Pose>::solve(PoseGraph<Pose>& graph) {
     return report;
   }
   levels_.clear();
-  levels_.emplace_back();
+  levels_.emplace_back(&hierarchy_);
   levels_[0].graph = &graph;
   work_done_ = 0.0;
   work_total_ = 2.0 * 4.0 / 3.0 * static_cast<double>(std::max<std::size_t>(graph.vertex_count(), 1));
@@ -335,11 +392,11 @@ SmfReport SmfSolver<Pose>::solve(PoseGraph<Pose>& graph) {
       report.error = "more than " + std::to_string(options_.max_levels) + " levels";
       return report;
     }
-    levels_.emplace_back();
+    levels_.emplace_back(&hierarchy_);
     Level& level = levels_[levels_.size() - 2];
     Level& above = levels_.back();
     if (!coarsen(level, above, report)) return report;
-    report.level.push_back({level.graph->vertex_count(), level.graph->edge_count(), level.parts});
+    report.level[static_cast<std::size_t>(report.levels++)] = {level.graph->vertex_count(), level.graph->edge_count(), level.parts};
     if (above.graph->vertex_count() >= level.graph->vertex_count()) {
       report.error = "level " + std::to_string(levels_.size() - 2) + " does not shrink: " +
                      std::to_string(above.graph->vertex_count()) + " of its " + std::to_string(level.graph->vertex_count()) +
@@ -354,10 +411,10 @@ SmfReport SmfSolver<Pose>::solve(PoseGraph<Pose>& graph) {
   top.part.assign(tn, 0);
   top.separator.assign(tn, 0);
   bucket(top.part, 1, top.order, top.start);
-  std::vector<std::int32_t> all(top.graph->edge_count(), 0);
+  Ints all(top.graph->edge_count(), 0, &hierarchy_);
   bucket(all, 1, top.edge_order, top.edge_start);
   if (!solve_part(top, 0, report)) return report;
-  report.level.push_back({tn, top.graph->edge_count(), 1});
+  report.level[static_cast<std::size_t>(report.levels++)] = {tn, top.graph->edge_count(), 1};
   // Root to leaves: each level's separators take their poses from above,
   // then every part is solved with its separators held.
   for (std::size_t l = levels_.size() - 1; l-- > 0;) {

@@ -75,13 +75,13 @@ struct SparseCholesky::Impl {
   }
 };
 
-SparseCholesky::SparseCholesky(Arena& arena) : impl_(new Impl) {
+SparseCholesky::SparseCholesky(Arena& arena, Factorisation kind) : impl_(new Impl) {
   install_hooks();
   impl_->arena = &arena;
   Scope s(impl_->arena);
   cholmod_start(&impl_->common);
   impl_->common.print = 0;
-  impl_->common.supernodal = CHOLMOD_AUTO;
+  impl_->common.supernodal = kind == Factorisation::simplicial ? CHOLMOD_SIMPLICIAL : CHOLMOD_AUTO;
   impl_->started = true;
 }
 

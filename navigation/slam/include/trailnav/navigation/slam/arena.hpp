@@ -9,6 +9,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <memory_resource>
+#include <new>
 
 namespace trailnav::slam {
 
@@ -22,6 +24,7 @@ class Arena {
   void* reallocate(void* p, std::size_t bytes) noexcept;  // as realloc; p kept when it fails
   void release(void* p) noexcept;
   bool owns(const void* p) const noexcept;
+  std::size_t usable_size(const void* p) const noexcept;  // bytes p may hold (p owned)
 
   std::size_t capacity() const noexcept { return capacity_; }
   std::size_t in_use() const noexcept { return in_use_; }        // bytes of blocks handed out (headers included)
@@ -42,6 +45,25 @@ class Arena {
   std::size_t in_use_ = 0;
   std::size_t high_water_ = 0;
   std::uint64_t failures_ = 0;
+};
+
+// The arena as a standard memory resource, for std::pmr containers: an
+// allocation it cannot serve throws std::bad_alloc (the solver turns it into
+// an error naming the arena); alignment up to 16 bytes.
+class ArenaResource final : public std::pmr::memory_resource {
+ public:
+  explicit ArenaResource(Arena& arena) noexcept : arena_(arena) {}
+  Arena& arena() noexcept { return arena_; }
+
+ private:
+  void* do_allocate(std::size_t bytes, std::size_t alignment) override {
+    void* p = alignment <= 16 ? arena_.allocate(bytes) : nullptr;
+    if (p == nullptr) throw std::bad_alloc();
+    return p;
+  }
+  void do_deallocate(void* p, std::size_t, std::size_t) override { arena_.release(p); }
+  bool do_is_equal(const std::pmr::memory_resource& other) const noexcept override { return this == &other; }
+  Arena& arena_;
 };
 
 }  // namespace trailnav::slam

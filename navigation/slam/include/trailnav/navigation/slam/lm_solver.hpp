@@ -57,7 +57,7 @@ template <class Pose>
 class LmSolver {
  public:
   static constexpr int kDim = Pose::kDim;
-  LmSolver(GraphCapacity capacity, Arena& arena);
+  LmSolver(GraphCapacity capacity, Arena& arena, Factorisation kind = Factorisation::automatic);
 
   // Optimises `graph`'s poses in place. `held` (may be empty) marks vertices
   // held constant beside the graph's own fixed ones (the refinement of a part

@@ -13,12 +13,15 @@
 #pragma once
 
 #include <cstdint>
+#include <memory_resource>
 #include <string>
 #include <vector>
 
 #include "trailnav/navigation/slam/pose_graph.hpp"
 
 namespace trailnav::slam {
+
+class Arena;
 
 struct PartitionResult {
   bool ok = false;
@@ -27,8 +30,12 @@ struct PartitionResult {
 };
 
 // part[v] ∈ [0, parts) for every vertex. Self-loops and parallel edges are
-// allowed in the graph; edges between held... all edges count as adjacency.
+// allowed in the graph. Scratch storage comes from `scratch`; METIS' own
+// workspace (it calls malloc) from `workspace` when one is given and the
+// build can redirect the heap (runtime/heap_redirect.hpp), else the heap.
 template <class Pose>
-PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std::vector<std::int32_t>& part);
+PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std::pmr::vector<std::int32_t>& part,
+                                std::pmr::memory_resource* scratch = std::pmr::get_default_resource(),
+                                Arena* workspace = nullptr);
 
 }  // namespace trailnav::slam

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory_resource>
 #include <string>
 #include <vector>
 
@@ -33,6 +34,8 @@ class PoseGraph {
 
   PoseGraph() = default;
   explicit PoseGraph(GraphCapacity capacity) { reserve(capacity); }
+  // Storage from `resource` (an arena, for SMF's levels).
+  explicit PoseGraph(std::pmr::memory_resource* resource) : ids_(resource), poses_(resource), fixed_(resource), edges_(resource) {}
   void reserve(GraphCapacity capacity) {
     capacity_ = capacity;
     ids_.reserve(capacity.vertices);
@@ -77,9 +80,9 @@ class PoseGraph {
   }
   const Edge& edge(std::size_t e) const noexcept { return edges_[e]; }
   Edge& edge(std::size_t e) noexcept { return edges_[e]; }
-  const std::vector<Edge>& edges() const noexcept { return edges_; }
-  const std::vector<Pose>& poses() const noexcept { return poses_; }
-  std::vector<Pose>& poses() noexcept { return poses_; }
+  const std::pmr::vector<Edge>& edges() const noexcept { return edges_; }
+  const std::pmr::vector<Pose>& poses() const noexcept { return poses_; }
+  std::pmr::vector<Pose>& poses() noexcept { return poses_; }
 
   // χ² = Σ e_ijᵀ Ω_ij e_ij over all edges (Eq. 2.3 without the ½, as g2o
   // reports it and as the thesis' Table 3.1 lists it).
@@ -95,10 +98,10 @@ class PoseGraph {
 
  private:
   GraphCapacity capacity_;
-  std::vector<std::int64_t> ids_;
-  std::vector<Pose> poses_;
-  std::vector<std::uint8_t> fixed_;
-  std::vector<Edge> edges_;
+  std::pmr::vector<std::int64_t> ids_;
+  std::pmr::vector<Pose> poses_;
+  std::pmr::vector<std::uint8_t> fixed_;
+  std::pmr::vector<Edge> edges_;
 };
 
 using PoseGraph2d = PoseGraph<Se2>;

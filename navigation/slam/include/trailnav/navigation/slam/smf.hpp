@@ -31,23 +31,26 @@
 //     separators move), so each solve after the first is short.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory_resource>
 #include <string>
 #include <vector>
 
+#include "trailnav/navigation/slam/arena.hpp"
 #include "trailnav/navigation/slam/lm_solver.hpp"
 #include "trailnav/navigation/slam/pose_graph.hpp"
 
 namespace trailnav::slam {
 
-class Arena;
+inline constexpr int kSmfMaxLevels = 64;
 
 struct SmfOptions {
   int max_part = 500;             // vertices of a part (the thesis: 500)
   std::size_t max_part_edges = 0; // edges a part's solve holds (0: 20 × max_part)
-  int max_levels = 64;
+  int max_levels = kSmfMaxLevels - 1;  // levels above the bottom (at most kSmfMaxLevels − 1)
   LmOptions lm;                   // every part's and the top's solve
   // After each part's solve: the share of the work done, estimated (the
   // vertices solved over twice those of all levels, taken as 4/3 of the
@@ -66,35 +69,52 @@ struct SmfReport {
   double initial_chi2 = 0.0;
   double chi2 = 0.0;          // of the whole graph at the end
   int levels = 0;             // including the bottom (1: the graph fit in one part)
-  std::vector<SmfLevel> level; // bottom first
+  std::array<SmfLevel, kSmfMaxLevels> level{};  // bottom first, `levels` of them (fixed: a solve allocates nothing)
   int part_solves = 0;
   int iterations = 0;          // LM steps over all solves
 };
+
+// Bytes of the hierarchy's arena for a capacity (what SmfSolver reserves).
+std::size_t smf_hierarchy_bytes(GraphCapacity capacity, int pose_dim, int max_part);
+// Bytes of the arena for one part's factorisation (at worst dense: its lower
+// triangle, twice for CHOLMOD's workspace) and 16 MiB for the rest of a
+// part's solve: what the caller hands SmfSolver.
+std::size_t smf_part_arena_bytes(int pose_dim, int max_part);
 
 template <class Pose>
 class SmfSolver {
  public:
   // `capacity`: the largest graph to be solved; `arena` holds the parts'
-  // factorisations (sized for one part).
+  // factorisations (sized for one part). The hierarchy (the levels above the
+  // bottom, their parts and the coarsening's scratch) lives in an arena of
+  // its own, sized here from the capacity (smf_hierarchy_bytes): after
+  // construction a solve takes no memory from the heap but METIS' own
+  // workspace while it partitions a level.
   SmfSolver(GraphCapacity capacity, const SmfOptions& options, Arena& arena);
   SmfReport solve(PoseGraph<Pose>& graph);
+  const Arena& hierarchy_arena() const noexcept { return hierarchy_arena_; }
+  Arena& hierarchy_arena() noexcept { return hierarchy_arena_; }
 
  private:
+  using Ints = std::pmr::vector<std::int32_t>;
   struct Level {
+    explicit Level(std::pmr::memory_resource* r)
+        : owned(r), below(r), part(r), separator(r), order(r), start(r), edge_order(r), edge_start(r) {}
     PoseGraph<Pose>* graph = nullptr;
     PoseGraph<Pose> owned;                 // levels above the bottom
-    std::vector<std::int32_t> below;       // per vertex: its index in the level below
-    std::vector<std::int32_t> part;        // per vertex: its part
-    std::vector<std::uint8_t> separator;
-    std::vector<std::int32_t> order, start;  // vertices by part
-    std::vector<std::int32_t> edge_order, edge_start;  // internal edges by part
+    Ints below;                            // per vertex: its index in the level below
+    Ints part;                             // per vertex: its part
+    std::pmr::vector<std::uint8_t> separator;
+    Ints order, start;                     // vertices by part
+    Ints edge_order, edge_start;           // internal edges by part
     int parts = 0;
   };
+  SmfReport run(PoseGraph<Pose>& graph);
   bool coarsen(Level& level, Level& above, SmfReport& report);
-  // Solves part p of `level` with `held` vertices constant (level indices
-  // marked in held_); copies the solution back.
+  // Solves part p of `level` with the vertices marked in held_ constant;
+  // copies the solution back.
   bool solve_part(Level& level, int p, SmfReport& report);
-  void virtual_edges(Level& level, int p, std::vector<GraphEdge<Pose>>& out);
+  void virtual_edges(Level& level, int p, std::pmr::vector<GraphEdge<Pose>>& out);
 
   GraphCapacity capacity_;
   SmfOptions options_;
@@ -103,9 +123,11 @@ class SmfSolver {
   std::vector<std::int32_t> local_;      // level index -> part-local index (−1 none)
   std::vector<std::uint8_t> held_;        // per level vertex, for solve_part
   std::vector<std::uint8_t> part_held_;   // per part-local vertex
-  std::vector<Level> levels_;
-  std::vector<Pose> moved_;
-  double work_done_ = 0.0, work_total_ = 1.0;  // vertices solved, for progress               // per level vertex: how the level above moved a separator
+  Arena hierarchy_arena_;
+  ArenaResource hierarchy_;
+  std::vector<Level> levels_;             // reserved for max_levels + 1
+  std::vector<Pose> moved_;               // per level vertex: how the level above moved a separator
+  double work_done_ = 0.0, work_total_ = 1.0;  // vertices solved, for progress
 };
 
 }  // namespace trailnav::slam

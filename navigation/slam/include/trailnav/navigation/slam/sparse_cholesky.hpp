@@ -15,10 +15,15 @@ namespace trailnav::slam {
 
 class Arena;
 
+// Supernodal factors pay on large graphs but run CHOLMOD's OpenMP regions
+// (threads, and libgomp's own malloc); simplicial ones stay on the calling
+// thread and in the arena: what SMF's parts (at most max_part poses) use.
+enum class Factorisation { automatic, simplicial };
+
 class SparseCholesky {
  public:
   // `arena` outlives this object; every CHOLMOD allocation is made in it.
-  explicit SparseCholesky(Arena& arena);
+  explicit SparseCholesky(Arena& arena, Factorisation kind = Factorisation::automatic);
   ~SparseCholesky();
   SparseCholesky(const SparseCholesky&) = delete;
   SparseCholesky& operator=(const SparseCholesky&) = delete;
