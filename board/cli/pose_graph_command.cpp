@@ -61,6 +61,7 @@ struct Solved {
   int iterations = 0, levels = 1, part_solves = 0;
   std::size_t top_vertices = 0;
   std::size_t solver_bytes = 0, arena_bytes = 0;
+  double factor_nonzeros = 0.0;  // exact: entries of the Cholesky factor L
   std::size_t hierarchy_bytes = 0, hierarchy_arena_bytes = 0;  // SMF's levels (high-water, arena)
 };
 
@@ -110,6 +111,7 @@ Solved solve(PoseGraph<Pose>& graph, GraphCapacity capacity, const OptimizeOptio
     s.chi2 = r.chi2;
     s.iterations = r.iterations;
     s.top_vertices = graph.vertex_count();
+    s.factor_nonzeros = r.factor_nonzeros;
   }
   s.solver_bytes = arena.high_water();
   return s;
@@ -154,10 +156,10 @@ int optimize(const OptimizeOptions& o) {
     std::printf(
         "{\"file\": \"%s\", \"method\": \"%s\", \"kind\": \"%s\", \"vertices\": %zu, \"edges\": %zu, \"initial_chi2\": %.6f, "
         "\"chi2\": %.6f, \"iterations\": %d, \"levels\": %d, \"part_solves\": %d, \"max_part\": %d, \"seconds\": %.3f, "
-        "\"peak_bytes\": %zu, \"solver_bytes\": %zu, \"hierarchy_bytes\": %zu}\n",
+        "\"peak_bytes\": %zu, \"solver_bytes\": %zu, \"hierarchy_bytes\": %zu, \"factor_nonzeros\": %.0f}\n",
         o.in.c_str(), o.method.c_str(), g.kind == GraphKind::spatial ? "SE3" : "SE2", g.vertex_count(), g.edge_count(),
         s.initial_chi2, s.chi2, s.iterations, s.levels, s.part_solves, o.max_part, seconds, peak, s.solver_bytes,
-        s.hierarchy_bytes);
+        s.hierarchy_bytes, s.factor_nonzeros);
   } else {
     std::printf("%s: %s graph, %zu vertices, %zu edges\n", o.in.c_str(), graph_kind_name(g.kind), g.vertex_count(), g.edge_count());
     std::printf("method %s: chi2 %.4f -> %.4f, %d iterations", o.method.c_str(), s.initial_chi2, s.chi2, s.iterations);
