@@ -12,7 +12,9 @@
 // malloc does when memory is exhausted: the library reports it.
 //
 // The code inside the scope must free what it allocated before the scope
-// ends (METIS does, on success and on error).
+// ends (METIS does, on success and on error), on the same thread, and must
+// not start threads (a new thread's state, allocated here, would be freed
+// there, on the heap).
 //
 // Plain builds on glibc support it (the project's own malloc); sanitizer
 // builds own malloc themselves, so there the scope does nothing and
