@@ -12,6 +12,7 @@
 #include "trailnav/navigation/slam/arena.hpp"
 #include "trailnav/navigation/slam/compare.hpp"
 #include "trailnav/navigation/slam/g2o_io.hpp"
+#include "trailnav/navigation/slam/keyframes.hpp"
 #include "trailnav/navigation/slam/lm_solver.hpp"
 #include "trailnav/navigation/slam/manhattan.hpp"
 #include "trailnav/navigation/slam/smf.hpp"
@@ -332,6 +333,89 @@ TEST(SlamMemory, AGraphAboveTheCapacityIsRefusedUntouched) {
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.error.find("exceeds the solver's capacity (2000, 8000)"), std::string::npos) << r.error;
   EXPECT_EQ(write_g2o(m3500.planar), before);
+}
+
+// Simulated truth: a robot drives three laps of a 60 m square at 2 m/s;
+// its odometry has a gyro bias of 0.02 rad/s (dead reckoning drifts by
+// metres a lap), GPS gives a fix each second with 1.5 m Gaussian noise.
+// The keyframe graph, optimised, must be far closer to the truth than
+// odometry, and closer than the fixes themselves.
+TEST(SlamKeyframes, OdometryAndGpsFixesOptimiseToTheTruth) {
+  KeyframeOptions o;
+  o.max_keyframes = 1000;
+  KeyframeGraph kf(o);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> gps_noise(0.0, 1.5);
+  const double dt = 0.1, speed = 2.0, side = 60.0, bias = 0.02;
+  Se2 truth{}, odometry{};
+  std::vector<Se2> truth_at_keyframe{Se2{}};  // index 0: the anchor
+  double along = 0.0, odo_error = 0.0, gps_error = 0.0;
+  int fixes = 0;
+  for (int step = 0; step < static_cast<int>(3 * 4 * side / speed / dt); ++step) {
+    along += speed * dt;
+    double turn = 0.0;
+    if (along >= side) {  // a corner: turn left by 90° in place over this step
+      along -= side;
+      turn = M_PI / 2;
+    }
+    const Se2 motion{speed * dt, 0.0, turn};
+    truth = truth * motion;
+    odometry = odometry * Se2{motion.x, motion.y, motion.theta + bias * dt};
+    if (kf.on_odometry(odometry) == KeyframeGraph::Added::keyframe) truth_at_keyframe.push_back(truth);
+    if (step % 10 == 9) {
+      const double gx = truth.x + gps_noise(rng), gy = truth.y + gps_noise(rng);
+      gps_error += std::hypot(gx - truth.x, gy - truth.y);
+      ++fixes;
+      kf.on_gps(gx, gy, 1.5);
+    }
+  }
+  const PoseGraph2d& g = kf.graph();
+  ASSERT_EQ(g.vertex_count(), truth_at_keyframe.size());
+  EXPECT_NEAR(static_cast<double>(kf.counters().keyframes), 3 * 4 * side / o.spacing_m, 30.0);
+  EXPECT_GT(kf.counters().gps_edges, kf.counters().keyframes / 2);
+  for (std::size_t k = 1; k < g.vertex_count(); ++k) odo_error += std::hypot(g.pose(k).x - truth_at_keyframe[k].x, g.pose(k).y - truth_at_keyframe[k].y);
+  odo_error /= static_cast<double>(g.vertex_count() - 1);
+  gps_error /= fixes;
+
+  PoseGraph2d solved = g;
+  Arena part_arena(smf_part_arena_bytes(3, 500));
+  SmfSolver<Se2> solver(kf.capacity(), SmfOptions{}, part_arena);
+  const SmfReport r = solver.solve(solved);
+  ASSERT_TRUE(r.ok) << r.error;
+  double error = 0.0;
+  for (std::size_t k = 1; k < solved.vertex_count(); ++k) error += std::hypot(solved.pose(k).x - truth_at_keyframe[k].x, solved.pose(k).y - truth_at_keyframe[k].y);
+  error /= static_cast<double>(solved.vertex_count() - 1);
+  std::printf("[ slam ] keyframes: %zu, %zu edges (%llu GPS); mean position error: odometry %.2f m, a GPS fix %.2f m, "
+              "optimised %.2f m (%d levels)\n",
+              solved.vertex_count() - 1, solved.edge_count(), static_cast<unsigned long long>(kf.counters().gps_edges),
+              odo_error, gps_error, error, r.levels);
+  EXPECT_GT(odo_error, 5.0);  // the drift is real
+  EXPECT_LT(error, odo_error / 5.0);
+  EXPECT_LT(error, gps_error);
+}
+
+// At the configured capacity no keyframe is added and the refusals are
+// counted; what was built stays valid.
+TEST(SlamKeyframes, AtCapacityKeyframesAreRefusedAndCounted) {
+  KeyframeOptions o;
+  o.max_keyframes = 10;
+  KeyframeGraph kf(o);
+  Se2 odometry{};
+  int added = 0, full = 0;
+  for (int i = 0; i < 200; ++i) {
+    odometry = odometry * Se2{0.5, 0.0, 0.0};
+    const auto a = kf.on_odometry(odometry);
+    added += a == KeyframeGraph::Added::keyframe;
+    full += a == KeyframeGraph::Added::full;
+  }
+  EXPECT_EQ(added, 10);
+  EXPECT_TRUE(kf.full());
+  EXPECT_EQ(kf.graph().vertex_count(), 11u);  // the anchor and 10 keyframes
+  EXPECT_GT(full, 0);
+  EXPECT_EQ(kf.counters().refused_full, static_cast<std::uint64_t>(full));
+  EXPECT_FALSE(kf.add_loop_closure(0, 3, Se2{}, Se2::Matrix::Identity()));  // the anchor is not a keyframe
+  EXPECT_TRUE(kf.add_loop_closure(2, 9, Se2{}, Se2::Matrix::Identity()));
+  EXPECT_FALSE(kf.on_gps(std::nan(""), 0.0, 1.0));
 }
 
 TEST(SlamCompare, ARigidMotionOfASolutionIsNoError) {
