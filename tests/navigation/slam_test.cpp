@@ -261,7 +261,7 @@ TEST(SlamSmf, EveryPartIsAtMostMaxPartAndEveryLevelShrinks) {
 // is given: no operator new, no malloc (METIS' workspace included, served
 // from the hierarchy's arena), so the solver's memory is its arenas, whose
 // sizes follow from the configuration alone. The three graphs differ in size
-// (1,228 to 10,000 vertices) and shape (a building, a city, a grid of
+// (1,728 to 10,000 vertices) and shape (a building, a city, a grid of
 // streets).
 TEST(SlamMemory, ASolveTakesNothingFromTheHeapWhateverTheGraph) {
   constexpr GraphCapacity cap{10000, 40000};

@@ -21,7 +21,7 @@ KeyframeGraph::Added KeyframeGraph::on_odometry(const Se2& pose) {
   if (!started_) {
     started_ = true;
     last_odometry_ = pose;
-    if (full() || graph_.edge_count() >= capacity_.edges) {
+    if (!room()) {
       ++counters_.refused_full;
       return Added::full;
     }
@@ -36,7 +36,7 @@ KeyframeGraph::Added KeyframeGraph::on_odometry(const Se2& pose) {
   turn_ += std::fabs(step.theta);
   last_odometry_ = pose;
   if (path_ < options_.spacing_m && turn_ < options_.spacing_rad) return Added::none;
-  if (full() || graph_.edge_count() >= capacity_.edges) {
+  if (!room()) {
     ++counters_.refused_full;
     path_ = turn_ = 0.0;
     return Added::full;

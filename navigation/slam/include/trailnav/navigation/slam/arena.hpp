@@ -53,7 +53,6 @@ class Arena {
 class ArenaResource final : public std::pmr::memory_resource {
  public:
   explicit ArenaResource(Arena& arena) noexcept : arena_(arena) {}
-  Arena& arena() noexcept { return arena_; }
 
  private:
   void* do_allocate(std::size_t bytes, std::size_t alignment) override {

@@ -83,6 +83,8 @@ class KeyframeGraph {
   Se2 last_odometry_{}, keyframe_odometry_{};  // the previous pose; the latest keyframe's odometry pose
   double path_ = 0.0, turn_ = 0.0;             // since the latest keyframe
   bool keyframe_has_gps_ = false;
+  // A keyframe fits: a vertex and its odometry edge.
+  bool room() const noexcept { return !full() && graph_.edge_count() < capacity_.edges; }
   void attach_gps(const Se2& fix_odometry, double x, double y, double sigma);
   struct Pending {
     bool valid = false;
