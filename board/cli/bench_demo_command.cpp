@@ -3,9 +3,10 @@
 // replays the recording into it in real time — lidar and e-stop over UDP,
 // GPS and IMU through pseudo-terminals, wheel speeds through the CAN tunnel —
 // and listens on DDS like a planner: obstacle maps (saved as PNG), terrain
-// maps, poses, health, and the corrected subgoals of the navigation task
+// maps, poses, health, the corrected subgoals of the navigation task
 // (planned on the recording's world.osm to where the drive ends), each
-// checked against the simulated trail. It ends with what arrived, the
+// checked against the simulated trail, and the online map's optimised
+// keyframes (checked against the simulated trajectory). It ends with what arrived, the
 // latency, and trailnavd's own report.
 #include <signal.h>
 #include <sys/wait.h>
@@ -26,6 +27,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <GeographicLib/UTMUPS.hpp>
 
 #include "bench_config.hpp"
 #include "builtin_models.hpp"
@@ -279,8 +282,9 @@ int run_bench_demo(const BenchDemoOptions& o) {
   auto terrain = dds::Subscriber::create(*domain.domain, "trailnav/terrain_map", &trailnav_msgs_msg_dds__TerrainClassMap__desc, 0);
   auto subgoal = dds::Subscriber::create(*domain.domain, "trailnav/subgoal", &geometry_msgs_msg_dds__PoseStamped__desc, 0, true);
   auto subgoal_path = dds::Subscriber::create(*domain.domain, "trailnav/subgoal_path", &nav_msgs_msg_dds__Path__desc, 0);
+  auto keyframe_path = dds::Subscriber::create(*domain.domain, "trailnav/keyframe_path", &nav_msgs_msg_dds__Path__desc, 0, true);
   if (!maps.subscriber || !poses.subscriber || !health.subscriber || !terrain.subscriber || !subgoal.subscriber ||
-      !subgoal_path.subscriber) {
+      !subgoal_path.subscriber || !keyframe_path.subscriber) {
     std::fprintf(stderr, "trailnav demo: cannot subscribe\n%s", stop_daemon().c_str());
     return 1;
   }
@@ -344,6 +348,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
   eval::TrailCheck trail_check(*truth.truth, trail, 0);
   std::uint64_t n_paths = 0;
   std::size_t last_path_poses = 0;
+  // The online map's newest keyframe path (its frame and, per keyframe, stamp and UTM position).
+  std::uint64_t n_keyframe_paths = 0;
+  std::string keyframe_frame;
+  std::vector<Stamped> keyframes;
   auto stamp_ns = [](const auto& header) {
     return static_cast<std::int64_t>(header.stamp.sec) * 1'000'000'000 + static_cast<std::int64_t>(header.stamp.nanosec);
   };
@@ -389,6 +397,16 @@ int run_bench_demo(const BenchDemoOptions& o) {
     subgoal_path.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       ++n_paths;
       last_path_poses = static_cast<const nav_msgs_msg_dds__Path_*>(r.sample)->poses._length;
+    });
+    keyframe_path.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& path = *static_cast<const nav_msgs_msg_dds__Path_*>(r.sample);
+      ++n_keyframe_paths;
+      keyframe_frame = path.header.frame_id;
+      keyframes.clear();
+      for (std::uint32_t i = 0; i < path.poses._length; ++i) {
+        const auto& k = path.poses._buffer[i];
+        keyframes.push_back({stamp_ns(k.header), k.pose.position.x, k.pose.position.y});
+      }
     });
     poses.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
@@ -513,6 +531,46 @@ int run_bench_demo(const BenchDemoOptions& o) {
                 static_cast<unsigned long long>(n_paths),
                 last_path_poses);
   }
+  {
+    // The online map's keyframes against the simulated truth at their
+    // stamps, in UTM: the offset common to all of them is the simulated
+    // GPS's wandering bias (board/sim/scenario.hpp), which no map tied to GPS
+    // can see; what is left is the map's own error.
+    int zone = 0;
+    char hemisphere = 'N';
+    std::vector<std::array<double, 2>> errors;
+    std::ofstream csv(out / "keyframes.csv");
+    csv << "stamp_s,easting,northing,true_easting,true_northing\n";
+    if (std::sscanf(keyframe_frame.c_str(), "utm_%d%c", &zone, &hemisphere) == 2) {
+      for (const Stamped& k : keyframes) {
+        eval::TruthAt at;
+        if (!eval::truth_at(truth.truth->trajectory, k.t - trail_check.offset_ns(), at) || std::isnan(at.lat)) continue;
+        double e = 0.0, n = 0.0, gamma = 0.0, scale = 0.0;
+        int z = zone;
+        bool north = hemisphere == 'N';
+        GeographicLib::UTMUPS::Forward(at.lat, at.lon, z, north, e, n, gamma, scale, zone);
+        errors.push_back({k.x - e, k.y - n});
+        char row[160];
+        std::snprintf(row, sizeof row, "%.3f,%.3f,%.3f,%.3f,%.3f\n", static_cast<double>(k.t) * 1e-9, k.x, k.y, e, n);
+        csv << row;
+      }
+    }
+    std::array<double, 2> bias{0.0, 0.0};
+    for (const auto& v : errors) bias = {bias[0] + v[0], bias[1] + v[1]};
+    const double count = static_cast<double>(std::max<std::size_t>(errors.size(), 1));
+    bias = {bias[0] / count, bias[1] / count};
+    double shape = 0.0, shape_max = 0.0;
+    for (const auto& v : errors) {
+      const double d = std::hypot(v[0] - bias[0], v[1] - bias[1]);
+      shape += d / count;
+      shape_max = std::max(shape_max, d);
+    }
+    std::printf("   %llu optimised keyframe paths of the online map (%s); the last one's %zu keyframes against the "
+                "simulated truth: %.2f m east, %.2f m north common to all (the simulated GPS's bias), %.2f m mean and "
+                "%.2f m max beyond it (%s)\n",
+                static_cast<unsigned long long>(n_keyframe_paths), keyframe_frame.empty() ? "none" : keyframe_frame.c_str(),
+                errors.size(), bias[0], bias[1], shape, shape_max, (out / "keyframes.csv").c_str());
+  }
   std::printf("   health while driving:\n%s", driving_health.c_str());
   std::printf("   after the recording ended: the last map resent %llu time(s) as stale (free cells unknown); health then:\n%s",
               static_cast<unsigned long long>(n_stale), last_health.c_str());
@@ -530,7 +588,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
               replay_wall_s, replay_wall_s > 0.0 ? 100.0 * replay_cpu_s / replay_wall_s : 0.0, o.lidar.c_str(),
               o.scenario.c_str());
   print_daemon_report(report);
-  return n_maps > 0 && n_poses > 0 && n_health > 0 && !subgoals_received.empty() ? 0 : 1;
+  return n_maps > 0 && n_poses > 0 && n_health > 0 && !subgoals_received.empty() && n_keyframe_paths > 0 ? 0 : 1;
 }
 
 }  // namespace

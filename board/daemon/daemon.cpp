@@ -125,6 +125,24 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                 d->can_ ? &d->can_->readings() : nullptr,
                                                 d->gps_ ? &d->gps_->fixes() : nullptr);
   }
+  if (config.mapping) {
+    // The mapping thread: every pose and every fix the alignment used, in
+    // queues of their own; the map's storage and the solver's arenas now.
+    const slam::MappingOptions& m = *config.mapping;
+    d->mapping_poses_ = std::make_unique<perception::PoseQueue>();
+    d->pose_->add_pose_output(d->mapping_poses_.get());
+    if (m.use_gps) {
+      d->mapping_fixes_ = std::make_unique<pose::MappingFixQueue>();
+      d->pose_->set_fix_output(d->mapping_fixes_.get());
+    }
+    d->mapping_out_ = std::make_unique<Mailbox<slam::MappingSnapshot>>(m.keyframes.max_keyframes);
+    d->mapping_ = std::make_unique<slam::MappingTask>(m, *d->mapping_poses_, d->mapping_fixes_.get(), *d->mapping_out_);
+    if (m.use_gps) {
+      d->map_corrections_ = std::make_unique<Mailbox<pose::MapCorrection>>();
+      d->mapping_->set_corrections(d->map_corrections_.get());
+      d->pose_->set_map_correction(d->map_corrections_.get());
+    }
+  }
   if (config.obstacles) {
     const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
     auto made = perception::ObstaclePipeline::create(*config.obstacles, shape);
@@ -201,6 +219,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     inputs.unknown_cost = config.terrain->unknown_cost;
   }
   inputs.navigation = d->navigation_out_.get();
+  inputs.mapping = d->mapping_out_.get();
   if (d->obstacles_ && config.dds.publisher.points_rate_hz > 0.0) {
     // Viewers' points: every point a revolution can have, allocated now.
     const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
@@ -255,6 +274,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (d->obstacles_) d->obstacles_->set_notify(&d->publisher_->wakeup());
   if (d->terrain_) d->terrain_->set_notify(&d->publisher_->wakeup());
   if (d->navigation_) d->navigation_->set_notify(&d->publisher_->wakeup());
+  if (d->mapping_) d->mapping_->set_notify(&d->publisher_->wakeup());
 
   // The task table, in a fixed order.
   auto add = [&](const char* name, Task* task, TaskEvent* event) -> bool {
@@ -270,7 +290,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       !add("imu", d->imu_.get(), nullptr) || !add("can", d->can_.get(), nullptr) ||
       !add("gpio", d->gpio_.get(), nullptr) || !add("pose", d->pose_.get(), nullptr) ||
       !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr) ||
-      !add("navigation", d->navigation_.get(), nullptr)) {
+      !add("navigation", d->navigation_.get(), nullptr) || !add("mapping", d->mapping_.get(), nullptr)) {
     return result;
   }
   d->last_runs_.assign(d->scheduler_->task_count(), 0);
@@ -304,11 +324,14 @@ void Daemon::stop() {
 }
 
 bool Daemon::alive() noexcept {
-  // Periodic tasks must have run since the last call; event tasks may idle.
+  // Periodic real-time tasks must have run since the last call; event tasks
+  // may idle, and so may a task on normal scheduling (the mapping thread's
+  // solve of a large map takes seconds: it must not restart the service).
   bool ok = scheduler_->running();
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
     const std::uint64_t runs = scheduler_->stats(i).runs;
-    if (scheduler_->spec(i).kind == TaskKind::periodic && runs == last_runs_[i]) ok = false;
+    const TaskSpec& spec = scheduler_->spec(i);
+    if (spec.kind == TaskKind::periodic && spec.priority > 0 && runs == last_runs_[i]) ok = false;
     last_runs_[i] = runs;
   }
   return ok;
@@ -519,6 +542,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     // What became of the GPS fixes: used, rejected as outliers, and how often
     // agreeing outliers meant the GPS itself had jumped (re-anchored).
     m.value("gps_fixes_used", s.utm_counters.used);
+    if (mapping_) m.value("map_corrections", s.map_corrections);
     m.value("gps_outliers", s.utm_counters.outliers);
     m.value("gps_jumps", s.utm_counters.jumps);
     // IMU and wheels are stamped with their host receive times (offset 0 by
@@ -598,6 +622,41 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("aligner_updates", s.navigator.updates);
     m.value("aligner_catch_up_updates", s.navigator.catch_up_updates);
     m.value("terrain_maps", s.terrain_maps);
+  }
+  if (mapping_) {
+    const slam::MappingTaskStatus s = mapping_->status();
+    const bool waiting = s.state == slam::MappingState::waiting_alignment;
+    const bool full = s.state == slam::MappingState::full;
+    m.begin(s.failures > 0 || full ? L::warn : (waiting ? L::warn : L::ok), "trailnavd: mapping",
+            full                 ? "full: the map no longer grows (max_keyframes); map -> odom held at its last keyframe"
+            : s.error[0] != '\0' ? s.error.data()
+                                 : slam::mapping_state_name(s.state),
+            "");
+    m.value("state", slam::mapping_state_name(s.state));
+    m.value("nodes", static_cast<std::uint64_t>(s.vertices));
+    m.value("edges", static_cast<std::uint64_t>(s.edges));
+    m.value("capacity_nodes", static_cast<std::uint64_t>(s.capacity_vertices));
+    m.value("keyframes", s.keyframes.keyframes);
+    m.value("gps_edges", s.keyframes.gps_edges);
+    m.value("loop_closures", s.keyframes.loop_closures);
+    m.value("refused_full", s.keyframes.refused_full);
+    m.value("gps_unattached", s.keyframes.gps_unattached);
+    m.value("optimisations", s.optimisations);
+    m.value("failures", s.failures);
+    m.value("levels", static_cast<std::uint64_t>(s.levels));
+    m.value("chi2", s.chi2, 3);
+    m.value("solve_ms", s.solve_ms, 1);
+    m.value("solve_max_ms", s.solve_max_ms, 1);
+    // The solver's arenas: reserved at start-up and their high-water marks.
+    m.value("correction_m", s.correction_m, 2);
+    m.value("correction_rad", s.correction_rad, 4);
+    m.value("memory_high_water_bytes", static_cast<std::uint64_t>(s.hierarchy_high_water + s.part_high_water));
+    m.value("memory_reserved_bytes", static_cast<std::uint64_t>(s.hierarchy_capacity + s.part_capacity));
+    m.value("poses", s.poses);
+    m.value("poses_unmeasured", s.poses_unmeasured);
+    m.value("poses_before_start", s.poses_before_start);
+    m.value("fixes", s.fixes);
+    if (pose_) m.value("fix_queue_drops", pose_->status().fix_queue_drops);
   }
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
     const TaskStats st = scheduler_->stats(i);

@@ -6,6 +6,8 @@
 //   obstacles                             -- real-time task, woken per revolution
 //   terrain                               -- real-time task: the terrain-class map
 //   navigation                            -- real-time task: route, subgoals, alignment
+//   mapping                               -- task on normal scheduling: keyframes, GPS
+//                                            constraints, SMF solves (docs/slam.md)
 //   publisher                             -- plain thread, the only one that writes to DDS
 //   command reader                        -- plain thread: goals and cancels in (DDS readers),
 //                                            queued for the navigation task
@@ -26,6 +28,7 @@
 #include "robot_config.hpp"
 #include "trailnav/navigation/navigator/navigation_task.hpp"
 #include "trailnav/navigation/osm/road_graph.hpp"
+#include "trailnav/navigation/slam/mapping_task.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/random_forest.hpp"
@@ -106,6 +109,11 @@ class Daemon {
   std::unique_ptr<nav::Navigator> navigator_;
   std::unique_ptr<Mailbox<nav::NavigationSnapshot>> navigation_out_;
   std::unique_ptr<nav::NavigationTask> navigation_;
+  std::unique_ptr<perception::PoseQueue> mapping_poses_;
+  std::unique_ptr<pose::MappingFixQueue> mapping_fixes_;
+  std::unique_ptr<Mailbox<slam::MappingSnapshot>> mapping_out_;
+  std::unique_ptr<Mailbox<pose::MapCorrection>> map_corrections_;  // mapping thread -> pose thread
+  std::unique_ptr<slam::MappingTask> mapping_;
   std::unique_ptr<dds::Domain> domain_;
   std::unique_ptr<dds::DdsPublisher> publisher_;
   std::unique_ptr<nav::NavCommandQueue> commands_;

@@ -200,6 +200,7 @@ DdsSection parse_dds(const ConfigNode& n) {
     topic("navigation_status", p.topics.navigation_status);
     topic("coarse_map", p.topics.coarse_map);
     topic("points", p.topics.points);
+    topic("keyframe_path", p.topics.keyframe_path);
     topic("goal", d.commands.topics.goal);
     topic("geo_goal", d.commands.topics.geo_goal);
     topic("cancel", d.commands.topics.cancel);
@@ -235,6 +236,41 @@ DdsSection parse_dds(const ConfigNode& n) {
   p.stale_after = n.number("stale_after_s", 0.05, 60.0, p.stale_after);
   n.reject_unknown_keys();
   return d;
+}
+
+// The mapping section (docs/trailnavd.md "mapping"): keyframes, their
+// odometry noise, the capacity and SMF's part size.
+slam::MappingOptions parse_mapping(const ConfigNode& n, bool has_gps, const pose::PoseEstimatorOptions& pose) {
+  slam::MappingOptions o;
+  // The GPS error model of the alignment (navigation/pose): white part and
+  // the wandering bias' correlation time.
+  o.gps_white_sigma = pose.utm.gps_white_sigma;
+  o.gps_bias_time = pose.utm.gps_bias_time;
+  slam::KeyframeOptions& k = o.keyframes;
+  // 10 km of keyframes at 2 m: an SMF solve of the whole map within the
+  // task's budget on the reference machine (docs/slam.md "Online mapping").
+  k.max_keyframes = 5000;
+  k.max_keyframes = static_cast<std::size_t>(n.integer("max_keyframes", 2, 10'000'000, static_cast<std::int64_t>(k.max_keyframes)));
+  k.spacing_m = n.number("spacing_m", 0.1, 1000.0, k.spacing_m);
+  k.spacing_rad = n.number("spacing_rad", 0.01, 6.3, k.spacing_rad);
+  k.sigma_per_metre = n.number("sigma_per_metre", 0.0, 10.0, k.sigma_per_metre);
+  k.sigma_theta_per_rad = n.number("sigma_theta_per_rad", 0.0, 10.0, k.sigma_theta_per_rad);
+  k.sigma_theta_per_metre = n.number("sigma_theta_per_metre", 0.0, 10.0, k.sigma_theta_per_metre);
+  k.sigma_floor_m = n.number("sigma_floor_m", 1e-6, 100.0, k.sigma_floor_m);
+  k.sigma_floor_rad = n.number("sigma_floor_rad", 1e-6, 10.0, k.sigma_floor_rad);
+  k.gps_max_distance = n.number("gps_max_distance_m", 0.0, 100.0, k.gps_max_distance);
+  o.max_part = static_cast<int>(n.integer("max_part", 10, 5000, o.max_part));
+  o.max_iterations = static_cast<int>(n.integer("max_iterations", 1, 10000, o.max_iterations));
+  o.optimize_period = n.number("optimize_period_s", 0.1, 3600.0, o.optimize_period);
+  o.use_gps = n.boolean("use_gps", has_gps);
+  if (o.use_gps && !has_gps) n.fail("use_gps", "the map is tied to GPS fixes: add a 'gps' section, or set use_gps: false");
+  if (!o.use_gps && has_gps) {
+    n.fail("use_gps", "with a 'gps' section the GPS alignment is odom's parent on tf; a map without GPS would be a "
+                      "second parent: keep use_gps true");
+  }
+  if (const std::string e = slam::check_mapping_options(o); !e.empty()) n.fail("max_keyframes", e);
+  n.reject_unknown_keys();
+  return o;
 }
 
 }  // namespace
@@ -287,6 +323,10 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
       c.navigation->navigator.aligner.unknown_cost = c.terrain->unknown_cost;
     }
   }
+  if (auto n = root.optional_map("mapping")) {
+    if (!c.pose) root.fail("mapping", "the map is built from the pose thread's odometry: add a 'pose' section");
+    c.mapping = parse_mapping(*n, c.gps.has_value(), *c.pose);
+  }
   // The terrain thread reads the revolutions itself only without the
   // obstacle thread, or when the two register with different poses (else it
   // takes the obstacle thread's aligned points: RobotConfig::terrain_shares_alignment()).
@@ -318,7 +358,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"pose", c.pose.has_value(), TaskKind::periodic},
                         {"obstacles", c.obstacles.has_value(), TaskKind::event},
                         {"terrain", c.terrain.has_value(), TaskKind::periodic},
-                        {"navigation", c.navigation.has_value(), TaskKind::periodic}};
+                        {"navigation", c.navigation.has_value(), TaskKind::periodic},
+                        {"mapping", c.mapping.has_value(), TaskKind::periodic}};
   if (root.is_map("tasks")) {
     // A preset: the measured table of a lidar model, for the parts configured.
     const ConfigNode t = root.map("tasks");
@@ -355,7 +396,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                                   [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
-                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation");
+                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping");
     }
   }
   root.reject_unknown_keys();

@@ -20,6 +20,7 @@
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/navigation/navigator/navigation_config.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/navigation/slam/mapping_task.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/perception/terrain_config.hpp"
@@ -66,6 +67,7 @@ struct RobotConfig {
   bool terrain_use_pose = true;
   perception::PoseWait pose_wait;  // how the obstacle and terrain threads wait for a late pose
   std::optional<nav::NavigationSection> navigation;
+  std::optional<slam::MappingOptions> mapping;  // online mapping (docs/slam.md "Online mapping")
   DdsSection dds;
 
   // The terrain thread registers the points the obstacle thread aligned

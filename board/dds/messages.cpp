@@ -286,6 +286,10 @@ PathMessage::PathMessage(std::size_t capacity, std::string_view frame_id) : pose
   msg_.poses._release = false;
 }
 
+void PathMessage::set_frame(std::string_view frame_id) noexcept {
+  frame_.set(frame_id);  // in place: the header and the poses point at it
+}
+
 void PathMessage::clear(std::int64_t utc_ns) noexcept {
   msg_.header.stamp = to_time(utc_ns);
   msg_.poses._length = 0;

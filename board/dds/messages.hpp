@@ -225,6 +225,8 @@ class PathMessage {
   PathMessage(std::size_t capacity, std::string_view frame_id);
   PathMessage(const PathMessage&) = delete;
   PathMessage& operator=(const PathMessage&) = delete;
+  // The frame of the path and its poses (cut to 63 characters).
+  void set_frame(std::string_view frame_id) noexcept;
   void clear(std::int64_t utc_ns) noexcept;
   // False when full.
   bool add(std::int64_t utc_ns, double x, double y, double yaw) noexcept;

@@ -72,6 +72,11 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     make(p->status_writer_, trailnav_msgs_msg_dds__NavigationStatus__desc, options.topics.navigation_status,
          {true, 1, Durability::transient_local});
   }
+  if (p->inputs_.mapping != nullptr) {
+    p->keyframe_path_msg_.emplace(p->inputs_.mapping->last_read().path.size(), "map");
+    make(p->keyframe_path_writer_, nav_msgs_msg_dds__Path__desc, options.topics.keyframe_path,
+         {true, 1, Durability::transient_local});
+  }
   make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
   if (options.publish_tf) {
     // As ROS 2's tf2 does: rt/tf reliable, volatile, keep last 100;
@@ -118,6 +123,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.odometry = odometry_.load(std::memory_order_relaxed);
   s.statuses = statuses_.load(std::memory_order_relaxed);
   s.point_clouds = point_clouds_.load(std::memory_order_relaxed);
+  s.keyframe_paths = keyframe_paths_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
   return s;
 }
@@ -140,6 +146,7 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
     health_msg_.value("navigation_statuses", s.statuses);
   }
   if (points_writer_) health_msg_.value("point_clouds", s.point_clouds);
+  if (keyframe_path_writer_) health_msg_.value("keyframe_paths", s.keyframe_paths);
   if (tf_writer_) {
     health_msg_.value("tf_messages", s.transforms);
     health_msg_.value("odometry", s.odometry);
@@ -181,7 +188,10 @@ void DdsPublisher::publish_pose(const pose::PoseSnapshot& p) noexcept {
       tf_msg_.clear();
       tf_msg_.add(p.local.time_ns, options_.odom_frame, options_.frames.base_link,
                   {p.local.x, p.local.y, p.local.z, p.local.roll, p.local.pitch, p.local.yaw});
-      if (p.utm.position_valid && p.utm.heading_valid) {
+      if (map_correction_.valid) {
+        // A map without GPS (the mapping thread's): odom's parent.
+        tf_msg_.add(p.local.time_ns, map_correction_.frame.data(), options_.odom_frame, map_correction_.transform);
+      } else if (p.utm.position_valid && p.utm.heading_valid) {
         map_frame_name(options_.frames.map, p.utm.zone, p.utm.north, map_frame_);
         tf_msg_.add(p.local.time_ns, map_frame_.data(), options_.odom_frame, utm_to_odom(p.local, p.utm));
       }
@@ -193,6 +203,30 @@ void DdsPublisher::publish_pose(const pose::PoseSnapshot& p) noexcept {
     const bool b = fix_writer_->write(&utm_msg_.fix());
     count(a && b, fixes_);
   }
+}
+
+void DdsPublisher::publish_mapping(const slam::MappingSnapshot& m) noexcept {
+  // Georeferenced: the UTM zone's frame, as the GPS alignment names it;
+  // else the odometry frame at start, "map" (or the configured name when it
+  // is not "utm").
+  const std::string_view configured = options_.frames.map;
+  map_frame_name(!m.georeferenced && configured == "utm" ? std::string_view("map") : configured, m.zone, m.north,
+                 map_correction_.frame);
+  // A map tied to GPS corrects the alignment inside the pose thread (every
+  // UTM pose, and so utm -> odom, is already the map's); a map without GPS
+  // is odom's parent here: the odometry frame at start until loop closures
+  // move it.
+  if (!m.georeferenced) {
+    map_correction_.valid = true;
+    map_correction_.transform = RigidTransform{m.x, m.y, 0.0, 0.0, 0.0, m.yaw};
+  }
+  keyframe_path_msg_->set_frame(map_correction_.frame.data());
+  keyframe_path_msg_->clear(m.time_ns);
+  for (std::size_t i = 0; i < m.path_count; ++i) {
+    const slam::MapPathPose& p = m.path[i];
+    keyframe_path_msg_->add(p.time_ns, p.x, p.y, p.yaw);
+  }
+  count(keyframe_path_writer_->write(&keyframe_path_msg_->sample()), keyframe_paths_);
 }
 
 void DdsPublisher::publish_coarse(const perception::ObstacleSnapshot& s, bool stale) noexcept {
@@ -313,6 +347,9 @@ void DdsPublisher::loop() noexcept {
         while (inputs_.navigation_answers->try_pop(answer_)) publish_status(answer_);
       }
       if (const nav::NavigationSnapshot* n = inputs_.navigation->try_read()) publish_navigation(*n);
+    }
+    if (keyframe_path_writer_) {
+      if (const slam::MappingSnapshot* m = inputs_.mapping->try_read()) publish_mapping(*m);
     }
     if (pose_writer_ && now >= next_pose) {
       next_pose = std::max(next_pose + pose_period, now);

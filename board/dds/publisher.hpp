@@ -29,6 +29,7 @@
 #include "trailnav/navigation/navigator/navigation_task.hpp"
 #include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/navigation/slam/mapping_task.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
 #include "trailnav/runtime/broadcast.hpp"
@@ -54,6 +55,7 @@ struct TopicNames {
   std::string navigation_status = "trailnav/navigation_status";
   std::string coarse_map = "trailnav/obstacle_map_coarse";
   std::string points = "trailnav/points";
+  std::string keyframe_path = "trailnav/keyframe_path";  // the mapping thread's optimised keyframes
 };
 
 // REP 105 frame names (docs/dds.md, "Frames"). `map`: the frame of the GPS
@@ -107,6 +109,8 @@ struct PublisherInputs {
   Mailbox<nav::NavigationSnapshot>* navigation = nullptr;
   // Revolutions as points for viewers (its slots give the capacity), may be null.
   Mailbox<perception::PointsSnapshot>* points = nullptr;
+  // The mapping thread's snapshots (their path capacity gives the Path's), may be null.
+  Mailbox<slam::MappingSnapshot>* mapping = nullptr;
   // The navigation task's answer to each order (a status each), may be null.
   nav::NavStatusQueue* navigation_answers = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
@@ -119,6 +123,7 @@ struct PublisherStats {
   std::uint64_t transforms = 0, odometry = 0;  // TFMessages on rt/tf, Odometry samples
   std::uint64_t statuses = 0;                  // navigation status samples
   std::uint64_t point_clouds = 0;
+  std::uint64_t keyframe_paths = 0;  // the mapping thread's paths
   bool lidar_stale = false;
 };
 
@@ -144,6 +149,7 @@ class DdsPublisher {
   void publish_pose(const pose::PoseSnapshot& p) noexcept;
   void publish_map_instant(const perception::ObstacleSnapshot& s) noexcept;
   void publish_static_frames() noexcept;
+  void publish_mapping(const slam::MappingSnapshot& m) noexcept;
   void count(bool written, std::atomic<std::uint64_t>& counter) noexcept;
 
   Clock& clock_;
@@ -168,6 +174,15 @@ class DdsPublisher {
   PoseStampedMessage pose_msg_;
   PoseStampedMessage subgoal_msg_;
   std::optional<PathMessage> path_msg_;
+  // The mapping thread's path, and, for a map without GPS, its map -> odom
+  // (docs/slam.md "Online mapping"; a map with GPS corrects the UTM poses).
+  std::unique_ptr<Writer> keyframe_path_writer_;
+  std::optional<PathMessage> keyframe_path_msg_;
+  struct MapCorrection {
+    bool valid = false;
+    RigidTransform transform;
+    std::array<char, 64> frame{};
+  } map_correction_;
   std::uint64_t last_active_revision_ = 0, last_path_revision_ = 0;
   UtmFixMessages utm_msg_;
   DiagnosticsMessage health_msg_;
@@ -176,6 +191,7 @@ class DdsPublisher {
   // Publisher thread's state, copied out under the atomics below.
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
   std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0}, statuses_{0}, point_clouds_{0};
+  std::atomic<std::uint64_t> keyframe_paths_{0};
   std::atomic<bool> lidar_stale_{false};
 };
 

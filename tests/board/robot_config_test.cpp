@@ -61,7 +61,7 @@ TEST(RobotConfig, ShippedExamplesAreValid) {
     // The obstacle thread alone: the terrain thread takes the points it aligned.
     EXPECT_TRUE(r.config->terrain_shares_alignment()) << f;
     EXPECT_EQ(r.config->lidar->driver.revolution_readers, 1) << f;
-    EXPECT_EQ(r.config->tasks.size(), 8u) << f;
+    EXPECT_EQ(r.config->tasks.size(), r.config->mapping ? 9u : 8u) << f;
     EXPECT_EQ(r.config->task_preset, velodyne::model_info(r.config->lidar->model).name) << f;
     // Every preset's budgets cover what its tasks were measured to need: nothing said at start.
     EXPECT_TRUE(r.config->warnings.empty()) << f << ": " << (r.config->warnings.empty() ? "" : r.config->warnings[0]);
@@ -145,6 +145,47 @@ TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {
   // A missing map file.
   e = load_error(std::string(kMinimal) + task + "navigation: {osm: nowhere.osm.pbf, goal: [47.166, 9.51]}\n");
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+}
+
+// The mapping section: its task, the pose it is built from, GPS or not said
+// in so many words, and its numbers in range, each mistake with its line.
+TEST(RobotConfig, MappingNeedsThePoseItsTaskAndSaysWhetherItUsesGps) {
+  const std::string task = "  - {name: mapping, kind: periodic, rate_hz: 2, budget_ms: 450}\n";
+  const std::string pose_tasks =
+      "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n"
+      "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
+      "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n";
+  const std::string pose =
+      "gps: {link: 'udp:127.0.0.1:10110'}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {antenna: [0, 0, 1]}\n";
+  const auto ok = load(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {max_keyframes: 1000, max_part: 200}\n");
+  ASSERT_TRUE(ok.config) << ok.error;
+  ASSERT_TRUE(ok.config->mapping.has_value());
+  EXPECT_TRUE(ok.config->mapping->use_gps);  // a gps section: the map is tied to it
+  EXPECT_EQ(ok.config->mapping->keyframes.max_keyframes, 1000u);
+  EXPECT_EQ(ok.config->mapping->max_part, 200);
+  // Its task is required.
+  std::string e = load_error(std::string(kMinimal) + pose_tasks + pose + "mapping: {}\n");
+  EXPECT_NE(e.find("mapping"), std::string::npos) << e;
+  // Without the pose.
+  e = load_error(std::string(kMinimal) + task + "mapping: {}\n");
+  EXPECT_NE(e.find("'pose' section"), std::string::npos) << e;
+  // Without GPS the map says so; with GPS it may not leave it out.
+  const std::string no_gps_pose = "imu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {}\n";
+  const std::string no_gps_tasks =
+      "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
+      "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n";
+  e = load_error(std::string(kMinimal) + task + no_gps_tasks + no_gps_pose + "mapping: {use_gps: true}\n");
+  EXPECT_NE(e.find("use_gps"), std::string::npos) << e;
+  const auto odometry_only = load(std::string(kMinimal) + task + no_gps_tasks + no_gps_pose + "mapping: {}\n");
+  ASSERT_TRUE(odometry_only.config) << odometry_only.error;
+  EXPECT_FALSE(odometry_only.config->mapping->use_gps);
+  e = load_error(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {use_gps: false}\n");
+  EXPECT_NE(e.find("second parent"), std::string::npos) << e;
+  // Numbers out of range and unknown keys, with the line.
+  e = load_error(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {max_part: 3}\n");
+  EXPECT_NE(e.find(":15: 'mapping.max_part'"), std::string::npos) << e;
+  e = load_error(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {spacing: 2}\n");
+  EXPECT_NE(e.find("spacing"), std::string::npos) << e;
 }
 
 // trailnavd --check goes as far as start-up with the navigation section: the
@@ -322,7 +363,7 @@ TEST(RobotConfig, ThePresetsSensorsShareAThreadAndAChangedRateMustLeaveIt) {
 TEST(RobotConfig, EveryPresetsBudgetIsItsNeedWithTheStatedMargin) {
   for (const auto model : {velodyne::Model::vlp16, velodyne::Model::vlp32c, velodyne::Model::hdl32e, velodyne::Model::hdl64e}) {
     const auto rows = daemon::task_preset(model);
-    ASSERT_EQ(rows.size(), 9u);
+    ASSERT_EQ(rows.size(), 10u);
     for (const daemon::PresetRow& r : rows) {
       const double cap = r.kind == TaskKind::periodic ? 0.9 * 1000.0 / r.rate_hz : 1e9;
       const double expected = std::min(cap, std::max(1.0, std::ceil(r.need_ms * 15.0 - 1e-9) / 10.0));

@@ -65,6 +65,8 @@
 #include "bench_daemon.hpp"
 #include "subscriber.hpp"
 #include "tf2_msgs.h"
+#include <GeographicLib/UTMUPS.hpp>
+
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
@@ -134,6 +136,14 @@ struct DaemonRun {
   long rss_start_kb = 0, rss_end_kb = 0;  // after the warm-up (a third of the drive, at least 4 s), at its end
   double cpu_percent = 0.0;  // the daemon's CPU time over the replay's wall time, % of one core
   long rss_after_kb = 0;                  // after the silence and the late subscribers (Cyclone's discovery allocates)
+  // Mapping (with navigation): keyframe paths received, the last one's frame
+  // and poses (UTM), each keyframe's distance from the simulated truth at its
+  // stamp, and health's newest mapping values.
+  std::size_t keyframe_paths = 0;
+  std::string keyframe_frame;
+  std::vector<std::array<double, 2>> keyframe_errors;  // keyframe minus truth, east and north
+  std::map<std::string, std::string> mapping_health;
+  bool map_to_odom_after_solve = false;  // utm -> odom seen after the first optimised path
   int exit_code = -1;
   std::string stderr_text;
 };
@@ -165,6 +175,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   // then rightly stops mapping. The tests without navigation keep the
   // pseudo-terminals, as do the drivers' own.
   bo.serial_over_udp = navigation;
+  bo.mapping = navigation;
   std::string error;
   const auto bench = test::BenchDaemon::start(TRAILNAVD_BINARY, bo, error);
   EXPECT_TRUE(bench) << error;
@@ -240,6 +251,14 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   auto nav_status = dds::Subscriber::create(*dds_domain.domain, "trailnav/navigation_status",
                                            &trailnav_msgs_msg_dds__NavigationStatus__desc, 0);
   EXPECT_TRUE(nav_status.subscriber);
+  auto keyframe_path = dds::Subscriber::create(*dds_domain.domain, "trailnav/keyframe_path", &nav_msgs_msg_dds__Path__desc, 0, true);
+  EXPECT_TRUE(keyframe_path.subscriber);
+  struct Keyframe {
+    std::int64_t t;
+    double e, n, yaw;
+  };
+  std::vector<Keyframe> keyframes;  // the newest path's
+  bool optimised_path_seen = false;
   std::array<double, 3> utm_odom{0.0, 0.0, 0.0};  // translation and yaw of utm -> odom
   bool have_utm_odom = false;
   const auto t_start = std::chrono::steady_clock::now();
@@ -319,6 +338,19 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
         out.path_ends.push_back({elapsed_s(), utm_odom[0] + c * p.x - s * p.y, utm_odom[1] + s * p.x + c * p.y, path.poses._length});
       }
     });
+    keyframe_path.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& path = *static_cast<const nav_msgs_msg_dds__Path_*>(r.sample);
+      ++out.keyframe_paths;
+      out.keyframe_frame = path.header.frame_id;
+      keyframes.clear();
+      for (std::uint32_t i = 0; i < path.poses._length; ++i) {
+        const auto& p = path.poses._buffer[i];
+        keyframes.push_back({stamp_ns(p.header), p.pose.position.x, p.pose.position.y, 2.0 * std::atan2(p.pose.orientation.z, p.pose.orientation.w)});
+      }
+      if (out.mapping_health.count("optimisations") != 0 && out.mapping_health["optimisations"] != "0") {
+        optimised_path_seen = true;
+      }
+    });
     nav_status.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& s = *static_cast<const trailnav_msgs_msg_dds__NavigationStatus_*>(r.sample);
       out.statuses.push_back({elapsed_s(), s.state, s.message, s.goal.latitude, s.goal.longitude, s.plans, s.goals_received,
@@ -333,6 +365,13 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
         const bool imu_status = std::strcmp(a.status._buffer[i].name, "trailnavd: imu") == 0;
         const bool terrain_status = std::strcmp(a.status._buffer[i].name, "trailnavd: terrain") == 0;
         const bool obstacles_status = std::strcmp(a.status._buffer[i].name, "trailnavd: obstacles") == 0;
+        const bool mapping_status = std::strcmp(a.status._buffer[i].name, "trailnavd: mapping") == 0;
+        if (mapping_status) {
+          for (std::uint32_t k = 0; k < a.status._buffer[i].values._length; ++k) {
+            out.mapping_health[a.status._buffer[i].values._buffer[k].key] = a.status._buffer[i].values._buffer[k].value;
+          }
+          out.mapping_health["message"] = a.status._buffer[i].message;
+        }
         if (navigation_status) out.navigation_health_s.push_back(elapsed_s());
         for (std::uint32_t k = 0; k < a.status._buffer[i].values._length; ++k) {
           const auto& kv = a.status._buffer[i].values._buffer[k];
@@ -368,6 +407,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
           utm_odom = {t.transform.translation.x, t.transform.translation.y,
                       std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))};
           have_utm_odom = true;
+          if (optimised_path_seen) out.map_to_odom_after_solve = true;
         }
       }
     });
@@ -484,6 +524,21 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     // transforms are a sample of the poses, and after the pose thread caught
     // up on held readings none of them need lie within 0.2 s of it).
     for (const auto& [stamp, xyyaw] : base_tf) trail_check.add_odometry_pose(stamp, xyyaw[0], xyyaw[1], xyyaw[2]);
+    // Each keyframe of the last path against the simulated truth at its
+    // stamp (the pose's time on trailnavd's clock, moved to the recording's).
+    int zone = 0;
+    char hemisphere = 'N';
+    if (std::sscanf(out.keyframe_frame.c_str(), "utm_%d%c", &zone, &hemisphere) == 2) {
+      for (const Keyframe& k : keyframes) {
+        eval::TruthAt at;
+        if (!eval::truth_at(truth.trajectory, k.t - trail_check.offset_ns(), at) || std::isnan(at.lat)) continue;
+        double e = 0.0, n = 0.0, gamma = 0.0, scale = 0.0;
+        int z = zone;
+        bool north = hemisphere == 'N';
+        GeographicLib::UTMUPS::Forward(at.lat, at.lon, z, north, e, n, gamma, scale, zone);
+        out.keyframe_errors.push_back({k.e - e, k.n - n});
+      }
+    }
     for (const Stamped& g : subgoals_received) {
       if (base_tf.count(g.t) == 0) ++out.subgoals_without_tf;
       const double d = trail_check.distance(g.t, g.x, g.y);
@@ -782,6 +837,53 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   EXPECT_LE(sorted[sorted.size() * 9 / 10], 0.05);
   EXPECT_LE(max_abs(r.map_tf_vs_pose_m), 0.45);
   EXPECT_TRUE(r.utm_to_odom);
+
+  // The mapping task beside them (simulated truth): keyframes every 2 m from
+  // the pose thread, the GPS fixes the alignment took as constraints, SMF
+  // every 2 s; its optimised keyframes arrive as a path in the UTM frame and
+  // its map -> odom goes out on tf, with no allocation on any task's thread.
+  const auto& m = r.mapping_health;
+  auto value = [&](const char* key) { return m.count(key) ? std::stod(m.at(key)) : -1.0; };
+  // The simulated GPS has a wandering bias (3 m a axis, 120 s correlation:
+  // board/sim/scenario.hpp) besides its 0.3 m noise; over a 30 s drive it is
+  // one offset common to every fix, which no map tied to GPS can observe. So
+  // the keyframes are held against the truth twice: as they are (the bias
+  // included) and with their mean offset taken out (the map's shape).
+  std::array<double, 2> offset{0.0, 0.0};
+  for (const auto& v : r.keyframe_errors) {
+    offset[0] += v[0];
+    offset[1] += v[1];
+  }
+  const double count = static_cast<double>(std::max<std::size_t>(r.keyframe_errors.size(), 1));
+  offset = {offset[0] / count, offset[1] / count};
+  double absolute = 0.0, shape = 0.0, shape_max = 0.0;
+  for (const auto& v : r.keyframe_errors) {
+    absolute += std::hypot(v[0], v[1]) / count;
+    const double d = std::hypot(v[0] - offset[0], v[1] - offset[1]);
+    shape += d / count;
+    shape_max = std::max(shape_max, d);
+  }
+  std::printf("[ trailnavd mapping ] %zu keyframe paths in %s; the last one's %zu keyframes against the simulated truth: "
+              "%.2f m off on average (the GPS bias, %.2f m east, %.2f m north, included), %.2f m mean and %.2f m max "
+              "with it taken out; health: %s, nodes %.0f, edges %.0f, gps_edges %.0f, optimisations %.0f, levels %.0f, "
+              "chi2 %.2f, solve_max_ms %.1f, correction of the GPS alignment %.2f m %.4f rad, memory %.0f of %.0f bytes\n",
+              r.keyframe_paths, r.keyframe_frame.c_str(), r.keyframe_errors.size(), absolute, offset[0], offset[1], shape,
+              shape_max, m.count("message") ? m.at("message").c_str() : "-", value("nodes"), value("edges"),
+              value("gps_edges"), value("optimisations"), value("levels"), value("chi2"), value("solve_max_ms"),
+              value("correction_m"), value("correction_rad"), value("memory_high_water_bytes"), value("memory_reserved_bytes"));
+  EXPECT_GE(r.keyframe_paths, 1u);
+  EXPECT_EQ(r.keyframe_frame.rfind("utm_", 0), 0u) << r.keyframe_frame;
+  EXPECT_GE(value("optimisations"), 1.0);
+  EXPECT_GE(value("gps_edges"), 2.0);
+  EXPECT_EQ(value("failures"), 0.0);
+  EXPECT_EQ(value("refused_full"), 0.0);
+  EXPECT_GT(value("memory_high_water_bytes"), 0.0);
+  EXPECT_LE(value("memory_high_water_bytes"), value("memory_reserved_bytes"));
+  ASSERT_GE(r.keyframe_errors.size(), 10u);
+  EXPECT_LT(shape, 1.0);
+  EXPECT_LT(shape_max, 2.0);
+  EXPECT_LT(absolute, 4.0 * 3.0);  // within 4 sigma of the bias' spread per axis
+  EXPECT_TRUE(r.map_to_odom_after_solve);
 }
 
 // Orders over DDS while the robot drives the `junctions` scenario: a new

@@ -103,7 +103,7 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
     error = "simulation: " + sr.error;
     return nullptr;
   }
-  if (options.navigation) {
+  if (options.navigation || options.mapping) {
     auto loaded = eval::load_sim_truth(so.out + "/truth");
     if (!loaded.truth || loaded.truth->trajectory.empty()) {
       error = "truth: " + loaded.error;
@@ -152,13 +152,15 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
       << "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1.0}\n"
       << "  - {name: obstacles, kind: event, budget_ms: 40.0}\n"
       << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
+      if (options.navigation) c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n";
+      if (options.mapping) c << "  - {name: mapping, kind: periodic, rate_hz: 2, budget_ms: 450.0}\n";
     }
     if (options.navigation) {
       char goal[120];
       std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", b->truth_.trajectory.back().lat, b->truth_.trajectory.back().lon);
-      if (!options.preset_tasks) c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n";
       c << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
     }
+    if (options.mapping) c << "mapping: {optimize_period_s: 2.0}\n";
     c << options.extra_yaml;
   }
 

@@ -49,6 +49,8 @@ struct BenchDaemonOptions {
   // The task table of the lidar's preset (`tasks: {preset: auto}`, as the
   // shipped configs) instead of the tests' own generous one.
   bool preset_tasks = false;
+  // The online mapping task (a `mapping` section, re-optimised every 2 s).
+  bool mapping = false;
 };
 
 // A goal for orders: the vertex of the recording's world.osm farthest from

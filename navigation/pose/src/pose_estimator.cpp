@@ -42,6 +42,21 @@ PoseTask::PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReadin
                    Mailbox<gps::GpsReading>* gps)
     : estimator_(with_imu(options, imu != nullptr)), imu_(imu), wheels_(wheels), gps_(gps) {}
 
+void PoseTask::correct(UtmPose& u) const noexcept {
+  if (!correction_.valid || !u.position_valid || !u.heading_valid) return;
+  const double c = std::cos(correction_.yaw), s = std::sin(correction_.yaw);
+  const double e = correction_.x + c * u.easting - s * u.northing;
+  const double n = correction_.y + s * u.easting + c * u.northing;
+  u.easting = e;
+  u.northing = n;
+  u.yaw = std::remainder(u.yaw + correction_.yaw, 2.0 * 3.14159265358979323846);
+  double lat = 0.0, lon = 0.0;
+  if (estimator_.alignment().reverse(e, n, lat, lon)) {
+    u.latitude = lat;
+    u.longitude = lon;
+  }
+}
+
 void PoseTask::run(const TaskTick& tick) {
   ++local_.runs;
   std::size_t ni = 0;
@@ -120,11 +135,33 @@ void PoseTask::run(const TaskTick& tick) {
       }
       estimator_.add_gps(fix, g->receive_ns);
       changed = true;
+      const UtmAlignment& a = estimator_.alignment();
+      if (fix_out_ != nullptr && a.last_used().serial != fix_serial_) {
+        fix_serial_ = a.last_used().serial;
+        MappingFix m;
+        m.fix = a.last_used();
+        m.zone = a.zone();
+        m.north = a.north();
+        m.aligned = a.heading_valid();
+        const Eigen::Vector3d t = a.transform();
+        m.east = t.x();
+        m.north_m = t.y();
+        m.rotation = t.z();
+        if (!fix_out_->try_push(m)) ++local_.fix_queue_drops;
+      }
+    }
+  }
+  if (corrections_ != nullptr) {
+    if (const MapCorrection* c = corrections_->try_read()) {
+      correction_ = *c;
+      ++local_.map_corrections;
+      changed = true;
     }
   }
   if (changed) {
     PoseSnapshot& slot = poses_.write_slot();
     estimator_.snapshot(slot);
+    correct(slot.utm);
     slot.sequence = ++local_.published;
     navigation_poses_.write_slot() = slot;
     navigation_poses_.publish();

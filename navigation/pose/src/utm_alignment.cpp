@@ -258,6 +258,7 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
     last_fix_sigma_ = sigma;
     have_fix_ = true;
     ++counters_.used;
+    record_used(z, a, p, sigma, time_ns);
     try_initial_fit();
     return;
   }
@@ -315,6 +316,19 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
   last_fix_odom_ = {p.x, p.y};
   last_fix_sigma_ = sigma;
   ++counters_.used;
+  record_used(z, a, p, sigma, time_ns);
+}
+
+void UtmAlignment::record_used(const Eigen::Vector2d& z, const Eigen::Vector2d& a, const LocalPose& p, double sigma,
+                               std::int64_t time_ns) noexcept {
+  last_used_.serial = counters_.used;
+  last_used_.time_ns = time_ns;
+  last_used_.utm = z;
+  last_used_.antenna_odom = a;
+  last_used_.x = p.x;
+  last_used_.y = p.y;
+  last_used_.yaw = p.yaw;
+  last_used_.sigma = sigma;
 }
 
 UtmPose UtmAlignment::utm(const LocalPose& local) const noexcept {

@@ -69,11 +69,40 @@ class PoseEstimator {
   UtmAlignment alignment_;
 };
 
+// A fix the alignment used, for the online mapping thread (one queue, one
+// reader): the fix, the UTM zone, and the alignment's odometry -> UTM
+// transform right after it (easting, northing, rotation; valid once the
+// heading is known), which places the map's first keyframe.
+struct MappingFix {
+  UsedFix fix;
+  int zone = 0;
+  bool north = true;
+  bool aligned = false;
+  double east = 0.0, north_m = 0.0, rotation = 0.0;  // odometry -> UTM
+};
+// A second of fixes at 20 Hz and more: the mapping thread drains it every run.
+inline constexpr std::size_t kMappingFixCapacity = 64;
+using MappingFixQueue = SpscQueue<MappingFix, kMappingFixCapacity>;
+
+// The online map's correction of the GPS alignment (the mapping thread,
+// navigation/slam/mapping_task.hpp): UTM as the optimised map has it is
+// Δ ∘ UTM as the alignment has it, Δ a rotation by `yaw` about the zone's
+// origin and a shift (x, y). The pose task applies the newest one to every
+// UTM pose it hands out (navigation, the DDS topics and so tf's utm -> odom):
+// one map -> odom for every consumer.
+struct MapCorrection {
+  bool valid = false;
+  std::uint64_t revision = 0;
+  double x = 0.0, y = 0.0, yaw = 0.0;
+};
+
 struct PoseTaskStatus {
   std::uint64_t runs = 0;
   std::uint64_t imu_readings = 0, wheel_readings = 0, gps_fixes = 0;
   std::uint64_t published = 0;
   std::uint64_t pose_queue_drops = 0;  // samples the perception threads' queue had no room for
+  std::uint64_t fix_queue_drops = 0;   // used fixes the mapping thread's queue had no room for
+  std::uint64_t map_corrections = 0;   // corrections of the online map taken (MapCorrection)
   // Wheel readings that came before the IMU readings of their time and were
   // held until those came (see PoseTask::run), and those let go without them
   // because the IMU fell silent or the hold was full.
@@ -108,6 +137,13 @@ class PoseTask final : public Task {
     return true;
   }
 
+  // Also pushes every fix the alignment used into this queue (the mapping
+  // thread's). Before the scheduler starts.
+  void set_fix_output(MappingFixQueue* queue) noexcept { fix_out_ = queue; }
+  // The mapping thread's corrections, applied to every UTM pose from the
+  // newest on. Before the scheduler starts.
+  void set_map_correction(Mailbox<MapCorrection>* corrections) noexcept { corrections_ = corrections; }
+
   void run(const TaskTick& tick) override;
 
   // The newest pose in both frames: for the DDS publisher, and a second
@@ -132,6 +168,11 @@ class PoseTask final : public Task {
   Mailbox<PoseSnapshot> navigation_poses_;
   std::array<perception::PoseQueue*, kMaxPoseOutputs> pose_out_{};
   std::size_t pose_outputs_ = 0;
+  MappingFixQueue* fix_out_ = nullptr;
+  Mailbox<MapCorrection>* corrections_ = nullptr;
+  MapCorrection correction_;
+  void correct(UtmPose& utm) const noexcept;
+  std::uint64_t fix_serial_ = 0;  // the newest used fix pushed
   std::int64_t last_out_ns_ = 0;
   PoseTaskStatus local_;
   StatusBoard<PoseTaskStatus> shared_;

@@ -98,6 +98,19 @@ struct UtmPose {
   double sigma_position() const noexcept;  // m, sqrt of the larger eigenvalue of the position covariance
 };
 
+// A fix the alignment took (not an outlier, not too uncertain), as the
+// online mapping uses it (navigation/slam/mapping_task.hpp): where the
+// antenna was in UTM and in the odometry frame, the odometry pose of the
+// fix's time and the fix's standard deviation.
+struct UsedFix {
+  std::uint64_t serial = 0;  // counts the fixes used; 0: none yet
+  std::int64_t time_ns = 0;
+  Eigen::Vector2d utm = Eigen::Vector2d::Zero();           // antenna, easting and northing
+  Eigen::Vector2d antenna_odom = Eigen::Vector2d::Zero();  // antenna, odometry frame
+  double x = 0.0, y = 0.0, yaw = 0.0;                      // the robot's odometry pose at time_ns
+  double sigma = 0.0;                                      // m
+};
+
 class UtmAlignment {
  public:
   explicit UtmAlignment(const UtmAlignmentOptions& options = {});
@@ -118,6 +131,9 @@ class UtmAlignment {
   double gyro_bias() const noexcept { return gyro_bias_applied_; }
   Eigen::Vector2d gps_error() const noexcept { return state_.tail<2>(); }
   int zone() const noexcept { return zone_; }
+  bool north() const noexcept { return north_; }
+  // The newest fix used (serial 0 before the first).
+  const UsedFix& last_used() const noexcept { return last_used_; }
   const UtmAlignmentCounters& counters() const noexcept { return counters_; }
   const UtmAlignmentOptions& options() const noexcept { return options_; }
 
@@ -164,6 +180,9 @@ class UtmAlignment {
   double last_altitude_ = 0.0;
   double last_altitude_z_ = 0.0;
   bool have_fix_ = false;
+  UsedFix last_used_;
+  void record_used(const Eigen::Vector2d& z, const Eigen::Vector2d& a, const LocalPose& p, double sigma,
+                   std::int64_t time_ns) noexcept;
   UtmAlignmentCounters counters_;
 };
 
