@@ -94,8 +94,11 @@ TEST(DriversBench, SimulatedRecordingReplaysIntoTheGpsImuCanAndGpioDrivers) {
   // been closed by its gap, however long a loaded machine takes; the
   // assertions below then check the counts themselves.
   const std::uint64_t fixes_expected = sr.nmea_sentences / 4;  // GGA, RMC, GST, VTG per epoch
+  // (Every line too: an epoch split by a pause is published, and counted, on
+  // its first part, before its late sentences arrive.)
   const bool arrived = test::eventually([&] {
     return gps_driver.driver->status().published >= fixes_expected &&
+           gps_driver.driver->status().gps.lines >= sr.nmea_sentences &&
            imu_driver.driver->status().stream.samples >= sr.imu_messages &&
            can_driver.driver->status().frames >= sr.can_frames &&
            gpio_driver.driver->status().tunnel_levels >= sr.gpio_levels;

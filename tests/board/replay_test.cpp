@@ -6,6 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <pthread.h>
+#include <sched.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cstring>
@@ -207,9 +210,8 @@ TEST(Replay, ASimulatedRecordingReplaysInRealTimeIntoTheDriver) {
 }
 
 // The driver's rest (VelodyneDriver::rest): a real VLP-16 capture sent at
-// its own pace (each packet its sensor-clock interval after the one before, so a
-// delayed sender delays everything after it), the driver run after every
-// packet. No rest may reach past the arrival of the packet that completes the
+// its own pace (each packet at its sensor-clock time after the first), the
+// driver run after every packet. No rest may reach past the arrival of the packet that completes the
 // next revolution, mid-revolution rests are the whole 10 ms, and once the
 // stream stops the driver rests the whole 10 ms.
 TEST(Replay, TheLidarRestsBetweenRevolutionsButNeverPastTheEndOfOne) {
@@ -224,86 +226,159 @@ TEST(Replay, TheLidarRestsBetweenRevolutionsButNeverPastTheEndOfOne) {
     if (packets.size() == 600) break;  // about 0.8 s: eight revolutions
   }
   ASSERT_EQ(packets.size(), 600u);
+  ASSERT_TRUE(std::is_sorted(times.begin(), times.end()));  // no top of the hour in these 0.8 s
 
-  DriverOptions options;
-  options.data.bind = {0x7F000001u, 0};
-  options.position.reset();
-  ASSERT_EQ(options.max_rest_ns, 10 * kNanosPerMilli);  // the default
-  options.watch_before_end_ns = 1500 * kNanosPerMicro;     // trailnavd's default
-  auto created = VelodyneDriver::create(make_decoder(Model::vlp16, ""), options);
-  ASSERT_TRUE(created.driver) << created.error;
-  VelodyneDriver& driver = *created.driver;
-  auto sender = udp::UdpSender::open(driver.data_endpoint());
-  ASSERT_TRUE(sender.sender) << sender.error;
-
-  ASSERT_GE(driver.wake_fd(), 0);  // the data socket
-  struct Run {
-    std::int64_t made;     // host time right after rest() returned
-    std::int64_t wake_by;  // when the rest asked for ends
-    Nanos rest;
-    bool watching;         // whether the next packet ends the sleep
+  // The driver predicts a revolution's end from the host times its packets
+  // arrived at (and the revolutions before). When this test's own sending
+  // falls behind the capture's pace (its thread kept off a busy machine's
+  // core), the revolution really ends later than any prediction could say,
+  // and a run "watching 8 ms before the end" is the sender's delay, not the
+  // driver's. So each revolution counts only when the sending kept pace
+  // through it and the one before (the host send times against the
+  // packets' own clock spread by at most 1 ms); the others are counted and
+  // reported. The whole replay is tried again (at most 5 times) until three
+  // revolutions count. (With two CPU hogs on this 2-core VM and the sending
+  // on normal scheduling, one revolution in seven kept pace.)
+  struct Attempt {
+    std::size_t far = 0, far_full = 0, far_watching = 0, near = 0, near_watching = 0, late_rests = 0;
+    std::size_t revolutions = 0, counted = 0;
+    Nanos final_rest = 0;
+    bool final_watching = true;
   };
-  std::vector<Run> runs;
-  std::vector<std::int64_t> completed_at;  // receive times of the packets that completed a revolution
-  std::uint64_t seen = 0;
-  for (std::size_t i = 0; i < packets.size(); ++i) {
-    if (i > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(std::clamp<std::int64_t>(times[i] - times[i - 1], 0, 5'000'000)));
-    ASSERT_TRUE(sender.sender->send(packets[i]));
-    for (int tries = 0; tries < 5000 && driver.counters().data.datagrams < i + 1; ++tries) {
-      driver.run(TaskTick{i, 0, 0});
-      if (driver.counters().data.datagrams < i + 1) std::this_thread::sleep_for(std::chrono::microseconds(20));
+  auto attempt = [&](Attempt& a) {
+    // The sending keeps the capture's pace best on a real-time thread (as
+    // the lidar task runs in trailnavd), where permitted; it sleeps between
+    // packets, so it starves nothing.
+    sched_param fifo{};
+    fifo.sched_priority = 10;
+    const bool realtime = pthread_setschedparam(pthread_self(), SCHED_FIFO, &fifo) == 0;
+    struct Restore {
+      bool on;
+      ~Restore() {
+        if (!on) return;
+        sched_param normal{};
+        pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+      }
+    } restore{realtime};
+    DriverOptions options;
+    options.data.bind = {0x7F000001u, 0};
+    options.position.reset();
+    ASSERT_EQ(options.max_rest_ns, 10 * kNanosPerMilli);  // the default
+    options.watch_before_end_ns = 1500 * kNanosPerMicro;     // trailnavd's default
+    auto created = VelodyneDriver::create(make_decoder(Model::vlp16, ""), options);
+    ASSERT_TRUE(created.driver) << created.error;
+    VelodyneDriver& driver = *created.driver;
+    auto sender = udp::UdpSender::open(driver.data_endpoint());
+    ASSERT_TRUE(sender.sender) << sender.error;
+
+    ASSERT_GE(driver.wake_fd(), 0);  // the data socket
+    struct Run {
+      std::int64_t made;     // host time right after rest() returned
+      std::int64_t wake_by;  // when the rest asked for ends
+      Nanos rest;
+      bool watching;         // whether the next packet ends the sleep
+    };
+    std::vector<Run> runs;
+    std::vector<std::int64_t> completed_at;    // receive times of the packets that completed a revolution
+    std::vector<std::size_t> completed_index;  // and their indices
+    std::vector<std::int64_t> lateness;        // per packet: host send time minus its own clock's time
+    std::uint64_t seen = 0;
+    // Each packet at its own time after the first (the capture's pace, on a
+    // schedule: a sender that fell behind sends what is due at once).
+    const auto start = std::chrono::steady_clock::now();
+    for (std::size_t i = 0; i < packets.size(); ++i) {
+      const auto due = start + std::chrono::nanoseconds(times[i] - times[0]);
+      std::this_thread::sleep_until(due);
+      lateness.push_back(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - due).count());
+      ASSERT_TRUE(sender.sender->send(packets[i]));
+      for (int tries = 0; tries < 5000 && driver.counters().data.datagrams < i + 1; ++tries) {
+        driver.run(TaskTick{i, 0, 0});
+        if (driver.counters().data.datagrams < i + 1) std::this_thread::sleep_for(std::chrono::microseconds(20));
+      }
+      ASSERT_EQ(driver.counters().data.datagrams, i + 1);
+      if (const RangeImage* image = driver.revolutions().try_read(); image != nullptr && image->sequence != seen) {
+        seen = image->sequence;
+        completed_at.push_back(image->completed_receive_ns);
+        completed_index.push_back(i);
+      }
+      const Nanos rest = driver.rest();
+      const bool watching = driver.watching();
+      const std::int64_t now = host_now_ns();
+      ASSERT_GE(rest, 0);
+      ASSERT_LE(rest, 10 * kNanosPerMilli);
+      runs.push_back({now, now + rest, rest, watching});
     }
-    ASSERT_EQ(driver.counters().data.datagrams, i + 1);
-    if (const RangeImage* image = driver.revolutions().try_read(); image != nullptr && image->sequence != seen) {
-      seen = image->sequence;
-      completed_at.push_back(image->completed_receive_ns);
+    ASSERT_GE(completed_at.size(), 5u);
+    a.revolutions = completed_at.size();
+    // Revolution m (ending at completion m) counts when the sending kept
+    // pace from the start of revolution m - 1 to its end.
+    std::vector<bool> counts(completed_at.size(), false);
+    for (std::size_t m = 2; m < completed_at.size(); ++m) {
+      const std::size_t from = completed_index[m - 2] + 1, to = completed_index[m];
+      const auto [lo, hi] = std::minmax_element(lateness.begin() + static_cast<std::ptrdiff_t>(from),
+                                                lateness.begin() + static_cast<std::ptrdiff_t>(to) + 1);
+      counts[m] = *hi - *lo <= kNanosPerMilli;
+      a.counted += counts[m] ? 1u : 0u;
     }
-    const Nanos rest = driver.rest();
-    const bool watching = driver.watching();
-    const std::int64_t now = host_now_ns();
-    ASSERT_GE(rest, 0);
-    ASSERT_LE(rest, 10 * kNanosPerMilli);
-    runs.push_back({now, now + rest, rest, watching});
+    for (const Run& run : runs) {
+      const auto next = std::upper_bound(completed_at.begin(), completed_at.end(), run.made);
+      if (next == completed_at.end()) break;
+      // Never past the end: a rest ends when the completing packet arrives,
+      // at the latest (a sender that caught up on a delay sends that packet
+      // early, which no prediction can know: those revolutions do not count).
+      if (!counts[static_cast<std::size_t>(next - completed_at.begin())]) continue;
+      if (run.wake_by > *next) {
+        ++a.late_rests;
+        ADD_FAILURE() << "a rest reached " << static_cast<double>(run.wake_by - *next) * 1e-6
+                      << " ms past the packet that completed the revolution";
+      }
+      if (*next - run.made > 25 * kNanosPerMilli) {
+        ++a.far;
+        a.far_full += run.rest == 10 * kNanosPerMilli ? 1 : 0;
+      }
+      // Watching: from 1.5 ms before the predicted end (the VLP-16's packets
+      // come 1.33 ms apart: the last one or two of each revolution), never far
+      // from it (each packet would wake the task).
+      if (*next - run.made > 5 * kNanosPerMilli && run.watching) {
+        ++a.far_watching;
+        std::printf("[ replay ] watching %.2f ms before an end, run %zu, completion %zu\n",
+                    static_cast<double>(*next - run.made) * 1e-6, static_cast<std::size_t>(&run - runs.data()),
+                    static_cast<std::size_t>(next - completed_at.begin()));
+      }
+    }
+    // The last run before each completing packet.
+    for (std::size_t m = 0; m < completed_at.size(); ++m) {
+      if (!counts[m]) continue;
+      const std::int64_t end = completed_at[m];
+      const auto last = std::find_if(runs.rbegin(), runs.rend(), [&](const Run& r) { return r.made < end; });
+      if (last == runs.rend()) continue;
+      ++a.near;
+      a.near_watching += last->watching ? 1u : 0u;
+    }
+    // The stream stopped: no revolution can end, the whole rest.
+    std::this_thread::sleep_for(std::chrono::milliseconds(12));
+    driver.run(TaskTick{packets.size(), 0, 0});
+    a.final_rest = driver.rest();
+    a.final_watching = driver.watching();
+  };
+  Attempt a;
+  for (int tries = 1; tries <= 5; ++tries) {
+    a = Attempt{};
+    attempt(a);
+    if (testing::Test::HasFatalFailure()) return;
+    std::printf("[ replay ] attempt %d: %zu revolutions, %zu of them sent at the capture's pace (counted)\n", tries,
+                a.revolutions, a.counted);
+    if (a.counted >= 3) break;
   }
-  ASSERT_GE(completed_at.size(), 5u);
-  std::size_t far = 0, far_full = 0, far_watching = 0, near = 0, near_watching = 0;
-  for (const Run& run : runs) {
-    const auto next = std::upper_bound(completed_at.begin(), completed_at.end(), run.made);
-    if (next == completed_at.end()) break;
-    EXPECT_LE(run.wake_by, *next) << "a rest reached " << static_cast<double>(run.wake_by - *next) * 1e-6
-                                  << " ms past the packet that completed the revolution";
-    if (*next - run.made > 25 * kNanosPerMilli) {
-      ++far;
-      far_full += run.rest == 10 * kNanosPerMilli ? 1 : 0;
-    }
-    // Watching: from 1.5 ms before the predicted end (the VLP-16's packets
-    // come 1.33 ms apart: the last one or two of each revolution), never far
-    // from it (each packet would wake the task).
-    // (From the first revolution completed on: before it the end of the
-    // partial revolution the stream began in is not predicted well.)
-    if (next != completed_at.begin() && *next - run.made > 5 * kNanosPerMilli && run.watching) {
-      ++far_watching;
-      ADD_FAILURE() << "watching " << static_cast<double>(*next - run.made) * 1e-6 << " ms before an end, run "
-                    << (&run - runs.data()) << ", completion " << (next - completed_at.begin());
-    }
-  }
-  // The last run before each completing packet.
-  for (const std::int64_t end : completed_at) {
-    const auto last = std::find_if(runs.rbegin(), runs.rend(), [&](const Run& r) { return r.made < end; });
-    if (last == runs.rend()) continue;
-    ++near;
-    near_watching += last->watching ? 1u : 0u;
-  }
-  ASSERT_GT(far, 100u);
-  EXPECT_GE(far_full, far * 9 / 10) << far_full << " of " << far << " runs over 25 ms before an end rested 10 ms";
-  EXPECT_EQ(far_watching, 0u) << "runs over 5 ms before an end watched the socket";
-  ASSERT_GE(near, 5u);
-  EXPECT_GE(near_watching, near * 9 / 10) << near_watching << " of " << near << " runs just before an end watched";
-  // The stream stopped: no revolution can end, the whole rest.
-  std::this_thread::sleep_for(std::chrono::milliseconds(12));
-  driver.run(TaskTick{packets.size(), 0, 0});
-  EXPECT_EQ(driver.rest(), 10 * kNanosPerMilli);
-  EXPECT_FALSE(driver.watching());
+  ASSERT_GE(a.counted, 3u) << "the sending never kept pace for three revolutions in five tries";
+  EXPECT_EQ(a.late_rests, 0u);
+  ASSERT_GT(a.far, 30u);
+  EXPECT_GE(a.far_full, a.far * 9 / 10) << a.far_full << " of " << a.far << " runs over 25 ms before an end rested 10 ms";
+  EXPECT_EQ(a.far_watching, 0u) << "runs over 5 ms before an end watched the socket";
+  ASSERT_GE(a.near, 3u);
+  EXPECT_GE(a.near_watching, a.near * 9 / 10) << a.near_watching << " of " << a.near << " runs just before an end watched";
+  EXPECT_EQ(a.final_rest, 10 * kNanosPerMilli);
+  EXPECT_FALSE(a.final_watching);
 }
 
 TEST(Replay, TrailnavReplayIntoTheDriverGivesTheRevolutionsOfTheFileHostTimed) {

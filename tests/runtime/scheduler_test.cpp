@@ -360,7 +360,12 @@ TEST(Scheduler, ARestIsEndedAtOnceByTheTasksDescriptor) {
   // the 50 ms waited before the first byte, far fewer than 2 x 20 s.
   EXPECT_GE(s.rested_periods, 4u);
   EXPECT_LT(s.rested_periods, 1000u);
-  EXPECT_EQ(s.skipped_periods, 0u);
+  // A period is skipped only when a run ends a whole period after its
+  // deadline: the thread kept off its core (a busy machine, once seen). Not
+  // more than the latencies and run times that really happened account for.
+  const auto late_periods = static_cast<std::uint64_t>((s.latency.max + s.execution.max) / (10 * kMs));
+  EXPECT_LE(s.skipped_periods, s.runs * late_periods)
+      << "latency max " << s.latency.max << " ns, run max " << s.execution.max << " ns";
 }
 
 // Without a rest, a watching task's sleep to its next period ends when the
