@@ -29,6 +29,14 @@ const char* kMinimal =
     "  - {name: lidar, kind: periodic, rate_hz: 1000, budget_ms: 0.5}\n"
     "  - {name: obstacles, kind: event, budget_ms: 20}\n";
 
+// The GPS, IMU and pose sections and their tasks: what navigation and mapping build on.
+const char* kPoseTasks =
+    "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n"
+    "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
+    "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n";
+const char* kPoseSections =
+    "gps: {link: 'udp:127.0.0.1:10110'}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {antenna: [0, 0, 1]}\n";
+
 // Writes `text` next to the repository's board/robots (so relative paths resolve the same way).
 std::string load_error(const std::string& text) {
   const fs::path p = fs::path("board/robots") / ("test-" + std::to_string(::getpid()) + ".yaml");
@@ -124,12 +132,7 @@ TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {
   const std::string osm = fs::absolute("../shared/data/osm/osm2pgsql_liechtenstein-2013-08-03.osm.pbf").string();
   const std::string nav = "navigation: {osm: " + osm + ", goal: [47.166, 9.51]}\n";
   const std::string task = "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 20}\n";
-  const std::string pose_tasks =
-      "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n"
-      "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
-      "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n";
-  const std::string pose =
-      "gps: {link: 'udp:127.0.0.1:10110'}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {antenna: [0, 0, 1]}\n";
+  const std::string pose_tasks = kPoseTasks, pose = kPoseSections;
   EXPECT_EQ(load_error(std::string(kMinimal) + task + pose_tasks + pose + nav), "");
   // Its task is required.
   std::string e = load_error(std::string(kMinimal) + pose_tasks + pose + nav);
@@ -151,12 +154,7 @@ TEST(RobotConfig, NavigationNeedsTheUtmPoseAndItsTask) {
 // in so many words, and its numbers in range, each mistake with its line.
 TEST(RobotConfig, MappingNeedsThePoseItsTaskAndSaysWhetherItUsesGps) {
   const std::string task = "  - {name: mapping, kind: periodic, rate_hz: 2, budget_ms: 450}\n";
-  const std::string pose_tasks =
-      "  - {name: gps, kind: periodic, rate_hz: 50, budget_ms: 1}\n"
-      "  - {name: imu, kind: periodic, rate_hz: 400, budget_ms: 1}\n"
-      "  - {name: pose, kind: periodic, rate_hz: 100, budget_ms: 1}\n";
-  const std::string pose =
-      "gps: {link: 'udp:127.0.0.1:10110'}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\npose: {antenna: [0, 0, 1]}\n";
+  const std::string pose_tasks = kPoseTasks, pose = kPoseSections;
   const auto ok = load(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {max_keyframes: 1000, max_part: 200}\n");
   ASSERT_TRUE(ok.config) << ok.error;
   ASSERT_TRUE(ok.config->mapping.has_value());
