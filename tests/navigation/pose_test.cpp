@@ -390,3 +390,85 @@ TEST(PoseTask, AnIMUThatNeverSpeaksLetsTheWheelsGoUnmeasured) {
   EXPECT_FALSE(s.local.rotation_valid);
   EXPECT_NEAR(s.local.distance, 0.29, 1e-9);
 }
+
+// The online map's correction (MapCorrection, from trailnavd's mapping task)
+// is applied to every UTM pose the task hands out, and gradually: a new one
+// never makes the UTM pose jump; it moves at most 0.5 m/s at the robot and
+// 0.005 rad/s until it is the correction itself.
+TEST(PoseTask, TheMapsCorrectionIsAppliedGraduallyToEveryUtmPose) {
+  SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+  SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+  Mailbox<gps::GpsReading> gps_box;
+  Mailbox<MapCorrection> corrections;
+  PoseEstimatorOptions o;
+  o.utm.zone = 32;
+  PoseTask task(o, &imu_queue, &wheel_queue, &gps_box);
+  task.set_map_correction(&corrections);
+  UtmAlignment ref(o.utm);
+  double e0 = 0, n0 = 0, g = 0;
+  ASSERT_TRUE(ref.forward(48.0133, 7.8353, e0, n0, g));
+  // Driving grid east at 2 m/s, a fix every 100 ms; the task run every 10 ms.
+  auto step = [&](int k) {
+    const std::int64_t t = kStart + ms(10.0 * k);
+    imu::ImuReading r;
+    r.attitude = attitude(t, 0.0);
+    ASSERT_TRUE(imu_queue.try_push(r));
+    ASSERT_TRUE(wheel_queue.try_push(wheels(t, 2.0, 0.0)));
+    if (k % 10 == 5) {
+      gps::GpsReading& slot = gps_box.write_slot();
+      slot.fix = fix_at(ref, e0 + 0.02 * (k - 5), n0, t - ms(50), 0.5);
+      slot.receive_ns = t;
+      gps_box.publish();
+    }
+    task.run(TaskTick{static_cast<std::uint64_t>(k), t, t});
+  };
+  int k = 0;
+  for (; k < 1000; ++k) step(k);
+  ASSERT_TRUE(task.status().utm.heading_valid);
+  // A correction: 10 m north, turned by 0.02 rad about the zone's origin
+  // (at the robot, 500 km east, that is another 10 km or so: the shift
+  // limit carries it).
+  const double yaw = 0.02;
+  MapCorrection& c = corrections.write_slot();
+  c = MapCorrection{true, 1, 0.0, 10.0, yaw};
+  // Keep the robot where the correction puts it: the rotation about the
+  // origin moved by the rotation's shift back.
+  const pose::PoseSnapshot* before = task.poses().try_read();
+  ASSERT_NE(before, nullptr);
+  const double e = before->utm.easting, n = before->utm.northing;
+  c.x = e - (std::cos(yaw) * e - std::sin(yaw) * n);
+  c.y = n - (std::sin(yaw) * e + std::cos(yaw) * n) + 10.0;
+  corrections.publish();
+  double last_gap = -1.0, worst_speed = 0.0, worst_turn = 0.0;
+  PoseSnapshot raw;
+  const PoseSnapshot* previous = nullptr;
+  double pe = e, pn = n, pyaw = before->utm.yaw, re = e, rn = n;
+  for (int j = 0; j < 3000; ++j, ++k) {
+    step(k);
+    const PoseSnapshot* p = task.poses().try_read();
+    ASSERT_NE(p, nullptr);
+    task.estimator().snapshot(raw);  // the alignment's own, uncorrected
+    // The change beyond the robot's own motion (the alignment's), per 10 ms.
+    const double moved = std::hypot((p->utm.easting - pe) - (raw.utm.easting - re), (p->utm.northing - pn) - (raw.utm.northing - rn));
+    worst_speed = std::max(worst_speed, moved / 0.01);
+    worst_turn = std::max(worst_turn, std::fabs(std::remainder(p->utm.yaw - pyaw, 2.0 * kPi)) / 0.01);
+    pe = p->utm.easting;
+    pn = p->utm.northing;
+    pyaw = p->utm.yaw;
+    re = raw.utm.easting;
+    rn = raw.utm.northing;
+    // Where the correction itself puts the robot now.
+    const double te = c.x + std::cos(yaw) * raw.utm.easting - std::sin(yaw) * raw.utm.northing;
+    const double tn = c.y + std::sin(yaw) * raw.utm.easting + std::cos(yaw) * raw.utm.northing;
+    last_gap = std::hypot(p->utm.easting - te, p->utm.northing - tn);
+    previous = p;
+  }
+  ASSERT_NE(previous, nullptr);
+  std::printf("[ pose ] a 10 m, 0.02 rad correction applied at most %.3f m/s and %.4f rad/s; after 30 s %.3f m from it\n",
+              worst_speed, worst_turn, last_gap);
+  EXPECT_LE(worst_speed, 0.5 + 0.1);    // the limit, and the alignment's own updates
+  EXPECT_LE(worst_turn, 0.005 + 0.002);
+  EXPECT_LT(last_gap, 0.05);            // 10 m at 0.5 m/s: there after 20 s, 30 s given
+  EXPECT_NEAR(std::remainder(previous->utm.yaw - raw.utm.yaw, 2.0 * kPi), yaw, 1e-3);
+  EXPECT_GE(task.status().map_corrections, 1u);
+}

@@ -42,14 +42,37 @@ PoseTask::PoseTask(const PoseEstimatorOptions& options, SpscQueue<imu::ImuReadin
                    Mailbox<gps::GpsReading>* gps)
     : estimator_(with_imu(options, imu != nullptr)), imu_(imu), wheels_(wheels), gps_(gps) {}
 
-void PoseTask::correct(UtmPose& u) const noexcept {
-  if (!correction_.valid || !u.position_valid || !u.heading_valid) return;
-  const double c = std::cos(correction_.yaw), s = std::sin(correction_.yaw);
-  const double e = correction_.x + c * u.easting - s * u.northing;
-  const double n = correction_.y + s * u.easting + c * u.northing;
+void PoseTask::correct(UtmPose& u, Nanos now) noexcept {
+  if (!target_.valid || !u.position_valid || !u.heading_valid) return;
+  // Step the applied correction towards the newest: first its turn, then
+  // its shift at the robot's position.
+  const double dt = last_correction_ < 0 ? 0.0 : std::min(1.0, static_cast<double>(now - last_correction_) * 1e-9);
+  last_correction_ = now;
+  if (!applied_.valid) applied_ = MapCorrection{true, 0, 0.0, 0.0, 0.0};
+  // The turn about the robot (about the zone's origin, 500 km away, it
+  // would throw the robot hundreds of metres): the robot's corrected
+  // position kept, the shift then moves it.
+  const double turn = std::remainder(target_.yaw - applied_.yaw, 2.0 * 3.14159265358979323846);
+  const double max_turn = kCorrectionTurn * dt;
+  const double c0 = std::cos(applied_.yaw), s0 = std::sin(applied_.yaw);
+  const double qe = applied_.x + c0 * u.easting - s0 * u.northing, qn = applied_.y + s0 * u.easting + c0 * u.northing;
+  applied_.yaw += std::clamp(turn, -max_turn, max_turn);
+  const double ct = std::cos(target_.yaw), st = std::sin(target_.yaw);
+  const double ca = std::cos(applied_.yaw), sa = std::sin(applied_.yaw);
+  applied_.x = qe - (ca * u.easting - sa * u.northing);
+  applied_.y = qn - (sa * u.easting + ca * u.northing);
+  const double dx = (target_.x + ct * u.easting - st * u.northing) - (applied_.x + ca * u.easting - sa * u.northing);
+  const double dy = (target_.y + st * u.easting + ct * u.northing) - (applied_.y + sa * u.easting + ca * u.northing);
+  const double gap = std::hypot(dx, dy), max_shift = kCorrectionShift * dt;
+  const double f = gap > max_shift ? max_shift / gap : 1.0;
+  applied_.x += f * dx;
+  applied_.y += f * dy;
+  applied_.revision = target_.revision;
+  const double e = applied_.x + ca * u.easting - sa * u.northing;
+  const double n = applied_.y + sa * u.easting + ca * u.northing;
   u.easting = e;
   u.northing = n;
-  u.yaw = std::remainder(u.yaw + correction_.yaw, 2.0 * 3.14159265358979323846);
+  u.yaw = std::remainder(u.yaw + applied_.yaw, 2.0 * 3.14159265358979323846);
   double lat = 0.0, lon = 0.0;
   if (estimator_.alignment().reverse(e, n, lat, lon)) {
     u.latitude = lat;
@@ -153,7 +176,7 @@ void PoseTask::run(const TaskTick& tick) {
   }
   if (corrections_ != nullptr) {
     if (const MapCorrection* c = corrections_->try_read()) {
-      correction_ = *c;
+      target_ = *c;
       ++local_.map_corrections;
       changed = true;
     }
@@ -161,7 +184,7 @@ void PoseTask::run(const TaskTick& tick) {
   if (changed) {
     PoseSnapshot& slot = poses_.write_slot();
     estimator_.snapshot(slot);
-    correct(slot.utm);
+    correct(slot.utm, tick.started);
     slot.sequence = ++local_.published;
     navigation_poses_.write_slot() = slot;
     navigation_poses_.publish();

@@ -89,7 +89,8 @@ using MappingFixQueue = SpscQueue<MappingFix, kMappingFixCapacity>;
 // Δ ∘ UTM as the alignment has it, Δ a rotation by `yaw` about the zone's
 // origin and a shift (x, y). The pose task applies the newest one to every
 // UTM pose it hands out (navigation, the DDS topics and so tf's utm -> odom):
-// one map -> odom for every consumer.
+// one map -> odom for every consumer. It is applied gradually (PoseTask:
+// at most 0.5 m/s at the robot and 0.005 rad/s).
 struct MapCorrection {
   bool valid = false;
   std::uint64_t revision = 0;
@@ -170,8 +171,15 @@ class PoseTask final : public Task {
   std::size_t pose_outputs_ = 0;
   MappingFixQueue* fix_out_ = nullptr;
   Mailbox<MapCorrection>* corrections_ = nullptr;
-  MapCorrection correction_;
-  void correct(UtmPose& utm) const noexcept;
+  // The newest correction, and the one applied: it moves towards the newest
+  // at most kCorrectionShift at the robot and kCorrectionTurn, so a solve of
+  // the map never makes the UTM pose jump (a planner's path would jump
+  // with it).
+  static constexpr double kCorrectionShift = 0.5;   // m/s
+  static constexpr double kCorrectionTurn = 0.005;  // rad/s
+  MapCorrection target_, applied_;
+  Nanos last_correction_ = -1;
+  void correct(UtmPose& utm, Nanos now) noexcept;
   std::uint64_t fix_serial_ = 0;  // the newest used fix pushed
   std::int64_t last_out_ns_ = 0;
   PoseTaskStatus local_;
