@@ -28,8 +28,6 @@
 #include <thread>
 #include <vector>
 
-#include <GeographicLib/UTMUPS.hpp>
-
 #include "bench_config.hpp"
 #include "builtin_models.hpp"
 #include "commands.hpp"
@@ -351,7 +349,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
   // The online map's newest keyframe path (its frame and, per keyframe, stamp and UTM position).
   std::uint64_t n_keyframe_paths = 0;
   std::string keyframe_frame;
-  std::vector<Stamped> keyframes;
+  std::vector<eval::StampedPosition> keyframes;
   auto stamp_ns = [](const auto& header) {
     return static_cast<std::int64_t>(header.stamp.sec) * 1'000'000'000 + static_cast<std::int64_t>(header.stamp.nanosec);
   };
@@ -536,40 +534,23 @@ int run_bench_demo(const BenchDemoOptions& o) {
     // stamps, in UTM: the offset common to all of them is the simulated
     // GPS's wandering bias (board/sim/scenario.hpp), which no map tied to GPS
     // can see; what is left is the map's own error.
-    int zone = 0;
-    char hemisphere = 'N';
-    std::vector<std::array<double, 2>> errors;
+    const std::vector<std::array<double, 2>> errors =
+        eval::utm_errors(truth.truth->trajectory, keyframe_frame, keyframes, trail_check.offset_ns());
     std::ofstream csv(out / "keyframes.csv");
-    csv << "stamp_s,easting,northing,true_easting,true_northing\n";
-    if (std::sscanf(keyframe_frame.c_str(), "utm_%d%c", &zone, &hemisphere) == 2) {
-      for (const Stamped& k : keyframes) {
-        eval::TruthAt at;
-        if (!eval::truth_at(truth.truth->trajectory, k.t - trail_check.offset_ns(), at) || std::isnan(at.lat)) continue;
-        double e = 0.0, n = 0.0, gamma = 0.0, scale = 0.0;
-        int z = zone;
-        bool north = hemisphere == 'N';
-        GeographicLib::UTMUPS::Forward(at.lat, at.lon, z, north, e, n, gamma, scale, zone);
-        errors.push_back({k.x - e, k.y - n});
-        char row[160];
-        std::snprintf(row, sizeof row, "%.3f,%.3f,%.3f,%.3f,%.3f\n", static_cast<double>(k.t) * 1e-9, k.x, k.y, e, n);
-        csv << row;
-      }
+    csv << "stamp_s,easting,northing,true_easting,true_northing\n";  // nan: no true pose at that time
+    for (std::size_t i = 0; i < keyframes.size() && i < errors.size(); ++i) {
+      const eval::StampedPosition& k = keyframes[i];
+      char row[160];
+      std::snprintf(row, sizeof row, "%.3f,%.3f,%.3f,%.3f,%.3f\n", static_cast<double>(k.t) * 1e-9, k.east, k.north,
+                    k.east - errors[i][0], k.north - errors[i][1]);
+      csv << row;
     }
-    std::array<double, 2> bias{0.0, 0.0};
-    for (const auto& v : errors) bias = {bias[0] + v[0], bias[1] + v[1]};
-    const double count = static_cast<double>(std::max<std::size_t>(errors.size(), 1));
-    bias = {bias[0] / count, bias[1] / count};
-    double shape = 0.0, shape_max = 0.0;
-    for (const auto& v : errors) {
-      const double d = std::hypot(v[0] - bias[0], v[1] - bias[1]);
-      shape += d / count;
-      shape_max = std::max(shape_max, d);
-    }
+    const eval::CommonOffset split = eval::split_common_offset(errors);
     std::printf("   %llu optimised keyframe paths of the online map (%s); the last one's %zu keyframes against the "
                 "simulated truth: %.2f m east, %.2f m north common to all (the simulated GPS's bias), %.2f m mean and "
                 "%.2f m max beyond it (%s)\n",
                 static_cast<unsigned long long>(n_keyframe_paths), keyframe_frame.empty() ? "none" : keyframe_frame.c_str(),
-                errors.size(), bias[0], bias[1], shape, shape_max, (out / "keyframes.csv").c_str());
+                split.count, split.east, split.north, split.mean, split.max, (out / "keyframes.csv").c_str());
   }
   std::printf("   health while driving:\n%s", driving_health.c_str());
   std::printf("   after the recording ended: the last map resent %llu time(s) as stale (free cells unknown); health then:\n%s",

@@ -627,7 +627,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     const slam::MappingTaskStatus s = mapping_->status();
     const bool waiting = s.state == slam::MappingState::waiting_alignment;
     const bool full = s.state == slam::MappingState::full;
-    m.begin(s.failures > 0 || full ? L::warn : (waiting ? L::warn : L::ok), "trailnavd: mapping",
+    m.begin(full || waiting || s.error[0] != '\0' ? L::warn : L::ok, "trailnavd: mapping",
             full                 ? "full: the map no longer grows (max_keyframes); map -> odom held at its last keyframe"
             : s.error[0] != '\0' ? s.error.data()
                                  : slam::mapping_state_name(s.state),
@@ -647,9 +647,9 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("chi2", s.chi2, 3);
     m.value("solve_ms", s.solve_ms, 1);
     m.value("solve_max_ms", s.solve_max_ms, 1);
-    // The solver's arenas: reserved at start-up and their high-water marks.
     m.value("correction_m", s.correction_m, 2);
     m.value("correction_rad", s.correction_rad, 4);
+    // The solver's arenas: reserved at start-up and their high-water marks.
     m.value("memory_high_water_bytes", static_cast<std::uint64_t>(s.hierarchy_high_water + s.part_high_water));
     m.value("memory_reserved_bytes", static_cast<std::uint64_t>(s.hierarchy_capacity + s.part_capacity));
     m.value("poses", s.poses);

@@ -188,9 +188,9 @@ void DdsPublisher::publish_pose(const pose::PoseSnapshot& p) noexcept {
       tf_msg_.clear();
       tf_msg_.add(p.local.time_ns, options_.odom_frame, options_.frames.base_link,
                   {p.local.x, p.local.y, p.local.z, p.local.roll, p.local.pitch, p.local.yaw});
-      if (map_correction_.valid) {
+      if (odom_parent_.valid) {
         // A map without GPS (the mapping thread's): odom's parent.
-        tf_msg_.add(p.local.time_ns, map_correction_.frame.data(), options_.odom_frame, map_correction_.transform);
+        tf_msg_.add(p.local.time_ns, odom_parent_.frame.data(), options_.odom_frame, odom_parent_.transform);
       } else if (p.utm.position_valid && p.utm.heading_valid) {
         map_frame_name(options_.frames.map, p.utm.zone, p.utm.north, map_frame_);
         tf_msg_.add(p.local.time_ns, map_frame_.data(), options_.odom_frame, utm_to_odom(p.local, p.utm));
@@ -211,16 +211,16 @@ void DdsPublisher::publish_mapping(const slam::MappingSnapshot& m) noexcept {
   // is not "utm").
   const std::string_view configured = options_.frames.map;
   map_frame_name(!m.georeferenced && configured == "utm" ? std::string_view("map") : configured, m.zone, m.north,
-                 map_correction_.frame);
+                 odom_parent_.frame);
   // A map tied to GPS corrects the alignment inside the pose thread (every
   // UTM pose, and so utm -> odom, is already the map's); a map without GPS
   // is odom's parent here: the odometry frame at start until loop closures
   // move it.
   if (!m.georeferenced) {
-    map_correction_.valid = true;
-    map_correction_.transform = RigidTransform{m.x, m.y, 0.0, 0.0, 0.0, m.yaw};
+    odom_parent_.valid = true;
+    odom_parent_.transform = RigidTransform{m.x, m.y, 0.0, 0.0, 0.0, m.yaw};
   }
-  keyframe_path_msg_->set_frame(map_correction_.frame.data());
+  keyframe_path_msg_->set_frame(odom_parent_.frame.data());
   keyframe_path_msg_->clear(m.time_ns);
   for (std::size_t i = 0; i < m.path_count; ++i) {
     const slam::MapPathPose& p = m.path[i];

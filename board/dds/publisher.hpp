@@ -178,11 +178,11 @@ class DdsPublisher {
   // (docs/slam.md "Online mapping"; a map with GPS corrects the UTM poses).
   std::unique_ptr<Writer> keyframe_path_writer_;
   std::optional<PathMessage> keyframe_path_msg_;
-  struct MapCorrection {
-    bool valid = false;
+  struct OdomParent {
+    bool valid = false;  // a map without GPS: its map -> odom replaces the alignment's
     RigidTransform transform;
     std::array<char, 64> frame{};
-  } map_correction_;
+  } odom_parent_;
   std::uint64_t last_active_revision_ = 0, last_path_revision_ = 0;
   UtmFixMessages utm_msg_;
   DiagnosticsMessage health_msg_;

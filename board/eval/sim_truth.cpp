@@ -10,6 +10,8 @@
 #include <sstream>
 #include <utility>
 
+#include <GeographicLib/UTMUPS.hpp>
+
 #include "png.hpp"
 #include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/runtime/config.hpp"
@@ -168,6 +170,47 @@ void fill_truth_terrain(const SimTruth& truth, perception::TerrainClassMap& map,
       cell.set(count);
     }
   }
+}
+
+std::vector<std::array<double, 2>> utm_errors(const std::vector<TruthPose>& trajectory, const std::string& frame,
+                                              const std::vector<StampedPosition>& positions, std::int64_t offset_ns) {
+  std::vector<std::array<double, 2>> out;
+  int zone = 0;
+  char hemisphere = 'N';
+  if (std::sscanf(frame.c_str(), "utm_%d%c", &zone, &hemisphere) != 2) return out;
+  for (const StampedPosition& p : positions) {
+    TruthAt at;
+    if (!truth_at(trajectory, p.t - offset_ns, at) || std::isnan(at.lat)) {
+      out.push_back({std::nan(""), std::nan("")});
+      continue;
+    }
+    double e = 0.0, n = 0.0, gamma = 0.0, scale = 0.0;
+    int z = zone;
+    bool north = hemisphere == 'N';
+    GeographicLib::UTMUPS::Forward(at.lat, at.lon, z, north, e, n, gamma, scale, zone);
+    out.push_back({p.east - e, p.north - n});
+  }
+  return out;
+}
+
+CommonOffset split_common_offset(const std::vector<std::array<double, 2>>& errors) {
+  CommonOffset c;
+  for (const auto& v : errors) c.count += std::isnan(v[0]) ? 0u : 1u;
+  if (c.count == 0) return c;
+  const double count = static_cast<double>(c.count);
+  for (const auto& v : errors) {
+    if (std::isnan(v[0])) continue;
+    c.east += v[0] / count;
+    c.north += v[1] / count;
+  }
+  for (const auto& v : errors) {
+    if (std::isnan(v[0])) continue;
+    c.absolute_mean += std::hypot(v[0], v[1]) / count;
+    const double d = std::hypot(v[0] - c.east, v[1] - c.north);
+    c.mean += d / count;
+    c.max = std::max(c.max, d);
+  }
+  return c;
 }
 
 bool truth_at(const std::vector<TruthPose>& traj, std::int64_t t, TruthAt& out) {

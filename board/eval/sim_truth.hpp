@@ -5,6 +5,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -121,6 +122,29 @@ struct TruthAt {
   double x = 0, y = 0, yaw = 0, arc = 0, lat = 0, lon = 0;
 };
 bool truth_at(const std::vector<TruthPose>& trajectory, std::int64_t t, TruthAt& out);
+
+// Positions in a UTM frame named as trailnavd names it (`utm_32N`), stamped
+// on trailnavd's clock, against the true trajectory at their stamps
+// (`offset_ns`: trailnavd's clock minus the recording's): per position, it
+// minus the truth, east and north; NaN for a position without a true pose
+// at its time. A frame that is not a UTM one gives none.
+struct StampedPosition {
+  std::int64_t t = 0;
+  double east = 0.0, north = 0.0;
+};
+std::vector<std::array<double, 2>> utm_errors(const std::vector<TruthPose>& trajectory, const std::string& frame,
+                                              const std::vector<StampedPosition>& positions, std::int64_t offset_ns);
+
+// Errors split into the offset common to all (their mean: with GPS-tied
+// positions, the receiver's bias, which nothing tied to GPS can see) and
+// what is left of each; NaN errors are left out.
+struct CommonOffset {
+  double east = 0.0, north = 0.0;  // the mean error
+  double absolute_mean = 0.0;      // mean |error|
+  double mean = 0.0, max = 0.0;    // of |error − offset|
+  std::size_t count = 0;           // errors that are numbers
+};
+CommonOffset split_common_offset(const std::vector<std::array<double, 2>>& errors);
 
 // The true trajectory as the obstacle pipeline's pose history (UTC times).
 void fill_pose_track(const SimTruth& truth, perception::PoseTrack& track);

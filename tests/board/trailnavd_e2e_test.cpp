@@ -65,8 +65,6 @@
 #include "bench_daemon.hpp"
 #include "subscriber.hpp"
 #include "tf2_msgs.h"
-#include <GeographicLib/UTMUPS.hpp>
-
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/osm/router.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
@@ -141,7 +139,7 @@ struct DaemonRun {
   // stamp, and health's newest mapping values.
   std::size_t keyframe_paths = 0;
   std::string keyframe_frame;
-  std::vector<std::array<double, 2>> keyframe_errors;  // keyframe minus truth, east and north
+  std::vector<std::array<double, 2>> keyframe_errors;  // keyframe minus truth, east and north (eval::utm_errors)
   std::map<std::string, std::string> mapping_health;
   bool map_to_odom_after_solve = false;  // utm -> odom seen after the first optimised path
   int exit_code = -1;
@@ -253,11 +251,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   EXPECT_TRUE(nav_status.subscriber);
   auto keyframe_path = dds::Subscriber::create(*dds_domain.domain, "trailnav/keyframe_path", &nav_msgs_msg_dds__Path__desc, 0, true);
   EXPECT_TRUE(keyframe_path.subscriber);
-  struct Keyframe {
-    std::int64_t t;
-    double e, n, yaw;
-  };
-  std::vector<Keyframe> keyframes;  // the newest path's
+  std::vector<eval::StampedPosition> keyframes;  // the newest path's
   bool optimised_path_seen = false;
   std::array<double, 3> utm_odom{0.0, 0.0, 0.0};  // translation and yaw of utm -> odom
   bool have_utm_odom = false;
@@ -345,7 +339,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
       keyframes.clear();
       for (std::uint32_t i = 0; i < path.poses._length; ++i) {
         const auto& p = path.poses._buffer[i];
-        keyframes.push_back({stamp_ns(p.header), p.pose.position.x, p.pose.position.y, 2.0 * std::atan2(p.pose.orientation.z, p.pose.orientation.w)});
+        keyframes.push_back({stamp_ns(p.header), p.pose.position.x, p.pose.position.y});
       }
       if (out.mapping_health.count("optimisations") != 0 && out.mapping_health["optimisations"] != "0") {
         optimised_path_seen = true;
@@ -526,19 +520,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
     for (const auto& [stamp, xyyaw] : base_tf) trail_check.add_odometry_pose(stamp, xyyaw[0], xyyaw[1], xyyaw[2]);
     // Each keyframe of the last path against the simulated truth at its
     // stamp (the pose's time on trailnavd's clock, moved to the recording's).
-    int zone = 0;
-    char hemisphere = 'N';
-    if (std::sscanf(out.keyframe_frame.c_str(), "utm_%d%c", &zone, &hemisphere) == 2) {
-      for (const Keyframe& k : keyframes) {
-        eval::TruthAt at;
-        if (!eval::truth_at(truth.trajectory, k.t - trail_check.offset_ns(), at) || std::isnan(at.lat)) continue;
-        double e = 0.0, n = 0.0, gamma = 0.0, scale = 0.0;
-        int z = zone;
-        bool north = hemisphere == 'N';
-        GeographicLib::UTMUPS::Forward(at.lat, at.lon, z, north, e, n, gamma, scale, zone);
-        out.keyframe_errors.push_back({k.e - e, k.n - n});
-      }
-    }
+    out.keyframe_errors = eval::utm_errors(truth.trajectory, out.keyframe_frame, keyframes, trail_check.offset_ns());
     for (const Stamped& g : subgoals_received) {
       if (base_tf.count(g.t) == 0) ++out.subgoals_without_tf;
       const double d = trail_check.distance(g.t, g.x, g.y);
@@ -849,25 +831,13 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   // one offset common to every fix, which no map tied to GPS can observe. So
   // the keyframes are held against the truth twice: as they are (the bias
   // included) and with their mean offset taken out (the map's shape).
-  std::array<double, 2> offset{0.0, 0.0};
-  for (const auto& v : r.keyframe_errors) {
-    offset[0] += v[0];
-    offset[1] += v[1];
-  }
-  const double count = static_cast<double>(std::max<std::size_t>(r.keyframe_errors.size(), 1));
-  offset = {offset[0] / count, offset[1] / count};
-  double absolute = 0.0, shape = 0.0, shape_max = 0.0;
-  for (const auto& v : r.keyframe_errors) {
-    absolute += std::hypot(v[0], v[1]) / count;
-    const double d = std::hypot(v[0] - offset[0], v[1] - offset[1]);
-    shape += d / count;
-    shape_max = std::max(shape_max, d);
-  }
+  const eval::CommonOffset split = eval::split_common_offset(r.keyframe_errors);
+  const double absolute = split.absolute_mean, shape = split.mean, shape_max = split.max;
   std::printf("[ trailnavd mapping ] %zu keyframe paths in %s; the last one's %zu keyframes against the simulated truth: "
               "%.2f m off on average (the GPS bias, %.2f m east, %.2f m north, included), %.2f m mean and %.2f m max "
               "with it taken out; health: %s, nodes %.0f, edges %.0f, gps_edges %.0f, optimisations %.0f, levels %.0f, "
               "chi2 %.2f, solve_max_ms %.1f, correction of the GPS alignment %.2f m %.4f rad, memory %.0f of %.0f bytes\n",
-              r.keyframe_paths, r.keyframe_frame.c_str(), r.keyframe_errors.size(), absolute, offset[0], offset[1], shape,
+              r.keyframe_paths, r.keyframe_frame.c_str(), split.count, absolute, split.east, split.north, shape,
               shape_max, m.count("message") ? m.at("message").c_str() : "-", value("nodes"), value("edges"),
               value("gps_edges"), value("optimisations"), value("levels"), value("chi2"), value("solve_max_ms"),
               value("correction_m"), value("correction_rad"), value("memory_high_water_bytes"), value("memory_reserved_bytes"));
@@ -879,7 +849,7 @@ TEST(Trailnavd, PublishesCorrectedSubgoalsOnTheSimulatedTrail) {
   EXPECT_EQ(value("refused_full"), 0.0);
   EXPECT_GT(value("memory_high_water_bytes"), 0.0);
   EXPECT_LE(value("memory_high_water_bytes"), value("memory_reserved_bytes"));
-  ASSERT_GE(r.keyframe_errors.size(), 10u);
+  ASSERT_GE(split.count, 10u);
   EXPECT_LT(shape, 1.0);
   EXPECT_LT(shape_max, 2.0);
   EXPECT_LT(absolute, 4.0 * 3.0);  // within 4 sigma of the bias' spread per axis

@@ -21,9 +21,9 @@ void PoseEstimator::add_gps(const gps::GpsFix& fix, std::int64_t receive_ns) noe
   alignment_.add_fix(fix, fix_time(fix, receive_ns), odometry_);
 }
 
-void PoseEstimator::snapshot(PoseSnapshot& out) const noexcept {
+void PoseEstimator::snapshot(PoseSnapshot& out, bool geodetic) const noexcept {
   out.local = odometry_.pose();
-  out.utm = alignment_.utm(out.local);
+  out.utm = alignment_.utm(out.local, geodetic);
   out.odometry_counters = odometry_.counters();
   out.utm_counters = alignment_.counters();
 }
@@ -67,17 +67,11 @@ void PoseTask::correct(UtmPose& u, Nanos now) noexcept {
   const double f = gap > max_shift ? max_shift / gap : 1.0;
   applied_.x += f * dx;
   applied_.y += f * dy;
-  applied_.revision = target_.revision;
   const double e = applied_.x + ca * u.easting - sa * u.northing;
   const double n = applied_.y + sa * u.easting + ca * u.northing;
   u.easting = e;
   u.northing = n;
   u.yaw = std::remainder(u.yaw + applied_.yaw, 2.0 * 3.14159265358979323846);
-  double lat = 0.0, lon = 0.0;
-  if (estimator_.alignment().reverse(e, n, lat, lon)) {
-    u.latitude = lat;
-    u.longitude = lon;
-  }
 }
 
 void PoseTask::run(const TaskTick& tick) {
@@ -183,8 +177,13 @@ void PoseTask::run(const TaskTick& tick) {
   }
   if (changed) {
     PoseSnapshot& slot = poses_.write_slot();
-    estimator_.snapshot(slot);
-    correct(slot.utm, tick.started);
+    // With a correction, the pose is moved before its one projection to
+    // latitude and longitude.
+    estimator_.snapshot(slot, !target_.valid);
+    if (target_.valid) {
+      correct(slot.utm, tick.started);
+      estimator_.alignment().add_geodetic(slot.utm);
+    }
     slot.sequence = ++local_.published;
     navigation_poses_.write_slot() = slot;
     navigation_poses_.publish();

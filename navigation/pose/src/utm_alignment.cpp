@@ -253,10 +253,6 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
     if (init_.size() == init_.capacity()) init_.erase(init_.begin());
     init_.push_back({a, z, white_sigma(sigma), p.distance, time_ns});
     last_time_ = time_ns;
-    last_fix_ = z;
-    last_fix_odom_ = {p.x, p.y};
-    last_fix_sigma_ = sigma;
-    have_fix_ = true;
     ++counters_.used;
     record_used(z, a, p, sigma, time_ns);
     try_initial_fit();
@@ -312,9 +308,6 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
   gyro_bias_applied_ += state_(3);
   state_(3) = 0.0;
   odometry.set_yaw_rate_bias(gyro_bias_applied_);
-  last_fix_ = z;
-  last_fix_odom_ = {p.x, p.y};
-  last_fix_sigma_ = sigma;
   ++counters_.used;
   record_used(z, a, p, sigma, time_ns);
 }
@@ -331,21 +324,21 @@ void UtmAlignment::record_used(const Eigen::Vector2d& z, const Eigen::Vector2d& 
   last_used_.sigma = sigma;
 }
 
-UtmPose UtmAlignment::utm(const LocalPose& local) const noexcept {
+UtmPose UtmAlignment::utm(const LocalPose& local, bool geodetic) const noexcept {
   UtmPose u;
   u.time_ns = local.time_ns;
   u.zone = zone_;
   u.north = north_;
-  if (!have_fix_) return u;
+  if (last_used_.serial == 0) return u;
   u.altitude = last_altitude_ + (local.z - last_altitude_z_);
   if (!aligned_) {
     // Position only: the last fix's antenna position, uncertain by its sigma
     // and by how far the robot has moved since.
-    const double moved = (Eigen::Vector2d(local.x, local.y) - last_fix_odom_).norm();
-    const double s = last_fix_sigma_ + moved + std::hypot(options_.antenna[0], options_.antenna[1]);
+    const double moved = std::hypot(local.x - last_used_.x, local.y - last_used_.y);
+    const double s = last_used_.sigma + moved + std::hypot(options_.antenna[0], options_.antenna[1]);
     u.position_valid = true;
-    u.easting = last_fix_.x();
-    u.northing = last_fix_.y();
+    u.easting = last_used_.utm.x();
+    u.northing = last_used_.utm.y();
     u.covariance(0, 0) = u.covariance(1, 1) = s * s;
     u.covariance(2, 2) = kPi * kPi;
   } else {
@@ -366,6 +359,12 @@ UtmPose UtmAlignment::utm(const LocalPose& local) const noexcept {
     a.block<2, 1>(0, 2) = perp(rb);
     u.covariance = a * c * a.transpose();
   }
+  if (geodetic) add_geodetic(u);
+  return u;
+}
+
+void UtmAlignment::add_geodetic(UtmPose& u) const noexcept {
+  if (!u.position_valid) return;
   double lat = 0.0, lon = 0.0;
   if (reverse(u.easting, u.northing, lat, lon)) {
     u.latitude = lat;
@@ -373,7 +372,6 @@ UtmPose UtmAlignment::utm(const LocalPose& local) const noexcept {
     double e = 0.0, n = 0.0, gamma = 0.0;
     if (forward(lat, lon, e, n, gamma)) u.convergence = gamma;
   }
-  return u;
 }
 
 }  // namespace trailnav::pose

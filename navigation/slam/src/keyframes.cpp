@@ -113,11 +113,7 @@ void KeyframeGraph::attach_gps(const GpsMeasurement& fix) {
   }
   const std::int32_t k = latest_vertex();
   const Se2 r = keyframe_odometry_.inverse() * fix.odometry;
-  const bool has_heading = fix.heading_sigma > 0.0 && std::isfinite(fix.heading);
-  // The keyframe's heading: measured (moved back by the odometry's turn
-  // between keyframe and fix), else its current estimate.
-  const double th = has_heading ? wrap_angle(fix.heading - r.theta) : graph_.pose(static_cast<std::size_t>(k)).theta;
-  const double c = std::cos(th), s = std::sin(th);
+  const double th = graph_.pose(static_cast<std::size_t>(k)).theta, c = std::cos(th), s = std::sin(th);
   GraphEdge<Se2> e;
   e.from = 0;
   e.to = k;
@@ -152,7 +148,7 @@ void KeyframeGraph::attach_gps(const GpsMeasurement& fix) {
     e.from = b;  // the keyframe's position less the bias is the fix
   }
   e.information(0, 0) = e.information(1, 1) = 1.0 / (white * white);
-  e.information(2, 2) = has_heading ? 1.0 / (fix.heading_sigma * fix.heading_sigma) : kGpsHeadingInformation;
+  e.information(2, 2) = kGpsHeadingInformation;
   graph_.add_edge(e);
   keyframe_has_gps_ = true;
   ++counters_.gps_edges;

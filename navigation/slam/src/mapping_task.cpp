@@ -99,10 +99,7 @@ void MappingTask::take_pose(const perception::Pose& p) {
     started_ = true;  // the map is the odometry frame at start: start_transform_ is the identity
   }
   const Se2 o{p.x, p.y, p.yaw};
-  if (!placed_) {
-    graph_.place_first(start_transform_ * o);
-    placed_ = true;
-  }
+  if (graph_.keyframe_count() == 0) graph_.place_first(start_transform_ * o);
   switch (graph_.on_odometry(o)) {
     case KeyframeGraph::Added::keyframe: {
       const auto k = static_cast<std::size_t>(graph_.latest_vertex());
@@ -169,7 +166,7 @@ void MappingTask::optimise() {
     return;
   }
   ++local_.optimisations;
-  optimised_ = true;
+  local_.error[0] = '\0';
   if (options_.use_gps) {
     // The map's correction of the alignment at the newest keyframe.
     const Se2 c = correction();
@@ -198,11 +195,10 @@ void MappingTask::optimise() {
 void MappingTask::publish() {
   const PoseGraph2d& g = graph_.graph();
   MappingSnapshot& s = out_.write_slot();
-  s.revision = local_.published + 1;
   s.georeferenced = options_.use_gps;
   s.zone = zone_;
   s.north = north_;
-  s.optimised = optimised_;
+  s.optimised = local_.optimisations > 0;
   const Se2 c = correction();
   s.x = c.x + origin_e_;
   s.y = c.y + origin_n_;

@@ -59,7 +59,8 @@ class PoseEstimator {
   const PoseEstimatorOptions& options() const noexcept { return options_; }
   const UtmAlignment& alignment() const noexcept { return alignment_; }
   // The current pose in both frames.
-  void snapshot(PoseSnapshot& out) const noexcept;
+  // `geodetic`: the UTM pose's latitude, longitude and convergence too (UtmAlignment::utm).
+  void snapshot(PoseSnapshot& out, bool geodetic = true) const noexcept;
   // The time a fix is valid for (see PoseEstimatorOptions).
   std::int64_t fix_time(const gps::GpsFix& fix, std::int64_t receive_ns) const noexcept;
 

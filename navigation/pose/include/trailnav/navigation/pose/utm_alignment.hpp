@@ -119,7 +119,10 @@ class UtmAlignment {
   // clock. Hands the gyro bias estimate back to the odometry.
   void add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdometry& odometry) noexcept;
   // The robot's pose in UTM for a local pose.
-  UtmPose utm(const LocalPose& local) const noexcept;
+  // `geodetic`: also latitude, longitude and convergence (one projection);
+  // without, a caller that moves the pose first adds them with add_geodetic().
+  UtmPose utm(const LocalPose& local, bool geodetic = true) const noexcept;
+  void add_geodetic(UtmPose& u) const noexcept;
 
   bool heading_valid() const noexcept { return aligned_; }
   // The transform odometry -> UTM: easting, northing, rotation.
@@ -173,14 +176,9 @@ class UtmAlignment {
   std::vector<Pair> init_;  // capacity fixed at construction
   std::array<Eigen::Vector2d, 16> rejected_{};
   int rejected_count_ = 0;
-  // The last used fix, for the position before the heading is known.
-  Eigen::Vector2d last_fix_ = Eigen::Vector2d::Zero();
-  Eigen::Vector2d last_fix_odom_ = Eigen::Vector2d::Zero();
-  double last_fix_sigma_ = 0.0;
   double last_altitude_ = 0.0;
   double last_altitude_z_ = 0.0;
-  bool have_fix_ = false;
-  UsedFix last_used_;
+  UsedFix last_used_;  // also the position before the heading is known
   void record_used(const Eigen::Vector2d& z, const Eigen::Vector2d& a, const LocalPose& p, double sigma,
                    std::int64_t time_ns) noexcept;
   UtmAlignmentCounters counters_;

@@ -18,9 +18,7 @@
 //     fix's own), its heading barely (information 1e-9: GPS does not measure
 //     it). The fix is moved to the keyframe by the odometry between them,
 //     r = k⁻¹ p: the keyframe's position is measured as g − R(θ_k) r_t, with
-//     θ_k the keyframe's current estimate. One fix a keyframe. Where the
-//     fix comes with a heading, that heading, moved to the keyframe by the
-//     odometry, is measured too, with its own standard deviation.
+//     θ_k the keyframe's current estimate. One fix a keyframe.
 //   - GPS with a wandering bias (`gps_white_sigma` > 0): a receiver's error
 //     is mostly a bias that wanders over minutes (first-order Gauss–Markov,
 //     correlation time τ = `gps_bias_time`) plus a white part. Taking the
@@ -76,13 +74,11 @@ struct KeyframeOptions {
 
 // A GPS fix for the graph: the robot's position in the map frame and its
 // standard deviation, when (the time the fix is valid for, on the
-// odometry's clock) and the odometry pose then; optionally the robot's
-// heading in the map then with its standard deviation (≤ 0: none).
+// odometry's clock) and the odometry pose then.
 struct GpsMeasurement {
   double x = 0.0, y = 0.0, sigma = 0.0;
   std::int64_t time_ns = 0;
   Se2 odometry{};
-  double heading = 0.0, heading_sigma = 0.0;
 };
 
 struct KeyframeCounters {

@@ -89,7 +89,6 @@ struct MapPathPose {
 
 struct MappingSnapshot {
   explicit MappingSnapshot(std::size_t capacity) : path(capacity) {}
-  std::uint64_t revision = 0;
   std::int64_t time_ns = 0;  // the newest keyframe's pose time
   bool georeferenced = false;  // UTM (zone, north) below; else the odometry frame at start
   int zone = 0;
@@ -117,7 +116,7 @@ struct MappingTaskStatus {
   double solve_ms = 0.0, solve_max_ms = 0.0;
   // Bytes: the solver's arenas, reserved and their high-water marks.
   std::size_t hierarchy_capacity = 0, hierarchy_high_water = 0, part_capacity = 0, part_high_water = 0;
-  std::array<char, 160> error{};  // the last failed solve's message
+  std::array<char, 160> error{};  // the last solve's message when it failed; empty once one succeeds
   // The newest correction of the GPS alignment at the newest keyframe: how
   // far the optimised map moved the robot there, and turned it.
   double correction_m = 0.0, correction_rad = 0.0;
@@ -141,7 +140,6 @@ class MappingTask final : public Task {
 
   void run(const TaskTick& tick) override;
   MappingTaskStatus status() const noexcept { return shared_.read(); }
-  const KeyframeGraph& keyframes() const noexcept { return graph_; }
 
  private:
   void take_pose(const perception::Pose& p);
@@ -164,14 +162,13 @@ class MappingTask final : public Task {
   std::vector<Se2> backup_;                // the poses before a solve, put back if it fails
   std::array<perception::Pose, perception::kPoseQueueCapacity> pose_batch_{};
   std::array<pose::MappingFix, pose::kMappingFixCapacity> fix_batch_{};
-  bool started_ = false, placed_ = false;
+  bool started_ = false;
   Se2 start_transform_{};                  // odometry -> map (graph coordinates) at the start
   Se2 alignment_{};                        // the newest fix's odometry -> UTM (absolute)
   Se2 alignment_at_keyframe_{};            // ... when the newest keyframe was made
   double origin_e_ = 0.0, origin_n_ = 0.0;
   int zone_ = 0;
   bool north_ = true;
-  bool optimised_ = false;
   std::size_t solved_vertices_ = 0, solved_edges_ = 0;  // the graph at the last solve (or publish)
   std::int64_t last_optimise_ = -1;
   MappingTaskStatus local_;
