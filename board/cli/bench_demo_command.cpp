@@ -372,7 +372,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
       if (o.png_every > 0 && n_maps % static_cast<std::uint64_t>(o.png_every) == 0) {
         char name[48];
         std::snprintf(name, sizeof name, "obstacle_map-%04llu.png", static_cast<unsigned long long>(n_maps));
-        if (write_occupancy_png((out / "maps" / name).string(), g)) ++pngs;
+        if (write_occupancy_png((out / "maps" / name).string(), g, "trailnav/obstacle_map")) ++pngs;
       }
     });
     terrain.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
@@ -386,7 +386,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
                     static_cast<unsigned long long>(count[2]), static_cast<unsigned long long>(count[3]),
                     static_cast<unsigned long long>(count[4]));
       terrain_summary = text;
-      if (write_terrain_png((out / "maps" / "terrain_map.png").string(), t)) ++pngs;
+      if (write_terrain_png((out / "maps" / "terrain_map.png").string(), t, "trailnav/terrain_map")) ++pngs;
     });
     subgoal.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
@@ -559,7 +559,7 @@ int run_bench_demo(const BenchDemoOptions& o) {
   if (!o.png.empty() && !last_map.empty()) {
     last_header.data._buffer = last_map.data();
     last_header.data._length = static_cast<std::uint32_t>(last_map.size());
-    if (Status st = write_occupancy_png(o.png, last_header); st) {
+    if (Status st = write_occupancy_png(o.png, last_header, "trailnav/obstacle_map, the last received"); st) {
       std::printf("   last obstacle map: %s\n", o.png.c_str());
     } else {
       std::fprintf(stderr, "trailnav demo: %s\n", st.message().c_str());

@@ -235,10 +235,10 @@ int run_echo(const EchoOptions& o) {
         const std::string path = (fs::path(o.png_dir) / (base + name)).string();
         Status st;
         if (r.type == &nav_msgs_msg_dds__OccupancyGrid__desc) {
-          st = write_occupancy_png(path, *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample));
+          st = write_occupancy_png(path, *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample), o.topic);
           ++pngs;
         } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
-          st = write_terrain_png(path, *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample));
+          st = write_terrain_png(path, *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample), o.topic);
           ++pngs;
         }
         if (!st) std::fprintf(stderr, "trailnav echo: %s\n", st.message().c_str());

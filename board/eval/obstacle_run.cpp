@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <unordered_set>
 
+#include "figure.hpp"
 #include "png.hpp"
 #include "revolution_source.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
@@ -391,30 +392,34 @@ void report_points(const perception::ObstaclePipeline& pipeline, const perceptio
 
 }  // namespace
 
-Status write_obstacle_png(const std::string& path, const ObstacleMap& map, double robot_x, double robot_y) {
+Status write_obstacle_png(const std::string& path, const ObstacleMap& map, double robot_x, double robot_y,
+                          const std::string& title, const std::vector<std::string>& notes) {
   const auto& g = map.grid();
   const auto w = static_cast<std::uint32_t>(g.size_x());
   const auto h = static_cast<std::uint32_t>(g.size_y());
+  constexpr cli::Rgb kUnknown{60, 70, 90}, kRobot{230, 30, 30};
+  // Free white to black by P(obstacle); cells the map calls occupied tinted blue.
+  const auto color = [](float p, bool occupied) {
+    const auto v = static_cast<std::uint8_t>(std::lround(255.0f * (1.0f - p)));
+    if (occupied) return cli::Rgb{static_cast<std::uint8_t>(v / 2), static_cast<std::uint8_t>(v / 2), v};
+    return cli::Rgb{v, v, v};
+  };
   std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
   const CellIndex o = g.origin();
+  std::uint64_t occupied = 0, known = 0;
   for (std::uint32_t row = 0; row < h; ++row) {
     const auto y = static_cast<std::int32_t>(h - 1 - row);  // north up
     for (std::uint32_t col = 0; col < w; ++col) {
       const perception::ObstacleCell& c = g.at({o.x + static_cast<std::int32_t>(col), o.y + y});
       std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + col) * 3];
-      if (!c.known()) {
-        px[0] = 60;
-        px[1] = 70;
-        px[2] = 90;
-        continue;
+      cli::Rgb k = kUnknown;
+      if (c.known()) {
+        ++known;
+        const bool occ = map.state(c) == perception::CellState::occupied;
+        occupied += occ ? 1 : 0;
+        k = color(perception::logistic(c.logit), occ);
       }
-      const float p = perception::logistic(c.logit);
-      const auto v = static_cast<std::uint8_t>(std::lround(255.0f * (1.0f - p)));
-      px[0] = px[1] = px[2] = v;
-      if (map.state(c) == perception::CellState::occupied) {
-        px[0] = static_cast<std::uint8_t>(v / 2);
-        px[1] = static_cast<std::uint8_t>(v / 2);
-      }
+      px[0] = k.r, px[1] = k.g, px[2] = k.b;
     }
   }
   const CellIndex rc = g.world_to_index(robot_x, robot_y);
@@ -425,12 +430,24 @@ Status write_obstacle_png(const std::string& path, const ObstacleMap& map, doubl
       const int row = static_cast<int>(h) - 1 - (rc.y + dy - o.y);
       if (col < 0 || row < 0 || col >= static_cast<int>(w) || row >= static_cast<int>(h)) continue;
       std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + static_cast<std::size_t>(col)) * 3];
-      px[0] = 230;
-      px[1] = 30;
-      px[2] = 30;
+      px[0] = kRobot.r, px[1] = kRobot.g, px[2] = kRobot.b;
     }
   }
-  return cli::write_png(path, w, h, cli::PngColor::rgb, rgb);
+  cli::MapFigure figure;
+  figure.title = title;
+  figure.notes = notes;
+  char text[128];
+  std::snprintf(text, sizeof text, "%u x %u cells of %.2f m; %llu seen, %llu occupied", w, h, g.resolution(),
+                static_cast<unsigned long long>(known), static_cast<unsigned long long>(occupied));
+  figure.notes.emplace_back(text);
+  figure.legend = {{kUnknown, "unknown (not seen)"},
+                   {color(0.0f, false), "free, P = 0"},
+                   {color(0.5f, false), "P = 0.5"},
+                   {color(0.75f, true), "occupied, P = 0.75"},
+                   {color(1.0f, true), "occupied, P = 1"},
+                   {kRobot, "robot"}};
+  figure.metres_per_pixel = g.resolution();
+  return cli::write_map_figure(path, rgb, static_cast<int>(w), static_cast<int>(h), figure);
 }
 
 ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
@@ -524,7 +541,13 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       if (map == nullptr) continue;
       const std::string name = "obstacles-" + std::string(perception::fusion_model_name(static_cast<FusionModel>(m))) + suffix;
       const std::string png = (fs::path(options.out_dir) / (name + ".png")).string();
-      if (write_obstacle_png(png, *map, pipeline.cloud().robot_x, pipeline.cloud().robot_y)) report.files.push_back(png);
+      char note[96];
+      std::snprintf(note, sizeof note, "after revolution %llu", static_cast<unsigned long long>(report.revolutions));
+      if (write_obstacle_png(png, *map, pipeline.cloud().robot_x, pipeline.cloud().robot_y,
+                             "obstacle map, fusion " + std::string(perception::fusion_model_name(static_cast<FusionModel>(m))),
+                             {note})) {
+        report.files.push_back(png);
+      }
     }
   };
   std::int64_t first_ns = 0;  // PointRecord::time_s counts from here

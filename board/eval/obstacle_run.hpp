@@ -173,7 +173,9 @@ struct ObstacleRunReport {
 ObstacleRunReport run_obstacles(const ObstacleRunOptions& options);
 
 // Writes a map as PNG: unknown dark blue-grey, free white to occupied black
-// by probability, the robot as a red dot; north up.
-Status write_obstacle_png(const std::string& path, const perception::ObstacleMap& map, double robot_x, double robot_y);
+// by probability (occupied cells tinted blue), the robot as a red dot; north
+// up; beside it the title, `notes`, the legend, a scale bar and north.
+Status write_obstacle_png(const std::string& path, const perception::ObstacleMap& map, double robot_x, double robot_y,
+                          const std::string& title = "obstacle map", const std::vector<std::string>& notes = {});
 
 }  // namespace trailnav::eval

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <numbers>
 
+#include "figure.hpp"
 #include "png.hpp"
 
 namespace trailnav::sim {
@@ -240,8 +241,30 @@ Status write_truth(const std::string& dir, const Scenario& s, std::uint64_t seed
     dot(j.point, {255, 220, 0}, 3);
     dot(j.mapped, {0, 220, 230}, 3);
   }
-  return cli::write_png(dir + "/overview.png", static_cast<std::uint32_t>(img.w), static_cast<std::uint32_t>(img.h),
-                        cli::PngColor::rgb, img.rgb);
+  const auto rgb = [](std::array<std::uint8_t, 3> c) { return cli::Rgb{c[0], c[1], c[2]}; };
+  cli::MapFigure figure;
+  figure.title = "simulated world: " + s.name;
+  char text[160];
+  std::snprintf(text, sizeof text, "%d x %d m, drawn at %.2f m per pixel; origin %.6f, %.6f (UTM zone %d%s)",
+                static_cast<int>(std::lround(world.width() * world.resolution())),
+                static_cast<int>(std::lround(world.height() * world.resolution())), world.resolution() * scale,
+                s.origin_lat, s.origin_lon, geo.zone(), geo.north() ? "N" : "S");
+  figure.notes = {text, "SIMULATED truth (docs/simulator.md)"};
+  figure.legend = {{rgb(kClassColour[0]), "street"},
+                   {rgb(kClassColour[1]), "dirt"},
+                   {rgb(kClassColour[2]), "grass"},
+                   {rgb(kClassColour[3]), "vegetation (ground)"},
+                   {rgb(kClassColour[4]), "other ground"},
+                   {{210, 30, 30}, "obstacle"},
+                   {{110, 20, 140}, "negative obstacle"},
+                   {{10, 64, 20}, "vegetation (obstacle)"},
+                   {{230, 40, 220}, "OSM ways"},
+                   {{255, 255, 255}, "true trail centres"},
+                   {{30, 80, 230}, "driven path"},
+                   {{255, 220, 0}, "junction, true"},
+                   {{0, 220, 230}, "junction, as mapped"}};
+  figure.metres_per_pixel = world.resolution() * scale;
+  return cli::write_map_figure(dir + "/overview.png", img.rgb, img.w, img.h, figure);
 }
 
 }  // namespace trailnav::sim
