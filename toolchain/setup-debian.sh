@@ -11,6 +11,8 @@ packages=(
   clang clang-format clang-tidy libclang-rt-14-dev
   # libraries
   libeigen3-dev
+  # Boost.Math, header-only: the χ² test of the traversability terrain models
+  libboost-dev
   libsuitesparse-dev libmetis-dev
   # the peer of the pose-graph side-by-side (tests/bench/ceres_pose_graph.hpp)
   libceres-dev

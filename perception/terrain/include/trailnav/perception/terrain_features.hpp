@@ -40,6 +40,7 @@ struct CellStats {
   float sr = 0.0f, srr = 0.0f;                        // remission sums, shifted by r0
   float sx = 0.0f, sy = 0.0f, sz = 0.0f;              // coordinate sums, shifted by the first point
   float sxx = 0.0f, sxy = 0.0f, sxz = 0.0f, syy = 0.0f, syz = 0.0f, szz = 0.0f;
+  float min_dz = 0.0f, max_dz = 0.0f;                 // z's extremes from z0 (the traversability's max |Δz|)
 
   // x, y relative to the cell's centre; z in the odometry frame; r the remission.
   void add(float x, float y, float z, float r) noexcept {
@@ -64,10 +65,12 @@ struct CellStats {
     syy += dy * dy;
     syz += dy * dz;
     szz += dz * dz;
+    min_dz = dz < min_dz ? dz : min_dz;
+    max_dz = dz > max_dz ? dz : max_dz;
   }
 };
 
-static_assert(sizeof(CellStats) == 68, "docs/terrain.md gives the cell's size");
+static_assert(sizeof(CellStats) == 76, "docs/terrain.md gives the cell's size");
 
 // The feature of a cell with at least three points; its area_std_remission is
 // the cell's own std_remission (the mapper replaces it with the area's).

@@ -1,0 +1,44 @@
+// A learnt traversability model on disk: the robot profile it was learnt
+// for, the vocabulary and learner settings, and each terrain model's word
+// counts (the learner recomputes every table from them, so a model can be
+// trained further later). Little-endian, versioned, CRC-32 at the end; only
+// words with a count are stored. Saving is atomic: a temporary file beside
+// the target, flushed to the disk, then renamed over it, so a reader (or a
+// power cut) never sees a half-written model. docs/traversability.md gives
+// the layout.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "trailnav/perception/trav_learner.hpp"
+#include "trailnav/runtime/status.hpp"
+
+namespace trailnav::perception::trav {
+
+inline constexpr std::uint32_t kModelFileVersion = 1;
+inline constexpr std::size_t kMaxProfileName = 64;
+
+struct TravModelFile {
+  std::string profile;  // printable ASCII, at most kMaxProfileName characters
+  VocabularyConfig vocabulary;
+  LearnerConfig learner;
+  std::vector<WordCounts> models;  // each over the vocabulary's size
+};
+
+// The file's bytes (the model must be consistent: check_vocabulary,
+// check_learner, counts over |V|, at most max_models).
+std::vector<std::uint8_t> serialize_trav_model(const TravModelFile& model);
+Status save_trav_model(const std::string& path, const TravModelFile& model);
+
+struct LoadedTravModel {
+  std::optional<TravModelFile> model;
+  std::string error;  // "<name>: what is wrong", when model is empty
+};
+LoadedTravModel load_trav_model(const std::string& path);
+LoadedTravModel parse_trav_model(std::span<const std::uint8_t> bytes, const std::string& name);
+
+}  // namespace trailnav::perception::trav

@@ -1,0 +1,97 @@
+// Traversability features of a grid cell and the vocabulary they are counted
+// in (thesis §6.1–6.2).
+//
+// Every d_P of travel each cell with at least five points since its last
+// feature gets one feature vector f = (max |Δz|, mean remission, variance of
+// remission, roughness, slope): the roughness is the smallest eigenvalue of
+// the points' covariance, the slope the angle between its eigenvector (the
+// least-squares plane's normal) and gravity. The vector is discretised by
+// bins of fixed increments per dimension; the tuple of bin indices is one
+// word of the vocabulary V, a cell is a document of the words it produced
+// (thesis §6.3.1: "the words are the discretized features f and the
+// documents are the cells of the grid").
+//
+// Our choices where the thesis gives no value (docs/traversability.md):
+// - The remission variance and the roughness are binned on their square
+//   roots (the standard deviation of remission, 0..255, and the RMS distance
+//   of the points from their plane in metres): the same information, but
+//   fixed increments then spread the cells over the bins instead of putting
+//   nearly all into the first.
+// - Default bins: max |Δz| 0.04 m x 8, mean remission 32 x 8, remission
+//   standard deviation 8 x 6, RMS plane distance 0.01 m x 6, slope 6° x 8;
+//   the last bin of each dimension is open-ended. |V| = 18 432 for the full
+//   vector, 384 without remission (NoRe) or without roughness and slope
+//   (NoRS): the ablations of §6.4 drop those dimensions from the word.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "trailnav/perception/terrain_features.hpp"
+
+namespace trailnav::perception::trav {
+
+inline constexpr int kDims = 5;
+enum class Dim : std::uint8_t { max_dz = 0, remission_mean = 1, remission_var = 2, roughness = 3, slope = 4 };
+std::string_view dim_name(Dim d) noexcept;
+
+// One cell's feature: max |Δz| in m, remission mean (0..255) and variance,
+// roughness in m², slope in degrees (0..90).
+struct Feature {
+  std::array<float, kDims> v{};
+  float operator[](Dim d) const noexcept { return v[static_cast<std::size_t>(d)]; }
+};
+
+// Cells with fewer points get no feature (the eigenvalues would not be
+// defined, thesis §6.2).
+inline constexpr std::uint32_t kMinPoints = 5;
+// The feature of a cell from its running sums; false with fewer than
+// kMinPoints points.
+bool cell_feature(const CellStats& s, Feature& out) noexcept;
+
+// Which dimensions make the word (thesis §6.4's ablations).
+enum class FeatureSet : std::uint8_t {
+  full = 0,
+  no_remission = 1,        // NoRe: without the remission mean and variance
+  no_roughness_slope = 2,  // NoRS: without roughness and slope
+};
+std::string_view feature_set_name(FeatureSet s) noexcept;  // "full", "NoRe", "NoRS"
+bool uses(FeatureSet s, Dim d) noexcept;
+
+// Bins of `width` from 0; values below 0 fall in the first, values beyond
+// the last bin's start in the last.
+struct Binning {
+  float width = 1.0f;
+  std::uint32_t bins = 1;
+};
+
+struct VocabularyConfig {
+  std::array<Binning, kDims> bins{{{0.04f, 8}, {32.0f, 8}, {8.0f, 6}, {0.01f, 6}, {6.0f, 8}}};
+  FeatureSet set = FeatureSet::full;
+};
+// "" if usable, else what is wrong (bins 1..64 per dimension, finite positive
+// widths, |V| at most kMaxVocabulary).
+inline constexpr std::uint32_t kMaxVocabulary = 1u << 18;
+std::string check_vocabulary(const VocabularyConfig& c);
+
+class Vocabulary {
+ public:
+  explicit Vocabulary(const VocabularyConfig& config);  // config must pass check_vocabulary
+
+  const VocabularyConfig& config() const noexcept { return config_; }
+  std::uint32_t size() const noexcept { return size_; }
+  // The bin of one dimension's value (the square root for variance and
+  // roughness, see above).
+  std::uint32_t bin(Dim d, float value) const noexcept;
+  // The word of a feature vector: the bins of the used dimensions in mixed
+  // radix, max |Δz| the most significant.
+  std::uint32_t word(const Feature& f) const noexcept;
+
+ private:
+  VocabularyConfig config_;
+  std::uint32_t size_ = 1;
+};
+
+}  // namespace trailnav::perception::trav

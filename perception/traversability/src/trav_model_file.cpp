@@ -1,0 +1,223 @@
+#include "trailnav/perception/trav_model_file.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+namespace trailnav::perception::trav {
+namespace {
+
+constexpr std::uint8_t kMagic[8] = {'T', 'N', 'T', 'R', 'A', 'V', 0x1a, '\n'};
+
+void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+}
+void put_u64(std::vector<std::uint8_t>& out, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+}
+void put_f32(std::vector<std::uint8_t>& out, float f) {
+  std::uint32_t v;
+  std::memcpy(&v, &f, 4);
+  put_u32(out, v);
+}
+void put_f64(std::vector<std::uint8_t>& out, double f) {
+  std::uint64_t v;
+  std::memcpy(&v, &f, 8);
+  put_u64(out, v);
+}
+
+class Reader {
+ public:
+  explicit Reader(std::span<const std::uint8_t> d) : d_(d) {}
+  bool u32(std::uint32_t& v) {
+    if (d_.size() - pos_ < 4) return false;
+    v = 0;
+    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(d_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
+    pos_ += 4;
+    return true;
+  }
+  bool u64(std::uint64_t& v) {
+    if (d_.size() - pos_ < 8) return false;
+    v = 0;
+    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(d_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
+    pos_ += 8;
+    return true;
+  }
+  bool f32(float& f) {
+    std::uint32_t v = 0;
+    if (!u32(v)) return false;
+    std::memcpy(&f, &v, 4);
+    return true;
+  }
+  bool f64(double& f) {
+    std::uint64_t v = 0;
+    if (!u64(v)) return false;
+    std::memcpy(&f, &v, 8);
+    return true;
+  }
+  bool bytes(std::size_t n, std::string& s) {
+    if (d_.size() - pos_ < n) return false;
+    s.assign(reinterpret_cast<const char*>(d_.data() + pos_), n);
+    pos_ += n;
+    return true;
+  }
+  std::size_t left() const noexcept { return d_.size() - pos_; }
+
+ private:
+  std::span<const std::uint8_t> d_;
+  std::size_t pos_ = 0;
+};
+
+}  // namespace
+
+std::vector<std::uint8_t> serialize_trav_model(const TravModelFile& m) {
+  std::vector<std::uint8_t> out(std::begin(kMagic), std::end(kMagic));
+  put_u32(out, kModelFileVersion);
+  put_u32(out, static_cast<std::uint32_t>(m.profile.size()));
+  out.insert(out.end(), m.profile.begin(), m.profile.end());
+  put_u32(out, static_cast<std::uint32_t>(m.vocabulary.set));
+  for (const Binning& b : m.vocabulary.bins) {
+    put_f32(out, b.width);
+    put_u32(out, b.bins);
+  }
+  const LearnerConfig& l = m.learner;
+  for (double d : {l.alpha_p, l.alpha_n, l.epsilon, l.chi2_alpha, l.min_expected, l.prior}) put_f64(out, d);
+  put_u32(out, l.max_models);
+  put_u32(out, static_cast<std::uint32_t>(m.models.size()));
+  for (const WordCounts& k : m.models) {
+    put_u64(out, k.total_positive());
+    put_u64(out, k.total_unlabelled());
+    std::uint32_t entries = 0;
+    for (std::uint32_t w = 0; w < k.vocabulary(); ++w) entries += (k.positive(w) != 0 || k.unlabelled(w) != 0) ? 1u : 0u;
+    put_u32(out, entries);
+    for (std::uint32_t w = 0; w < k.vocabulary(); ++w) {
+      if (k.positive(w) == 0 && k.unlabelled(w) == 0) continue;
+      put_u32(out, w);
+      put_u32(out, k.positive(w));
+      put_u32(out, k.unlabelled(w));
+    }
+  }
+  put_u32(out, static_cast<std::uint32_t>(crc32(0L, out.data(), static_cast<uInt>(out.size()))));
+  return out;
+}
+
+Status save_trav_model(const std::string& path, const TravModelFile& model) {
+  const std::vector<std::uint8_t> bytes = serialize_trav_model(model);
+  const std::string tmp = path + ".tmp";
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return Status::error("cannot write " + path + ": " + std::strerror(errno));
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const std::string why = std::strerror(errno);
+      ::close(fd);
+      ::unlink(tmp.c_str());
+      return Status::error("cannot write " + path + ": " + why);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+    const std::string why = std::strerror(errno);
+    ::unlink(tmp.c_str());
+    return Status::error("cannot write " + path + ": " + why);
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string why = std::strerror(errno);
+    ::unlink(tmp.c_str());
+    return Status::error("cannot write " + path + ": " + why);
+  }
+  return Status::ok();
+}
+
+LoadedTravModel load_trav_model(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return {std::nullopt, path + ": cannot open: " + std::strerror(errno)};
+  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return parse_trav_model(bytes, path);
+}
+
+LoadedTravModel parse_trav_model(std::span<const std::uint8_t> data, const std::string& name) {
+  auto fail = [&](const std::string& what) { return LoadedTravModel{std::nullopt, name + ": " + what}; };
+  if (data.size() < sizeof kMagic || std::memcmp(data.data(), kMagic, sizeof kMagic) != 0) {
+    return fail("not a trailnav traversability model (trailnav trav-train writes them)");
+  }
+  Reader r(data.subspan(sizeof kMagic));
+  std::uint32_t version = 0;
+  if (!r.u32(version)) return fail("truncated header");
+  if (version != kModelFileVersion) {
+    return fail("model format version " + std::to_string(version) + "; this build reads version " +
+                std::to_string(kModelFileVersion));
+  }
+  if (data.size() < sizeof kMagic + 8) return fail("truncated");
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, data.data(), static_cast<uInt>(data.size() - 4)));
+  std::uint32_t stored = 0;
+  for (std::size_t i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(data[data.size() - 4 + i]) << (8 * i);
+  if (stored != crc) return fail("checksum mismatch: the file is truncated or corrupt");
+  Reader body(data.subspan(sizeof kMagic + 4, data.size() - sizeof kMagic - 8));
+
+  TravModelFile m;
+  std::uint32_t profile_len = 0;
+  if (!body.u32(profile_len)) return fail("truncated header");
+  if (profile_len > kMaxProfileName) return fail("robot profile name longer than " + std::to_string(kMaxProfileName) + " characters");
+  if (!body.bytes(profile_len, m.profile)) return fail("truncated header");
+  for (char c : m.profile) {
+    if (c < 0x20 || c > 0x7e) return fail("robot profile name is not printable ASCII");
+  }
+  std::uint32_t set = 0;
+  if (!body.u32(set)) return fail("truncated header");
+  if (set > 2) return fail("unknown feature set " + std::to_string(set));
+  m.vocabulary.set = static_cast<FeatureSet>(set);
+  for (Binning& b : m.vocabulary.bins) {
+    if (!body.f32(b.width) || !body.u32(b.bins)) return fail("truncated header");
+  }
+  if (std::string why = check_vocabulary(m.vocabulary); !why.empty()) return fail("vocabulary: " + why);
+  LearnerConfig& l = m.learner;
+  for (double* d : {&l.alpha_p, &l.alpha_n, &l.epsilon, &l.chi2_alpha, &l.min_expected, &l.prior}) {
+    if (!body.f64(*d)) return fail("truncated header");
+  }
+  if (!body.u32(l.max_models)) return fail("truncated header");
+  if (std::string why = check_learner(l); !why.empty()) return fail("learner settings: " + why);
+  const std::uint32_t size = Vocabulary(m.vocabulary).size();
+  std::uint32_t models = 0;
+  if (!body.u32(models)) return fail("truncated header");
+  if (models > l.max_models) {
+    return fail(std::to_string(models) + " terrain models, more than its max_models " + std::to_string(l.max_models));
+  }
+  for (std::uint32_t i = 0; i < models; ++i) {
+    const std::string which = "terrain model " + std::to_string(i) + ": ";
+    std::uint64_t np = 0, nu = 0;
+    std::uint32_t entries = 0;
+    if (!body.u64(np) || !body.u64(nu) || !body.u32(entries)) return fail(which + "truncated");
+    if (entries > size) return fail(which + std::to_string(entries) + " words, the vocabulary has " + std::to_string(size));
+    if (body.left() < 12ull * entries) return fail(which + "truncated");
+    WordCounts k(size);
+    std::int64_t last = -1;
+    for (std::uint32_t e = 0; e < entries; ++e) {
+      std::uint32_t w = 0, p = 0, u = 0;
+      body.u32(w);
+      body.u32(p);
+      body.u32(u);
+      if (w >= size) return fail(which + "word " + std::to_string(w) + " outside the vocabulary of " + std::to_string(size));
+      if (static_cast<std::int64_t>(w) <= last) return fail(which + "words out of order");
+      if (p == 0 && u == 0) return fail(which + "a stored word without a count");
+      last = w;
+      k.add(w, true, p);
+      k.add(w, false, u);
+    }
+    if (k.total_positive() != np || k.total_unlabelled() != nu) {
+      return fail(which + "the counts do not add up to the stored totals");
+    }
+    m.models.push_back(std::move(k));
+  }
+  if (body.left() != 0) return fail(std::to_string(body.left()) + " bytes after the last model");
+  return {std::move(m), ""};
+}
+
+}  // namespace trailnav::perception::trav
