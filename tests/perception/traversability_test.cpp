@@ -15,6 +15,9 @@
 #include <vector>
 
 #include "test_data.hpp"
+#include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/trav_recorder.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/perception/trav_learner.hpp"
 #include "trailnav/perception/trav_model_file.hpp"
 #include "trailnav/perception/trav_vocabulary.hpp"
@@ -419,6 +422,149 @@ TEST(TravModelFile, BadBytesGetAClearError) {
   recrc(b);
   EXPECT_NE(error(b).find("more than its max_models"), std::string::npos);
   EXPECT_NE(load_trav_model("/nonexistent/x.tntrav").error.find("cannot open"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace trailnav::perception::trav
+
+// --- the local maps and the demonstration's labels ---
+
+namespace trailnav::perception::trav {
+namespace {
+
+CellStats flat_cell(float remission) {
+  CellStats s;
+  for (int i = 0; i < 9; ++i) s.add(-0.08f + 0.02f * static_cast<float>(i), 0.03f * static_cast<float>(i % 3), 0.0f, remission);
+  return s;
+}
+
+TEST(TravRecorder, TheFootprintsCellsArePositiveForOneLocalMap) {
+  const Vocabulary v{VocabularyConfig{}};
+  RecorderConfig rc;
+  rc.footprint = {1.0, 0.7, 0.0};
+  rc.local_map_distance = 10.0;
+  TravRecorder rec(rc, v, 300, 300, 0.2);
+  // Along +x from 0 to 10.4 m; a word on the path (y = 0) and one 2 m beside it, every metre.
+  const CellStats path = flat_cell(50.0f), verge = flat_cell(20.0f);
+  for (int k = 0; k <= 104; ++k) {
+    const double x = 0.1 * k;
+    rec.drive(x, 0.0, 0.0);
+    if (k % 10 == 5) {
+      rec.cell_sums({static_cast<std::int32_t>(std::floor(x / 0.2)), 0}, path, x, 0.1);
+      rec.cell_sums({static_cast<std::int32_t>(std::floor(x / 0.2)), 10}, verge, x, 2.1);
+    }
+  }
+  EXPECT_TRUE(rec.footprint({25, 1}));    // y 0.2..0.4 meets the 0.35 m half-width
+  EXPECT_FALSE(rec.footprint({25, 2}));   // y 0.4..0.6 does not
+  EXPECT_TRUE(rec.footprint({25, -2}));   // y -0.4..-0.2
+  EXPECT_FALSE(rec.footprint({-4, 0}));   // 0.8 m behind the start
+  EXPECT_TRUE(rec.local_map_complete());
+  WordCounts counts(v.size());
+  int cells = 0, positive_cells = 0;
+  rec.finish_local_map(counts, [&](const TravRecorder::CellWords& c) {
+    ++cells;
+    positive_cells += c.positive ? 1 : 0;
+    EXPECT_EQ(c.positive, c.cell.y == 0);
+    EXPECT_EQ(c.words.size(), 1u);
+  });
+  EXPECT_EQ(cells, 20);  // x = 0.5, 1.5, ..., 9.5: ten on the path, ten beside it
+  EXPECT_EQ(positive_cells, 10);
+  Feature fp, fv;
+  ASSERT_TRUE(cell_feature(path, fp));
+  ASSERT_TRUE(cell_feature(verge, fv));
+  EXPECT_EQ(counts.positive(v.word(fp)), 10u);
+  EXPECT_EQ(counts.unlabelled(v.word(fv)), 10u);
+  EXPECT_EQ(counts.total_positive(), 10u);
+  EXPECT_EQ(counts.total_unlabelled(), 10u);
+  // The next local map: the old marks no longer count.
+  EXPECT_EQ(rec.local_map(), 2u);
+  EXPECT_FALSE(rec.footprint({25, 0}));
+  EXPECT_FALSE(rec.local_map_complete());
+  rec.cell_sums({25, 0}, path, 5.1, 0.1);
+  rec.finish_local_map(counts);
+  EXPECT_EQ(counts.total_positive(), 0u);
+  EXPECT_EQ(counts.total_unlabelled(), 1u);
+}
+
+TEST(TravRecorder, FarCellsAndWordsBeyondItsCapacityAreCounted) {
+  const Vocabulary v{VocabularyConfig{}};
+  RecorderConfig rc;
+  rc.max_range = 20.0;
+  rc.max_words = 1000;
+  TravRecorder rec(rc, v, 300, 300, 0.2);
+  rec.drive(0.0, 0.0, 0.0);
+  const CellStats s = flat_cell(30.0f);
+  rec.cell_sums({110, 0}, s, 22.1, 0.1);
+  EXPECT_EQ(rec.counters().too_far, 1u);
+  for (int i = 0; i < 1005; ++i) rec.cell_sums({i % 50, i / 50}, s, 0.2 * (i % 50), 0.2 * (i / 50));
+  EXPECT_EQ(rec.counters().words, 1000u);
+  EXPECT_EQ(rec.counters().dropped, 5u);
+  CellStats few;
+  for (int i = 0; i < 4; ++i) few.add(0.01f * static_cast<float>(i), 0.0f, 0.0f, 1.0f);
+  rec.cell_sums({1, 1}, few, 0.3, 0.3);  // fewer than five points: no word
+  EXPECT_EQ(rec.counters().words + rec.counters().dropped, 1005u);
+  EXPECT_EQ(check_recorder(rc), "");
+  rc.footprint.width = 0.0;
+  EXPECT_NE(check_recorder(rc).find("footprint"), std::string::npos);
+}
+
+// Real KITTI revolutions through the terrain mapper into the recorder while
+// the robot drives 0.3 m a revolution: words are recorded at the steps, the
+// local map ends after d_M, its positives are the cells under the path, and
+// after arming no heap operation happens (train included).
+TEST(TravRecorder, RealRevolutionsThroughTheTerrainStepWithoutAllocating) {
+  std::array<velodyne::RangeImage, 2> scans{velodyne::RangeImage(kitti_shape()), velodyne::RangeImage(kitti_shape())};
+  std::vector<float> buffer;
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, scans[0]));
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, scans[1]));
+  MountParams mount;
+  mount.translation = {0.0, 0.0, 1.73};
+  TerrainConfig tc;
+  auto mapper = TerrainMapper::create(tc, mount, kitti_shape(), nullptr);
+  ASSERT_TRUE(mapper.mapper) << mapper.error;
+  const Vocabulary v{VocabularyConfig{}};
+  RecorderConfig rc;
+  rc.local_map_distance = 2.0;  // 9 m driven: four local maps
+  TravRecorder rec(rc, v, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  mapper.mapper->set_sums_sink(&rec);
+  TravModels models(v, LearnerConfig{});
+  WordCounts counts(v.size());
+  PoseTrack poses(64);
+
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("terrain");
+  ASSERT_TRUE(alloc_guard::arm());
+  std::uint64_t trained = 0, positives = 0, unlabelled = 0;
+  for (int n = 1; n <= 30; ++n) {
+    const std::int64_t t = std::int64_t{n} * 100'000'000;
+    poses.push({t - 100'000'000, 0.3 * (n - 1), 0.0, 0.0, 0.0, 0.0, 0.0});
+    poses.push({t, 0.3 * n, 0.0, 0.0, 0.0, 0.0, 0.0});
+    velodyne::RangeImage& image = scans[static_cast<std::size_t>(n % 2)];
+    image.sequence = static_cast<std::uint64_t>(n);
+    image.start_ns = t - 100'000'000;
+    image.end_ns = t;
+    rec.drive(0.3 * n, 0.0, 0.0);
+    mapper.mapper->process(image, &poses);
+    if (rec.local_map_complete()) {
+      rec.finish_local_map(counts);
+      positives += counts.total_positive();
+      unlabelled += counts.total_unlabelled();
+      trained += models.train(counts).model >= 0 ? 1u : 0u;
+    }
+  }
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  EXPECT_GE(rec.counters().local_maps, 4u);
+  EXPECT_GT(rec.counters().words, 10'000u);
+  EXPECT_EQ(rec.counters().dropped, 0u);
+  EXPECT_GT(positives, 20u);
+  EXPECT_GT(unlabelled, 50u * positives);
+  // A local map may go unlearnt: with 2 m local maps the path's cells can
+  // lie in the lidar's blind circle around the car for the whole map and get
+  // no word (the thesis' 20 m give every map positives).
+  EXPECT_GE(trained, 3u);
+  EXPECT_GE(models.models(), 1u);
 }
 
 }  // namespace

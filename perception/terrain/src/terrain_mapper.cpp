@@ -201,7 +201,7 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
     if (row < 0) continue;
     work_.for_each_in_window({o.x, o.y + row}, {o.x + nx, o.y + row + 1}, [&](CellIndex i, TerrainWorkCell& w) {
       TerrainCell& c = map_.grid().at(i);
-      if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, now_ns)) {
+      if ((w.stats.n > 0 || w.frozen) && due_for_feature(w, c, i, now_ns)) {
         batch_[pending++] = {&w, &c, i, {}, area_std(i.x - o.x)};
         if (pending == batch_.size()) {
           finish_batch(pending, now_ns, classified, known);
@@ -281,7 +281,7 @@ float TerrainMapper::area_std(std::int32_t x) const noexcept {
   return static_cast<float>(std::sqrt(std::max(0.0, a.q / a.n - mean * mean)));
 }
 
-bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept {
+bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, CellIndex i, std::int64_t now_ns) noexcept {
   if (w.frozen && config_.reopen_after > 0.0 && static_cast<double>(now_ns - w.frozen_ns) >= config_.reopen_after * 1e9) {
     // Open the cell again (§7.2.3), softened so new evidence can move it.
     w.frozen = false;
@@ -294,6 +294,10 @@ bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int
   if (w.stats.n < static_cast<std::uint32_t>(config_.min_points)) return false;  // keeps accumulating
   if (w.frozen && observer_ == nullptr) {
     ++counters_.frozen_skipped;
+    if (sums_sink_ != nullptr) {
+      const WorldPoint centre = work_.cell_center(i);
+      sums_sink_->cell_sums(i, w.stats, centre.x, centre.y);
+    }
     w.stats = CellStats{};
     return false;
   }
@@ -362,6 +366,10 @@ void TerrainMapper::update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i,
     obs.estimate = &c;
     obs.time_ns = now_ns;
     observer_->observe(obs);
+  }
+  if (sums_sink_ != nullptr) {
+    const WorldPoint centre = work_.cell_center(i);
+    sums_sink_->cell_sums(i, w.stats, centre.x, centre.y);
   }
   w.stats = CellStats{};
 }

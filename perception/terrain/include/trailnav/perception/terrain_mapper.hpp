@@ -51,6 +51,18 @@ class TerrainObserver {
   virtual void observe(const TerrainObservation& o) = 0;
 };
 
+// Told, at each classification step, about every cell whose running sums the
+// step takes (at least min_points points since the cell's last feature):
+// those that get a terrain feature and the frozen ones whose sums are
+// dropped. The traversability layer builds its own features from them
+// (perception/traversability). Called on the terrain thread: no allocation.
+class CellSumsSink {
+ public:
+  virtual ~CellSumsSink() = default;
+  // (x, y): the cell's centre in the odometry frame.
+  virtual void cell_sums(CellIndex cell, const CellStats& sums, double x, double y) noexcept = 0;
+};
+
 // Per cell of the registration grid.
 struct TerrainWorkCell {
   CellStats stats;
@@ -100,6 +112,8 @@ class TerrainMapper {
 
   // Offline only: told about every cell at every step.
   void set_observer(TerrainObserver* observer) noexcept { observer_ = observer; }
+  // The traversability layer (may be null); it must outlive the mapper.
+  void set_sums_sink(CellSumsSink* sink) noexcept { sums_sink_ = sink; }
 
   const TerrainConfig& config() const noexcept { return config_; }
   const TerrainClassMap& map() const noexcept { return map_; }
@@ -113,7 +127,7 @@ class TerrainMapper {
                 const RandomForest* forest, const FeatureParams& alignment);
   // Re-opens a frozen cell when its time has come; whether the cell gets a
   // feature at this step.
-  bool due_for_feature(TerrainWorkCell& w, TerrainCell& c, std::int64_t now_ns) noexcept;
+  bool due_for_feature(TerrainWorkCell& w, TerrainCell& c, CellIndex i, std::int64_t now_ns) noexcept;
   // Features, then forest and Bayes update, for the first `count` batched cells.
   void finish_batch(std::size_t count, std::int64_t now_ns, std::uint64_t& classified, std::uint64_t& known) noexcept;
   void update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i, const FeatureVector& feature,
@@ -146,6 +160,7 @@ class TerrainMapper {
   RollingGrid<TerrainWorkCell> work_;
   TerrainClassMap map_;
   TerrainObserver* observer_ = nullptr;
+  CellSumsSink* sums_sink_ = nullptr;
   std::array<Pending, 32> batch_{};
   std::unique_ptr<AreaSums[]> area_cells_;  // one row of cells' own sums
   std::unique_ptr<AreaSums[]> area_rows_;   // 2 kAreaRadius + 1 rows of sums along x
