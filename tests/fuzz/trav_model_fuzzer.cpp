@@ -24,15 +24,17 @@ void parse_one(std::span<const std::uint8_t> bytes) {
   const TravModelFile& m = *loaded.model;
   const std::vector<std::uint8_t> back = serialize_trav_model(m);
   check(back.size() == bytes.size() && std::equal(back.begin(), back.end(), bytes.begin()));
-  // Keep the learner's tables small enough for the fuzzer's memory limit.
-  const Vocabulary vocabulary(m.vocabulary);
-  if (static_cast<std::uint64_t>(vocabulary.size()) * m.learner.max_models > (1u << 20)) return;
-  TravModels models(vocabulary, m.learner);
-  models.set_models(m.models);
-  const std::vector<std::uint32_t> words{0, vocabulary.size() - 1, vocabulary.size() / 2};
-  for (Method method : {Method::pnb, Method::pos}) {
-    const double p = models.probability(method, words);
-    check(p >= 0.0 && p <= 1.0);
+  for (const TravModelSet& t : m.sets) {
+    // Keep the learner's tables small enough for the fuzzer's memory limit.
+    const Vocabulary vocabulary(t.vocabulary);
+    if (static_cast<std::uint64_t>(vocabulary.size()) * t.learner.max_models > (1u << 20)) continue;
+    TravModels models(vocabulary, t.learner);
+    models.set_models(t.models);
+    const std::vector<std::uint32_t> words{0, vocabulary.size() - 1, vocabulary.size() / 2};
+    for (Method method : {Method::pnb, Method::pos}) {
+      const double p = models.probability(method, words);
+      check(p >= 0.0 && p <= 1.0);
+    }
   }
 }
 

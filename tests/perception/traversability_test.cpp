@@ -338,14 +338,17 @@ TEST(TravTerrainModels, GrassDrivenBrieflyIsLearntOnlyWithTerrainModels) {
 TravModelFile trained_file() {
   TravModelFile f;
   f.profile = "large";
-  f.vocabulary = VocabularyConfig{};
-  f.vocabulary.set = FeatureSet::no_remission;
-  f.learner.max_models = 4;
-  const Vocabulary v(f.vocabulary);
-  for (std::uint32_t m = 0; m < 2; ++m) {
-    WordCounts k(v.size());
-    for (std::uint32_t w = m; w < v.size(); w += 7) k.add(w, (w % 3) == 0, w + 1);
-    f.models.push_back(k);
+  for (FeatureSet fs : {FeatureSet::no_remission, FeatureSet::no_roughness_slope}) {
+    TravModelSet t;
+    t.vocabulary.set = fs;
+    t.learner.max_models = 4;
+    const Vocabulary v(t.vocabulary);
+    for (std::uint32_t m = 0; m < 2; ++m) {
+      WordCounts k(v.size());
+      for (std::uint32_t w = m; w < v.size(); w += 7) k.add(w, (w % 3) == 0, w + 1);
+      t.models.push_back(k);
+    }
+    f.sets.push_back(std::move(t));
   }
   return f;
 }
@@ -364,21 +367,29 @@ TEST(TravModelFile, RoundTripsEveryCountAndSetting) {
   std::filesystem::remove(path);
   ASSERT_TRUE(l.model) << l.error;
   EXPECT_EQ(l.model->profile, "large");
-  EXPECT_EQ(l.model->vocabulary.set, FeatureSet::no_remission);
-  EXPECT_EQ(l.model->learner.max_models, 4u);
-  ASSERT_EQ(l.model->models.size(), 2u);
-  for (std::size_t m = 0; m < 2; ++m) {
-    for (std::uint32_t w = 0; w < Vocabulary(f.vocabulary).size(); ++w) {
-      ASSERT_EQ(l.model->models[m].positive(w), f.models[m].positive(w));
-      ASSERT_EQ(l.model->models[m].unlabelled(w), f.models[m].unlabelled(w));
+  ASSERT_EQ(l.model->sets.size(), 2u);
+  ASSERT_NE(l.model->set(FeatureSet::no_remission), nullptr);
+  ASSERT_NE(l.model->set(FeatureSet::no_roughness_slope), nullptr);
+  EXPECT_EQ(l.model->set(FeatureSet::full), nullptr);
+  for (std::size_t si = 0; si < 2; ++si) {
+    const TravModelSet& a = f.sets[si];
+    const TravModelSet& b = l.model->sets[si];
+    EXPECT_EQ(b.vocabulary.set, a.vocabulary.set);
+    EXPECT_EQ(b.learner.max_models, 4u);
+    ASSERT_EQ(b.models.size(), 2u);
+    for (std::size_t m = 0; m < 2; ++m) {
+      for (std::uint32_t w = 0; w < Vocabulary(a.vocabulary).size(); ++w) {
+        ASSERT_EQ(b.models[m].positive(w), a.models[m].positive(w));
+        ASSERT_EQ(b.models[m].unlabelled(w), a.models[m].unlabelled(w));
+      }
     }
+    // The learner's tables from the loaded counts equal the originals'.
+    TravModels ta(Vocabulary(a.vocabulary), a.learner), tb(Vocabulary(b.vocabulary), b.learner);
+    ta.set_models(a.models);
+    tb.set_models(b.models);
+    for (std::uint32_t w = 0; w < Vocabulary(a.vocabulary).size(); ++w) ASSERT_EQ(ta.pos_log_ratio(w), tb.pos_log_ratio(w));
   }
   EXPECT_EQ(serialize_trav_model(*l.model), serialize_trav_model(f));
-  // The learner's tables from the loaded counts equal the originals'.
-  TravModels a(Vocabulary(f.vocabulary), f.learner), b(Vocabulary(f.vocabulary), f.learner);
-  a.set_models(f.models);
-  b.set_models(l.model->models);
-  for (std::uint32_t w = 0; w < Vocabulary(f.vocabulary).size(); ++w) ASSERT_EQ(a.pos_log_ratio(w), b.pos_log_ratio(w));
 }
 
 TEST(TravModelFile, BadBytesGetAClearError) {
@@ -406,8 +417,8 @@ TEST(TravModelFile, BadBytesGetAClearError) {
   b[12] = 200;  // profile length
   recrc(b);
   EXPECT_NE(error(b).find("longer than 64"), std::string::npos);
-  // The first model's first word beyond the vocabulary.
-  const std::size_t header = 8 + 4 + 4 + 5 + 4 + 5 * 8 + 6 * 8 + 4 + 4;
+  // The first set's first model's first word beyond the vocabulary.
+  const std::size_t header = 8 + 4 + 4 + 5 + 4 + 4 + 5 * 8 + 6 * 8 + 4 + 4;
   const std::size_t first_word = header + 8 + 8 + 4;
   b = good;
   b[first_word + 3] = 0x7f;
@@ -421,6 +432,10 @@ TEST(TravModelFile, BadBytesGetAClearError) {
   b[header - 4] = 99;  // 99 models
   recrc(b);
   EXPECT_NE(error(b).find("more than its max_models"), std::string::npos);
+  b = good;
+  b[8 + 4 + 4 + 5] = 4;  // four feature sets
+  recrc(b);
+  EXPECT_NE(error(b).find("1 to 3"), std::string::npos);
   EXPECT_NE(load_trav_model("/nonexistent/x.tntrav").error.find("cannot open"), std::string::npos);
 }
 

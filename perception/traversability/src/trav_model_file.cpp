@@ -75,31 +75,41 @@ class Reader {
 
 }  // namespace
 
+const TravModelSet* TravModelFile::set(FeatureSet s) const noexcept {
+  for (const TravModelSet& t : sets) {
+    if (t.vocabulary.set == s) return &t;
+  }
+  return nullptr;
+}
+
 std::vector<std::uint8_t> serialize_trav_model(const TravModelFile& m) {
   std::vector<std::uint8_t> out(std::begin(kMagic), std::end(kMagic));
   put_u32(out, kModelFileVersion);
   put_u32(out, static_cast<std::uint32_t>(m.profile.size()));
   out.insert(out.end(), m.profile.begin(), m.profile.end());
-  put_u32(out, static_cast<std::uint32_t>(m.vocabulary.set));
-  for (const Binning& b : m.vocabulary.bins) {
-    put_f32(out, b.width);
-    put_u32(out, b.bins);
-  }
-  const LearnerConfig& l = m.learner;
-  for (double d : {l.alpha_p, l.alpha_n, l.epsilon, l.chi2_alpha, l.min_expected, l.prior}) put_f64(out, d);
-  put_u32(out, l.max_models);
-  put_u32(out, static_cast<std::uint32_t>(m.models.size()));
-  for (const WordCounts& k : m.models) {
-    put_u64(out, k.total_positive());
-    put_u64(out, k.total_unlabelled());
-    std::uint32_t entries = 0;
-    for (std::uint32_t w = 0; w < k.vocabulary(); ++w) entries += (k.positive(w) != 0 || k.unlabelled(w) != 0) ? 1u : 0u;
-    put_u32(out, entries);
-    for (std::uint32_t w = 0; w < k.vocabulary(); ++w) {
-      if (k.positive(w) == 0 && k.unlabelled(w) == 0) continue;
-      put_u32(out, w);
-      put_u32(out, k.positive(w));
-      put_u32(out, k.unlabelled(w));
+  put_u32(out, static_cast<std::uint32_t>(m.sets.size()));
+  for (const TravModelSet& t : m.sets) {
+    put_u32(out, static_cast<std::uint32_t>(t.vocabulary.set));
+    for (const Binning& b : t.vocabulary.bins) {
+      put_f32(out, b.width);
+      put_u32(out, b.bins);
+    }
+    const LearnerConfig& l = t.learner;
+    for (double d : {l.alpha_p, l.alpha_n, l.epsilon, l.chi2_alpha, l.min_expected, l.prior}) put_f64(out, d);
+    put_u32(out, l.max_models);
+    put_u32(out, static_cast<std::uint32_t>(t.models.size()));
+    for (const WordCounts& k : t.models) {
+      put_u64(out, k.total_positive());
+      put_u64(out, k.total_unlabelled());
+      std::uint32_t entries = 0;
+      for (std::uint32_t w = 0; w < k.vocabulary(); ++w) entries += (k.positive(w) != 0 || k.unlabelled(w) != 0) ? 1u : 0u;
+      put_u32(out, entries);
+      for (std::uint32_t w = 0; w < k.vocabulary(); ++w) {
+        if (k.positive(w) == 0 && k.unlabelled(w) == 0) continue;
+        put_u32(out, w);
+        put_u32(out, k.positive(w));
+        put_u32(out, k.unlabelled(w));
+      }
     }
   }
   put_u32(out, static_cast<std::uint32_t>(crc32(0L, out.data(), static_cast<uInt>(out.size()))));
@@ -170,51 +180,62 @@ LoadedTravModel parse_trav_model(std::span<const std::uint8_t> data, const std::
   for (char c : m.profile) {
     if (c < 0x20 || c > 0x7e) return fail("robot profile name is not printable ASCII");
   }
-  std::uint32_t set = 0;
-  if (!body.u32(set)) return fail("truncated header");
-  if (set > 2) return fail("unknown feature set " + std::to_string(set));
-  m.vocabulary.set = static_cast<FeatureSet>(set);
-  for (Binning& b : m.vocabulary.bins) {
-    if (!body.f32(b.width) || !body.u32(b.bins)) return fail("truncated header");
-  }
-  if (std::string why = check_vocabulary(m.vocabulary); !why.empty()) return fail("vocabulary: " + why);
-  LearnerConfig& l = m.learner;
-  for (double* d : {&l.alpha_p, &l.alpha_n, &l.epsilon, &l.chi2_alpha, &l.min_expected, &l.prior}) {
-    if (!body.f64(*d)) return fail("truncated header");
-  }
-  if (!body.u32(l.max_models)) return fail("truncated header");
-  if (std::string why = check_learner(l); !why.empty()) return fail("learner settings: " + why);
-  const std::uint32_t size = Vocabulary(m.vocabulary).size();
-  std::uint32_t models = 0;
-  if (!body.u32(models)) return fail("truncated header");
-  if (models > l.max_models) {
-    return fail(std::to_string(models) + " terrain models, more than its max_models " + std::to_string(l.max_models));
-  }
-  for (std::uint32_t i = 0; i < models; ++i) {
-    const std::string which = "terrain model " + std::to_string(i) + ": ";
-    std::uint64_t np = 0, nu = 0;
-    std::uint32_t entries = 0;
-    if (!body.u64(np) || !body.u64(nu) || !body.u32(entries)) return fail(which + "truncated");
-    if (entries > size) return fail(which + std::to_string(entries) + " words, the vocabulary has " + std::to_string(size));
-    if (body.left() < 12ull * entries) return fail(which + "truncated");
-    WordCounts k(size);
-    std::int64_t last = -1;
-    for (std::uint32_t e = 0; e < entries; ++e) {
-      std::uint32_t w = 0, p = 0, u = 0;
-      body.u32(w);
-      body.u32(p);
-      body.u32(u);
-      if (w >= size) return fail(which + "word " + std::to_string(w) + " outside the vocabulary of " + std::to_string(size));
-      if (static_cast<std::int64_t>(w) <= last) return fail(which + "words out of order");
-      if (p == 0 && u == 0) return fail(which + "a stored word without a count");
-      last = w;
-      k.add(w, true, p);
-      k.add(w, false, u);
+  std::uint32_t sets = 0;
+  if (!body.u32(sets)) return fail("truncated header");
+  if (sets < 1 || sets > 3) return fail(std::to_string(sets) + " feature sets; a model holds 1 to 3");
+  for (std::uint32_t si = 0; si < sets; ++si) {
+    TravModelSet t;
+    std::uint32_t set = 0;
+    if (!body.u32(set)) return fail("truncated header");
+    if (set > 2) return fail("unknown feature set " + std::to_string(set));
+    t.vocabulary.set = static_cast<FeatureSet>(set);
+    if (m.set(t.vocabulary.set) != nullptr) {
+      return fail("feature set " + std::string(feature_set_name(t.vocabulary.set)) + " twice");
     }
-    if (k.total_positive() != np || k.total_unlabelled() != nu) {
-      return fail(which + "the counts do not add up to the stored totals");
+    const std::string in = "feature set " + std::string(feature_set_name(t.vocabulary.set)) + ": ";
+    for (Binning& b : t.vocabulary.bins) {
+      if (!body.f32(b.width) || !body.u32(b.bins)) return fail(in + "truncated");
     }
-    m.models.push_back(std::move(k));
+    if (std::string why = check_vocabulary(t.vocabulary); !why.empty()) return fail(in + "vocabulary: " + why);
+    LearnerConfig& l = t.learner;
+    for (double* d : {&l.alpha_p, &l.alpha_n, &l.epsilon, &l.chi2_alpha, &l.min_expected, &l.prior}) {
+      if (!body.f64(*d)) return fail(in + "truncated");
+    }
+    if (!body.u32(l.max_models)) return fail(in + "truncated");
+    if (std::string why = check_learner(l); !why.empty()) return fail(in + "learner settings: " + why);
+    const std::uint32_t size = Vocabulary(t.vocabulary).size();
+    std::uint32_t models = 0;
+    if (!body.u32(models)) return fail(in + "truncated");
+    if (models > l.max_models) {
+      return fail(in + std::to_string(models) + " terrain models, more than its max_models " + std::to_string(l.max_models));
+    }
+    for (std::uint32_t i = 0; i < models; ++i) {
+      const std::string which = in + "terrain model " + std::to_string(i) + ": ";
+      std::uint64_t np = 0, nu = 0;
+      std::uint32_t entries = 0;
+      if (!body.u64(np) || !body.u64(nu) || !body.u32(entries)) return fail(which + "truncated");
+      if (entries > size) return fail(which + std::to_string(entries) + " words, the vocabulary has " + std::to_string(size));
+      if (body.left() < 12ull * entries) return fail(which + "truncated");
+      WordCounts k(size);
+      std::int64_t last = -1;
+      for (std::uint32_t e = 0; e < entries; ++e) {
+        std::uint32_t w = 0, p = 0, u = 0;
+        body.u32(w);
+        body.u32(p);
+        body.u32(u);
+        if (w >= size) return fail(which + "word " + std::to_string(w) + " outside the vocabulary of " + std::to_string(size));
+        if (static_cast<std::int64_t>(w) <= last) return fail(which + "words out of order");
+        if (p == 0 && u == 0) return fail(which + "a stored word without a count");
+        last = w;
+        k.add(w, true, p);
+        k.add(w, false, u);
+      }
+      if (k.total_positive() != np || k.total_unlabelled() != nu) {
+        return fail(which + "the counts do not add up to the stored totals");
+      }
+      t.models.push_back(std::move(k));
+    }
+    m.sets.push_back(std::move(t));
   }
   if (body.left() != 0) return fail(std::to_string(body.left()) + " bytes after the last model");
   return {std::move(m), ""};

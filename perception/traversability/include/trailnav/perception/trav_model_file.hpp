@@ -1,7 +1,8 @@
 // A learnt traversability model on disk: the robot profile it was learnt
-// for, the vocabulary and learner settings, and each terrain model's word
-// counts (the learner recomputes every table from them, so a model can be
-// trained further later). Little-endian, versioned, CRC-32 at the end; only
+// for and, per feature set (the full vector and the ablations NoRe and NoRS,
+// thesis §6.4, each at most once), the vocabulary and learner settings and
+// each terrain model's word counts (the learner recomputes every table from
+// them, so a model can be trained further later). Little-endian, versioned, CRC-32 at the end; only
 // words with a count are stored. Saving is atomic: a temporary file beside
 // the target, flushed to the disk, then renamed over it, so a reader (or a
 // power cut) never sees a half-written model. docs/traversability.md gives
@@ -22,11 +23,17 @@ namespace trailnav::perception::trav {
 inline constexpr std::uint32_t kModelFileVersion = 1;
 inline constexpr std::size_t kMaxProfileName = 64;
 
-struct TravModelFile {
-  std::string profile;  // printable ASCII, at most kMaxProfileName characters
+struct TravModelSet {
   VocabularyConfig vocabulary;
   LearnerConfig learner;
   std::vector<WordCounts> models;  // each over the vocabulary's size
+};
+
+struct TravModelFile {
+  std::string profile;  // printable ASCII, at most kMaxProfileName characters
+  std::vector<TravModelSet> sets;  // 1 to 3, distinct feature sets
+  // The set of a feature set, or null.
+  const TravModelSet* set(FeatureSet s) const noexcept;
 };
 
 // The file's bytes (the model must be consistent: check_vocabulary,
