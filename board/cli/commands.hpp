@@ -18,6 +18,7 @@ void add_can_decode_command(CLI::App& app);
 void add_pose_eval_command(CLI::App& app);
 void add_echo_command(CLI::App& app);
 void add_terrain_commands(CLI::App& app);
+void add_trav_commands(CLI::App& app);
 void add_route_command(CLI::App& app);
 void add_subgoal_eval_command(CLI::App& app);
 void add_pose_graph_command(CLI::App& app);

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_sim_command(app);
   trailnav::cli::add_obstacles_command(app);
   trailnav::cli::add_terrain_commands(app);
+  trailnav::cli::add_trav_commands(app);
   trailnav::cli::add_route_command(app);
   trailnav::cli::add_subgoal_eval_command(app);
   trailnav::cli::add_pose_graph_command(app);

@@ -108,8 +108,11 @@ TEST(TravFeatures, OnARealKittiScanTheRoadIsFlatAndObstaclesAreTall) {
 // --- vocabulary ---
 
 TEST(TravVocabulary, FixedIncrementBinsOpenAtTheTopAndMixedRadixWords) {
-  const Vocabulary v{VocabularyConfig{}};
+  VocabularyConfig c;
+  c.bins = {{{0.04f, 8}, {32.0f, 8}, {8.0f, 6}, {0.01f, 6}, {6.0f, 8}}};
+  const Vocabulary v{c};
   EXPECT_EQ(v.size(), 8u * 8u * 6u * 6u * 8u);
+  EXPECT_EQ(Vocabulary(VocabularyConfig{}).size(), 6u * 10u * 4u * 3u * 3u);  // the default
   EXPECT_EQ(v.bin(Dim::max_dz, 0.0f), 0u);
   EXPECT_EQ(v.bin(Dim::max_dz, 0.039f), 0u);
   EXPECT_EQ(v.bin(Dim::max_dz, 0.041f), 1u);
@@ -121,9 +124,12 @@ TEST(TravVocabulary, FixedIncrementBinsOpenAtTheTopAndMixedRadixWords) {
   Feature f;
   f.v = {0.05f, 70.0f, 0.0f, 0.0f, 13.0f};  // bins 1, 2, 0, 0, 2
   EXPECT_EQ(v.word(f), (((1u * 8 + 2) * 6 + 0) * 6 + 0) * 8 + 2);
-  EXPECT_EQ(Vocabulary(VocabularyConfig{.set = FeatureSet::no_remission}).size(), 8u * 6u * 8u);
-  EXPECT_EQ(Vocabulary(VocabularyConfig{.set = FeatureSet::no_roughness_slope}).size(), 8u * 8u * 6u);
-  EXPECT_EQ(Vocabulary(VocabularyConfig{.set = FeatureSet::no_remission}).word(f), (1u * 6 + 0) * 8 + 2);
+  VocabularyConfig no_re = c, no_rs = c;
+  no_re.set = FeatureSet::no_remission;
+  no_rs.set = FeatureSet::no_roughness_slope;
+  EXPECT_EQ(Vocabulary(no_re).size(), 8u * 6u * 8u);
+  EXPECT_EQ(Vocabulary(no_rs).size(), 8u * 8u * 6u);
+  EXPECT_EQ(Vocabulary(no_re).word(f), (1u * 6 + 0) * 8 + 2);
 }
 
 TEST(TravVocabulary, ABadBinningIsNamed) {

@@ -171,16 +171,30 @@ void TravModels::refresh(std::uint32_t m) noexcept {
     const double pu = (alpha_n + k.unlabelled(static_cast<std::uint32_t>(w))) / (alpha_n * size + nu);
     const double g = p_label * pl / (p_label * pl + (1.0 - p_label) * pu);
     pos[w] = static_cast<float>(g);
-    if (k.positive(static_cast<std::uint32_t>(w)) > 0) c = std::max(c, g);
+    if (k.positive(static_cast<std::uint32_t>(w)) >= kCSupport) c = std::max(c, g);
+  }
+  if (!(c > 0.0)) {  // no word seen that often: every labelled word
+    for (std::size_t w = 0; w < v; ++w) {
+      if (k.positive(static_cast<std::uint32_t>(w)) > 0) c = std::max(c, static_cast<double>(pos[w]));
+    }
   }
   if (!(c > 0.0)) c = 1.0;
   c_[m] = c;
+  // For the prior, Elkan–Noto's e1: the mean of g over the labelled words.
+  // The largest g (the classifier's c, as the thesis asks) rests on the
+  // rarest words and made every unlabelled word look untraversable: priors
+  // of 0.04–0.46 on a demonstration whose unlabelled ground was mostly
+  // meadow the large robot may cross (docs/traversability.md).
+  double e1 = 0.0;
+  for (std::size_t w = 0; w < v; ++w) e1 += static_cast<double>(pos[w]) * k.positive(static_cast<std::uint32_t>(w));
+  e1 = np > 0.0 ? e1 / np : 1.0;
+  if (!(e1 > 0.0)) e1 = 1.0;
   const double eps = config_.epsilon;
   double traversable_unlabelled = 0.0;
   for (std::size_t w = 0; w < v; ++w) {
     const double g = pos[w];
-    // The weight of an unlabelled word being positive, (1−c)/c · g/(1−g), at most 1.
-    const double weight = std::min(1.0, (1.0 - c) / c * g / std::max(1.0 - g, 1e-12));
+    // The weight of an unlabelled word being positive, (1−e1)/e1 · g/(1−g), at most 1.
+    const double weight = std::min(1.0, (1.0 - e1) / e1 * g / std::max(1.0 - g, 1e-12));
     traversable_unlabelled += weight * k.unlabelled(static_cast<std::uint32_t>(w));
     pos[w] = static_cast<float>(std::clamp(g / c, eps, 1.0 - eps));  // Eq. 6.13, 6.14
   }

@@ -9,7 +9,7 @@
 // Our decisions where the thesis leaves a value open (docs/traversability.md):
 // - P(trav), the class prior of PNB, is not given. By default each terrain
 //   model takes Elkan and Noto's estimate of the traversable share of its
-//   unlabelled words, Σ_U w(f) / C(U) with w(f) = (1−c)/c · g(f)/(1−g(f))
+//   unlabelled words, Σ_U w(f) / C(U) with w(f) = (1−e1)/e1 · g(f)/(1−g(f))
 //   (their weight of an unlabelled example being positive), clamped to
 //   [0.01, 0.99]; `prior` in the config fixes it instead.
 // - Eq. 6.15 as printed adds the previous logit twice; we use the standard
@@ -19,9 +19,17 @@
 // - g(f) = P(label|f) is a naive Bayes over the words, smoothed as PNB is
 //   (α_p for the labelled, α_n for the unlabelled: a word never seen is more
 //   likely unlabelled, the safety rule of Eq. 6.11; with Laplace smoothing on
-//   both an unseen word came out traversable), and c is the largest g over the words of the labelled examples
-//   (Elkan–Noto's e3, "the most conservative"). P(trav|f) is clamped to
-//   [ε, 1−ε] (Eq. 6.14 clamps the top; the bottom keeps logits finite).
+//   both an unseen word came out traversable), and c is the largest g over the
+//   words with at least kCSupport labelled examples (Elkan–Noto's e3, "the
+//   most conservative", over words whose g is measured rather than guessed:
+//   a word seen once as positive and never unlabelled has g near 0.5 from
+//   the smoothing alone, and with it as c the large robot called a third of
+//   the meadow traversable). P(trav|f) is clamped to [ε, 1−ε] (Eq. 6.14
+//   clamps the top; the bottom keeps logits finite).
+// - PNB's prior uses Elkan–Noto's e1 instead, the mean of g over the
+//   labelled words: the largest g made every unlabelled word look
+//   untraversable (priors of 0.04–0.46 where most unlabelled ground was
+//   meadow the large robot may cross).
 // - The χ² test compares the local map's positive words with each model's
 //   (the terrain models separate the kinds of ground driven on, which is
 //   what an unbalanced demonstration confuses, §6.3.3). Words expected fewer
@@ -74,6 +82,8 @@ struct LearnerConfig {
   double prior = 0.0;         // P(trav) for PNB; 0: estimated per model (above)
 };
 inline constexpr std::uint32_t kMaxModels = 32;
+// Labelled examples a word needs for its g to count towards Elkan–Noto's c.
+inline constexpr std::uint32_t kCSupport = 10;
 std::string check_learner(const LearnerConfig& c);  // "" if usable
 
 struct ChiSquare {

@@ -17,11 +17,15 @@
 //   of the points from their plane in metres): the same information, but
 //   fixed increments then spread the cells over the bins instead of putting
 //   nearly all into the first.
-// - Default bins: max |Δz| 0.04 m x 8, mean remission 32 x 8, remission
-//   standard deviation 8 x 6, RMS plane distance 0.01 m x 6, slope 6° x 8;
-//   the last bin of each dimension is open-ended. |V| = 18 432 for the full
-//   vector, 384 without remission (NoRe) or without roughness and slope
-//   (NoRS): the ablations of §6.4 drop those dimensions from the word.
+// - Default bins: max |Δz| 0.1 m x 6, mean remission 16 x 10, remission
+//   standard deviation 8 x 4, RMS plane distance 0.03 m x 3, slope 15° x 3;
+//   the last bin of each dimension is open-ended. |V| = 2 160 for the full
+//   vector, 54 without remission (NoRe), 240 without roughness and slope
+//   (NoRS): the ablations of §6.4 drop those dimensions from the word. Chosen
+//   by measurement (docs/traversability.md): finer geometry bins left most of
+//   a meadow's words unseen in a demonstration, coarser remission bins let
+//   grass and dirt share words, and max |Δz| must reach past half a metre to
+//   tell low heather from undergrowth.
 #pragma once
 
 #include <array>
@@ -68,7 +72,7 @@ struct Binning {
 };
 
 struct VocabularyConfig {
-  std::array<Binning, kDims> bins{{{0.04f, 8}, {32.0f, 8}, {8.0f, 6}, {0.01f, 6}, {6.0f, 8}}};
+  std::array<Binning, kDims> bins{{{0.1f, 6}, {16.0f, 10}, {8.0f, 4}, {0.03f, 3}, {15.0f, 3}}};
   FeatureSet set = FeatureSet::full;
 };
 // "" if usable, else what is wrong (bins 1..64 per dimension, finite positive

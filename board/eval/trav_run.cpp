@@ -1,0 +1,339 @@
+#include "trav_run.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <unordered_map>
+
+#include "revolution_source.hpp"
+#include "trailnav/perception/terrain_mapper.hpp"
+#include "trailnav/runtime/config.hpp"
+#include "world.hpp"
+
+namespace trailnav::eval {
+namespace trav = perception::trav;
+namespace {
+
+using SteadyClock = std::chrono::steady_clock;
+double ms_since(SteadyClock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(SteadyClock::now() - t0).count();
+}
+
+// The terrain step's sums to one recorder per feature set.
+class FanOut final : public perception::CellSumsSink {
+ public:
+  std::vector<trav::TravRecorder*> recorders;
+  void cell_sums(CellIndex cell, const perception::CellStats& sums, double x, double y) noexcept override {
+    for (trav::TravRecorder* r : recorders) r->cell_sums(cell, sums, x, y);
+  }
+};
+
+constexpr std::array<const char*, perception::kTerrainClasses> kClassNames = {"street", "dirt", "grass", "vegetation",
+                                                                               "other"};
+
+// One pass over each recording: the mapper's steps feed a recorder per
+// feature set; `on_local_map(set index, recorder)` when one ends.
+std::string drive_recordings(const TravRunOptions& o, const std::vector<trav::VocabularyConfig>& vocabularies,
+                             std::uint64_t& revolutions, double* step_ms,
+                             const std::function<void(const SimTruth&)>& on_input,
+                             const std::function<void(std::size_t, trav::TravRecorder&)>& on_local_map) {
+  for (std::size_t n = 0; n < o.inputs.size(); ++n) {
+    const std::string& input = o.inputs[n];
+    auto opened = RevolutionSource::open({input}, o.calibration);
+    if (!opened.source) return opened.error;
+    RevolutionSource& source = *opened.source;
+    if (!source.truth()) {
+      return input + ": not a simulated recording (no truth/ directory): its poses and truth are needed";
+    }
+    const SimTruth& truth = *source.truth();
+    if (on_input) on_input(truth);
+    perception::MountParams mount;
+    mount.translation = source.mount_translation();
+    auto made = perception::TerrainMapper::create(o.terrain, mount, source.shape(), nullptr);
+    if (!made.mapper) return input + ": " + made.error;
+    perception::TerrainMapper& mapper = *made.mapper;
+    std::vector<std::unique_ptr<trav::TravRecorder>> recorders;
+    FanOut fan;
+    trav::RecorderConfig rc = o.recorder;
+    rc.footprint = o.profile.footprint;
+    for (const trav::VocabularyConfig& v : vocabularies) {
+      recorders.push_back(std::make_unique<trav::TravRecorder>(rc, trav::Vocabulary(v), o.terrain.map.size_x,
+                                                               o.terrain.map.size_y, o.terrain.map.resolution));
+      fan.recorders.push_back(recorders.back().get());
+    }
+    mapper.set_sums_sink(&fan);
+    perception::PoseTrack poses(truth.trajectory.size() + 1);
+    fill_pose_track(truth, poses);
+    // The footprint follows every true pose (100 Hz), not only each revolution's.
+    std::size_t next_pose = 0;
+    double step_total = 0.0;
+    std::uint64_t steps = 0;
+    const std::string error = source.run(
+        [&](const velodyne::RangeImage& image) {
+          ++revolutions;
+          mapper.align(image, &poses);
+          mapper.register_cloud();
+          const std::int64_t end = image.reference_end_ns();
+          while (next_pose < truth.trajectory.size() && truth.trajectory[next_pose].utc_ns <= end) {
+            const TruthPose& p = truth.trajectory[next_pose++];
+            for (auto& r : recorders) r->drive(p.x, p.y, p.yaw);
+          }
+          if (mapper.step_due()) {
+            const auto t0 = SteadyClock::now();
+            mapper.step(mapper.cloud().time_ns);
+            step_total += ms_since(t0);
+            ++steps;
+          }
+          for (std::size_t s = 0; s < recorders.size(); ++s) {
+            if (recorders[s]->local_map_complete()) on_local_map(s, *recorders[s]);
+          }
+          return true;
+        },
+        o.progress ? std::function<void(double)>([&](double f) {
+          o.progress((static_cast<double>(n) + f) / static_cast<double>(o.inputs.size()));
+        })
+                   : std::function<void(double)>());
+    if (!error.empty()) return error;
+    if (step_ms != nullptr && steps > 0) *step_ms = step_total / static_cast<double>(steps);
+  }
+  return {};
+}
+
+}  // namespace
+
+std::optional<RobotProfile> builtin_profile(const std::string& name) {
+  RobotProfile p;
+  p.name = name;
+  if (name == "large") {
+    // Viona's class: ground clearance for meadows and low undergrowth.
+    p.footprint = {1.2, 0.8, 0.0};
+    p.ground = {true, true, true, true, true};
+    return p;
+  }
+  if (name == "small") {
+    // Obelix's class: streets and walkways (street, dirt paths and the
+    // simulator's `other`, hard bare ground: walkways, plazas).
+    p.footprint = {0.6, 0.45, 0.0};
+    p.ground = {true, true, false, false, true};
+    return p;
+  }
+  return std::nullopt;
+}
+
+LoadedProfile load_profile(const std::string& name_or_file) {
+  if (auto b = builtin_profile(name_or_file)) return {b, ""};
+  if (name_or_file.find('/') == std::string::npos && name_or_file.find(".yaml") == std::string::npos) {
+    return {std::nullopt, "unknown robot profile '" + name_or_file + "' (built in: large, small; or a YAML file)"};
+  }
+  try {
+    const ConfigNode root = ConfigNode::load_file(name_or_file);
+    if (root.string("format") != "trailnav-robot-profile") {
+      throw ConfigError(root.file(), root.line(), "format", "expected 'trailnav-robot-profile'");
+    }
+    RobotProfile p;
+    p.name = root.string("name");
+    if (p.name.empty() || p.name.size() > trav::kMaxProfileName) {
+      throw ConfigError(root.file(), root.line(), "name", "1 to 64 characters");
+    }
+    for (char c : p.name) {
+      if (c < 0x21 || c > 0x7e) throw ConfigError(root.file(), root.line(), "name", "printable ASCII without spaces");
+    }
+    const ConfigNode fp = root.map("footprint");
+    p.footprint.length = fp.number("length", 0.1, 10.0);
+    p.footprint.width = fp.number("width", 0.1, 10.0);
+    p.footprint.forward = fp.number("forward", -5.0, 5.0, 0.0);
+    fp.reject_unknown_keys();
+    for (const std::string& g : root.string_list("ground")) {
+      const auto c = perception::parse_terrain_class(g);
+      if (!c) {
+        throw ConfigError(root.file(), root.line(), "ground",
+                          "unknown kind of ground '" + g + "' (street, dirt, grass, vegetation, other)");
+      }
+      p.ground[static_cast<std::size_t>(*c)] = true;
+    }
+    if (std::none_of(p.ground.begin(), p.ground.end(), [](bool b) { return b; })) {
+      throw ConfigError(root.file(), root.line(), "ground", "the robot may drive on no ground at all");
+    }
+    root.reject_unknown_keys();
+    return {p, ""};
+  } catch (const ConfigError& e) {
+    return {std::nullopt, e.what()};
+  }
+}
+
+std::optional<bool> truth_traversable(const RobotProfile& profile, const SimTruth& truth, double x, double y,
+                                      double res) {
+  const double rr = truth.terrain.resolution;
+  const int inner = std::max(1, static_cast<int>(std::lround(res / rr)));
+  const double x0 = x - 0.5 * res + 0.5 * rr, y0 = y - 0.5 * res + 0.5 * rr;
+  bool ok = true;
+  for (int j = 0; j < inner; ++j) {
+    for (int i = 0; i < inner; ++i) {
+      const double px = x0 + i * rr, py = y0 + j * rr;
+      const std::uint8_t c = truth.terrain.at(px, py);
+      if (c >= perception::kTerrainClasses) return std::nullopt;
+      const std::uint8_t ob = truth.obstacles.at(px, py, 0);
+      ok = ok && ob == static_cast<std::uint8_t>(sim::ObstacleTruth::free) && profile.ground[c];
+    }
+  }
+  return ok;
+}
+
+TravTrainReport run_trav_train(const TravRunOptions& options, const trav::VocabularyConfig& vocabulary,
+                               const trav::LearnerConfig& learner, const trav::TravModelFile* extend) {
+  TravTrainReport report;
+  std::vector<trav::VocabularyConfig> vocabularies;
+  for (trav::FeatureSet s : {trav::FeatureSet::full, trav::FeatureSet::no_remission, trav::FeatureSet::no_roughness_slope}) {
+    trav::VocabularyConfig v = vocabulary;
+    v.set = s;
+    vocabularies.push_back(v);
+  }
+  std::vector<std::unique_ptr<trav::TravModels>> models;
+  std::vector<trav::WordCounts> counts;
+  for (const trav::VocabularyConfig& v : vocabularies) {
+    models.push_back(std::make_unique<trav::TravModels>(trav::Vocabulary(v), learner));
+    counts.emplace_back(trav::Vocabulary(v).size());
+    TravTrainSet set;
+    set.set = v.set;
+    report.sets.push_back(set);
+    if (extend != nullptr) {
+      const trav::TravModelSet* old = extend->set(v.set);
+      if (old != nullptr) models.back()->set_models(old->models);
+    }
+  }
+  const std::string error = drive_recordings(
+      options, vocabularies, report.revolutions, nullptr, {}, [&](std::size_t s, trav::TravRecorder& rec) {
+        rec.finish_local_map(counts[s]);
+        const trav::TravModels::Assignment a = models[s]->train(counts[s]);
+        TravTrainSet& t = report.sets[s];
+        t.local_maps.push_back({a, counts[s].total_positive(), counts[s].total_unlabelled()});
+        if (a.model < 0) {
+          ++t.unlearnt;
+        } else {
+          ++t.learnt;
+          t.created += a.created ? 1 : 0;
+          t.forced += a.forced ? 1 : 0;
+        }
+        if (s == 0) {
+          ++report.local_maps;
+          report.recorder = rec.counters();
+        }
+      });
+  if (!error.empty()) {
+    report.error = error;
+    return report;
+  }
+  report.model.profile = options.profile.name;
+  for (std::size_t s = 0; s < models.size(); ++s) {
+    trav::TravModelSet set;
+    set.vocabulary = vocabularies[s];
+    set.learner = learner;
+    for (std::uint32_t m = 0; m < models[s]->models(); ++m) set.models.push_back(models[s]->counts(m));
+    report.model.sets.push_back(std::move(set));
+  }
+  return report;
+}
+
+TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravModelFile& model) {
+  TravEvalReport report;
+  std::vector<trav::VocabularyConfig> vocabularies;
+  std::vector<std::unique_ptr<trav::TravModels>> models;
+  for (const trav::TravModelSet& s : model.sets) {
+    vocabularies.push_back(s.vocabulary);
+    models.push_back(std::make_unique<trav::TravModels>(trav::Vocabulary(s.vocabulary), s.learner));
+    models.back()->set_models(s.models);
+    for (trav::Method m : {trav::Method::pnb, trav::Method::pos}) {
+      TravEvalRow row;
+      row.method = m;
+      row.set = s.vocabulary.set;
+      report.rows.push_back(row);
+    }
+  }
+  const SimTruth* truth = nullptr;
+  const double res = options.terrain.map.resolution;
+  struct Called {
+    bool traversable = false;
+    std::int8_t truth = -1;   // -1 outside
+    std::int8_t cls = -1;     // the cell's single true class, -1 mixed
+  };
+  std::unordered_map<std::uint64_t, std::array<Called, 2>> cells;
+  auto key = [](CellIndex c) {
+    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(c.x)) << 32) | static_cast<std::uint32_t>(c.y);
+  };
+  trav::WordCounts scratch(1);
+  std::uint64_t local_maps_full = 0;
+  const std::string error = drive_recordings(
+      options, vocabularies, report.revolutions, &report.step_ms, [&](const SimTruth& t) { truth = &t; },
+      [&](std::size_t s, trav::TravRecorder& rec) {
+        cells.clear();
+        const double cell_res = res;
+        trav::WordCounts counts(rec.vocabulary().size());
+        rec.finish_local_map(counts, [&](const trav::TravRecorder::CellWords& c) {
+          std::array<Called, 2> called{};
+          const double x = (c.cell.x + 0.5) * cell_res, y = (c.cell.y + 0.5) * cell_res;
+          const std::optional<bool> t = truth_traversable(options.profile, *truth, x, y, cell_res);
+          std::int8_t cls = -1;
+          if (t) {
+            // Its single class, for the per-class figures.
+            const std::uint8_t c0 = truth->terrain.at(x, y);
+            cls = c0 < perception::kTerrainClasses ? static_cast<std::int8_t>(c0) : std::int8_t{-1};
+          }
+          for (std::size_t m = 0; m < 2; ++m) {
+            const double p = models[s]->probability(static_cast<trav::Method>(m), c.words);
+            called[m] = {p > 0.5, t ? static_cast<std::int8_t>(*t ? 1 : 0) : std::int8_t{-1}, cls};
+          }
+          cells[key(c.cell)] = called;
+        });
+        // Score with the thesis' rule: an untraversable cell called
+        // traversable is a false positive only when its 8 neighbours are
+        // called traversable too.
+        for (const auto& [k, called] : cells) {
+          const CellIndex c{static_cast<std::int32_t>(k >> 32), static_cast<std::int32_t>(k & 0xffffffffu)};
+          for (std::size_t m = 0; m < 2; ++m) {
+            TravEvalRow& row = report.rows[2 * s + m];
+            const Called& me = called[m];
+            if (me.truth < 0) {
+              if (s == 0 && m == 0) ++report.unscored;
+              continue;
+            }
+            if (me.cls >= 0) {
+              ++row.class_cells[static_cast<std::size_t>(me.cls)];
+              row.called_traversable[static_cast<std::size_t>(me.cls)] += me.traversable ? 1 : 0;
+            }
+            if (me.truth == 1) {
+              (me.traversable ? row.scores.tp : row.scores.fn) += 1;
+              continue;
+            }
+            if (!me.traversable) {
+              ++row.scores.tn;
+              continue;
+            }
+            bool all = true;
+            for (int dy = -1; dy <= 1 && all; ++dy) {
+              for (int dx = -1; dx <= 1 && all; ++dx) {
+                if (dx == 0 && dy == 0) continue;
+                const auto it = cells.find(key({c.x + dx, c.y + dy}));
+                all = it != cells.end() && it->second[m].traversable;
+              }
+            }
+            if (all) {
+              ++row.scores.fp;
+            } else {
+              ++row.scores.tn;
+              ++row.scores.forgiven;
+            }
+          }
+        }
+        if (s == 0) ++local_maps_full;
+      });
+  if (!error.empty()) {
+    report.error = error;
+    return report;
+  }
+  report.local_maps = local_maps_full;
+  (void)kClassNames;
+  return report;
+}
+
+}  // namespace trailnav::eval
