@@ -24,8 +24,9 @@ double ms_since(SteadyClock::time_point t0) {
 class FanOut final : public perception::CellSumsSink {
  public:
   std::vector<trav::TravRecorder*> recorders;
-  void cell_sums(CellIndex cell, const perception::CellStats& sums, double x, double y) noexcept override {
-    for (trav::TravRecorder* r : recorders) r->cell_sums(cell, sums, x, y);
+  void cell_sums(CellIndex cell, const perception::CellStats& sums, const perception::FeatureVector* feature, double x,
+                 double y) noexcept override {
+    for (trav::TravRecorder* r : recorders) r->cell_sums(cell, sums, feature, x, y);
   }
 };
 

@@ -43,6 +43,11 @@ TEST(TravFeatures, APlaneGivesItsSlopeHeightRangeAndRemission) {
   EXPECT_NEAR(f[Dim::remission_mean], 50.0f, 1e-3f);
   EXPECT_NEAR(f[Dim::remission_var], 100.0f, 1e-2f);
   EXPECT_LT(f[Dim::roughness], 1e-6f);
+  // From the terrain step's own feature of the same sums: the same bits.
+  const FeatureVector terrain = compute_terrain_feature(s);
+  Feature g;
+  ASSERT_TRUE(cell_feature(s, g, &terrain));
+  EXPECT_EQ(g.v, f.v);
 }
 
 TEST(TravFeatures, FewerThanFivePointsGiveNoFeature) {
@@ -471,8 +476,8 @@ TEST(TravRecorder, TheFootprintsCellsArePositiveForOneLocalMap) {
     const double x = 0.1 * k;
     rec.drive(x, 0.0, 0.0);
     if (k % 10 == 5) {
-      rec.cell_sums({static_cast<std::int32_t>(std::floor(x / 0.2)), 0}, path, x, 0.1);
-      rec.cell_sums({static_cast<std::int32_t>(std::floor(x / 0.2)), 10}, verge, x, 2.1);
+      rec.cell_sums({static_cast<std::int32_t>(std::floor(x / 0.2)), 0}, path, nullptr, x, 0.1);
+      rec.cell_sums({static_cast<std::int32_t>(std::floor(x / 0.2)), 10}, verge, nullptr, x, 2.1);
     }
   }
   EXPECT_TRUE(rec.footprint({25, 1}));    // y 0.2..0.4 meets the 0.35 m half-width
@@ -501,7 +506,7 @@ TEST(TravRecorder, TheFootprintsCellsArePositiveForOneLocalMap) {
   EXPECT_EQ(rec.local_map(), 2u);
   EXPECT_FALSE(rec.footprint({25, 0}));
   EXPECT_FALSE(rec.local_map_complete());
-  rec.cell_sums({25, 0}, path, 5.1, 0.1);
+  rec.cell_sums({25, 0}, path, nullptr, 5.1, 0.1);
   rec.finish_local_map(counts);
   EXPECT_EQ(counts.total_positive(), 0u);
   EXPECT_EQ(counts.total_unlabelled(), 1u);
@@ -515,14 +520,14 @@ TEST(TravRecorder, FarCellsAndWordsBeyondItsCapacityAreCounted) {
   TravRecorder rec(rc, v, 300, 300, 0.2);
   rec.drive(0.0, 0.0, 0.0);
   const CellStats s = flat_cell(30.0f);
-  rec.cell_sums({110, 0}, s, 22.1, 0.1);
+  rec.cell_sums({110, 0}, s, nullptr, 22.1, 0.1);
   EXPECT_EQ(rec.counters().too_far, 1u);
-  for (int i = 0; i < 1005; ++i) rec.cell_sums({i % 50, i / 50}, s, 0.2 * (i % 50), 0.2 * (i / 50));
+  for (int i = 0; i < 1005; ++i) rec.cell_sums({i % 50, i / 50}, s, nullptr, 0.2 * (i % 50), 0.2 * (i / 50));
   EXPECT_EQ(rec.counters().words, 1000u);
   EXPECT_EQ(rec.counters().dropped, 5u);
   CellStats few;
   for (int i = 0; i < 4; ++i) few.add(0.01f * static_cast<float>(i), 0.0f, 0.0f, 1.0f);
-  rec.cell_sums({1, 1}, few, 0.3, 0.3);  // fewer than five points: no word
+  rec.cell_sums({1, 1}, few, nullptr, 0.3, 0.3);  // fewer than five points: no word
   EXPECT_EQ(rec.counters().words + rec.counters().dropped, 1005u);
   EXPECT_EQ(check_recorder(rc), "");
   rc.footprint.width = 0.0;

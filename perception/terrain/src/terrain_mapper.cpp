@@ -296,7 +296,7 @@ bool TerrainMapper::due_for_feature(TerrainWorkCell& w, TerrainCell& c, CellInde
     ++counters_.frozen_skipped;
     if (sums_sink_ != nullptr) {
       const WorldPoint centre = work_.cell_center(i);
-      sums_sink_->cell_sums(i, w.stats, centre.x, centre.y);
+      sums_sink_->cell_sums(i, w.stats, nullptr, centre.x, centre.y);
     }
     w.stats = CellStats{};
     return false;
@@ -369,7 +369,7 @@ void TerrainMapper::update_cell(TerrainWorkCell& w, TerrainCell& c, CellIndex i,
   }
   if (sums_sink_ != nullptr) {
     const WorldPoint centre = work_.cell_center(i);
-    sums_sink_->cell_sums(i, w.stats, centre.x, centre.y);
+    sums_sink_->cell_sums(i, w.stats, &feature, centre.x, centre.y);
   }
   w.stats = CellStats{};
 }

@@ -64,13 +64,14 @@ bool TravRecorder::footprint(CellIndex cell) const noexcept {
   return marks_.contains(cell) && marks_.at(cell) == local_map_;
 }
 
-void TravRecorder::cell_sums(CellIndex cell, const CellStats& sums, double x, double y) noexcept {
+void TravRecorder::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
+                             double y) noexcept {
   if (have_pose_ && std::hypot(x - last_x_, y - last_y_) > config_.max_range) {
     ++counters_.too_far;
     return;
   }
   Feature f;
-  if (!cell_feature(sums, f)) return;
+  if (!cell_feature(sums, f, feature)) return;
   if (used_ == entries_.size()) {
     ++counters_.dropped;
     return;

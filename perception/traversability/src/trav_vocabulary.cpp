@@ -33,9 +33,9 @@ bool uses(FeatureSet s, Dim d) noexcept {
   return false;
 }
 
-bool cell_feature(const CellStats& s, Feature& out) noexcept {
+bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain) noexcept {
   if (s.n < kMinPoints) return false;
-  const FeatureVector t = compute_terrain_feature(s);
+  const FeatureVector t = terrain != nullptr ? *terrain : compute_terrain_feature(s);
   const float sd = t[static_cast<std::size_t>(TerrainFeature::std_remission)];
   out.v[static_cast<std::size_t>(Dim::max_dz)] = s.max_dz - s.min_dz;
   out.v[static_cast<std::size_t>(Dim::remission_mean)] = t[static_cast<std::size_t>(TerrainFeature::mean_remission)];

@@ -59,8 +59,11 @@ class TerrainObserver {
 class CellSumsSink {
  public:
   virtual ~CellSumsSink() = default;
-  // (x, y): the cell's centre in the odometry frame.
-  virtual void cell_sums(CellIndex cell, const CellStats& sums, double x, double y) noexcept = 0;
+  // (x, y): the cell's centre in the odometry frame; `feature` the terrain
+  // feature the step computed from these sums (null for a frozen cell, whose
+  // sums get none), so that a sink need not find the eigenvalues again.
+  virtual void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
+                         double y) noexcept = 0;
 };
 
 // Per cell of the registration grid.

@@ -52,7 +52,8 @@ class TravRecorder final : public CellSumsSink {
   // A pose of the robot (odometry frame): marks the footprint's cells and
   // adds the distance from the previous pose to the local map's travel.
   void drive(double x, double y, double yaw) noexcept;
-  void cell_sums(CellIndex cell, const CellStats& sums, double x, double y) noexcept override;
+  void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
+                 double y) noexcept override;
 
   bool local_map_complete() const noexcept { return travelled_ >= config_.local_map_distance; }
   double travelled() const noexcept { return travelled_; }

@@ -52,8 +52,10 @@ struct Feature {
 // defined, thesis §6.2).
 inline constexpr std::uint32_t kMinPoints = 5;
 // The feature of a cell from its running sums; false with fewer than
-// kMinPoints points.
-bool cell_feature(const CellStats& s, Feature& out) noexcept;
+// kMinPoints points. `terrain`: the terrain feature of the same sums, when
+// the terrain step has computed it (its remission, roughness and slope are
+// taken from there instead of being computed again).
+bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain = nullptr) noexcept;
 
 // Which dimensions make the word (thesis §6.4's ablations).
 enum class FeatureSet : std::uint8_t {
