@@ -1,6 +1,8 @@
 #include "bench_daemon.hpp"
 
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -112,9 +114,29 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
     b->truth_ = std::move(*loaded.truth);
   }
 
-  // The bench config, on this test's own ports and DDS domain.
-  b->base_port_ = 21000 + (::getpid() % 400) * 10;
-  b->domain_ = static_cast<std::uint32_t>(100 + ::getpid() % 100);
+  // The bench config, on this test's own ports and DDS domain: a slot none of
+  // the benches running at the same time holds (a lock file each). Taken
+  // from the process id alone, two of ctest's parallel tests once shared a
+  // domain, and each checked the other's maps against its own truth.
+  int slot = -1;
+  for (int k = 0; k < 100 && slot < 0; ++k) {
+    const int n = (::getpid() + k) % 100;
+    const std::string lock = (fs::temp_directory_path() / ("trailnav-bench-slot-" + std::to_string(n) + ".lock")).string();
+    const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (fd < 0) continue;
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      slot = n;
+      b->slot_fd_ = fd;
+    } else {
+      ::close(fd);
+    }
+  }
+  if (slot < 0) {
+    error = "no free bench slot: 100 benches running at once?";
+    return nullptr;
+  }
+  b->base_port_ = 21000 + slot * 10;
+  b->domain_ = static_cast<std::uint32_t>(100 + slot);
   const int base = b->base_port_;
   b->config_ = b->dir_ / "robot.yaml";
   {
@@ -179,6 +201,7 @@ BenchDaemon::~BenchDaemon() {
   join_replay();
   stop();
   fs::remove_all(dir_);
+  if (slot_fd_ >= 0) ::close(slot_fd_);
 }
 
 bool BenchDaemon::wait_until_up(const std::function<bool(double wait_s)>& arrived, double timeout_s) const {

@@ -116,6 +116,7 @@ class BenchDaemon {
   std::string recording_;
   std::uint32_t domain_ = 0;
   int base_port_ = 0;
+  int slot_fd_ = -1;  // the lock of its slot (domain and ports) among concurrent benches
   eval::SimTruth truth_;
   pid_t pid_ = 0;
   std::string stderr_path_, stderr_text_;
