@@ -191,7 +191,11 @@ LmReport LmSolver<Pose>::solve(PoseGraph<Pose>& graph, const LmOptions& options,
     double predicted = 0.0;
     for (std::size_t i = 0; i < dims; ++i) predicted += step_[i] * (lambda * damping(i) * step_[i] - gradient_[i]);
     const double rho = (chi2 - new_chi2) / predicted;
-    if (std::isfinite(new_chi2) && rho > 0.0 && std::isfinite(rho)) {
+    // A step is taken only when χ² really fell and the linear model predicted
+    // a fall: on an ill-conditioned system (an information entry of 1e61 the
+    // fuzzer wrote) the solve can return a step whose predicted change is
+    // negative, and a rise divided by it looked like a gain (χ² 101 -> 1,449).
+    if (std::isfinite(new_chi2) && new_chi2 < chi2 && predicted > 0.0 && rho > 0.0 && std::isfinite(rho)) {
       ++report.steps_taken;
       const double decrease = (chi2 - new_chi2) / std::max(chi2, 1e-300);
       const double t = 2.0 * rho - 1.0;
