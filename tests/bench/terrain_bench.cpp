@@ -16,11 +16,14 @@
 #include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
+#include "trailnav/perception/trav_layer.hpp"
+#include "trailnav/perception/trav_recorder.hpp"
 
 namespace {
 
 using namespace trailnav;
 using namespace trailnav::perception;
+namespace trav = trailnav::perception::trav;
 
 const RandomForest& model() {
   static const RandomForest forest = [] {
@@ -83,6 +86,136 @@ void BM_TerrainStep(benchmark::State& state) {
   time_steps(state, *filled, *mapper);
 }
 BENCHMARK(BM_TerrainStep)->Arg(1)->Arg(4)->Arg(20)->Unit(benchmark::kMillisecond);
+
+// The traversability's share of a step (docs/traversability.md): the same
+// step as BM_TerrainStep/4, with the recorder taking every cell's sums (its
+// feature from the terrain's, its word, the local map's entry); and the
+// classification of the words the step produced by a model with eight terrain
+// models (both learners), learnt beforehand from these revolutions with the
+// lane ahead of the car as the footprint.
+void BM_TravStep(benchmark::State& state) {
+  const auto images = bench::kitti_scans();
+  TerrainConfig config;
+  auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  filled->align(*images[0], nullptr);
+  filled->register_cloud();
+  filled->step(0);
+  for (int r = 0; r < 4; ++r) {
+    filled->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
+    filled->register_cloud();
+  }
+  const trav::Vocabulary vocabulary{trav::VocabularyConfig{}};
+  trav::RecorderConfig rc;
+  rc.max_words = 200'000;
+  trav::TravRecorder recorder(rc, vocabulary, config.map.size_x, config.map.size_y, config.map.resolution);
+  for (int k = 0; k <= 100; ++k) recorder.drive(0.1 * k, 0.0, 0.0);  // the lane ahead
+  mapper->set_sums_sink(&recorder);
+  trav::WordCounts counts(vocabulary.size());
+  const bool classify = state.range(0) != 0;
+  trav::TravModels models(vocabulary, trav::LearnerConfig{});
+  if (classify) {
+    // Eight local maps' worth from the same step, so that every table is in use.
+    for (int m = 0; m < 8; ++m) {
+      mapper->copy_state_from(*filled);
+      mapper->step(1'000'000'000);
+      recorder.finish_local_map(counts);
+      for (std::uint32_t w = 0; w < vocabulary.size(); w += 7 + static_cast<std::uint32_t>(m)) counts.add(w, true, 3);
+      models.train(counts);
+      for (int k = 0; k <= 100; ++k) recorder.drive(0.1 * k, 0.0, 0.0);
+    }
+  }
+  std::uint64_t words = 0;
+  double sum = 0.0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    mapper->copy_state_from(*filled);
+    const std::uint64_t before = recorder.counters().words;
+    state.ResumeTiming();
+    mapper->step(1'000'000'000);
+    if (classify) {
+      // Every cell's words through both learners (with the local map's sort:
+      // an upper bound of what the layer does per step).
+      recorder.finish_local_map(counts, [&](const trav::TravRecorder::CellWords& c) {
+        sum += models.probability(trav::Method::pnb, c.words) + models.probability(trav::Method::pos, c.words);
+      });
+    }
+    words = recorder.counters().words - before;
+    state.PauseTiming();
+    if (!classify) recorder.finish_local_map(counts);
+    state.ResumeTiming();
+  }
+  benchmark::DoNotOptimize(sum);
+  state.counters["words"] = static_cast<double>(words);
+  state.counters["models"] = static_cast<double>(models.models());
+}
+BENCHMARK(BM_TravStep)->ArgName("classify")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The traversability's own work in one step, apart from the terrain's
+// (whose time this noisy machine varies by more than the difference): the
+// cells a real step over four KITTI revolutions handed over (their sums and
+// terrain features, captured once), given to the recorder (feature, word,
+// entry) and, with `classify`, to the layer (each word into its cell's
+// evidence for eight terrain models and POS), as the terrain thread does.
+void BM_TravWords(benchmark::State& state) {
+  const auto images = bench::kitti_scans();
+  TerrainConfig config;
+  auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  mapper->align(*images[0], nullptr);
+  mapper->register_cloud();
+  mapper->step(0);
+  for (int r = 0; r < 4; ++r) {
+    mapper->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
+    mapper->register_cloud();
+  }
+  struct Handed {
+    CellIndex cell;
+    CellStats sums;
+    FeatureVector feature;
+    bool has_feature;
+    double x, y;
+  };
+  struct Capture final : CellSumsSink {
+    std::vector<Handed> cells;
+    void cell_sums(CellIndex c, const CellStats& s, const FeatureVector* f, double x, double y) noexcept override {
+      cells.push_back({c, s, f != nullptr ? *f : FeatureVector{}, f != nullptr, x, y});
+    }
+  } capture;
+  mapper->set_sums_sink(&capture);
+  mapper->step(1'000'000'000);
+  const trav::Vocabulary vocabulary{trav::VocabularyConfig{}};
+  trav::RecorderConfig rc;
+  rc.max_words = 200'000;
+  trav::TravRecorder recorder(rc, vocabulary, config.map.size_x, config.map.size_y, config.map.resolution);
+  recorder.drive(0.0, 0.0, 0.0);
+  // Eight terrain models, each word in use.
+  trav::TravModels models(vocabulary, trav::LearnerConfig{});
+  std::vector<trav::WordCounts> counts;
+  for (std::uint32_t m = 0; m < 8; ++m) {
+    counts.emplace_back(vocabulary.size());
+    for (std::uint32_t w = 0; w < vocabulary.size(); ++w) counts.back().add(w, (w + m) % 3 == 0, 1 + (w * 7 + m) % 13);
+  }
+  models.set_models(counts);
+  auto layer = trav::TravLayer::create(models, trav::Method::pnb, 20.0, 20.0, config.map.size_x, config.map.size_y,
+                                       config.map.resolution);
+  if (!layer.layer) throw std::runtime_error(layer.error);
+  layer.layer->move_to(0.0, 0.0);
+  const bool classify = state.range(0) != 0;
+  trav::WordCounts scratch(vocabulary.size());
+  for (auto _ : state) {
+    for (const Handed& h : capture.cells) {
+      const FeatureVector* f = h.has_feature ? &h.feature : nullptr;
+      recorder.cell_sums(h.cell, h.sums, f, h.x, h.y);
+      if (classify) layer.layer->cell_sums(h.cell, h.sums, f, h.x, h.y);
+    }
+    state.PauseTiming();
+    recorder.finish_local_map(scratch);
+    state.ResumeTiming();
+  }
+  state.counters["cells"] = static_cast<double>(capture.cells.size());
+  state.counters["models"] = static_cast<double>(models.models());
+}
+BENCHMARK(BM_TravWords)->ArgName("classify")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // Fills cells with 20 points each (random surfaces and remissions): every
 // cell of the grid, or (`reachable`) every cell the lidar can have reached

@@ -16,6 +16,7 @@
 
 #include "test_data.hpp"
 #include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/trav_layer.hpp"
 #include "trailnav/perception/trav_recorder.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/perception/trav_learner.hpp"
@@ -591,6 +592,120 @@ TEST(TravRecorder, RealRevolutionsThroughTheTerrainStepWithoutAllocating) {
   // no word (the thesis' 20 m give every map positives).
   EXPECT_GE(trained, 3u);
   EXPECT_GE(models.models(), 1u);
+}
+
+}  // namespace
+}  // namespace trailnav::perception::trav
+
+// --- the layer on the robot ---
+
+namespace trailnav::perception::trav {
+namespace {
+
+// A cell 1 m high (a box's side), remission 90.
+CellStats tall_cell() {
+  CellStats s;
+  for (int i = 0; i < 12; ++i) s.add(0.02f * static_cast<float>(i % 4), 0.05f, 0.1f * static_cast<float>(i), 90.0f);
+  return s;
+}
+
+struct TrainedLayer {
+  Vocabulary vocabulary{VocabularyConfig{}};
+  TravModels models{vocabulary, LearnerConfig{}};
+  std::uint32_t ground = 0, wall = 0;
+  TrainedLayer() {
+    Feature f;
+    EXPECT_TRUE(cell_feature(flat_cell(50.0f), f));
+    ground = vocabulary.word(f);
+    EXPECT_TRUE(cell_feature(tall_cell(), f));
+    wall = vocabulary.word(f);
+    EXPECT_NE(ground, wall);
+    WordCounts k(vocabulary.size());
+    k.add(ground, true, 400);
+    k.add(ground, false, 3000);
+    k.add(wall, false, 1500);
+    EXPECT_EQ(models.train(k).model, 0);
+  }
+};
+
+TEST(TravLayer, CellsGiveTheLearnersAnswerForTheirWords) {
+  TrainedLayer t;
+  for (Method method : {Method::pnb, Method::pos}) {
+    auto made = TravLayer::create(t.models, method, 20.0, 20.0, 300, 300, 0.2);
+    ASSERT_TRUE(made.layer) << made.error;
+    TravLayer& layer = *made.layer;
+    layer.move_to(0.0, 0.0);
+    const CellStats ground = flat_cell(50.0f), wall = tall_cell();
+    for (int k = 0; k < 3; ++k) layer.cell_sums({5, 0}, ground, nullptr, 1.1, 0.1);
+    layer.cell_sums({6, 0}, wall, nullptr, 1.3, 0.1);
+    layer.cell_sums({6, 0}, wall, nullptr, 1.3, 0.1);
+    const std::vector<std::uint32_t> g{t.ground, t.ground, t.ground}, w{t.wall, t.wall};
+    EXPECT_NEAR(layer.probability(layer.grid().at({5, 0})), t.models.probability(method, g), 1e-5) << method_name(method);
+    EXPECT_NEAR(layer.probability(layer.grid().at({6, 0})), t.models.probability(method, w), 1e-5) << method_name(method);
+    EXPECT_GT(layer.probability(layer.grid().at({5, 0})), 0.9f);
+    EXPECT_LT(layer.probability(layer.grid().at({6, 0})), 0.1f);
+    EXPECT_LT(layer.probability(layer.grid().at({7, 0})), 0.0f);  // never observed
+    std::vector<std::int8_t> costs(300 * 300);
+    layer.export_costs(costs);
+    const CellIndex o = layer.grid().origin();
+    auto cost = [&](std::int32_t x, std::int32_t y) { return costs[static_cast<std::size_t>((y - o.y) * 300 + (x - o.x))]; };
+    EXPECT_LE(cost(5, 0), 10);
+    EXPECT_GE(cost(6, 0), 90);
+    EXPECT_EQ(cost(7, 0), -1);
+  }
+}
+
+TEST(TravLayer, ANewLocalMapStartsACellAfreshAndFarCellsAreLeftOut) {
+  TrainedLayer t;
+  auto made = TravLayer::create(t.models, Method::pnb, 5.0, 20.0, 300, 300, 0.2);
+  ASSERT_TRUE(made.layer) << made.error;
+  TravLayer& layer = *made.layer;
+  layer.move_to(0.0, 0.0);
+  layer.cell_sums({10, 0}, tall_cell(), nullptr, 2.1, 0.1);
+  EXPECT_EQ(layer.grid().at({10, 0}).words, 1u);
+  for (int k = 1; k <= 6; ++k) layer.move_to(static_cast<double>(k), 0.0);  // 6 m: the next local map
+  EXPECT_EQ(layer.local_map(), 2u);
+  EXPECT_LT(layer.probability(layer.grid().at({10, 0})), 0.5f);  // the old evidence stays until seen again
+  layer.cell_sums({10, 0}, flat_cell(50.0f), nullptr, 2.1, 0.1);
+  EXPECT_EQ(layer.grid().at({10, 0}).words, 1u);
+  EXPECT_EQ(layer.counters().restarted, 1u);
+  EXPECT_GT(layer.probability(layer.grid().at({10, 0})), 0.5f);
+  layer.cell_sums({200, 0}, flat_cell(50.0f), nullptr, 40.1, 0.1);  // 34 m from the robot
+  EXPECT_EQ(layer.counters().too_far, 1u);
+}
+
+TEST(TravLayer, RefusesAModelWithoutTerrainModelsOrWithTooMany) {
+  const Vocabulary v{VocabularyConfig{}};
+  TravModels none(v, LearnerConfig{});
+  EXPECT_NE(TravLayer::create(none, Method::pnb, 20.0, 20.0, 10, 10, 0.2).error.find("no terrain model"), std::string::npos);
+  TravModels many(v, LearnerConfig{.max_models = 12});
+  std::vector<WordCounts> counts;
+  for (std::uint32_t m = 0; m < 9; ++m) {
+    counts.emplace_back(v.size());
+    counts.back().add(m, true, 10);
+  }
+  many.set_models(counts);
+  EXPECT_NE(TravLayer::create(many, Method::pnb, 20.0, 20.0, 10, 10, 0.2).error.find("--max-models 8"), std::string::npos);
+}
+
+TEST(TravLayer, TheTerrainThreadsCallsTouchNoHeap) {
+  TrainedLayer t;
+  auto made = TravLayer::create(t.models, Method::pnb, 20.0, 20.0, 300, 300, 0.2);
+  ASSERT_TRUE(made.layer);
+  std::vector<std::int8_t> costs(300 * 300);
+  const CellStats ground = flat_cell(50.0f);
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("terrain");
+  ASSERT_TRUE(alloc_guard::arm());
+  for (int k = 0; k < 200; ++k) {
+    made.layer->move_to(0.3 * k, 0.0);
+    made.layer->cell_sums({k, 1}, ground, nullptr, 0.2 * k + 0.1, 0.3);
+  }
+  made.layer->export_costs(costs);
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  EXPECT_EQ(made.layer->counters().words, 200u);
 }
 
 }  // namespace
