@@ -794,7 +794,7 @@ TEST(TravOnRealLidar, ALaneDrivenOnKittiTeachesTheRoadAndNotWhatStandsOnIt) {
     ASSERT_GT(road, 200u);
     ASSERT_GT(tall, 200u);
     // POS is the more conservative (c, the largest g of the lane's words, from
-    // one scan's ~250 positives): 0.39 of the street against PNB's 0.88.
+    // one scan's lane): 0.39 of the street against PNB's 0.88.
     EXPECT_GT(static_cast<double>(road_called), (m == Method::pnb ? 0.8 : 0.3) * static_cast<double>(road)) << method_name(m);
     EXPECT_LT(static_cast<double>(tall_called), 0.05 * static_cast<double>(tall)) << method_name(m);
   }
