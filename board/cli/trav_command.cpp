@@ -185,6 +185,7 @@ struct EvalOptions {
   std::string profile;  // default: the model's
   std::string config_file;
   std::string report;
+  std::string png_dir;
   double local_map = 20.0;
   double max_range = 20.0;
   bool quiet = false;
@@ -217,6 +218,19 @@ int evaluate(EvalOptions& o) {
   if (std::string e = trav::check_recorder(run.recorder); !e.empty()) {
     std::fprintf(stderr, "%s: %s\n", who, e.c_str());
     return 2;
+  }
+  if (!o.png_dir.empty()) {
+    if (o.inputs.size() != 1) {
+      std::fprintf(stderr, "%s: --png takes one recording (each has its own world frame)\n", who);
+      return 2;
+    }
+    std::error_code ec;
+    std::filesystem::create_directories(o.png_dir, ec);
+    if (ec) {
+      std::fprintf(stderr, "%s: --png: cannot create %s: %s\n", who, o.png_dir.c_str(), ec.message().c_str());
+      return 2;
+    }
+    run.png_dir = o.png_dir;
   }
   const bool json = o.report == "json";
   ProgressBar bar("evaluation", 100.0, "%");
@@ -279,6 +293,7 @@ int evaluate(EvalOptions& o) {
   }
   std::printf("thesis (real robots): Viona PNB 0.992 / 0.79 / 0.987; Obelix PNB 0.978 / 0.947 / 0.984, POS 0.975 / 0.947 / "
               "0.982\n");
+  for (const std::string& f : r.files) std::printf("wrote %s\n", f.c_str());
   return 0;
 }
 
@@ -331,6 +346,9 @@ void add_trav_commands(CLI::App& app) {
   ev->add_option("--config", e.config_file, "YAML file with a `terrain:` section (docs/terrain.md)");
   ev->add_option("--local-map", e.local_map, "d_M: metres driven per local map")->capture_default_str();
   ev->add_option("--max-range", e.max_range, "Cells farther from the robot give no feature (m)")->capture_default_str();
+  ev->add_option("--png", e.png_dir,
+                 "Write DIR/traversability-PNB.png and -POS.png: the full vector's answer per cell against the truth "
+                 "(one recording)");
   ev->add_option("--report", e.report, "json: one JSON object (fields method, features, precision, recall, specificity, cells)");
   ev->add_flag("--quiet", e.quiet, "No progress bars");
   ev->callback([&] { std::exit(evaluate(e)); });

@@ -6,6 +6,7 @@
 #include <memory>
 #include <unordered_map>
 
+#include "figure.hpp"
 #include "revolution_source.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/runtime/config.hpp"
@@ -262,8 +263,13 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
   auto key = [](CellIndex c) {
     return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(c.x)) << 32) | static_cast<std::uint32_t>(c.y);
   };
-  trav::WordCounts scratch(1);
   std::uint64_t local_maps_full = 0;
+  // For the pictures: each cell's latest answer of the full vector (both methods) and its truth.
+  std::unordered_map<std::uint64_t, std::array<Called, 2>> latest;
+  std::size_t full_set = model.sets.size();
+  for (std::size_t s = 0; s < model.sets.size(); ++s) {
+    if (model.sets[s].vocabulary.set == trav::FeatureSet::full) full_set = s;
+  }
   const std::string error = drive_recordings(
       options, vocabularies, report.revolutions, &report.step_ms, [&](const SimTruth& t) { truth = &t; },
       [&](std::size_t s, trav::TravRecorder& rec) {
@@ -285,6 +291,7 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
             called[m] = {p > 0.5, t ? static_cast<std::int8_t>(*t ? 1 : 0) : std::int8_t{-1}, cls};
           }
           cells[key(c.cell)] = called;
+          if (s == full_set && !options.png_dir.empty() && options.inputs.size() == 1) latest[key(c.cell)] = called;
         });
         // Score with the thesis' rule: an untraversable cell called
         // traversable is a false positive only when its 8 neighbours are
@@ -333,6 +340,49 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
     return report;
   }
   report.local_maps = local_maps_full;
+  if (!latest.empty()) {
+    std::int32_t x0 = INT32_MAX, y0 = INT32_MAX, x1 = INT32_MIN, y1 = INT32_MIN;
+    for (const auto& [k, called] : latest) {
+      const auto x = static_cast<std::int32_t>(k >> 32), y = static_cast<std::int32_t>(k & 0xffffffffu);
+      x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x), y1 = std::max(y1, y);
+    }
+    const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+    constexpr cli::Rgb kTp{90, 180, 90}, kTn{70, 70, 80}, kFp{220, 40, 40}, kFn{240, 160, 40}, kOut{200, 200, 205},
+        kNone{245, 245, 240};
+    for (std::size_t m = 0; m < 2; ++m) {
+      std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 3);
+      for (std::size_t i = 0; i < rgb.size(); i += 3) rgb[i] = kNone.r, rgb[i + 1] = kNone.g, rgb[i + 2] = kNone.b;
+      for (const auto& [k, called] : latest) {
+        const auto x = static_cast<std::int32_t>(k >> 32), y = static_cast<std::int32_t>(k & 0xffffffffu);
+        const Called& a = called[m];
+        const cli::Rgb c = a.truth < 0 ? kOut
+                           : a.truth == 1 ? (a.traversable ? kTp : kFn)
+                                          : (a.traversable ? kFp : kTn);
+        const std::size_t row = static_cast<std::size_t>(y1 - y), col = static_cast<std::size_t>(x - x0);
+        std::uint8_t* px = &rgb[(row * static_cast<std::size_t>(w) + col) * 3];
+        px[0] = c.r, px[1] = c.g, px[2] = c.b;
+      }
+      cli::MapFigure f;
+      f.title = "traversability, " + std::string(trav::method_name(static_cast<trav::Method>(m))) + ", robot " +
+                options.profile.name;
+      f.notes = {options.inputs.front(), "each cell's answer when its last local map ended, against the SIMULATED truth",
+                 "world frame, north up"};
+      f.legend = {{kTp, "traversable, called so"},
+                  {kTn, "untraversable, called so"},
+                  {kFp, "untraversable, called traversable"},
+                  {kFn, "traversable, called not"},
+                  {kOut, "outside the world"},
+                  {kNone, "no feature"}};
+      f.metres_per_pixel = res;
+      const std::string path = options.png_dir + "/traversability-" +
+                               std::string(trav::method_name(static_cast<trav::Method>(m))) + ".png";
+      if (Status st = cli::write_map_figure(path, rgb, w, h, f); st) {
+        report.files.push_back(path);
+      } else {
+        report.error = st.message();
+      }
+    }
+  }
   (void)kClassNames;
   return report;
 }

@@ -55,6 +55,7 @@ struct TravRunOptions {
   perception::trav::RecorderConfig recorder;  // its footprint is the profile's
   RobotProfile profile;
   std::function<void(double)> progress;       // 0..1 over all inputs
+  std::string png_dir;                        // trav-eval: a picture per method of the full vector's answers, if set
 };
 
 struct TravLocalMap {
@@ -106,6 +107,7 @@ struct TravEvalReport {
   std::uint64_t unscored = 0;  // cells outside the world
   std::vector<TravEvalRow> rows;  // per feature set in the model, PNB then POS
   double step_ms = 0.0;           // mean time of a 0.5 m traversability step (features, words), full set
+  std::vector<std::string> files;  // pictures written (png_dir)
 };
 // Every cell with words in a local map is classified when the local map ends
 // (P(trav | f_1..n) > 0.5) and scored against the profile's truth.
