@@ -3,6 +3,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include <string>
+
+#include "trailnav/perception/terrain_config.hpp"
+
 namespace trailnav::cli {
 
 void add_demo_command(CLI::App& app);
@@ -19,6 +23,9 @@ void add_pose_eval_command(CLI::App& app);
 void add_echo_command(CLI::App& app);
 void add_terrain_commands(CLI::App& app);
 void add_trav_commands(CLI::App& app);
+// The `terrain:` section of a YAML file into `out` (nothing when `file` is
+// empty); prints the error after `who` and returns false.
+bool load_terrain_config(const std::string& file, perception::TerrainConfig& out, const char* who);
 void add_route_command(CLI::App& app);
 void add_subgoal_eval_command(CLI::App& app);
 void add_pose_graph_command(CLI::App& app);

@@ -20,6 +20,8 @@ namespace fs = std::filesystem;
 using perception::ConfusionMatrix;
 using perception::TerrainClass;
 
+}  // namespace
+
 bool load_terrain_config(const std::string& file, perception::TerrainConfig& out, const char* who) {
   if (file.empty()) return true;
   try {
@@ -31,6 +33,8 @@ bool load_terrain_config(const std::string& file, perception::TerrainConfig& out
     return false;
   }
 }
+
+namespace {
 
 void print_counts(const perception::LabelledFeatures& d) {
   const auto c = d.class_counts();

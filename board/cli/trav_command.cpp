@@ -22,18 +22,6 @@ namespace {
 namespace fs = std::filesystem;
 namespace trav = perception::trav;
 
-bool load_terrain_section(const std::string& file, perception::TerrainConfig& out, const char* who) {
-  if (file.empty()) return true;
-  try {
-    const ConfigNode root = ConfigNode::load_file(file);
-    out = perception::parse_terrain_config(root.map("terrain"));
-    return true;
-  } catch (const ConfigError& e) {
-    std::fprintf(stderr, "%s: %s\n", who, e.what());
-    return false;
-  }
-}
-
 struct TrainOptions {
   std::vector<std::string> inputs;
   std::string profile;
@@ -82,7 +70,7 @@ bool parse_bins(const std::string& text, trav::VocabularyConfig& v, const char* 
 int train(TrainOptions& o) {
   const char* who = "trailnav trav-train";
   perception::TerrainConfig terrain;
-  if (!load_terrain_section(o.config_file, terrain, who)) return 2;
+  if (!load_terrain_config(o.config_file, terrain, who)) return 2;
   const eval::LoadedProfile profile = eval::load_profile(o.profile);
   if (!profile.profile) {
     std::fprintf(stderr, "%s: --profile: %s\n", who, profile.error.c_str());
@@ -126,6 +114,7 @@ int train(TrainOptions& o) {
   ProgressBar bar("demonstrations", 100.0, "%");
   if (!o.quiet) run.progress = [&](double f) { bar.update(100.0 * f); };
   const eval::TravTrainReport r = eval::run_trav_train(run, vocabulary, learner, old ? &*old : nullptr);
+  const std::size_t local_maps = r.sets.front().local_maps.size();
   if (!o.quiet) bar.finish();
   if (!r.error.empty()) {
     std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
@@ -133,7 +122,7 @@ int train(TrainOptions& o) {
   }
   std::printf("robot profile %s (footprint %.2f x %.2f m): %llu revolutions, %llu local maps of %.0f m\n",
               run.profile.name.c_str(), run.profile.footprint.length, run.profile.footprint.width,
-              static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(r.local_maps), o.local_map);
+              static_cast<unsigned long long>(r.revolutions), static_cast<unsigned long long>(local_maps), o.local_map);
   std::printf("words (full vector): %llu, %llu of them positive (the footprint's cells), %llu cells beyond %.0f m, %llu "
               "dropped\n",
               static_cast<unsigned long long>(r.recorder.words), static_cast<unsigned long long>(r.recorder.positive_words),
@@ -194,7 +183,7 @@ struct EvalOptions {
 int evaluate(EvalOptions& o) {
   const char* who = "trailnav trav-eval";
   perception::TerrainConfig terrain;
-  if (!load_terrain_section(o.config_file, terrain, who)) return 2;
+  if (!load_terrain_config(o.config_file, terrain, who)) return 2;
   if (!o.report.empty() && o.report != "json") {
     std::fprintf(stderr, "%s: --report takes 'json', got '%s'\n", who, o.report.c_str());
     return 2;

@@ -31,9 +31,6 @@ class FanOut final : public perception::CellSumsSink {
   }
 };
 
-constexpr std::array<const char*, perception::kTerrainClasses> kClassNames = {"street", "dirt", "grass", "vegetation",
-                                                                               "other"};
-
 // One pass over each recording: the mapper's steps feed a recorder per
 // feature set; `on_local_map(set index, recorder)` when one ends.
 std::string drive_recordings(const TravRunOptions& o, const std::vector<trav::VocabularyConfig>& vocabularies,
@@ -217,10 +214,7 @@ TravTrainReport run_trav_train(const TravRunOptions& options, const trav::Vocabu
           t.created += a.created ? 1 : 0;
           t.forced += a.forced ? 1 : 0;
         }
-        if (s == 0) {
-          ++report.local_maps;
-          report.recorder = rec.counters();
-        }
+        if (s == 0) report.recorder = rec.counters();
       });
   if (!error.empty()) {
     report.error = error;
@@ -383,7 +377,6 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
       }
     }
   }
-  (void)kClassNames;
   return report;
 }
 

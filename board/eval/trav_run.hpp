@@ -70,8 +70,7 @@ struct TravTrainSet {
 struct TravTrainReport {
   std::string error;
   std::uint64_t revolutions = 0;
-  std::uint64_t local_maps = 0;
-  perception::trav::RecorderCounters recorder;  // the full set's
+  perception::trav::RecorderCounters recorder;  // the full set's (its local maps: sets.front().local_maps)
   std::vector<TravTrainSet> sets;
   perception::trav::TravModelFile model;
 };

@@ -41,6 +41,21 @@ MountParams kitti_mount() {
   return m;
 }
 
+// A mapper whose interval was opened by one KITTI revolution and which then
+// registered `revolutions` more (the state a step starts from).
+std::unique_ptr<TerrainMapper> filled_mapper(const TerrainConfig& config, int revolutions) {
+  const auto images = bench::kitti_scans();
+  auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  filled->align(*images[0], nullptr);
+  filled->register_cloud();
+  filled->step(0);  // opens the interval
+  for (int r = 0; r < revolutions; ++r) {
+    filled->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
+    filled->register_cloud();
+  }
+  return filled;
+}
+
 // Times one step of `mapper`, each time from `filled`'s state.
 void time_steps(benchmark::State& state, const TerrainMapper& filled, TerrainMapper& mapper) {
   std::uint64_t features = 0;
@@ -72,84 +87,42 @@ BENCHMARK(BM_TerrainRegisterRevolution)->Unit(benchmark::kMillisecond);
 // apart at the thesis' 1.2 m/s that is about four; twenty is a robot standing
 // still for max_step_interval, 2 s, the most a real step gathers).
 void BM_TerrainStep(benchmark::State& state) {
-  const auto images = bench::kitti_scans();
   TerrainConfig config;
-  auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  auto filled = filled_mapper(config, static_cast<int>(state.range(0)));
   auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
-  filled->align(*images[0], nullptr);
-  filled->register_cloud();
-  filled->step(0);  // opens the interval
-  for (int r = 0; r < state.range(0); ++r) {
-    filled->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
-    filled->register_cloud();
-  }
   time_steps(state, *filled, *mapper);
 }
 BENCHMARK(BM_TerrainStep)->Arg(1)->Arg(4)->Arg(20)->Unit(benchmark::kMillisecond);
 
 // The traversability's share of a step (docs/traversability.md): the same
 // step as BM_TerrainStep/4, with the recorder taking every cell's sums (its
-// feature from the terrain's, its word, the local map's entry); and the
-// classification of the words the step produced by a model with eight terrain
-// models (both learners), learnt beforehand from these revolutions with the
-// lane ahead of the car as the footprint.
+// feature from the terrain's, its word, the local map's entry).
 void BM_TravStep(benchmark::State& state) {
-  const auto images = bench::kitti_scans();
   TerrainConfig config;
-  auto filled = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
+  auto filled = filled_mapper(config, 4);
   auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
-  filled->align(*images[0], nullptr);
-  filled->register_cloud();
-  filled->step(0);
-  for (int r = 0; r < 4; ++r) {
-    filled->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
-    filled->register_cloud();
-  }
   const trav::Vocabulary vocabulary{trav::VocabularyConfig{}};
   trav::RecorderConfig rc;
   rc.max_words = 200'000;
   trav::TravRecorder recorder(rc, vocabulary, config.map.size_x, config.map.size_y, config.map.resolution);
-  for (int k = 0; k <= 100; ++k) recorder.drive(0.1 * k, 0.0, 0.0);  // the lane ahead
+  recorder.drive(0.0, 0.0, 0.0);
   mapper->set_sums_sink(&recorder);
   trav::WordCounts counts(vocabulary.size());
-  const bool classify = state.range(0) != 0;
-  trav::TravModels models(vocabulary, trav::LearnerConfig{});
-  if (classify) {
-    // Eight local maps' worth from the same step, so that every table is in use.
-    for (int m = 0; m < 8; ++m) {
-      mapper->copy_state_from(*filled);
-      mapper->step(1'000'000'000);
-      recorder.finish_local_map(counts);
-      for (std::uint32_t w = 0; w < vocabulary.size(); w += 7 + static_cast<std::uint32_t>(m)) counts.add(w, true, 3);
-      models.train(counts);
-      for (int k = 0; k <= 100; ++k) recorder.drive(0.1 * k, 0.0, 0.0);
-    }
-  }
   std::uint64_t words = 0;
-  double sum = 0.0;
   for (auto _ : state) {
     state.PauseTiming();
     mapper->copy_state_from(*filled);
     const std::uint64_t before = recorder.counters().words;
     state.ResumeTiming();
     mapper->step(1'000'000'000);
-    if (classify) {
-      // Every cell's words through both learners (with the local map's sort:
-      // an upper bound of what the layer does per step).
-      recorder.finish_local_map(counts, [&](const trav::TravRecorder::CellWords& c) {
-        sum += models.probability(trav::Method::pnb, c.words) + models.probability(trav::Method::pos, c.words);
-      });
-    }
     words = recorder.counters().words - before;
     state.PauseTiming();
-    if (!classify) recorder.finish_local_map(counts);
+    recorder.finish_local_map(counts);
     state.ResumeTiming();
   }
-  benchmark::DoNotOptimize(sum);
   state.counters["words"] = static_cast<double>(words);
-  state.counters["models"] = static_cast<double>(models.models());
 }
-BENCHMARK(BM_TravStep)->ArgName("classify")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TravStep)->Unit(benchmark::kMillisecond);
 
 // The traversability's own work in one step, apart from the terrain's
 // (whose time this noisy machine varies by more than the difference): the
@@ -158,16 +131,8 @@ BENCHMARK(BM_TravStep)->ArgName("classify")->Arg(0)->Arg(1)->Unit(benchmark::kMi
 // entry) and, with `classify`, to the layer (each word into its cell's
 // evidence for eight terrain models and POS), as the terrain thread does.
 void BM_TravWords(benchmark::State& state) {
-  const auto images = bench::kitti_scans();
   TerrainConfig config;
-  auto mapper = std::move(TerrainMapper::create(config, kitti_mount(), kitti_shape(), &model()).mapper);
-  mapper->align(*images[0], nullptr);
-  mapper->register_cloud();
-  mapper->step(0);
-  for (int r = 0; r < 4; ++r) {
-    mapper->align(*images[static_cast<std::size_t>(r % 2)], nullptr);
-    mapper->register_cloud();
-  }
+  auto mapper = filled_mapper(config, 4);
   struct Handed {
     CellIndex cell;
     CellStats sums;
