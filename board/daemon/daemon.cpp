@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 
 #include "trailnav/drivers/velodyne/calibration.hpp"
@@ -190,6 +191,43 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                              config.pose_wait);
     }
   }
+  // The traversability layer rides on the terrain thread's steps (the
+  // mapper's sums sink) and writes each cell's P(trav) into the class maps
+  // it publishes; a demonstration trains the model on a thread of its own.
+  if (config.traversability) {
+    namespace trav = perception::trav;
+    const trav::TraversabilityConfig& tc = *config.traversability;
+    auto start = trav::load_start_models(tc);
+    if (!start.models) return fail("traversability: " + start.error);
+    d->trav_models_ = std::move(start.models);
+    const perception::TerrainMapShape& map = config.terrain->map;
+    auto layer = trav::TravLayer::create(*d->trav_models_, tc.method, tc.local_map_distance, tc.max_range, map.size_x,
+                                         map.size_y, map.resolution);
+    if (!layer.layer) return fail("traversability: " + layer.error);
+    d->trav_layer_ = std::move(layer.layer);
+    if (tc.demonstration) {
+      trav::RecorderConfig rc;
+      rc.local_map_distance = tc.local_map_distance;
+      rc.max_range = tc.max_range;
+      rc.footprint = tc.footprint;
+      rc.max_words = tc.max_words;
+      const trav::Vocabulary& v = d->trav_models_->vocabulary();
+      d->trav_recorder_ = std::make_unique<trav::TravRecorder>(rc, v, map.size_x, map.size_y, map.resolution);
+      d->trav_local_maps_ = std::make_unique<Mailbox<trav::LocalMapWords>>(v.size());
+      d->trav_models_out_ = std::make_unique<Mailbox<trav::TravModels>>(v, d->trav_models_->config());
+      d->trav_trainer_ = std::make_unique<trav::TravTrainer>(*d->trav_models_, tc.profile, tc.model,
+                                                             *d->trav_local_maps_, *d->trav_models_out_);
+      d->trav_training_ = std::make_unique<trav::TravTrainingTask>(*d->trav_trainer_);
+      TN_LOG_INFO("traversability: demonstration for the '%s' profile: %s %s%s", tc.profile.c_str(),
+                  start.created ? "a new model, saved to" : "training further", tc.model.c_str(),
+                  start.other_sets > 0 ? " (its NoRe/NoRS ablation sets are not trained online and are left out when "
+                                         "it is saved)"
+                                       : "");
+    }
+    d->trav_online_ = std::make_unique<trav::TravOnline>(*d->trav_layer_, d->trav_recorder_.get(),
+                                                         d->trav_local_maps_.get(), d->trav_models_out_.get());
+    d->terrain_mapper_->set_sums_sink(d->trav_online_.get());
+  }
   if (config.obstacles) {
     d->obstacles_ = std::make_unique<perception::ObstacleTask>(
         *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
@@ -217,6 +255,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     inputs.terrain = &d->terrain_out_->reader(1);
     inputs.terrain_cost = config.terrain->cost;
     inputs.unknown_cost = config.terrain->unknown_cost;
+    inputs.traversability = config.traversability.has_value();
   }
   inputs.navigation = d->navigation_out_.get();
   inputs.mapping = d->mapping_out_.get();
@@ -290,7 +329,8 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       !add("imu", d->imu_.get(), nullptr) || !add("can", d->can_.get(), nullptr) ||
       !add("gpio", d->gpio_.get(), nullptr) || !add("pose", d->pose_.get(), nullptr) ||
       !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr) ||
-      !add("navigation", d->navigation_.get(), nullptr) || !add("mapping", d->mapping_.get(), nullptr)) {
+      !add("navigation", d->navigation_.get(), nullptr) || !add("mapping", d->mapping_.get(), nullptr) ||
+      !add("demonstration", d->trav_training_.get(), nullptr)) {
     return result;
   }
   d->last_runs_.assign(d->scheduler_->task_count(), 0);
@@ -315,7 +355,24 @@ Status Daemon::start() {
 void Daemon::stop() {
   if (gpio_) gpio_->set_ready(false);
   if (command_reader_) command_reader_->stop();
-  if (scheduler_ && scheduler_->running()) scheduler_->stop();
+  const bool was_running = scheduler_ && scheduler_->running();
+  if (was_running) scheduler_->stop();
+  if (was_running && trav_trainer_) {
+    // The demonstration's last stretch (the tasks have ended): the local map
+    // under way is learnt from and the model saved, so that a drive cut
+    // short keeps what it showed.
+    trav_online_->finish_partial();
+    while (trav_trainer_->poll()) {
+    }
+    const perception::trav::TrainerCounters t = trav_trainer_->counters();
+    if (t.save_errno != 0) {
+      TN_LOG_ERROR("traversability: the model could not be saved to %s: %s", trav_trainer_->path().c_str(),
+                   std::strerror(t.save_errno));
+    } else {
+      TN_LOG_INFO("traversability: %llu local maps learnt, %u terrain models, saved to %s",
+                  static_cast<unsigned long long>(t.trained), t.models, trav_trainer_->path().c_str());
+    }
+  }
   if (publisher_) publisher_->stop();
   if (armed_.load(std::memory_order_acquire)) {
     alloc_guard::disarm();
@@ -592,6 +649,32 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("known_cells", c.mapper.known_cells);
     m.value("classified_cells", c.mapper.classified_cells);
     m.value("poses", c.poses);
+  }
+  if (trav_online_) {
+    const perception::trav::OnlineCounters c = trav_online_->status();
+    const char* text = c.models == 0 ? "no terrain model yet: every cell unknown until a demonstrated local map is learnt"
+                                     : "ok";
+    m.begin(c.models == 0 ? L::warn : L::ok, "trailnavd: traversability", text, config_.traversability->model);
+    m.value("method", perception::trav::method_name(trav_layer_->method()));
+    m.value("models", static_cast<std::uint64_t>(c.models));
+    m.value("words", c.layer.words);
+    m.value("restarted", c.layer.restarted);
+    m.value("too_far", c.layer.too_far);
+    m.value("model_updates", c.model_updates);
+    if (trav_trainer_) {
+      const perception::trav::TrainerCounters t = trav_trainer_->status();
+      m.value("demonstration_local_maps", c.handed);
+      m.value("footprint_cells", c.recorder.footprint_cells);
+      m.value("positive_words", c.recorder.positive_words);
+      m.value("dropped_words", c.recorder.dropped);
+      m.value("trained", t.trained);
+      m.value("without_positive", t.without_positive);
+      m.value("lost", t.lost);
+      m.value("created", t.created);
+      m.value("saves", t.saves);
+      m.value("save_failures", t.save_failures);
+      if (t.save_errno != 0) m.value("save_error", std::string_view(std::strerror(t.save_errno)));
+    }
   }
   if (navigation_) {
     const nav::NavigationTaskStatus s = navigation_->status();

@@ -4,10 +4,13 @@
 //   drivers (lidar, gps, imu, can, gpio)  -- real-time tasks
 //   pose                                  -- real-time task: IMU + wheels + GPS
 //   obstacles                             -- real-time task, woken per revolution
-//   terrain                               -- real-time task: the terrain-class map
+//   terrain                               -- real-time task: the terrain-class map and the
+//                                            learnt traversability layer (docs/traversability.md)
 //   navigation                            -- real-time task: route, subgoals, alignment
 //   mapping                               -- task on normal scheduling: keyframes, GPS
 //                                            constraints, SMF solves (docs/slam.md)
+//   demonstration                         -- task on normal scheduling: the traversability
+//                                            model trained from a driven demonstration, saved
 //   publisher                             -- plain thread, the only one that writes to DDS
 //   command reader                        -- plain thread: goals and cancels in (DDS readers),
 //                                            queued for the navigation task
@@ -33,6 +36,7 @@
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_task.hpp"
+#include "trailnav/perception/trav_online.hpp"
 #include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/scheduler.hpp"
@@ -105,6 +109,15 @@ class Daemon {
   std::unique_ptr<Mailbox<perception::AlignedRevolution>> aligned_;  // obstacle thread -> terrain thread
   std::unique_ptr<Broadcast<perception::TerrainClassMap>> terrain_out_;
   std::unique_ptr<perception::TerrainTask> terrain_;
+  // The traversability layer (the terrain mapper's sums sink) and the demonstration's training.
+  std::unique_ptr<perception::trav::TravModels> trav_models_;
+  std::unique_ptr<perception::trav::TravLayer> trav_layer_;
+  std::unique_ptr<perception::trav::TravRecorder> trav_recorder_;
+  std::unique_ptr<Mailbox<perception::trav::LocalMapWords>> trav_local_maps_;  // terrain thread -> training
+  std::unique_ptr<Mailbox<perception::trav::TravModels>> trav_models_out_;     // training -> terrain thread
+  std::unique_ptr<perception::trav::TravOnline> trav_online_;
+  std::unique_ptr<perception::trav::TravTrainer> trav_trainer_;
+  std::unique_ptr<perception::trav::TravTrainingTask> trav_training_;
   std::optional<osm::RoadGraph> graph_;
   std::unique_ptr<nav::Navigator> navigator_;
   std::unique_ptr<Mailbox<nav::NavigationSnapshot>> navigation_out_;

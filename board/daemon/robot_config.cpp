@@ -309,6 +309,18 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
         perception::check_terrain_alignment(*c.terrain, c.obstacles ? c.obstacles->features : perception::FeatureParams{});
     if (!e.empty()) root.fail("terrain", e);
   }
+  if (auto n = root.optional_map("traversability")) {
+    c.traversability = perception::trav::parse_traversability_config(*n);
+    if (!c.terrain) {
+      root.fail("traversability", "the layer is computed in the terrain thread from its grid: add a 'terrain' section");
+    }
+    if (c.traversability->demonstration && (!c.pose || !c.terrain_use_pose)) {
+      n->fail("demonstration", "the footprint follows the robot's odometry: add a 'pose' section with feed_terrain: true");
+    }
+    if (const auto start = perception::trav::load_start_models(*c.traversability); !start.models) {
+      n->fail("model", start.error);
+    }
+  }
   if (auto n = root.optional_map("navigation")) {
     c.navigation = nav::parse_navigation_section(*n);
     if (!c.pose || !c.gps) {
@@ -321,6 +333,10 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     if (c.terrain) {
       c.navigation->navigator.aligner.cost = c.terrain->cost;
       c.navigation->navigator.aligner.unknown_cost = c.terrain->unknown_cost;
+    }
+    if (c.navigation->navigator.aligner.cell_cost == subgoals::AlignerConfig::CellCost::traversability &&
+        !c.traversability) {
+      n->fail("aligner", "cell_cost: traversability needs the learnt layer: add a 'traversability' section");
     }
   }
   if (auto n = root.optional_map("mapping")) {
@@ -359,7 +375,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"obstacles", c.obstacles.has_value(), TaskKind::event},
                         {"terrain", c.terrain.has_value(), TaskKind::periodic},
                         {"navigation", c.navigation.has_value(), TaskKind::periodic},
-                        {"mapping", c.mapping.has_value(), TaskKind::periodic}};
+                        {"mapping", c.mapping.has_value(), TaskKind::periodic},
+                        {"demonstration", c.traversability && c.traversability->demonstration, TaskKind::periodic}};
   if (root.is_map("tasks")) {
     // A preset: the measured table of a lidar model, for the parts configured.
     const ConfigNode t = root.map("tasks");
@@ -396,7 +413,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                                   [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
-                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping");
+                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping, demonstration");
     }
   }
   root.reject_unknown_keys();

@@ -24,6 +24,7 @@
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/perception/terrain_config.hpp"
+#include "trailnav/perception/trav_config.hpp"
 #include "trailnav/runtime/runtime_config.hpp"
 
 namespace trailnav::daemon {
@@ -65,6 +66,8 @@ struct RobotConfig {
   bool obstacles_use_pose = true;
   std::optional<perception::TerrainConfig> terrain;
   bool terrain_use_pose = true;
+  // The learnt traversability layer in the terrain thread (docs/traversability.md "On the robot").
+  std::optional<perception::trav::TraversabilityConfig> traversability;
   perception::PoseWait pose_wait;  // how the obstacle and terrain threads wait for a late pose
   std::optional<nav::NavigationSection> navigation;
   std::optional<slam::MappingOptions> mapping;  // online mapping (docs/slam.md "Online mapping")

@@ -113,6 +113,25 @@ void OccupancyGridMessage::fill_cost(const perception::TerrainClassMap& map,
   }
 }
 
+void OccupancyGridMessage::fill_traversability(const perception::TerrainClassMap& map) noexcept {
+  const auto& g = map.grid();
+  msg_.header.stamp = to_time(map.time_ns);
+  msg_.info.map_load_time = msg_.header.stamp;
+  msg_.info.resolution = static_cast<float>(g.resolution());
+  msg_.info.origin.position.x = g.origin().x * g.resolution();
+  msg_.info.origin.position.y = g.origin().y * g.resolution();
+  msg_.info.origin.position.z = 0.0;
+  const CellIndex o = g.origin();
+  const auto w = static_cast<std::int32_t>(msg_.info.width), h = static_cast<std::int32_t>(msg_.info.height);
+  for (std::int32_t y = 0; y < std::min(h, g.size_y()); ++y) {
+    for (std::int32_t x = 0; x < std::min(w, g.size_x()); ++x) {
+      const float p = g.at({o.x + x, o.y + y}).traversable;
+      data_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
+          p < 0.0f ? std::int8_t{-1} : static_cast<std::int8_t>(std::lround(100.0f * (1.0f - std::min(p, 1.0f))));
+    }
+  }
+}
+
 // --- PoseStamped ---
 
 PoseStampedMessage::PoseStampedMessage(std::string_view frame_id) {

@@ -77,6 +77,9 @@ class OccupancyGridMessage {
   // -1 where no class is known. The map must have this message's size.
   void fill_cost(const perception::TerrainClassMap& map, const std::array<float, perception::kTerrainClasses>& cost,
                  float unknown_cost) noexcept;
+  // The learnt traversability layer (thesis ch. 6): each cell's
+  // 100 · (1 − P(trav)), -1 where the layer has no evidence. Same size rule.
+  void fill_traversability(const perception::TerrainClassMap& map) noexcept;
   nav_msgs_msg_dds__OccupancyGrid_& sample() noexcept { return msg_; }
   std::uint32_t width() const noexcept { return msg_.info.width; }
   std::uint32_t height() const noexcept { return msg_.info.height; }

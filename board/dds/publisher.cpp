@@ -59,6 +59,11 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     p->cost_msg_.emplace(w, h, options.odom_frame);
     make(p->terrain_writer_, trailnav_msgs_msg_dds__TerrainClassMap__desc, options.topics.terrain_map, {true, 1, Durability::transient_local});
     make(p->cost_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.terrain_cost, {true, 1, Durability::transient_local});
+    if (p->inputs_.traversability) {
+      p->trav_msg_.emplace(w, h, options.odom_frame);
+      make(p->trav_writer_, nav_msgs_msg_dds__OccupancyGrid__desc, options.topics.traversability,
+           {true, 1, Durability::transient_local});
+    }
   }
   if (p->inputs_.poses != nullptr) {
     make(p->pose_writer_, geometry_msgs_msg_dds__PoseStamped__desc, options.topics.pose, {true, 1});
@@ -113,6 +118,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.maps = maps_.load(std::memory_order_relaxed);
   s.stale_maps = stale_maps_.load(std::memory_order_relaxed);
   s.terrain_maps = terrain_maps_.load(std::memory_order_relaxed);
+  s.traversability_maps = trav_maps_.load(std::memory_order_relaxed);
   s.poses = poses_.load(std::memory_order_relaxed);
   s.fixes = fixes_.load(std::memory_order_relaxed);
   s.health = health_.load(std::memory_order_relaxed);
@@ -138,6 +144,7 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
   health_msg_.value("obstacle_maps", s.maps);
   health_msg_.value("stale_maps", s.stale_maps);
   if (terrain_writer_) health_msg_.value("terrain_maps", s.terrain_maps);
+  if (trav_writer_) health_msg_.value("traversability_maps", s.traversability_maps);
   health_msg_.value("poses", s.poses);
   health_msg_.value("fixes", s.fixes);
   if (subgoal_writer_) {
@@ -338,6 +345,10 @@ void DdsPublisher::loop() noexcept {
           terrain_maps_.fetch_add(1, std::memory_order_relaxed);
         } else {
           failures_.fetch_add(1, std::memory_order_relaxed);
+        }
+        if (trav_writer_) {
+          trav_msg_->fill_traversability(*t);
+          count(trav_writer_->write(&trav_msg_->sample()), trav_maps_);
         }
       }
     }

@@ -43,6 +43,7 @@ struct TopicNames {
   std::string obstacle_map = "trailnav/obstacle_map";
   std::string terrain_map = "trailnav/terrain_map";
   std::string terrain_cost = "trailnav/terrain_cost";
+  std::string traversability = "trailnav/traversability";  // the learnt layer (nav_msgs/OccupancyGrid)
   std::string pose = "trailnav/pose";
   std::string utm_pose = "trailnav/utm_pose";
   std::string fix = "trailnav/fix";
@@ -105,6 +106,9 @@ struct PublisherInputs {
   Broadcast<perception::TerrainClassMap>::Reader* terrain = nullptr;
   std::array<float, perception::kTerrainClasses> terrain_cost{0.1f, 0.2f, 0.4f, 0.8f, 1.0f};
   float unknown_cost = 1.0f;
+  // The class maps carry the learnt traversability layer (TerrainCell::traversable): published on
+  // topics.traversability.
+  bool traversability = false;
   // The navigation thread's snapshots (their path capacity gives the Path's).
   Mailbox<nav::NavigationSnapshot>* navigation = nullptr;
   // Revolutions as points for viewers (its slots give the capacity), may be null.
@@ -124,6 +128,7 @@ struct PublisherStats {
   std::uint64_t statuses = 0;                  // navigation status samples
   std::uint64_t point_clouds = 0;
   std::uint64_t keyframe_paths = 0;  // the mapping thread's paths
+  std::uint64_t traversability_maps = 0;
   bool lidar_stale = false;
 };
 
@@ -156,7 +161,7 @@ class DdsPublisher {
   PublisherOptions options_;
   PublisherInputs inputs_;
   Wakeup wakeup_;
-  std::unique_ptr<Writer> map_writer_, terrain_writer_, cost_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
+  std::unique_ptr<Writer> map_writer_, terrain_writer_, cost_writer_, trav_writer_, pose_writer_, utm_writer_, fix_writer_, health_writer_;
   std::unique_ptr<Writer> subgoal_writer_, path_writer_;
   std::unique_ptr<Writer> tf_writer_, tf_static_writer_, odometry_writer_, status_writer_;
   NavigationStatusMessage status_msg_;
@@ -170,7 +175,7 @@ class DdsPublisher {
   std::optional<PointCloudMessage> points_msg_;
   void publish_coarse(const perception::ObstacleSnapshot& snapshot, bool stale) noexcept;
   std::optional<TerrainClassMapMessage> terrain_msg_;
-  std::optional<OccupancyGridMessage> cost_msg_;
+  std::optional<OccupancyGridMessage> cost_msg_, trav_msg_;
   PoseStampedMessage pose_msg_;
   PoseStampedMessage subgoal_msg_;
   std::optional<PathMessage> path_msg_;
@@ -189,6 +194,7 @@ class DdsPublisher {
   std::atomic<bool> running_{false};
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.
+  std::atomic<std::uint64_t> trav_maps_{0};
   std::atomic<std::uint64_t> maps_{0}, stale_maps_{0}, terrain_maps_{0}, poses_{0}, fixes_{0}, health_{0}, failures_{0};
   std::atomic<std::uint64_t> subgoals_{0}, paths_{0}, transforms_{0}, odometry_{0}, statuses_{0}, point_clouds_{0};
   std::atomic<std::uint64_t> keyframe_paths_{0};

@@ -106,14 +106,14 @@ std::optional<RobotProfile> builtin_profile(const std::string& name) {
   p.name = name;
   if (name == "large") {
     // Viona's class: ground clearance for meadows and low undergrowth.
-    p.footprint = {1.2, 0.8, 0.0};
+    p.footprint = *trav::builtin_footprint(name);
     p.ground = {true, true, true, true, true};
     return p;
   }
   if (name == "small") {
     // Obelix's class: streets and walkways (street, dirt paths and the
     // simulator's `other`, hard bare ground: walkways, plazas).
-    p.footprint = {0.6, 0.45, 0.0};
+    p.footprint = *trav::builtin_footprint(name);
     p.ground = {true, true, false, false, true};
     return p;
   }

@@ -361,7 +361,7 @@ TEST(RobotConfig, ThePresetsSensorsShareAThreadAndAChangedRateMustLeaveIt) {
 TEST(RobotConfig, EveryPresetsBudgetIsItsNeedWithTheStatedMargin) {
   for (const auto model : {velodyne::Model::vlp16, velodyne::Model::vlp32c, velodyne::Model::hdl32e, velodyne::Model::hdl64e}) {
     const auto rows = daemon::task_preset(model);
-    ASSERT_EQ(rows.size(), 10u);
+    ASSERT_EQ(rows.size(), 11u);
     for (const daemon::PresetRow& r : rows) {
       const double cap = r.kind == TaskKind::periodic ? 0.9 * 1000.0 / r.rate_hz : 1e9;
       const double expected = std::min(cap, std::max(1.0, std::ceil(r.need_ms * 15.0 - 1e-9) / 10.0));

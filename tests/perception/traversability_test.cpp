@@ -7,6 +7,9 @@
 
 #include <zlib.h>
 
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -16,7 +19,9 @@
 
 #include "test_data.hpp"
 #include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/trav_config.hpp"
 #include "trailnav/perception/trav_layer.hpp"
+#include "trailnav/perception/trav_online.hpp"
 #include "trailnav/perception/trav_recorder.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 #include "trailnav/perception/trav_learner.hpp"
@@ -674,10 +679,16 @@ TEST(TravLayer, ANewLocalMapStartsACellAfreshAndFarCellsAreLeftOut) {
   EXPECT_EQ(layer.counters().too_far, 1u);
 }
 
-TEST(TravLayer, RefusesAModelWithoutTerrainModelsOrWithTooMany) {
+TEST(TravLayer, WithoutTerrainModelsEveryCellIsUnknownAndTooManyAreRefused) {
   const Vocabulary v{VocabularyConfig{}};
+  // A demonstration before its first local map: no model yet.
   TravModels none(v, LearnerConfig{});
-  EXPECT_NE(TravLayer::create(none, Method::pnb, 20.0, 20.0, 10, 10, 0.2).error.find("no terrain model"), std::string::npos);
+  auto empty = TravLayer::create(none, Method::pnb, 20.0, 20.0, 10, 10, 0.2);
+  ASSERT_TRUE(empty.layer) << empty.error;
+  empty.layer->move_to(0.0, 0.0);
+  empty.layer->cell_sums(empty.layer->grid().world_to_index(0.5, 0.5), flat_cell(50.0f), nullptr, 0.5, 0.5);
+  EXPECT_EQ(empty.layer->counters().words, 1u);
+  EXPECT_LT(empty.layer->probability(*empty.layer->grid().find(0.5, 0.5)), 0.0f);
   TravModels many(v, LearnerConfig{.max_models = 12});
   std::vector<WordCounts> counts;
   for (std::uint32_t m = 0; m < 9; ++m) {
@@ -798,6 +809,191 @@ TEST(TravOnRealLidar, ALaneDrivenOnKittiTeachesTheRoadAndNotWhatStandsOnIt) {
     EXPECT_GT(static_cast<double>(road_called), (m == Method::pnb ? 0.8 : 0.3) * static_cast<double>(road)) << method_name(m);
     EXPECT_LT(static_cast<double>(tall_called), 0.05 * static_cast<double>(tall)) << method_name(m);
   }
+}
+
+}  // namespace
+}  // namespace trailnav::perception::trav
+
+// --- the demonstration mode on the robot ---
+
+namespace trailnav::perception::trav {
+namespace {
+
+// trailnavd's two halves on real KITTI revolutions (driven 0.3 m a
+// revolution along x): the terrain step hands its cells to TravOnline, whose
+// recorder ends a local map every 6 m (the footprint's cells must have been
+// seen in the local map they are driven in: KITTI's blind circle is 3-5 m); the trainer learns each, hands the
+// models back (the layer takes them at the next step) and saves the file.
+// From the first revolution on, neither half touches the heap — the save's
+// serialisation and its write included. The class map then carries P(trav)
+// on the cells the layer saw, and the file on disk holds the trainer's models.
+TEST(TravDemonstration, RealRevolutionsTrainOnlineSaveAtomicallyAndFillTheClassMap) {
+  std::array<velodyne::RangeImage, 2> scans{velodyne::RangeImage(kitti_shape()), velodyne::RangeImage(kitti_shape())};
+  std::vector<float> buffer;
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, scans[0]));
+  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, scans[1]));
+  MountParams mount;
+  mount.translation = {0.0, 0.0, 1.73};
+  TerrainConfig tc;
+  auto mapper = TerrainMapper::create(tc, mount, kitti_shape(), nullptr);
+  ASSERT_TRUE(mapper.mapper) << mapper.error;
+  const Vocabulary v{VocabularyConfig{}};
+  const TravModels start(v, LearnerConfig{});  // a new demonstration: no model yet
+  auto made = TravLayer::create(start, Method::pnb, 6.0, 20.0, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  ASSERT_TRUE(made.layer) << made.error;
+  RecorderConfig rc;
+  rc.local_map_distance = 6.0;
+  TravRecorder recorder(rc, v, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  Mailbox<LocalMapWords> local_maps(v.size());
+  Mailbox<TravModels> models(v, LearnerConfig{});
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("trav-demo-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string path = (dir / "robot.tntrav").string();
+  TravOnline online(*made.layer, &recorder, &local_maps, &models);
+  TravTrainer trainer(start, "kitti-car", path, local_maps, models);
+  mapper.mapper->set_sums_sink(&online);
+  PoseTrack poses(64);
+  constexpr int kRevolutions = 80;  // 24 m: four local maps of 6 m
+
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("terrain");
+  ASSERT_TRUE(alloc_guard::arm());
+  for (int n = 1; n <= kRevolutions; ++n) {
+    const std::int64_t t = std::int64_t{n} * 100'000'000;
+    poses.push({t - 100'000'000, 0.3 * (n - 1), 0.0, 0.0, 0.0, 0.0, 0.0});
+    poses.push({t, 0.3 * n, 0.0, 0.0, 0.0, 0.0, 0.0});
+    velodyne::RangeImage& image = scans[static_cast<std::size_t>(n % 2)];
+    image.sequence = static_cast<std::uint64_t>(n);
+    image.start_ns = t - 100'000'000;
+    image.end_ns = t;
+    mapper.mapper->process(image, &poses);
+    while (trainer.poll()) {
+    }
+  }
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+
+  const OnlineCounters& oc = online.counters();
+  const TrainerCounters& tr = trainer.counters();
+  EXPECT_EQ(oc.handed, 3u);  // 23.7 m driven: the fourth is under way
+  EXPECT_EQ(tr.lost, 0u);
+  EXPECT_EQ(tr.trained, 3u);
+  EXPECT_EQ(tr.saves, tr.trained);
+  EXPECT_EQ(tr.save_failures, 0u);
+  EXPECT_GE(oc.model_updates, 1u);
+  EXPECT_GE(made.layer->models().models(), 1u);
+  // The class map carries the layer: cells with P(trav), the lane ahead
+  // (within 1 m of the path, 2–8 m beyond the last pose) mostly traversable.
+  const TerrainClassMap& map = mapper.mapper->map();
+  constexpr double kEnd = 0.3 * kRevolutions;  // the last pose's x
+  std::uint64_t with_p = 0, called = 0, lane = 0, lane_called = 0;
+  const auto& g = map.grid();
+  for (std::int32_t y = 0; y < g.size_y(); ++y) {
+    for (std::int32_t x = 0; x < g.size_x(); ++x) {
+      const CellIndex i{g.origin().x + x, g.origin().y + y};
+      const TerrainCell& c = g.at(i);
+      if (c.traversable < 0.0f) continue;
+      ++with_p;
+      called += c.traversable > 0.5f ? 1u : 0u;
+      const WorldPoint p = g.cell_center(i);
+      if (p.x > kEnd + 2.0 && p.x < kEnd + 8.0 && std::abs(p.y) < 1.0) {
+        ++lane;
+        lane_called += c.traversable > 0.5f ? 1u : 0u;
+      }
+    }
+  }
+  EXPECT_GT(with_p, 1000u);
+  ASSERT_GT(lane, 20u);
+  std::printf("[ trav ] online: %llu cells with P(trav), %.3f of them called traversable; the lane ahead %.3f\n",
+              static_cast<unsigned long long>(with_p), static_cast<double>(called) / static_cast<double>(with_p),
+              static_cast<double>(lane_called) / static_cast<double>(lane));
+  // The two scans alternate under a made-up motion, so the world is smeared:
+  // the lane is not clean road everywhere. It is called traversable far more
+  // often than the map's cells at large.
+  const double lane_share = static_cast<double>(lane_called) / static_cast<double>(lane);
+  EXPECT_GT(lane_share, 0.7) << lane_called << " of " << lane;
+  EXPECT_GT(lane_share, 2.0 * static_cast<double>(called) / static_cast<double>(with_p));
+  // The file on disk: the trainer's models, under the profile's name, and
+  // no temporary file left beside it.
+  const LoadedTravModel loaded = load_trav_model(path);
+  ASSERT_TRUE(loaded.model) << loaded.error;
+  EXPECT_EQ(loaded.model->profile, "kitti-car");
+  const TravModelSet* set = loaded.model->set(FeatureSet::full);
+  ASSERT_NE(set, nullptr);
+  ASSERT_EQ(set->models.size(), trainer.models().models());
+  for (std::uint32_t m = 0; m < trainer.models().models(); ++m) {
+    EXPECT_EQ(set->models[m].total_positive(), trainer.models().counts(m).total_positive());
+    EXPECT_EQ(set->models[m].total_unlabelled(), trainer.models().counts(m).total_unlabelled());
+  }
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+  std::filesystem::remove_all(dir);
+}
+
+// A save that cannot happen (its directory is gone) is counted with its
+// errno and leaves nothing behind; the models stay in memory for the next.
+TEST(TravDemonstration, AFailedSaveIsCountedAndTheNextOneWrites) {
+  TrainedLayer t;
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("trav-save-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  Mailbox<LocalMapWords> local_maps(t.vocabulary.size());
+  Mailbox<TravModels> models(t.vocabulary, LearnerConfig{});
+  TravTrainer trainer(t.models, "large", (dir / "m.tntrav").string(), local_maps, models);
+  EXPECT_EQ(trainer.save(), ENOENT);
+  EXPECT_EQ(trainer.counters().save_failures, 1u);
+  EXPECT_EQ(trainer.counters().save_errno, ENOENT);
+  std::filesystem::create_directories(dir);
+  EXPECT_EQ(trainer.save(), 0);
+  const LoadedTravModel loaded = load_trav_model((dir / "m.tntrav").string());
+  ASSERT_TRUE(loaded.model) << loaded.error;
+  EXPECT_EQ(loaded.model->set(FeatureSet::full)->models.size(), 1u);
+  std::filesystem::remove_all(dir);
+}
+
+// The section of the robot config: its keys, a profile's footprint, and the
+// start models (a missing file only in demonstration mode; a file learnt for
+// another profile refused).
+TEST(TravDemonstration, TheConfigSectionAndTheStartModels) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("trav-cfg-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string file = (dir / "robot.yaml").string();
+  auto parse = [&](const std::string& text) {
+    std::ofstream(file) << text;
+    return parse_traversability_config(ConfigNode::load_file(file).map("traversability"));
+  };
+  TraversabilityConfig c = parse("traversability: {model: m.tntrav, method: pos, demonstration: {profile: small}}\n");
+  EXPECT_EQ(c.model, (dir / "m.tntrav").string());
+  EXPECT_EQ(c.method, Method::pos);
+  EXPECT_TRUE(c.demonstration);
+  EXPECT_DOUBLE_EQ(c.footprint.length, 0.6);
+  StartModels s = load_start_models(c);
+  ASSERT_TRUE(s.models) << s.error;
+  EXPECT_TRUE(s.created);
+  EXPECT_EQ(s.models->models(), 0u);
+  try {
+    parse("traversability: {model: m.tntrav, demonstration: {profile: rover}}\n");
+    ADD_FAILURE() << "a profile without footprint was taken";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("footprint"), std::string::npos) << e.what();
+  }
+  c = parse("traversability: {model: m.tntrav}\n");
+  EXPECT_NE(load_start_models(c).error.find("no such file"), std::string::npos);
+  ASSERT_TRUE(save_trav_model(c.model, trained_file()));
+  EXPECT_NE(load_start_models(c).error.find("no model of the full feature vector"), std::string::npos);
+  TravModelFile full = trained_file();
+  full.sets.front().vocabulary.set = FeatureSet::full;
+  full.sets.front().models.assign(2, WordCounts(Vocabulary(full.sets.front().vocabulary).size()));
+  full.sets.front().models[0].add(3, true, 40);
+  full.sets.front().models[1].add(5, false, 40);
+  ASSERT_TRUE(save_trav_model(c.model, full));
+  s = load_start_models(c);
+  ASSERT_TRUE(s.models) << s.error;
+  EXPECT_FALSE(s.created);
+  EXPECT_EQ(s.models->models(), 2u);
+  EXPECT_EQ(s.other_sets, 1u);
+  c = parse("traversability: {model: m.tntrav, demonstration: {profile: rover, footprint: {length_m: 2, width_m: 1}}}\n");
+  EXPECT_NE(load_start_models(c).error.find("not 'rover'"), std::string::npos) << load_start_models(c).error;
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

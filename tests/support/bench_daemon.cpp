@@ -105,7 +105,7 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
     error = "simulation: " + sr.error;
     return nullptr;
   }
-  if (options.navigation || options.mapping) {
+  if (options.navigation || options.mapping || !options.traversability.empty()) {
     auto loaded = eval::load_sim_truth(so.out + "/truth");
     if (!loaded.truth || loaded.truth->trajectory.empty()) {
       error = "truth: " + loaded.error;
@@ -141,7 +141,7 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
   b->config_ = b->dir_ / "robot.yaml";
   {
     std::ofstream c(b->config_);
-    const char* nav = options.navigation ? "true" : "false";
+    const char* nav = options.navigation || options.feed_pose ? "true" : "false";
     const auto serial_link = [&](const char* name, const char* baud, int k) {
       return options.serial_over_udp ? "udp:127.0.0.1:" + std::to_string(base + k)
                                      : "serial:" + (b->dir_ / name).string() + "@" + baud;
@@ -176,7 +176,11 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
       << "  - {name: terrain, kind: periodic, rate_hz: 20, budget_ms: 40.0}\n";
       if (options.navigation) c << "  - {name: navigation, kind: periodic, rate_hz: 10, budget_ms: 40.0}\n";
       if (options.mapping) c << "  - {name: mapping, kind: periodic, rate_hz: 2, budget_ms: 450.0}\n";
+      if (options.traversability.find("demonstration") != std::string::npos) {
+        c << "  - {name: demonstration, kind: periodic, rate_hz: 1, budget_ms: 100.0}\n";
+      }
     }
+    if (!options.traversability.empty()) c << "traversability: " << options.traversability << "\n";
     if (options.navigation) {
       char goal[120];
       std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", b->truth_.trajectory.back().lat, b->truth_.trajectory.back().lon);

@@ -51,6 +51,11 @@ struct BenchDaemonOptions {
   bool preset_tasks = false;
   // The online mapping task (a `mapping` section, re-optimised every 2 s).
   bool mapping = false;
+  // The pose moves the obstacle and terrain maps (as with navigation, without it).
+  bool feed_pose = false;
+  // A `traversability:` section (its flow mapping, e.g. "{model: /x.tntrav}");
+  // with `demonstration: {...}` in it the task table gets the demonstration task.
+  std::string traversability;
 };
 
 // A goal for orders: the vertex of the recording's world.osm farthest from
@@ -104,7 +109,7 @@ class BenchDaemon {
   std::uint32_t domain() const noexcept { return domain_; }
   const std::string& recording() const noexcept { return recording_; }
   const std::filesystem::path& config_path() const noexcept { return config_; }
-  // The simulated truth (loaded with navigation only).
+  // The simulated truth (loaded with navigation, mapping or traversability only).
   const eval::SimTruth& truth() const noexcept { return truth_; }
   pid_t pid() const noexcept { return pid_; }
 

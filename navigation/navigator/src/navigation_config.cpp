@@ -49,6 +49,9 @@ NavigationSection parse_navigation_section(const ConfigNode& n) {
     ac.corner_angle = a->number("corner_angle", 0.01, 3.14, ac.corner_angle);
     ac.separation = a->number("separation", 0.0, 4.0, ac.separation);
     ac.known_cells_only = a->choice("unknown_cells", {"other", "known-only"}, "other") == "known-only";
+    ac.cell_cost = a->choice("cell_cost", {"classes", "traversability"}, "classes") == "traversability"
+                       ? subgoals::AlignerConfig::CellCost::traversability
+                       : subgoals::AlignerConfig::CellCost::classes;
     ac.resample_below = a->number("resample_below", 0.0, 1.0, ac.resample_below);
     ac.seed = static_cast<std::uint64_t>(a->integer("seed", 0, std::numeric_limits<std::int64_t>::max(), 1));
     a->reject_unknown_keys();

@@ -302,6 +302,7 @@ void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) no
     counters_.cells_summed = 0;
     return;
   }
+  const bool learnt = config_.cell_cost == AlignerConfig::CellCost::traversability;
   // sat_[(y + 1) * (w + 1) + (x + 1)] = sum of f^E over [0, x] x [0, y].
   const auto stride = static_cast<std::size_t>(box_w_ + 1);
   std::fill(sat_.begin(), sat_.begin() + static_cast<std::ptrdiff_t>(stride), 0.0);
@@ -314,7 +315,12 @@ void SubgoalAligner::build_cost_table(const perception::TerrainClassMap& map) no
     sat_known_[base] = 0;
     for (std::int32_t x = 0; x < box_w_; ++x) {
       const perception::TerrainCell& c = grid.at({x0 + x, y0 + y});
-      if (c.known) {
+      if (learnt) {
+        if (c.traversable >= 0.0f) {
+          row += static_cast<double>(perception::traversability_cost(c, config_.unknown_cost));
+          ++row_known;
+        }
+      } else if (c.known) {
         row += static_cast<double>(perception::terrain_cost(c, config_.cost, config_.unknown_cost));
         ++row_known;
       }

@@ -90,6 +90,7 @@ void TerrainMapper::register_cloud(const RevolutionCloud& cloud) noexcept {
   robot_x_ = cloud.robot_x;
   robot_y_ = cloud.robot_y;
   time_ns_ = cloud.time_ns;
+  if (sums_sink_ != nullptr) sums_sink_->robot_pose(cloud.robot_x, cloud.robot_y, cloud.robot_yaw, cloud.time_ns);
   clock_offset_ns_ = cloud.clock_offset_ns;
   // Both grids follow the robot together, so a cell and its class share a
   // world index; cells leaving the map are forgotten by both.
@@ -183,6 +184,7 @@ void TerrainMapper::step(std::int64_t now_ns) noexcept {
   step_y_ = robot_y_;
   step_ns_ = now_ns;
   ++counters_.steps;
+  if (sums_sink_ != nullptr) sums_sink_->step_begins(robot_x_, robot_y_, now_ns, map_);
   const CellIndex o = work_.origin();
   const std::int32_t nx = work_.size_x(), ny = work_.size_y();
   constexpr std::int32_t kR = kAreaRadius;

@@ -7,7 +7,6 @@ namespace trailnav::perception::trav {
 
 TravLayer::Created TravLayer::create(const TravModels& models, Method method, double local_map_distance, double max_range,
                                      std::int32_t size_x, std::int32_t size_y, double resolution) {
-  if (models.models() == 0) return {nullptr, "the traversability model has no terrain model (train it first)"};
   if (models.models() > kLayerModels) {
     return {nullptr, "the traversability model has " + std::to_string(models.models()) + " terrain models; the layer holds " +
                          std::to_string(kLayerModels) + " (train with --max-models " + std::to_string(kLayerModels) + ")"};
@@ -22,7 +21,7 @@ TravLayer::Created TravLayer::create(const TravModels& models, Method method, do
 
 TravLayer::TravLayer(const TravModels& models, Method method, double local_map_distance, double max_range,
                      std::int32_t size_x, std::int32_t size_y, double resolution)
-    : models_(models),
+    : models_(&models),
       method_(method),
       local_map_distance_(local_map_distance),
       max_range_(max_range),
@@ -52,25 +51,36 @@ void TravLayer::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVe
   }
   Feature f;
   if (!cell_feature(sums, f, feature)) return;
-  const std::uint32_t word = models_.vocabulary().word(f);
+  const std::uint32_t word = models_->vocabulary().word(f);
   TravCell& c = grid_.at(cell);
-  if (c.words > 0 && c.local_map != local_map_) {
+  if (c.words > 0 && (c.local_map != local_map_ || c.models != models_epoch_)) {
     c = TravCell{};
     ++counters_.restarted;
   }
   c.local_map = local_map_;
+  c.models = models_epoch_;
   if (c.words < 0xFFFF) ++c.words;
-  for (std::uint32_t m = 0; m < models_.models(); ++m) c.pnb[m] += models_.pnb_log_ratio(m, word);
-  c.pos += models_.pos_log_ratio(word);
+  const std::uint32_t models = std::min(models_->models(), kLayerModels);
+  for (std::uint32_t m = 0; m < models; ++m) c.pnb[m] += models_->pnb_log_ratio(m, word);
+  c.pos += models_->pos_log_ratio(word);
   ++counters_.words;
+  if (map_ != nullptr) {
+    if (TerrainCell* t = map_->grid().find(x, y)) t->traversable = probability(c);
+  }
+}
+
+void TravLayer::step_begins(double robot_x, double robot_y, std::int64_t, TerrainClassMap& map) noexcept {
+  move_to(robot_x, robot_y);
+  map_ = &map;
 }
 
 float TravLayer::probability(const TravCell& c) const noexcept {
-  if (c.words == 0) return -1.0f;
-  if (method_ == Method::pos) return 1.0f / (1.0f + std::exp(-(models_.pos_prior_logit() + c.pos)));
+  const std::uint32_t models = std::min(models_->models(), kLayerModels);
+  if (c.words == 0 || models == 0) return -1.0f;
+  if (method_ == Method::pos) return 1.0f / (1.0f + std::exp(-(models_->pos_prior_logit() + c.pos)));
   float best = 0.0f;
-  for (std::uint32_t m = 0; m < models_.models(); ++m) {
-    best = std::max(best, 1.0f / (1.0f + std::exp(-(models_.pnb_prior_logit(m) + c.pnb[m]))));  // Eq. 6.16
+  for (std::uint32_t m = 0; m < models; ++m) {
+    best = std::max(best, 1.0f / (1.0f + std::exp(-(models_->pnb_prior_logit(m) + c.pnb[m]))));  // Eq. 6.16
   }
   return best;
 }

@@ -1,13 +1,13 @@
 #include "trailnav/perception/trav_model_file.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
 #include <zlib.h>
 
 #include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <iterator>
+
+#include "trailnav/runtime/atomic_file.hpp"
 
 namespace trailnav::perception::trav {
 namespace {
@@ -82,66 +82,82 @@ const TravModelSet* TravModelFile::set(FeatureSet s) const noexcept {
   return nullptr;
 }
 
-std::vector<std::uint8_t> serialize_trav_model(const TravModelFile& m) {
-  std::vector<std::uint8_t> out(std::begin(kMagic), std::end(kMagic));
-  put_u32(out, kModelFileVersion);
-  put_u32(out, static_cast<std::uint32_t>(m.profile.size()));
-  out.insert(out.end(), m.profile.begin(), m.profile.end());
-  put_u32(out, static_cast<std::uint32_t>(m.sets.size()));
-  for (const TravModelSet& t : m.sets) {
-    put_u32(out, static_cast<std::uint32_t>(t.vocabulary.set));
-    for (const Binning& b : t.vocabulary.bins) {
-      put_f32(out, b.width);
-      put_u32(out, b.bins);
-    }
-    const LearnerConfig& l = t.learner;
-    for (double d : {l.alpha_p, l.alpha_n, l.epsilon, l.chi2_alpha, l.min_expected, l.prior}) put_f64(out, d);
-    put_u32(out, l.max_models);
-    put_u32(out, static_cast<std::uint32_t>(t.models.size()));
-    for (const WordCounts& k : t.models) {
-      put_u64(out, k.total_positive());
-      put_u64(out, k.total_unlabelled());
-      std::uint32_t entries = 0;
-      for (std::uint32_t w = 0; w < k.vocabulary(); ++w) entries += (k.positive(w) != 0 || k.unlabelled(w) != 0) ? 1u : 0u;
-      put_u32(out, entries);
-      for (std::uint32_t w = 0; w < k.vocabulary(); ++w) {
-        if (k.positive(w) == 0 && k.unlabelled(w) == 0) continue;
-        put_u32(out, w);
-        put_u32(out, k.positive(w));
-        put_u32(out, k.unlabelled(w));
-      }
+namespace {
+
+// One feature set: its vocabulary, learner settings and `count` models'
+// counts (model(i) gives the i-th). Appends only: no allocation when `out`
+// has the room (trav_model_bound()).
+template <typename Model>
+void put_set(std::vector<std::uint8_t>& out, const VocabularyConfig& vocabulary, const LearnerConfig& l,
+             std::uint32_t count, const Model& model) noexcept {
+  put_u32(out, static_cast<std::uint32_t>(vocabulary.set));
+  for (const Binning& b : vocabulary.bins) {
+    put_f32(out, b.width);
+    put_u32(out, b.bins);
+  }
+  for (double d : {l.alpha_p, l.alpha_n, l.epsilon, l.chi2_alpha, l.min_expected, l.prior}) put_f64(out, d);
+  put_u32(out, l.max_models);
+  put_u32(out, count);
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const WordCounts& k = model(i);
+    put_u64(out, k.total_positive());
+    put_u64(out, k.total_unlabelled());
+    std::uint32_t entries = 0;
+    for (std::uint32_t w = 0; w < k.vocabulary(); ++w) entries += (k.positive(w) != 0 || k.unlabelled(w) != 0) ? 1u : 0u;
+    put_u32(out, entries);
+    for (std::uint32_t w = 0; w < k.vocabulary(); ++w) {
+      if (k.positive(w) == 0 && k.unlabelled(w) == 0) continue;
+      put_u32(out, w);
+      put_u32(out, k.positive(w));
+      put_u32(out, k.unlabelled(w));
     }
   }
+}
+
+void put_header(std::vector<std::uint8_t>& out, std::string_view profile, std::uint32_t sets) noexcept {
+  out.insert(out.end(), std::begin(kMagic), std::end(kMagic));
+  put_u32(out, kModelFileVersion);
+  put_u32(out, static_cast<std::uint32_t>(profile.size()));
+  out.insert(out.end(), profile.begin(), profile.end());
+  put_u32(out, sets);
+}
+
+void put_crc(std::vector<std::uint8_t>& out) noexcept {
   put_u32(out, static_cast<std::uint32_t>(crc32(0L, out.data(), static_cast<uInt>(out.size()))));
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> serialize_trav_model(const TravModelFile& m) {
+  std::vector<std::uint8_t> out;
+  put_header(out, m.profile, static_cast<std::uint32_t>(m.sets.size()));
+  for (const TravModelSet& t : m.sets) {
+    put_set(out, t.vocabulary, t.learner, static_cast<std::uint32_t>(t.models.size()),
+            [&](std::uint32_t i) -> const WordCounts& { return t.models[i]; });
+  }
+  put_crc(out);
   return out;
+}
+
+std::size_t trav_model_bound(std::size_t profile, std::uint32_t vocabulary, std::uint32_t models) noexcept {
+  const std::size_t header = sizeof kMagic + 4 + 4 + profile + 4;
+  const std::size_t set = 4 + kDims * 8 + 6 * 8 + 4 + 4;
+  const std::size_t model = 8 + 8 + 4 + static_cast<std::size_t>(vocabulary) * 12;
+  return header + set + static_cast<std::size_t>(models) * model + 4;
+}
+
+void serialize_trav_models(std::string_view profile, const TravModels& models, std::vector<std::uint8_t>& out) noexcept {
+  out.clear();
+  put_header(out, profile, 1);
+  put_set(out, models.vocabulary().config(), models.config(), models.models(),
+          [&](std::uint32_t i) -> const WordCounts& { return models.counts(i); });
+  put_crc(out);
 }
 
 Status save_trav_model(const std::string& path, const TravModelFile& model) {
   const std::vector<std::uint8_t> bytes = serialize_trav_model(model);
-  const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return Status::error("cannot write " + path + ": " + std::strerror(errno));
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const std::string why = std::strerror(errno);
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      return Status::error("cannot write " + path + ": " + why);
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
-    const std::string why = std::strerror(errno);
-    ::unlink(tmp.c_str());
-    return Status::error("cannot write " + path + ": " + why);
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    ::unlink(tmp.c_str());
-    return Status::error("cannot write " + path + ": " + why);
+  if (const int e = AtomicFile(path).write(bytes); e != 0) {
+    return Status::error("cannot write " + path + ": " + std::strerror(e));
   }
   return Status::ok();
 }

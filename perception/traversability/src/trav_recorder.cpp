@@ -5,6 +5,13 @@
 
 namespace trailnav::perception::trav {
 
+std::optional<Footprint> builtin_footprint(std::string_view profile) noexcept {
+  if (profile == "large") return Footprint{1.2, 0.8, 0.0};
+  if (profile == "small") return Footprint{0.6, 0.45, 0.0};
+  return std::nullopt;
+}
+
+
 std::string check_recorder(const RecorderConfig& c) {
   if (!(c.local_map_distance > 0.0) || !std::isfinite(c.local_map_distance)) return "local_map_distance must be positive";
   if (!(c.max_range > 0.0) || !std::isfinite(c.max_range)) return "max_range must be positive";

@@ -30,6 +30,10 @@ struct TerrainCell {
   std::array<float, kTerrainClasses> p{};  // P(t | f_1..f_n); sums to 1 when known
   TerrainClass best = TerrainClass::other;  // argmax of p
   bool known = false;
+  // The learnt traversability layer's P(trav | f_1..n) for this robot
+  // (thesis ch. 6, perception/traversability), written by the terrain step
+  // when trailnavd runs one; negative: no evidence (or no layer).
+  float traversable = -1.0f;
 
   // Sets the distribution (normalised here) and its argmax.
   void set(const std::array<float, kTerrainClasses>& distribution) noexcept;
@@ -43,6 +47,12 @@ inline float terrain_cost(const TerrainCell& c, const std::array<float, kTerrain
   float sum = 0.0f;
   for (std::size_t t = 0; t < cost.size(); ++t) sum += c.p[t] * cost[t];
   return sum;
+}
+
+// The learnt layer's cost of a cell for the subgoal aligner: 1 − P(trav),
+// `unknown_cost` where the layer has no evidence.
+inline float traversability_cost(const TerrainCell& c, float unknown_cost) noexcept {
+  return c.traversable < 0.0f ? unknown_cost : 1.0f - c.traversable;
 }
 
 struct TerrainMapShape {

@@ -64,6 +64,14 @@ class CellSumsSink {
   // sums get none), so that a sink need not find the eigenvalues again.
   virtual void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
                          double y) noexcept = 0;
+  // Each registered revolution: the robot's pose at its end (odometry frame,
+  // the revolution's lidar clock) — a demonstration's footprint.
+  virtual void robot_pose(double /*x*/, double /*y*/, double /*yaw*/, std::int64_t /*time_ns*/) noexcept {}
+  // Before a step hands over its cells: the robot's position then and the
+  // class map the step updates; a sink may write the `traversable` of the
+  // map's cells (its own layer) while it is handed their sums.
+  virtual void step_begins(double /*robot_x*/, double /*robot_y*/, std::int64_t /*now_ns*/,
+                           TerrainClassMap& /*map*/) noexcept {}
 };
 
 // Per cell of the registration grid.

@@ -13,6 +13,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "trailnav/perception/trav_learner.hpp"
@@ -40,6 +41,14 @@ struct TravModelFile {
 // check_learner, counts over |V|, at most max_models).
 std::vector<std::uint8_t> serialize_trav_model(const TravModelFile& model);
 Status save_trav_model(const std::string& path, const TravModelFile& model);
+
+// The largest file of one feature set of `models` models over a vocabulary
+// of that size, with a profile name of `profile` characters.
+std::size_t trav_model_bound(std::size_t profile, std::uint32_t vocabulary, std::uint32_t models) noexcept;
+// The file of live models (one feature set, their own), into `out` (cleared
+// first): no allocation when out's capacity is trav_model_bound() of them
+// (a demonstration saving on a thread the allocation guard watches).
+void serialize_trav_models(std::string_view profile, const TravModels& models, std::vector<std::uint8_t>& out) noexcept;
 
 struct LoadedTravModel {
   std::optional<TravModelFile> model;

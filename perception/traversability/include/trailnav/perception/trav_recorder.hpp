@@ -9,6 +9,8 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
+#include <string_view>
 #include <span>
 #include <vector>
 
@@ -25,6 +27,10 @@ struct Footprint {
   double width = 0.7;
   double forward = 0.0;
 };
+
+// The built-in robot profiles' footprints: "large" (Viona's class, 1.2 x
+// 0.8 m) and "small" (Obelix's class, 0.6 x 0.45 m); nothing for another name.
+std::optional<Footprint> builtin_footprint(std::string_view profile) noexcept;
 
 struct RecorderConfig {
   double local_map_distance = 20.0;  // d_M, m driven

@@ -69,6 +69,11 @@ struct AlignerConfig {
   double sigma_across = 4.0;         // m, Sigma_0 across it
   std::array<float, perception::kTerrainClasses> cost{0.1f, 0.2f, 0.4f, 0.8f, 1.0f};  // §8.4.1
   float unknown_cost = 1.0f;         // cells without observations: as `other`
+  // What a cell costs: its class distribution weighted by `cost` (§8.1.2),
+  // or 1 − P(trav) of the robot's learnt traversability layer (thesis ch. 6,
+  // TerrainCell::traversable; cells without its evidence are unknown).
+  enum class CellCost : std::uint8_t { classes, traversability };
+  CellCost cell_cost = CellCost::classes;
   // true: a patch's cost is the mean over its known cells (unknown_cost only
   // when none is known), so gaps between lidar rings ahead do not pull the
   // subgoals back towards the robot; false: unknown cells count as
