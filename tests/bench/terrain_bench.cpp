@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <random>
 #include <stdexcept>
@@ -17,7 +18,9 @@
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/perception/trav_layer.hpp"
+#include "trailnav/perception/trav_model_file.hpp"
 #include "trailnav/perception/trav_recorder.hpp"
+#include "trailnav/runtime/atomic_file.hpp"
 
 namespace {
 
@@ -181,6 +184,51 @@ void BM_TravWords(benchmark::State& state) {
   state.counters["models"] = static_cast<double>(models.models());
 }
 BENCHMARK(BM_TravWords)->ArgName("classify")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The demonstration task's work per local map (trailnavd's `demonstration`
+// task, docs/traversability.md "On the robot"): a local map of 60 000 words
+// (20 m of driving: 40 steps of about 1 500 cells) with 2 % positives,
+// trained into models that already hold `models` terrain models (the χ²
+// test against each, the merge, the tables recomputed), then (`save`) the
+// model serialised and written with AtomicFile to /tmp (fsync included:
+// the disk's speed, not the CPU's, decides that part).
+void BM_TravTrainLocalMap(benchmark::State& state) {
+  const trav::Vocabulary vocabulary{trav::VocabularyConfig{}};
+  trav::LearnerConfig lc;
+  lc.max_models = 8;
+  trav::TravModels start(vocabulary, lc);
+  std::mt19937 rng(6);
+  const auto held = static_cast<std::uint32_t>(state.range(0));
+  std::vector<trav::WordCounts> counts;
+  for (std::uint32_t m = 0; m < held; ++m) {
+    counts.emplace_back(vocabulary.size());
+    std::uniform_int_distribution<std::uint32_t> word(m * 200, m * 200 + 400);
+    for (int k = 0; k < 60'000; ++k) counts.back().add(word(rng) % vocabulary.size(), k % 50 == 0);
+  }
+  start.set_models(counts);
+  trav::WordCounts local(vocabulary.size());
+  std::uniform_int_distribution<std::uint32_t> word(0, 600);
+  for (int k = 0; k < 60'000; ++k) local.add(word(rng), k % 50 == 0);
+  const bool save = state.range(1) != 0;
+  const AtomicFile file((std::filesystem::temp_directory_path() / "trailnav-bench-trav.tntrav").string());
+  std::vector<std::uint8_t> bytes;
+  bytes.reserve(trav::trav_model_bound(8, vocabulary.size(), lc.max_models));
+  trav::TravModels models = start;
+  for (auto _ : state) {
+    state.PauseTiming();
+    models = start;
+    state.ResumeTiming();
+    benchmark::DoNotOptimize(models.train(local));
+    if (save) {
+      trav::serialize_trav_models("bench", models, bytes);
+      if (file.write(bytes) != 0) throw std::runtime_error("cannot write " + file.path());
+    }
+  }
+  state.counters["models"] = static_cast<double>(models.models());
+  if (save) state.counters["bytes"] = static_cast<double>(bytes.size());
+  std::filesystem::remove(file.path());
+}
+BENCHMARK(BM_TravTrainLocalMap)->ArgNames({"models", "save"})->Args({1, 0})->Args({8, 0})->Args({8, 1})->Unit(benchmark::kMillisecond);
 
 // Fills cells with 20 points each (random surfaces and remissions): every
 // cell of the grid, or (`reachable`) every cell the lidar can have reached
