@@ -235,7 +235,15 @@ int run_echo(const EchoOptions& o) {
         const std::string path = (fs::path(o.png_dir) / (base + name)).string();
         Status st;
         if (r.type == &nav_msgs_msg_dds__OccupancyGrid__desc) {
-          st = write_occupancy_png(path, *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample), o.topic);
+          const auto& grid = *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample);
+          if (o.topic.find("traversability") != std::string::npos) {
+            st = write_cost_png(path, grid, o.topic, "100 (1 - P(trav)) of the learnt layer", "0: traversable",
+                                "100: not traversable");
+          } else if (o.topic.find("terrain_cost") != std::string::npos) {
+            st = write_cost_png(path, grid, o.topic, "the expected class cost x 100");
+          } else {
+            st = write_occupancy_png(path, grid, o.topic);
+          }
           ++pngs;
         } else if (r.type == &trailnav_msgs_msg_dds__TerrainClassMap__desc) {
           st = write_terrain_png(path, *static_cast<const trailnav_msgs_msg_dds__TerrainClassMap_*>(r.sample), o.topic);
@@ -268,13 +276,13 @@ void add_echo_command(CLI::App& app) {
   auto* cmd = app.add_subcommand("echo",
                                  "Print what arrives on a trailnavd topic (DDS, ROS 2 naming): one line per sample with "
                                  "its size and latency, then rate and latency percentiles; save maps as PNG.\n"
-                                 "Topics: trailnav/obstacle_map, trailnav/terrain_map, trailnav/terrain_cost, trailnav/pose, "
+                                 "Topics: trailnav/obstacle_map, trailnav/terrain_map, trailnav/terrain_cost, trailnav/traversability, trailnav/pose, "
                                  "trailnav/utm_pose, trailnav/fix, trailnav/subgoal, trailnav/subgoal_path, "
                                  "trailnav/navigation_status, tf, tf_static, odom, diagnostics, and when configured "
                                  "trailnav/obstacle_map_coarse and trailnav/points; and the order topics "
                                  "trailnav/goal, trailnav/geo_goal, trailnav/cancel (docs/dds.md). Exit 1 when nothing arrived.");
   cmd->add_option("topic", o->topic, "Topic name without the rt/ prefix, e.g. trailnav/obstacle_map")->required();
-  cmd->add_option("--png", o->png_dir, "Save every map (obstacle map, terrain map) as DIR/<topic>-<n>.png");
+  cmd->add_option("--png", o->png_dir, "Save every map (obstacle map, terrain map, cost layers) as DIR/<topic>-<n>.png");
   cmd->add_option("--count", o->count, "Stop after this many samples (0: until Ctrl-C or silence)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--timeout", o->timeout, "Seconds to wait for a writer, and of silence before stopping")
       ->capture_default_str()->check(CLI::PositiveNumber);

@@ -73,6 +73,45 @@ Status write_occupancy_png(const std::string& path, const nav_msgs_msg_dds__Occu
   return write_map_figure(path, rgb, static_cast<int>(w), static_cast<int>(h), figure);
 }
 
+Rgb cost_color(int v) noexcept {
+  if (v < 0) return kUnknown;
+  // Green (0) through yellow (50) to red (100).
+  const int c = std::min(v, 100);
+  if (c <= 50) return {static_cast<std::uint8_t>(40 + (c * 200) / 50), 190, 60};
+  return {240, static_cast<std::uint8_t>(190 - ((c - 50) * 170) / 50), 60};
+}
+
+std::vector<LegendEntry> cost_legend(std::string_view low, std::string_view high) {
+  return {{cost_color(0), std::string(low)},
+          {cost_color(25), "25"},
+          {cost_color(50), "50"},
+          {cost_color(75), "75"},
+          {cost_color(100), std::string(high)},
+          {kUnknown, "unknown (no evidence)"}};
+}
+
+Status write_cost_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g, std::string_view title,
+                      std::string_view note, std::string_view low, std::string_view high) {
+  const std::uint32_t w = g.info.width, h = g.info.height;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
+  for (std::uint32_t row = 0; row < h; ++row) {
+    const std::uint32_t y = h - 1 - row;
+    for (std::uint32_t x = 0; x < w; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      const Rgb c = cost_color(i < g.data._length ? g.data._buffer[i] : -1);
+      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
+      px[0] = c.r, px[1] = c.g, px[2] = c.b;
+    }
+  }
+  MapFigure figure;
+  figure.title = std::string(title);
+  figure.notes = {stamp_note(g.header.frame_id, g.header.stamp.sec, g.header.stamp.nanosec),
+                  grid_note(w, h, g.info.resolution), std::string(note) + ", north up"};
+  figure.legend = cost_legend(low, high);
+  figure.metres_per_pixel = g.info.resolution;
+  return write_map_figure(path, rgb, static_cast<int>(w), static_cast<int>(h), figure);
+}
+
 Status write_class_png(const std::string& path, std::uint32_t w, std::uint32_t h, const std::uint8_t* class_id,
                        const MapFigure& figure) {
   std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);

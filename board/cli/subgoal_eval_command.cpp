@@ -2,10 +2,12 @@
 // simulated recordings (board/eval/subgoal_eval.hpp): RMSE of raw OSM
 // subgoals and of corrected ones per sample count and sequence length K
 // (mean over seeds, Fig. 8.5), and junction success rates (Fig. 8.7).
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -14,6 +16,7 @@
 #include "commands.hpp"
 #include "subgoal_eval.hpp"
 #include "terminal.hpp"
+#include "trailnav/perception/trav_config.hpp"
 #include "trailnav/runtime/config.hpp"
 
 namespace trailnav::cli {
@@ -29,6 +32,9 @@ struct SubgoalEvalCli {
   eval::SubgoalEvalOptions options;
   bool quiet = false;
   std::string unknown_cells = "other";
+  std::vector<std::string> costs{"classes"};
+  std::string trav_model;
+  std::string trav_method = "pnb";
 };
 
 int run_eval(SubgoalEvalCli& c) {
@@ -70,6 +76,28 @@ int run_eval(SubgoalEvalCli& c) {
   }
   o.forest = &*forest;
   o.forest_name = model_name;
+  // The learnt traversability cost (docs/traversability.md "On the robot"): its model's full feature set.
+  o.costs.clear();
+  for (const std::string& name : c.costs) {
+    o.costs.push_back(name == "traversability" ? subgoals::AlignerConfig::CellCost::traversability
+                                               : subgoals::AlignerConfig::CellCost::classes);
+  }
+  std::unique_ptr<perception::trav::TravModels> trav_models;
+  if (!c.trav_model.empty()) {
+    perception::trav::TraversabilityConfig tc;
+    tc.model = c.trav_model;
+    auto start = perception::trav::load_start_models(tc);
+    if (!start.models) {
+      std::fprintf(stderr, "%s: --trav-model: %s\n", who, start.error.c_str());
+      return 1;
+    }
+    trav_models = std::move(start.models);
+    o.trav_models = trav_models.get();
+    o.trav_method = c.trav_method == "pos" ? perception::trav::Method::pos : perception::trav::Method::pnb;
+  } else if (std::find(c.costs.begin(), c.costs.end(), "traversability") != c.costs.end()) {
+    std::fprintf(stderr, "%s: --cell-cost traversability needs --trav-model MODEL (trailnav trav-train)\n", who);
+    return 2;
+  }
   std::map<std::string, std::unique_ptr<ProgressBar>> bars;
   std::string current;
   if (!c.quiet) {
@@ -92,16 +120,22 @@ int run_eval(SubgoalEvalCli& c) {
               "terrain model %s; %d seeds per setting; error = Eq. 8.15 (distance to the true path - %.1f m)\n\n",
               c.recordings.size(), r.route_length, r.subgoals_sent, model_name.c_str(), c.seeds, 0.5 * o.street_width);
   std::printf("raw OpenStreetMap subgoals: RMSE %.2f m (max %.2f m)\n\n", r.raw_rmse, r.raw_max);
-  std::printf("corrected, mean RMSE over seeds [m] (reduction against raw)\n%8s", "samples");
-  for (int k : c.sequences) std::printf("        K=%d     ", k);
-  std::printf("\n");
-  for (std::size_t s : c.samples) {
-    std::printf("%8zu", s);
-    for (int k : c.sequences) {
-      for (const auto& cr : r.configs) {
-        if (cr.samples == s && cr.sequence == k)
-          std::printf("  %5.2f (%+4.0f%%) ", cr.mean_rmse, r.raw_rmse > 0 ? 100.0 * (cr.mean_rmse / r.raw_rmse - 1.0) : 0.0);
+  for (const auto cost : o.costs) {
+    std::printf("corrected, cell cost %s%s, mean RMSE over seeds [m] (reduction against raw)\n%8s",
+                eval::cell_cost_name(cost),
+                cost == subgoals::AlignerConfig::CellCost::traversability ? (" of " + c.trav_model).c_str() : "",
+                "samples");
+    for (int k : c.sequences) std::printf("        K=%d     ", k);
+    std::printf("\n");
+    for (std::size_t s : c.samples) {
+      std::printf("%8zu", s);
+      for (int k : c.sequences) {
+        for (const auto& cr : r.configs) {
+          if (cr.cost == cost && cr.samples == s && cr.sequence == k)
+            std::printf("  %5.2f (%+4.0f%%) ", cr.mean_rmse, r.raw_rmse > 0 ? 100.0 * (cr.mean_rmse / r.raw_rmse - 1.0) : 0.0);
+        }
       }
+      std::printf("\n");
     }
     std::printf("\n");
   }
@@ -110,12 +144,15 @@ int run_eval(SubgoalEvalCli& c) {
                 c.seeds, o.junction_tolerance);
     for (std::size_t j = 0; j < r.junctions.size(); ++j) {
       std::printf("  %s   raw %s\n", r.junctions[j].c_str(), r.raw_junction_ok[j] ? "ok" : "off");
-      for (std::size_t s : c.samples) {
-        std::printf("    %6zu samples:", s);
-        for (int k : c.sequences)
-          for (const auto& cr : r.configs)
-            if (cr.samples == s && cr.sequence == k) std::printf("  K=%d %2d/%d", k, cr.junction_successes[j], c.seeds);
-        std::printf("\n");
+      for (const auto cost : o.costs) {
+        for (std::size_t s : c.samples) {
+          std::printf("    %-14s %6zu samples:", eval::cell_cost_name(cost), s);
+          for (int k : c.sequences)
+            for (const auto& cr : r.configs)
+              if (cr.cost == cost && cr.samples == s && cr.sequence == k)
+                std::printf("  K=%d %2d/%d", k, cr.junction_successes[j], c.seeds);
+          std::printf("\n");
+        }
       }
     }
   }
@@ -169,6 +206,16 @@ void add_subgoal_eval_command(CLI::App& app) {
                   "How a patch treats cells without observations: known-only (mean over the known cells) or other\n"
                   "(each costs unknown_cost, the thesis' reading)")
       ->check(CLI::IsMember({"known-only", "other"}))
+      ->capture_default_str();
+  cmd->add_option("--cell-cost", c.costs,
+                  "What a cell costs the aligner, one setting or both side by side (comma-separated): classes (the\n"
+                  "class costs of the terrain section) or traversability (1 - P(trav) of the learnt layer: --trav-model)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"classes", "traversability"}))
+      ->capture_default_str();
+  cmd->add_option("--trav-model", c.trav_model, "Traversability model (.tntrav, trailnav trav-train) for --cell-cost traversability");
+  cmd->add_option("--trav-method", c.trav_method, "Its learner: pnb or pos")
+      ->check(CLI::IsMember({"pnb", "pos"}))
       ->capture_default_str();
   cmd->add_option("--csv", c.options.csv, "Also write every sent subgoal (raw and each setting's first seed) to this CSV");
   cmd->add_flag("-q,--quiet", c.quiet, "No progress bars");

@@ -14,6 +14,7 @@
 #include "roads.hpp"
 #include "sim_truth.hpp"
 #include "terrain_run.hpp"
+#include "trailnav/perception/trav_layer.hpp"
 #include "trailnav/navigation/navigator/navigator.hpp"
 
 namespace trailnav::eval {
@@ -63,6 +64,10 @@ struct Run {
 
 }  // namespace
 
+const char* cell_cost_name(subgoals::AlignerConfig::CellCost cost) noexcept {
+  return cost == subgoals::AlignerConfig::CellCost::traversability ? "traversability" : "classes";
+}
+
 SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
   SubgoalEvalReport report;
   auto fail = [&](std::string e) {
@@ -72,16 +77,23 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
   if (o.recordings.empty()) return fail("no recordings given");
   if (o.forest == nullptr) return fail("no terrain model");
   if (o.seeds < 1) return fail("at least one seed is needed");
-  for (std::size_t s : o.samples) {
-    for (int k : o.sequences) {
-      subgoals::AlignerConfig c = o.navigator.aligner;
-      c.samples = s;
-      c.sequence = k;
-      if (std::string e = subgoals::check_aligner_config(c); !e.empty()) return fail("aligner: " + e);
-      SubgoalConfigResult r;
-      r.samples = s;
-      r.sequence = k;
-      report.configs.push_back(r);
+  using CellCost = subgoals::AlignerConfig::CellCost;
+  const bool learnt = std::find(o.costs.begin(), o.costs.end(), CellCost::traversability) != o.costs.end();
+  if (o.costs.empty()) return fail("no cell cost to align with");
+  if (learnt && o.trav_models == nullptr) return fail("the traversability cost needs a traversability model");
+  for (CellCost cost : o.costs) {
+    for (std::size_t s : o.samples) {
+      for (int k : o.sequences) {
+        subgoals::AlignerConfig c = o.navigator.aligner;
+        c.samples = s;
+        c.sequence = k;
+        if (std::string e = subgoals::check_aligner_config(c); !e.empty()) return fail("aligner: " + e);
+        SubgoalConfigResult r;
+        r.cost = cost;
+        r.samples = s;
+        r.sequence = k;
+        report.configs.push_back(r);
+      }
     }
   }
   double raw_sq = 0.0;
@@ -92,7 +104,11 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
     csv = std::fopen(o.csv.c_str(), "w");
     if (csv == nullptr) return fail("cannot write " + o.csv);
     std::fprintf(csv, "recording,subgoal,true_arc,raw_x,raw_y,raw_error");
-    for (const auto& c : report.configs) std::fprintf(csv, ",x_%zu_k%d,y_%zu_k%d,error_%zu_k%d", c.samples, c.sequence, c.samples, c.sequence, c.samples, c.sequence);
+    for (const auto& c : report.configs) {
+      const char* n = c.cost == CellCost::classes ? "" : "_trav";
+      std::fprintf(csv, ",x_%zu_k%d%s,y_%zu_k%d%s,error_%zu_k%d%s", c.samples, c.sequence, n, c.samples, c.sequence, n,
+                   c.samples, c.sequence, n);
+    }
     std::fprintf(csv, "\n");
   }
   struct CsvCloser {
@@ -150,6 +166,7 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
         nc.aligner.seed = static_cast<std::uint64_t>(seed);
         nc.aligner.cost = o.terrain.cost;
         nc.aligner.unknown_cost = o.terrain.unknown_cost;
+        nc.aligner.cell_cost = report.configs[c].cost;
         auto made = nav::Navigator::create(graph, nc, o.terrain.map);
         if (!made.navigator) return fail(rec + ": " + made.error);
         Run r;
@@ -170,8 +187,16 @@ SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& o) {
       return arc >= junctions[j].arc - o.junction_before && arc <= junctions[j].arc + o.junction_after;
     };
 
+    std::unique_ptr<perception::trav::TravLayer> layer;
+    if (learnt) {
+      auto made = perception::trav::TravLayer::create(*o.trav_models, o.trav_method, o.trav_local_map, o.trav_max_range,
+                                                      o.terrain.map.size_x, o.terrain.map.size_y, o.terrain.map.resolution);
+      if (!made.layer) return fail("traversability: " + made.error);
+      layer = std::move(made.layer);
+    }
     TerrainRunOptions tr;
     tr.input = rec;
+    tr.sums_sink = layer.get();
     tr.config = o.terrain;
     tr.forest = o.forest;
     tr.forest_name = o.forest_name;

@@ -32,6 +32,7 @@
 #include "trailnav/navigation/navigator/navigator.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_config.hpp"
+#include "trailnav/perception/trav_learner.hpp"
 
 namespace trailnav::eval {
 
@@ -46,6 +47,15 @@ struct SubgoalEvalOptions {
   perception::TerrainConfig terrain;
   const perception::RandomForest* forest = nullptr;
   std::string forest_name = "the terrain model";  // its file, for errors
+  // The cells' costs the aligner is run with, side by side in lockstep on the
+  // same maps: the class costs (terrain.cost) and/or the learnt
+  // traversability layer's 1 − P(trav), which needs `trav_models`
+  // (docs/traversability.md): its layer runs on the terrain steps as in
+  // trailnavd's terrain thread.
+  std::vector<subgoals::AlignerConfig::CellCost> costs{subgoals::AlignerConfig::CellCost::classes};
+  const perception::trav::TravModels* trav_models = nullptr;
+  perception::trav::Method trav_method = perception::trav::Method::pnb;
+  double trav_local_map = 20.0, trav_max_range = 20.0;
   osm::RoutingProfile profile;
   double street_width = 3.0;  // s of Eq. 8.15
   double junction_before = 8.0, junction_after = 12.0;  // m of route around a junction
@@ -56,6 +66,7 @@ struct SubgoalEvalOptions {
 };
 
 struct SubgoalConfigResult {
+  subgoals::AlignerConfig::CellCost cost = subgoals::AlignerConfig::CellCost::classes;
   std::size_t samples = 0;
   int sequence = 0;
   std::vector<double> rmse;  // per seed
@@ -78,5 +89,8 @@ struct SubgoalEvalReport {
 };
 
 SubgoalEvalReport evaluate_subgoals(const SubgoalEvalOptions& options);
+
+// "classes" or "traversability".
+const char* cell_cost_name(subgoals::AlignerConfig::CellCost cost) noexcept;
 
 }  // namespace trailnav::eval

@@ -117,6 +117,7 @@ TerrainRunReport run_terrain(const TerrainRunOptions& options) {
   perception::TerrainMapper& mapper = *made.mapper;
   Scorer scorer(truth, options.config.map.resolution, report, options.collect_samples, options.forest != nullptr);
   mapper.set_observer(&scorer);
+  mapper.set_sums_sink(options.sums_sink);
   perception::PoseTrack poses(truth.trajectory.size() + 1);
   fill_pose_track(truth, poses);
 

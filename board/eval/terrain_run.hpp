@@ -37,6 +37,8 @@ struct TerrainRunOptions {
   std::function<void(double)> progress;
   // Called after every revolution (the obstacle run with estimated classes uses the map).
   std::function<void(const perception::TerrainMapper&, bool stepped)> on_revolution;
+  // Optional: the mapper's sums sink (a traversability layer); it must outlive the run.
+  perception::CellSumsSink* sums_sink = nullptr;
 };
 
 struct TerrainRunReport {
