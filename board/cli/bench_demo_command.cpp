@@ -212,6 +212,20 @@ int run_bench_demo(const BenchDemoOptions& o) {
     std::ofstream file(out / "terrain-sim.tnrf", std::ios::binary);
     file.write(reinterpret_cast<const char*>(terrain_model.data()), static_cast<std::streamsize>(terrain_model.size()));
   }
+  // The traversability layer's model was learnt from a VLP-16's demonstration
+  // (its remission words are that lidar's): with another lidar the demo runs
+  // without the layer.
+  const bool traversability = *lidar == velodyne::Model::vlp16;
+  if (traversability) {
+    replace_all(config, "../models/trav-large.tntrav", "trav-large.tntrav");
+    const std::span<const std::uint8_t> trav = builtin_traversability_model();
+    std::ofstream file(out / "trav-large.tntrav", std::ios::binary);
+    file.write(reinterpret_cast<const char*>(trav.data()), static_cast<std::streamsize>(trav.size()));
+  } else {
+    const std::size_t from = config.find("\ntraversability:");
+    const std::size_t to = from == std::string::npos ? from : config.find("\n\n", from + 1);
+    if (from != std::string::npos && to != std::string::npos) config.erase(from + 1, to - from);
+  }
   if (*lidar != velodyne::Model::vlp16) {
     // The lidar the recording has, and the calibration it was simulated with.
     replace_all(config, "  model: VLP-16", "  model: " + std::string(velodyne::model_info(*lidar).name));
@@ -281,8 +295,9 @@ int run_bench_demo(const BenchDemoOptions& o) {
   auto subgoal = dds::Subscriber::create(*domain.domain, "trailnav/subgoal", &geometry_msgs_msg_dds__PoseStamped__desc, 0, true);
   auto subgoal_path = dds::Subscriber::create(*domain.domain, "trailnav/subgoal_path", &nav_msgs_msg_dds__Path__desc, 0);
   auto keyframe_path = dds::Subscriber::create(*domain.domain, "trailnav/keyframe_path", &nav_msgs_msg_dds__Path__desc, 0, true);
+  auto trav = dds::Subscriber::create(*domain.domain, "trailnav/traversability", &nav_msgs_msg_dds__OccupancyGrid__desc, 0);
   if (!maps.subscriber || !poses.subscriber || !health.subscriber || !terrain.subscriber || !subgoal.subscriber ||
-      !subgoal_path.subscriber || !keyframe_path.subscriber) {
+      !subgoal_path.subscriber || !keyframe_path.subscriber || !trav.subscriber) {
     std::fprintf(stderr, "trailnav demo: cannot subscribe\n%s", stop_daemon().c_str());
     return 1;
   }
@@ -327,6 +342,8 @@ int run_bench_demo(const BenchDemoOptions& o) {
   ProgressBar bar(soak ? "soak" : "replay", total_s, "s");
   std::uint64_t n_maps = 0, n_stale = 0, n_poses = 0, n_health = 0, pngs = 0, n_terrain = 0;
   std::string terrain_summary;
+  std::uint64_t n_trav = 0;
+  std::string trav_summary;
   std::string driving_health;
   DurationHistogram latency;  // ns, within 3 %
   DurationHistogram window_latency;  // the soak's sample window
@@ -387,6 +404,25 @@ int run_bench_demo(const BenchDemoOptions& o) {
                     static_cast<unsigned long long>(count[4]));
       terrain_summary = text;
       if (write_terrain_png((out / "maps" / "terrain_map.png").string(), t, "trailnav/terrain_map")) ++pngs;
+    });
+    trav.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
+      const auto& g = *static_cast<const nav_msgs_msg_dds__OccupancyGrid_*>(r.sample);
+      ++n_trav;
+      std::uint64_t known = 0, traversable = 0;
+      for (std::uint32_t i = 0; i < g.data._length; ++i) {
+        if (g.data._buffer[i] < 0) continue;
+        ++known;
+        traversable += g.data._buffer[i] < 50 ? 1u : 0u;
+      }
+      char text[160];
+      std::snprintf(text, sizeof text, "%llu cells with evidence, %llu of them traversable",
+                    static_cast<unsigned long long>(known), static_cast<unsigned long long>(traversable));
+      trav_summary = text;
+      if (write_cost_png((out / "maps" / "traversability.png").string(), g,
+                         "trailnav/traversability (learnt from demo-large)", "100 (1 - P(trav)) of the learnt layer",
+                         "0: traversable", "100: not traversable")) {
+        ++pngs;
+      }
     });
     subgoal.subscriber->take(0.0, [&](const dds::ReceivedSample& r) {
       const auto& p = *static_cast<const geometry_msgs_msg_dds__PoseStamped_*>(r.sample);
@@ -496,6 +532,10 @@ int run_bench_demo(const BenchDemoOptions& o) {
               last_pose.c_str(), static_cast<unsigned long long>(n_health));
   std::printf("   %llu terrain-class maps (last: %s; picture %s)\n", static_cast<unsigned long long>(n_terrain),
               terrain_summary.c_str(), (out / "maps" / "terrain_map.png").c_str());
+  if (traversability) {
+    std::printf("   %llu traversability layers (last: %s; picture %s)\n", static_cast<unsigned long long>(n_trav),
+                trav_summary.c_str(), (out / "maps" / "traversability.png").c_str());
+  }
   std::vector<double> subgoal_errors;
   {
     // Distance of each active subgoal from the trail's centre: on it within

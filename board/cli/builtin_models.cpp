@@ -7,6 +7,7 @@ TN_MODEL(vlp16)
 TN_MODEL(vlp32c)
 TN_MODEL(hdl32e)
 TN_MODEL(hdl64e)
+TN_MODEL(trav_large)
 #undef TN_MODEL
 
 namespace trailnav::cli {
@@ -27,6 +28,10 @@ std::span<const std::uint8_t> builtin_terrain_model(velodyne::Model lidar) noexc
     case velodyne::Model::vlp16_hires: return {};
   }
   return {};
+}
+
+std::span<const std::uint8_t> builtin_traversability_model() noexcept {
+  return bytes(trailnav_builtin_terrain_model_trav_large, trailnav_builtin_terrain_model_trav_large_end);
 }
 
 }  // namespace trailnav::cli

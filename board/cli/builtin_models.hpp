@@ -13,5 +13,8 @@ namespace trailnav::cli {
 // The model's bytes; empty for a lidar without one (a VLP-16-HiRes: its
 // remissions are not a VLP-16's).
 std::span<const std::uint8_t> builtin_terrain_model(velodyne::Model lidar) noexcept;
+// The large robot's traversability model (board/models/trav-large.tntrav),
+// learnt from the VLP-16 `demo-large` demonstration (docs/traversability.md).
+std::span<const std::uint8_t> builtin_traversability_model() noexcept;
 
 }  // namespace trailnav::cli
