@@ -254,6 +254,11 @@ int evaluate(EvalOptions& o) {
                     static_cast<double>(row.called_traversable[k]) / static_cast<double>(row.class_cells[k]));
         first = false;
       }
+      std::printf("}, \"false_positives\": {");
+      for (std::size_t c = 1; c < eval::kUntraversableCauses; ++c) {
+        std::printf("%s\"%s\": %llu", c > 1 ? ", " : "", eval::untraversable_name(static_cast<eval::Untraversable>(c)),
+                    static_cast<unsigned long long>(row.false_positives[c]));
+      }
       std::printf("}}");
     }
     std::printf("\n]}\n");
@@ -279,6 +284,14 @@ int evaluate(EvalOptions& o) {
                 static_cast<double>(r.rows[0].called_traversable[k]) / static_cast<double>(r.rows[0].class_cells[k]),
                 static_cast<double>(r.rows[1].called_traversable[k]) / static_cast<double>(r.rows[1].class_cells[k]),
                 static_cast<unsigned long long>(r.rows[0].class_cells[k]));
+  }
+  if (r.rows.size() >= 2) {
+    std::printf("false positives (thesis' rule), by why the cell is not traversable (full vector, PNB / POS):\n");
+    for (std::size_t c = 1; c < eval::kUntraversableCauses; ++c) {
+      std::printf("  %-11s %llu / %llu\n", eval::untraversable_name(static_cast<eval::Untraversable>(c)),
+                  static_cast<unsigned long long>(r.rows[0].false_positives[c]),
+                  static_cast<unsigned long long>(r.rows[1].false_positives[c]));
+    }
   }
   std::printf("thesis (real robots): Viona PNB 0.992 / 0.79 / 0.987; Obelix PNB 0.978 / 0.947 / 0.984, POS 0.975 / 0.947 / "
               "0.982\n");

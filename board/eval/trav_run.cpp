@@ -161,22 +161,48 @@ LoadedProfile load_profile(const std::string& name_or_file) {
   }
 }
 
-std::optional<bool> truth_traversable(const RobotProfile& profile, const SimTruth& truth, double x, double y,
-                                      double res) {
+const char* untraversable_name(Untraversable cause) noexcept {
+  switch (cause) {
+    case Untraversable::none: return "none";
+    case Untraversable::solid: return "solid";
+    case Untraversable::ditch: return "ditch";
+    case Untraversable::undergrowth: return "undergrowth";
+    case Untraversable::ground: return "ground";
+  }
+  return "none";
+}
+
+std::optional<Untraversable> truth_cause(const RobotProfile& profile, const SimTruth& truth, double x, double y,
+                                         double res) {
   const double rr = truth.terrain.resolution;
   const int inner = std::max(1, static_cast<int>(std::lround(res / rr)));
   const double x0 = x - 0.5 * res + 0.5 * rr, y0 = y - 0.5 * res + 0.5 * rr;
-  bool ok = true;
+  // Worst first: a solid obstacle, a ditch, undergrowth, ground not allowed.
+  constexpr int kRank[] = {0, 4, 3, 2, 1};
+  Untraversable worst = Untraversable::none;
   for (int j = 0; j < inner; ++j) {
     for (int i = 0; i < inner; ++i) {
       const double px = x0 + i * rr, py = y0 + j * rr;
       const std::uint8_t c = truth.terrain.at(px, py);
       if (c >= perception::kTerrainClasses) return std::nullopt;
-      const std::uint8_t ob = truth.obstacles.at(px, py, 0);
-      ok = ok && ob == static_cast<std::uint8_t>(sim::ObstacleTruth::free) && profile.ground[c];
+      Untraversable here = Untraversable::none;
+      switch (static_cast<sim::ObstacleTruth>(truth.obstacles.at(px, py, 0))) {
+        case sim::ObstacleTruth::obstacle: here = Untraversable::solid; break;
+        case sim::ObstacleTruth::negative: here = Untraversable::ditch; break;
+        case sim::ObstacleTruth::vegetation: here = Untraversable::undergrowth; break;
+        case sim::ObstacleTruth::free: here = profile.ground[c] ? Untraversable::none : Untraversable::ground; break;
+      }
+      if (kRank[static_cast<int>(here)] > kRank[static_cast<int>(worst)]) worst = here;
     }
   }
-  return ok;
+  return worst;
+}
+
+std::optional<bool> truth_traversable(const RobotProfile& profile, const SimTruth& truth, double x, double y,
+                                      double res) {
+  const auto cause = truth_cause(profile, truth, x, y, res);
+  if (!cause) return std::nullopt;
+  return *cause == Untraversable::none;
 }
 
 TravTrainReport run_trav_train(const TravRunOptions& options, const trav::VocabularyConfig& vocabulary,
@@ -252,6 +278,7 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
     bool traversable = false;
     std::int8_t truth = -1;   // -1 outside
     std::int8_t cls = -1;     // the cell's single true class, -1 mixed
+    Untraversable cause = Untraversable::none;
   };
   std::unordered_map<std::uint64_t, std::array<Called, 2>> cells;
   auto key = [](CellIndex c) {
@@ -273,16 +300,17 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
         rec.finish_local_map(counts, [&](const trav::TravRecorder::CellWords& c) {
           std::array<Called, 2> called{};
           const double x = (c.cell.x + 0.5) * cell_res, y = (c.cell.y + 0.5) * cell_res;
-          const std::optional<bool> t = truth_traversable(options.profile, *truth, x, y, cell_res);
+          const std::optional<Untraversable> cause = truth_cause(options.profile, *truth, x, y, cell_res);
+          const std::int8_t t = !cause ? std::int8_t{-1} : *cause == Untraversable::none ? std::int8_t{1} : std::int8_t{0};
           std::int8_t cls = -1;
-          if (t) {
+          if (t >= 0) {
             // Its single class, for the per-class figures.
             const std::uint8_t c0 = truth->terrain.at(x, y);
             cls = c0 < perception::kTerrainClasses ? static_cast<std::int8_t>(c0) : std::int8_t{-1};
           }
           for (std::size_t m = 0; m < 2; ++m) {
             const double p = models[s]->probability(static_cast<trav::Method>(m), c.words);
-            called[m] = {p > 0.5, t ? static_cast<std::int8_t>(*t ? 1 : 0) : std::int8_t{-1}, cls};
+            called[m] = {p > 0.5, t, cls, cause.value_or(Untraversable::none)};
           }
           cells[key(c.cell)] = called;
           if (s == full_set && !options.png_dir.empty() && options.inputs.size() == 1) latest[key(c.cell)] = called;
@@ -321,6 +349,7 @@ TravEvalReport run_trav_eval(const TravRunOptions& options, const trav::TravMode
             }
             if (all) {
               ++row.scores.fp;
+              ++row.false_positives[static_cast<std::size_t>(me.cause)];
             } else {
               ++row.scores.tn;
               ++row.scores.forgiven;

@@ -48,6 +48,14 @@ LoadedProfile load_profile(const std::string& name_or_file);
 // traversable), none outside the world.
 std::optional<bool> truth_traversable(const RobotProfile& profile, const SimTruth& truth, double x, double y, double res);
 
+// Why a cell is not traversable (its worst pixel: a solid obstacle over a
+// ditch over undergrowth over ground the profile may not cross); `none` when it is.
+enum class Untraversable : std::uint8_t { none = 0, solid = 1, ditch = 2, undergrowth = 3, ground = 4 };
+inline constexpr std::size_t kUntraversableCauses = 5;
+const char* untraversable_name(Untraversable cause) noexcept;  // "none", "solid", "ditch", "undergrowth", "ground"
+std::optional<Untraversable> truth_cause(const RobotProfile& profile, const SimTruth& truth, double x, double y,
+                                         double res);
+
 struct TravRunOptions {
   std::vector<std::string> inputs;  // simulated recordings (truth/ gives the poses and, for eval, the truth)
   perception::TerrainConfig terrain;
@@ -98,6 +106,8 @@ struct TravEvalRow {
   TravScores scores;
   // By true terrain class of the cell (only its single-class cells): cells called traversable / cells.
   std::array<std::uint64_t, perception::kTerrainClasses> called_traversable{}, class_cells{};
+  // The false positives (thesis' rule) by why the cell is not traversable (Untraversable).
+  std::array<std::uint64_t, kUntraversableCauses> false_positives{};
 };
 struct TravEvalReport {
   std::string error;

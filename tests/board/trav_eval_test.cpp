@@ -82,6 +82,16 @@ TEST(TravProfiles, TheTruthOfACellIsFreeGroundOfAKindTheRobotMayCross) {
   EXPECT_EQ(truth_traversable(large, t, 0.7, 0.7, 0.2), std::optional<bool>(false));  // the obstacle pixel
   EXPECT_EQ(truth_traversable(small, t, 0.5, 0.1, 0.2), std::optional<bool>(false));  // half grass: in doubt, not
   EXPECT_EQ(truth_traversable(large, t, 5.0, 5.0, 0.2), std::nullopt);                // outside the world
+  // Why not: the worst pixel (a solid obstacle over a ditch over undergrowth over forbidden ground).
+  EXPECT_EQ(truth_cause(small, t, 0.1, 0.1, 0.2), std::optional<Untraversable>(Untraversable::ground));
+  EXPECT_EQ(truth_cause(large, t, 0.7, 0.7, 0.2), std::optional<Untraversable>(Untraversable::solid));
+  t.obstacles.data[1 * 20 + 1] = static_cast<std::uint8_t>(sim::ObstacleTruth::vegetation);
+  t.obstacles.data[1 * 20 + 2] = static_cast<std::uint8_t>(sim::ObstacleTruth::negative);
+  EXPECT_EQ(truth_cause(large, t, 0.1, 0.1, 0.2), std::optional<Untraversable>(Untraversable::ditch));
+  EXPECT_EQ(truth_cause(small, t, 0.1, 0.1, 0.2), std::optional<Untraversable>(Untraversable::ditch));
+  t.obstacles.data[1 * 20 + 2] = 0;
+  EXPECT_EQ(truth_cause(large, t, 0.1, 0.1, 0.2), std::optional<Untraversable>(Untraversable::undergrowth));
+  EXPECT_EQ(truth_cause(large, t, 0.7, 0.1, 0.2), std::optional<Untraversable>(Untraversable::none));
 }
 
 // An 80 m world: a street, a dirt road, then a path across the meadow or a dirt yard.
