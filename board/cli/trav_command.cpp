@@ -32,12 +32,12 @@ struct TrainOptions {
   double max_range = 20.0;
   std::uint32_t max_models = 8;
   double prior = 0.0;
-  std::string bins;  // "w:n,w:n,w:n,w:n,w:n"
+  std::string bins;  // "w:n,w:n,w:n,w:n,w:n,w:n"
   bool verbose = false;
   bool quiet = false;
 };
 
-// "--bins 0.1:6,16:10,8:4,0.03:3,15:3": width and count per dimension.
+// "--bins 0.1:6,16:10,8:4,0.03:3,15:3,0.25:5": width and count per dimension.
 bool parse_bins(const std::string& text, trav::VocabularyConfig& v, const char* who) {
   if (text.empty()) return true;
   std::size_t pos = 0;
@@ -53,8 +53,9 @@ bool parse_bins(const std::string& text, trav::VocabularyConfig& v, const char* 
     const long count = std::strtol(n.c_str(), &e2, 10);
     if (w.empty() || n.empty() || *e1 != '\0' || *e2 != '\0' || count < 1 || count > 64 || (d + 1 < trav::kDims && end == std::string::npos) ||
         (d + 1 == trav::kDims && end != std::string::npos)) {
-      std::fprintf(stderr, "%s: --bins: expected five WIDTH:COUNT pairs (max_dz m, remission mean, remission standard "
-                   "deviation, RMS plane distance m, slope degrees), got '%s'\n", who, text.c_str());
+      std::fprintf(stderr, "%s: --bins: expected six WIDTH:COUNT pairs (max_dz m, remission mean, remission standard "
+                   "deviation, RMS plane distance m, slope degrees, height above the ground m), got '%s'\n", who,
+                   text.c_str());
       return false;
     }
     v.bins[static_cast<std::size_t>(d)] = {width, static_cast<std::uint32_t>(count)};
@@ -327,7 +328,8 @@ void add_trav_commands(CLI::App& app) {
   tr->add_option("--prior", t.prior, "P(trav) for PNB (0: Elkan-Noto's estimate per terrain model)")->capture_default_str();
   tr->add_option("--bins", t.bins,
                  "Vocabulary: WIDTH:COUNT for max |dz| (m), remission mean, remission standard deviation, RMS distance "
-                 "from the cell's plane (m), slope (degrees); default 0.1:6,16:10,8:4,0.03:3,15:3");
+                 "from the cell's plane (m), slope (degrees), height above the ground (m); default\n"
+                 "0.1:6,16:10,8:4,0.03:3,15:3,0.25:5");
   tr->add_flag("--verbose", t.verbose, "Also list each local map: its terrain model, the test's p-value, its words");
   tr->add_flag("--quiet", t.quiet, "No progress bars");
   tr->callback([&] { std::exit(train(t)); });

@@ -209,7 +209,8 @@ TravTrainReport run_trav_train(const TravRunOptions& options, const trav::Vocabu
                                const trav::LearnerConfig& learner, const trav::TravModelFile* extend) {
   TravTrainReport report;
   std::vector<trav::VocabularyConfig> vocabularies;
-  for (trav::FeatureSet s : {trav::FeatureSet::full, trav::FeatureSet::no_remission, trav::FeatureSet::no_roughness_slope}) {
+  for (trav::FeatureSet s : {trav::FeatureSet::full, trav::FeatureSet::thesis, trav::FeatureSet::no_remission,
+                             trav::FeatureSet::no_roughness_slope}) {
     trav::VocabularyConfig v = vocabulary;
     v.set = s;
     vocabularies.push_back(v);

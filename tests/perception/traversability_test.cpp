@@ -123,7 +123,10 @@ TEST(TravVocabulary, FixedIncrementBinsOpenAtTheTopAndMixedRadixWords) {
   c.bins = {{{0.04f, 8}, {32.0f, 8}, {8.0f, 6}, {0.01f, 6}, {6.0f, 8}}};
   const Vocabulary v{c};
   EXPECT_EQ(v.size(), 8u * 8u * 6u * 6u * 8u);
-  EXPECT_EQ(Vocabulary(VocabularyConfig{}).size(), 6u * 10u * 4u * 3u * 3u);  // the default
+  EXPECT_EQ(Vocabulary(VocabularyConfig{}).size(), 6u * 10u * 4u * 3u * 3u * 5u);  // the default
+  VocabularyConfig thesis;
+  thesis.set = FeatureSet::thesis;
+  EXPECT_EQ(Vocabulary(thesis).size(), 6u * 10u * 4u * 3u * 3u);  // the thesis' five dimensions
   EXPECT_EQ(v.bin(Dim::max_dz, 0.0f), 0u);
   EXPECT_EQ(v.bin(Dim::max_dz, 0.039f), 0u);
   EXPECT_EQ(v.bin(Dim::max_dz, 0.041f), 1u);
@@ -435,7 +438,7 @@ TEST(TravModelFile, BadBytesGetAClearError) {
   recrc(b);
   EXPECT_NE(error(b).find("longer than 64"), std::string::npos);
   // The first set's first model's first word beyond the vocabulary.
-  const std::size_t header = 8 + 4 + 4 + 5 + 4 + 4 + 5 * 8 + 6 * 8 + 4 + 4;
+  const std::size_t header = 8 + 4 + 4 + 5 + 4 + 4 + kDims * 8 + 6 * 8 + 4 + 4;
   const std::size_t first_word = header + 8 + 8 + 4;
   b = good;
   b[first_word + 3] = 0x7f;
@@ -450,9 +453,12 @@ TEST(TravModelFile, BadBytesGetAClearError) {
   recrc(b);
   EXPECT_NE(error(b).find("more than its max_models"), std::string::npos);
   b = good;
-  b[8 + 4 + 4 + 5] = 4;  // four feature sets
+  b[8 + 4 + 4 + 5] = 5;  // five feature sets
   recrc(b);
-  EXPECT_NE(error(b).find("1 to 3"), std::string::npos);
+  EXPECT_NE(error(b).find("1 to 4"), std::string::npos);
+  b = good;
+  b[8] = 1;  // a version 1 file: the thesis' five dimensions
+  EXPECT_NE(error(b).find("train it again"), std::string::npos);
   EXPECT_NE(load_trav_model("/nonexistent/x.tntrav").error.find("cannot open"), std::string::npos);
 }
 
@@ -622,7 +628,10 @@ struct TrainedLayer {
     Feature f;
     EXPECT_TRUE(cell_feature(flat_cell(50.0f), f));
     ground = vocabulary.word(f);
-    EXPECT_TRUE(cell_feature(tall_cell(), f));
+    // The wall's height above the ground: its top (1.1 m) above the lowest
+    // point around it (the ground cells' and its own, 0 m), as the layer's
+    // GroundReference finds it.
+    EXPECT_TRUE(cell_feature(tall_cell(), f, nullptr, 1.1f));
     wall = vocabulary.word(f);
     EXPECT_NE(ground, wall);
     WordCounts k(vocabulary.size());
@@ -912,8 +921,8 @@ TEST(TravDemonstration, RealRevolutionsTrainOnlineSaveAtomicallyAndFillTheClassM
   // the lane is not clean road everywhere. It is called traversable far more
   // often than the map's cells at large.
   const double lane_share = static_cast<double>(lane_called) / static_cast<double>(lane);
-  EXPECT_GT(lane_share, 0.7) << lane_called << " of " << lane;
-  EXPECT_GT(lane_share, 2.0 * static_cast<double>(called) / static_cast<double>(with_p));
+  EXPECT_GT(lane_share, 0.6) << lane_called << " of " << lane;
+  EXPECT_GT(lane_share, 3.0 * static_cast<double>(called) / static_cast<double>(with_p));
   // The file on disk: the trainer's models, under the profile's name, and
   // no temporary file left beside it.
   const LoadedTravModel loaded = load_trav_model(path);
@@ -979,7 +988,7 @@ TEST(TravDemonstration, TheConfigSectionAndTheStartModels) {
   c = parse("traversability: {model: m.tntrav}\n");
   EXPECT_NE(load_start_models(c).error.find("no such file"), std::string::npos);
   ASSERT_TRUE(save_trav_model(c.model, trained_file()));
-  EXPECT_NE(load_start_models(c).error.find("no model of the full feature vector"), std::string::npos);
+  EXPECT_NE(load_start_models(c).error.find("no model of the feature set 'full'"), std::string::npos);
   TravModelFile full = trained_file();
   full.sets.front().vocabulary.set = FeatureSet::full;
   full.sets.front().models.assign(2, WordCounts(Vocabulary(full.sets.front().vocabulary).size()));

@@ -16,6 +16,8 @@ TraversabilityConfig parse_traversability_config(const ConfigNode& node) {
                 ? model
                 : (std::filesystem::path(node.file()).parent_path() / p).lexically_normal().string();
   c.method = node.choice("method", {"pnb", "pos"}, "pnb") == "pos" ? Method::pos : Method::pnb;
+  c.features = node.choice("features", {"full", "thesis"}, "full") == "thesis" ? FeatureSet::thesis : FeatureSet::full;
+  c.vocabulary.set = c.features;
   c.local_map_distance = node.number("local_map_m", 1.0, 10000.0, c.local_map_distance);
   c.max_range = node.number("max_range_m", 1.0, 300.0, c.max_range);
   if (auto d = node.optional_map("demonstration")) {
@@ -72,9 +74,10 @@ StartModels load_start_models(const TraversabilityConfig& c) {
     out.error = loaded.error;
     return out;
   }
-  const TravModelSet* set = loaded.model->set(FeatureSet::full);
+  const TravModelSet* set = loaded.model->set(c.features);
   if (set == nullptr) {
-    out.error = c.model + ": holds no model of the full feature vector (only ablations): train one with `trailnav trav-train`";
+    out.error = c.model + ": holds no model of the feature set '" + std::string(feature_set_name(c.features)) +
+                "' (traversability.features): train one with `trailnav trav-train`";
     return out;
   }
   if (set->models.size() > kLayerModels) {

@@ -25,7 +25,8 @@ TravLayer::TravLayer(const TravModels& models, Method method, double local_map_d
       method_(method),
       local_map_distance_(local_map_distance),
       max_range_(max_range),
-      grid_(size_x, size_y, resolution, TravCell{}) {}
+      grid_(size_x, size_y, resolution, TravCell{}),
+      ground_(size_x * resolution, size_y * resolution) {}
 
 void TravLayer::move_to(double x, double y) noexcept {
   if (have_pose_) travelled_ += std::hypot(x - x_, y - y_);
@@ -33,6 +34,7 @@ void TravLayer::move_to(double x, double y) noexcept {
   x_ = x;
   y_ = y;
   grid_.move_to(x, y);
+  ground_.move_to(x, y);
   if (travelled_ >= local_map_distance_) {
     travelled_ = 0.0;
     // 0 marks "never": wrap from 65535 to 1.
@@ -49,8 +51,9 @@ void TravLayer::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVe
     ++counters_.outside;
     return;
   }
+  const float height = ground_.height(x, y, sums);
   Feature f;
-  if (!cell_feature(sums, f, feature)) return;
+  if (!cell_feature(sums, f, feature, height)) return;
   const std::uint32_t word = models_->vocabulary().word(f);
   TravCell& c = grid_.at(cell);
   if (c.words > 0 && (c.local_map != local_map_ || c.models != models_epoch_)) {

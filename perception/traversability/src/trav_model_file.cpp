@@ -177,6 +177,10 @@ LoadedTravModel parse_trav_model(std::span<const std::uint8_t> data, const std::
   Reader r(data.subspan(sizeof kMagic));
   std::uint32_t version = 0;
   if (!r.u32(version)) return fail("truncated header");
+  if (version == 1) {
+    return fail("model format version 1: its words are the thesis' five feature dimensions, without the height "
+                "above the ground this build adds (docs/traversability.md): train it again with trailnav trav-train");
+  }
   if (version != kModelFileVersion) {
     return fail("model format version " + std::to_string(version) + "; this build reads version " +
                 std::to_string(kModelFileVersion));
@@ -198,12 +202,14 @@ LoadedTravModel parse_trav_model(std::span<const std::uint8_t> data, const std::
   }
   std::uint32_t sets = 0;
   if (!body.u32(sets)) return fail("truncated header");
-  if (sets < 1 || sets > 3) return fail(std::to_string(sets) + " feature sets; a model holds 1 to 3");
+  if (sets < 1 || sets > static_cast<std::uint32_t>(kFeatureSets)) {
+    return fail(std::to_string(sets) + " feature sets; a model holds 1 to " + std::to_string(kFeatureSets));
+  }
   for (std::uint32_t si = 0; si < sets; ++si) {
     TravModelSet t;
     std::uint32_t set = 0;
     if (!body.u32(set)) return fail("truncated header");
-    if (set > 2) return fail("unknown feature set " + std::to_string(set));
+    if (set >= static_cast<std::uint32_t>(kFeatureSets)) return fail("unknown feature set " + std::to_string(set));
     t.vocabulary.set = static_cast<FeatureSet>(set);
     if (m.set(t.vocabulary.set) != nullptr) {
       return fail("feature set " + std::string(feature_set_name(t.vocabulary.set)) + " twice");

@@ -25,7 +25,11 @@ std::string check_recorder(const RecorderConfig& c) {
 
 TravRecorder::TravRecorder(const RecorderConfig& config, const Vocabulary& vocabulary, std::int32_t size_x,
                            std::int32_t size_y, double resolution)
-    : config_(config), vocabulary_(vocabulary), marks_(size_x, size_y, resolution, 0u), entries_(config.max_words) {
+    : config_(config),
+      vocabulary_(vocabulary),
+      marks_(size_x, size_y, resolution, 0u),
+      ground_(size_x * resolution, size_y * resolution),
+      entries_(config.max_words) {
   words_.reserve(config.max_words);
 }
 
@@ -35,6 +39,7 @@ void TravRecorder::drive(double x, double y, double yaw) noexcept {
   last_x_ = x;
   last_y_ = y;
   marks_.move_to(x, y);
+  ground_.move_to(x, y);
   mark(x, y, yaw);
 }
 
@@ -77,8 +82,9 @@ void TravRecorder::cell_sums(CellIndex cell, const CellStats& sums, const Featur
     ++counters_.too_far;
     return;
   }
+  const float height = ground_.height(x, y, sums);
   Feature f;
-  if (!cell_feature(sums, f, feature)) return;
+  if (!cell_feature(sums, f, feature, height)) return;
   if (used_ == entries_.size()) {
     ++counters_.dropped;
     return;

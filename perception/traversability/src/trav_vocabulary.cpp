@@ -11,6 +11,7 @@ std::string_view dim_name(Dim d) noexcept {
     case Dim::remission_var: return "remission_var";
     case Dim::roughness: return "roughness";
     case Dim::slope: return "slope";
+    case Dim::height: return "height";
   }
   return "?";
 }
@@ -20,6 +21,7 @@ std::string_view feature_set_name(FeatureSet s) noexcept {
     case FeatureSet::full: return "full";
     case FeatureSet::no_remission: return "NoRe";
     case FeatureSet::no_roughness_slope: return "NoRS";
+    case FeatureSet::thesis: return "thesis";
   }
   return "?";
 }
@@ -29,11 +31,12 @@ bool uses(FeatureSet s, Dim d) noexcept {
     case FeatureSet::full: return true;
     case FeatureSet::no_remission: return d != Dim::remission_mean && d != Dim::remission_var;
     case FeatureSet::no_roughness_slope: return d != Dim::roughness && d != Dim::slope;
+    case FeatureSet::thesis: return d != Dim::height;
   }
   return false;
 }
 
-bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain) noexcept {
+bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain, float height) noexcept {
   if (s.n < kMinPoints) return false;
   const FeatureVector t = terrain != nullptr ? *terrain : compute_terrain_feature(s);
   const float sd = t[static_cast<std::size_t>(TerrainFeature::std_remission)];
@@ -42,11 +45,12 @@ bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain
   out.v[static_cast<std::size_t>(Dim::remission_var)] = sd * sd;
   out.v[static_cast<std::size_t>(Dim::roughness)] = t[static_cast<std::size_t>(TerrainFeature::roughness)];
   out.v[static_cast<std::size_t>(Dim::slope)] = t[static_cast<std::size_t>(TerrainFeature::slope)];
+  out.v[static_cast<std::size_t>(Dim::height)] = height;
   return true;
 }
 
 std::string check_vocabulary(const VocabularyConfig& c) {
-  if (static_cast<int>(c.set) > 2) return "unknown feature set";
+  if (static_cast<int>(c.set) >= kFeatureSets) return "unknown feature set";
   std::uint64_t size = 1;
   for (int d = 0; d < kDims; ++d) {
     const Binning& b = c.bins[static_cast<std::size_t>(d)];

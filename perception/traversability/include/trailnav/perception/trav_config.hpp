@@ -17,6 +17,9 @@ namespace trailnav::perception::trav {
 struct TraversabilityConfig {
   std::string model;                 // .tntrav; relative paths from the config file's directory
   Method method = Method::pnb;
+  // The model file's feature set the layer classifies with: `full` (six
+  // dimensions, the height above the ground included) or `thesis` (its five).
+  FeatureSet features = FeatureSet::full;
   double local_map_distance = 20.0;  // d_M, m: the layer's evidence restarts per local map
   double max_range = 20.0;           // m: cells farther from the robot get no word
   // Demonstration mode: the footprint's cells train the model online; it is
@@ -34,15 +37,15 @@ struct TraversabilityConfig {
 // Reads the mapping; ConfigError (file, line, key) on bad values.
 TraversabilityConfig parse_traversability_config(const ConfigNode& node);
 
-// The models the layer starts with: the model file's full feature set, or,
+// The models the layer starts with: the model file's set of `features`, or,
 // in demonstration mode when the file does not exist yet, new empty models
-// (`created`). Errors: an unreadable or inconsistent file, one without the
-// full feature set, more terrain models than the layer holds, a
+// (`created`). Errors: an unreadable or inconsistent file, one without that
+// feature set, more terrain models than the layer holds, a
 // demonstration under another profile's name than the file's.
 struct StartModels {
   std::unique_ptr<TravModels> models;
   bool created = false;
-  std::size_t other_sets = 0;  // the file's ablation sets (NoRe, NoRS): a demonstration does not extend them
+  std::size_t other_sets = 0;  // the file's other sets (thesis, NoRe, NoRS): a demonstration does not extend them
   std::string error;
 };
 StartModels load_start_models(const TraversabilityConfig& config);

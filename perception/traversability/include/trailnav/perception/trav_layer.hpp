@@ -17,6 +17,7 @@
 #include <string>
 
 #include "trailnav/perception/terrain_mapper.hpp"
+#include "trailnav/perception/trav_ground.hpp"
 #include "trailnav/perception/trav_learner.hpp"
 #include "trailnav/runtime/rolling_grid.hpp"
 
@@ -91,6 +92,7 @@ class TravLayer final : public CellSumsSink {
   double local_map_distance_;
   double max_range_;
   RollingGrid<TravCell> grid_;
+  GroundReference ground_;
   std::uint16_t local_map_ = 1;
   std::uint16_t models_epoch_ = 0;
   double travelled_ = 0.0;

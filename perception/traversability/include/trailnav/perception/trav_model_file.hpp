@@ -1,6 +1,6 @@
 // A learnt traversability model on disk: the robot profile it was learnt
-// for and, per feature set (the full vector and the ablations NoRe and NoRS,
-// thesis §6.4, each at most once), the vocabulary and learner settings and
+// for and, per feature set (the full vector, the thesis' five dimensions and
+// the ablations NoRe and NoRS, thesis §6.4, each at most once), the vocabulary and learner settings and
 // each terrain model's word counts (the learner recomputes every table from
 // them, so a model can be trained further later). Little-endian, versioned, CRC-32 at the end; only
 // words with a count are stored. Saving is atomic: a temporary file beside
@@ -21,7 +21,9 @@
 
 namespace trailnav::perception::trav {
 
-inline constexpr std::uint32_t kModelFileVersion = 1;
+// Version 2: six feature dimensions (the height above the ground added);
+// version 1 files (the thesis' five) are refused with what to do.
+inline constexpr std::uint32_t kModelFileVersion = 2;
 inline constexpr std::size_t kMaxProfileName = 64;
 
 struct TravModelSet {
@@ -32,7 +34,7 @@ struct TravModelSet {
 
 struct TravModelFile {
   std::string profile;  // printable ASCII, at most kMaxProfileName characters
-  std::vector<TravModelSet> sets;  // 1 to 3, distinct feature sets
+  std::vector<TravModelSet> sets;  // 1 to kFeatureSets, distinct feature sets
   // The set of a feature set, or null.
   const TravModelSet* set(FeatureSet s) const noexcept;
 };

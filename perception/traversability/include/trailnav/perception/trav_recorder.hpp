@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "trailnav/perception/terrain_mapper.hpp"
+#include "trailnav/perception/trav_ground.hpp"
 #include "trailnav/perception/trav_learner.hpp"
 #include "trailnav/runtime/rolling_grid.hpp"
 
@@ -94,6 +95,7 @@ class TravRecorder final : public CellSumsSink {
   RecorderConfig config_;
   Vocabulary vocabulary_;
   RollingGrid<std::uint32_t> marks_;  // the local map in which the footprint last crossed the cell
+  GroundReference ground_;
   std::vector<Entry> entries_;        // capacity max_words
   std::vector<std::uint32_t> words_;  // one cell's words, for each_cell
   std::size_t used_ = 0;

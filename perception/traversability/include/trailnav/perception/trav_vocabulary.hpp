@@ -5,7 +5,13 @@
 // feature gets one feature vector f = (max |Δz|, mean remission, variance of
 // remission, roughness, slope): the roughness is the smallest eigenvalue of
 // the points' covariance, the slope the angle between its eigenvector (the
-// least-squares plane's normal) and gravity. The vector is discretised by
+// least-squares plane's normal) and gravity. Beyond the thesis a sixth
+// dimension, the height of the cell's highest point above the lowest ground
+// seen around it (GroundReference): every other dimension is the cell's
+// own, and the tops of undergrowth seen from afar — a thin level layer of
+// leaves — look like the low heather a large robot was driven through
+// (docs/traversability.md "The height above the ground"). The thesis' five
+// dimensions alone are the feature set `thesis`. The vector is discretised by
 // bins of fixed increments per dimension; the tuple of bin indices is one
 // word of the vocabulary V, a cell is a document of the words it produced
 // (thesis §6.3.1: "the words are the discretized features f and the
@@ -18,9 +24,10 @@
 //   fixed increments then spread the cells over the bins instead of putting
 //   nearly all into the first.
 // - Default bins: max |Δz| 0.1 m x 6, mean remission 16 x 10, remission
-//   standard deviation 8 x 4, RMS plane distance 0.03 m x 3, slope 15° x 3;
-//   the last bin of each dimension is open-ended. |V| = 2 160 for the full
-//   vector, 54 without remission (NoRe), 240 without roughness and slope
+//   standard deviation 8 x 4, RMS plane distance 0.03 m x 3, slope 15° x 3,
+//   height above the ground 0.25 m x 5; the last bin of each dimension is
+//   open-ended. |V| = 10 800 for the full vector, 2 160 for the thesis'
+//   five, 270 without remission (NoRe), 1 200 without roughness and slope
 //   (NoRS): the ablations of §6.4 drop those dimensions from the word. Chosen
 //   by measurement (docs/traversability.md): finer geometry bins left most of
 //   a meadow's words unseen in a demonstration, coarser remission bins let
@@ -37,12 +44,12 @@
 
 namespace trailnav::perception::trav {
 
-inline constexpr int kDims = 5;
-enum class Dim : std::uint8_t { max_dz = 0, remission_mean = 1, remission_var = 2, roughness = 3, slope = 4 };
+inline constexpr int kDims = 6;
+enum class Dim : std::uint8_t { max_dz = 0, remission_mean = 1, remission_var = 2, roughness = 3, slope = 4, height = 5 };
 std::string_view dim_name(Dim d) noexcept;
 
 // One cell's feature: max |Δz| in m, remission mean (0..255) and variance,
-// roughness in m², slope in degrees (0..90).
+// roughness in m², slope in degrees (0..90), height above the ground in m.
 struct Feature {
   std::array<float, kDims> v{};
   float operator[](Dim d) const noexcept { return v[static_cast<std::size_t>(d)]; }
@@ -54,16 +61,19 @@ inline constexpr std::uint32_t kMinPoints = 5;
 // The feature of a cell from its running sums; false with fewer than
 // kMinPoints points. `terrain`: the terrain feature of the same sums, when
 // the terrain step has computed it (its remission, roughness and slope are
-// taken from there instead of being computed again).
-bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain = nullptr) noexcept;
+// taken from there instead of being computed again); `height`: the cell's
+// height above the ground around it (GroundReference::height()).
+bool cell_feature(const CellStats& s, Feature& out, const FeatureVector* terrain = nullptr, float height = 0.0f) noexcept;
 
 // Which dimensions make the word (thesis §6.4's ablations).
 enum class FeatureSet : std::uint8_t {
   full = 0,
   no_remission = 1,        // NoRe: without the remission mean and variance
   no_roughness_slope = 2,  // NoRS: without roughness and slope
+  thesis = 3,              // the thesis' five dimensions: without the height above the ground
 };
-std::string_view feature_set_name(FeatureSet s) noexcept;  // "full", "NoRe", "NoRS"
+inline constexpr int kFeatureSets = 4;
+std::string_view feature_set_name(FeatureSet s) noexcept;  // "full", "NoRe", "NoRS", "thesis"
 bool uses(FeatureSet s, Dim d) noexcept;
 
 // Bins of `width` from 0; values below 0 fall in the first, values beyond
@@ -74,7 +84,7 @@ struct Binning {
 };
 
 struct VocabularyConfig {
-  std::array<Binning, kDims> bins{{{0.1f, 6}, {16.0f, 10}, {8.0f, 4}, {0.03f, 3}, {15.0f, 3}}};
+  std::array<Binning, kDims> bins{{{0.1f, 6}, {16.0f, 10}, {8.0f, 4}, {0.03f, 3}, {15.0f, 3}, {0.25f, 5}}};
   FeatureSet set = FeatureSet::full;
 };
 // "" if usable, else what is wrong (bins 1..64 per dimension, finite positive
