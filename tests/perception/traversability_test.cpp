@@ -20,6 +20,7 @@
 #include "test_data.hpp"
 #include "trailnav/perception/kitti.hpp"
 #include "trailnav/perception/trav_config.hpp"
+#include "trailnav/perception/trav_ground.hpp"
 #include "trailnav/perception/trav_layer.hpp"
 #include "trailnav/perception/trav_online.hpp"
 #include "trailnav/perception/trav_recorder.hpp"
@@ -628,10 +629,10 @@ struct TrainedLayer {
     Feature f;
     EXPECT_TRUE(cell_feature(flat_cell(50.0f), f));
     ground = vocabulary.word(f);
-    // The wall's height above the ground: its top (1.1 m) above the lowest
-    // point around it (the ground cells' and its own, 0 m), as the layer's
+    // The wall's height above the ground: its lowest point (0 m) above the
+    // lowest around it (the ground cells', 0 m), as the layer's
     // GroundReference finds it.
-    EXPECT_TRUE(cell_feature(tall_cell(), f, nullptr, 1.1f));
+    EXPECT_TRUE(cell_feature(tall_cell(), f, nullptr, 0.0f));
     wall = vocabulary.word(f);
     EXPECT_NE(ground, wall);
     WordCounts k(vocabulary.size());
@@ -1003,6 +1004,41 @@ TEST(TravDemonstration, TheConfigSectionAndTheStartModels) {
   c = parse("traversability: {model: m.tntrav, demonstration: {profile: rover, footprint: {length_m: 2, width_m: 1}}}\n");
   EXPECT_NE(load_start_models(c).error.find("not 'rover'"), std::string::npos) << load_start_models(c).error;
   std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace trailnav::perception::trav
+
+// --- the height above the ground ---
+
+namespace trailnav::perception::trav {
+namespace {
+
+CellStats level_cell(float z, int points = 8) {
+  CellStats s;
+  for (int i = 0; i < points; ++i) s.add(0.02f * static_cast<float>(i % 4), 0.03f * static_cast<float>(i / 4), z, 60.0f);
+  return s;
+}
+
+// Undergrowth seen from afar (its leaves only, 1.2 m up) 2.5 m from ground
+// the lidar saw stands 1.2 m above it; the same leaves 5 m away from any
+// ground seen are 0 (the reference reaches 3 m); a cell whose lowest
+// return is on the ground is at 0 whatever stands above it (a canopy); a
+// block's lowest point is kept as the grid rolls with the robot, and
+// forgotten once it has rolled out.
+TEST(TravGround, TheLowestPointAboveTheLowestGroundWithinThreeMetres) {
+  GroundReference g(60.0, 60.0);
+  g.move_to(0.0, 0.0);
+  EXPECT_FLOAT_EQ(g.height(10.1, 0.1, level_cell(0.3f)), 0.0f);  // nothing seen around it yet: its own block
+  EXPECT_FLOAT_EQ(g.height(12.6, 0.1, level_cell(1.5f)), 1.2f);  // leaves 2.5 m from that ground
+  EXPECT_FLOAT_EQ(g.height(15.6, 0.1, level_cell(1.5f)), 0.0f);  // 5.5 m away: only leaves within 3 m
+  CellStats canopy = level_cell(0.3f);
+  canopy.add(0.1f, 0.1f, 6.0f, 40.0f);  // a leaf 5.7 m above the ground in the same cell
+  EXPECT_FLOAT_EQ(g.height(10.3, 0.3, canopy), 0.0f);
+  g.move_to(20.0, 0.0);  // the ground's block at x = 10 m stays on the grid (33 m each way)
+  EXPECT_FLOAT_EQ(g.height(12.6, 0.1, level_cell(1.5f)), 1.2f);
+  g.move_to(60.0, 0.0);  // ... and is gone 50 m on
+  EXPECT_FLOAT_EQ(g.height(32.6, 0.1, level_cell(1.5f)), 0.0f);
 }
 
 }  // namespace

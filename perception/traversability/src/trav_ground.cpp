@@ -18,7 +18,7 @@ GroundReference::GroundReference(double extent_x, double extent_y, double block,
 void GroundReference::move_to(double x, double y) noexcept { blocks_.move_to(x, y); }
 
 float GroundReference::height(double x, double y, const CellStats& s) noexcept {
-  const float low = s.z0 + s.min_dz, top = s.z0 + s.max_dz;
+  const float low = s.z0 + s.min_dz;
   const CellIndex c = blocks_.world_to_index(x, y);
   if (!blocks_.contains(c)) return 0.0f;
   float& own = blocks_.at(c);
@@ -30,7 +30,7 @@ float GroundReference::height(double x, double y, const CellStats& s) noexcept {
       if (blocks_.contains(n)) ground = std::min(ground, blocks_.at(n));
     }
   }
-  return std::max(0.0f, top - ground);
+  return std::max(0.0f, low - ground);
 }
 
 }  // namespace trailnav::perception::trav

@@ -1,10 +1,11 @@
 // The ground around a cell, for the traversability feature's sixth
 // dimension (trav_vocabulary.hpp): blocks of 1 m holding the lowest point
 // seen in them (odometry frame), on a rolling grid that follows the robot.
-// A cell's height is its highest point above the lowest block within
-// `radius` blocks (3 m): a street or a meadow stands a few centimetres above
-// it, heather a few decimetres, the leaves of undergrowth a metre and more,
-// whether or not the lidar saw into the cell itself. The recorder and the
+// A cell's height is its lowest point above the lowest block within
+// `radius` blocks (3 m): the ground of a street, a meadow or a track under
+// trees lies at it (whatever else the cell holds above: grass, a canopy),
+// while a cell in which the lidar saw only the leaves of undergrowth — from
+// afar, its returns never reach the ground — lies a metre and more above it. The recorder and the
 // layer each keep one and feed it the cells in the order the terrain step
 // hands them over, so that training and the robot make the same words.
 // Allocated at construction; no heap afterwards.
@@ -24,8 +25,7 @@ class GroundReference {
 
   void move_to(double x, double y) noexcept;
   // Registers the lowest point of the cell at (x, y) in its block and gives
-  // the height of the cell's highest point above the lowest ground within
-  // the radius (0 or more).
+  // its height above the lowest ground within the radius (0 or more).
   float height(double x, double y, const CellStats& s) noexcept;
 
  private:

@@ -6,7 +6,7 @@
 // remission, roughness, slope): the roughness is the smallest eigenvalue of
 // the points' covariance, the slope the angle between its eigenvector (the
 // least-squares plane's normal) and gravity. Beyond the thesis a sixth
-// dimension, the height of the cell's highest point above the lowest ground
+// dimension, the height of the cell's lowest point above the lowest ground
 // seen around it (GroundReference): every other dimension is the cell's
 // own, and the tops of undergrowth seen from afar — a thin level layer of
 // leaves — look like the low heather a large robot was driven through
@@ -25,14 +25,16 @@
 //   nearly all into the first.
 // - Default bins: max |Δz| 0.1 m x 6, mean remission 16 x 10, remission
 //   standard deviation 8 x 4, RMS plane distance 0.03 m x 3, slope 15° x 3,
-//   height above the ground 0.25 m x 5; the last bin of each dimension is
+//   height above the ground 0.4 m x 5; the last bin of each dimension is
 //   open-ended. |V| = 10 800 for the full vector, 2 160 for the thesis'
 //   five, 270 without remission (NoRe), 1 200 without roughness and slope
 //   (NoRS): the ablations of §6.4 drop those dimensions from the word. Chosen
 //   by measurement (docs/traversability.md): finer geometry bins left most of
 //   a meadow's words unseen in a demonstration, coarser remission bins let
-//   grass and dirt share words, and max |Δz| must reach past half a metre to
-//   tell low heather from undergrowth.
+//   grass and dirt share words, max |Δz| must reach past half a metre to
+//   tell low heather from undergrowth, and the height's first bin must hold
+//   the ground beside a ditch and on a hillside (up to 0.4 m above the
+//   lowest point within 3 m) while undergrowth's leaves start at 0.8 m.
 #pragma once
 
 #include <array>
@@ -84,7 +86,7 @@ struct Binning {
 };
 
 struct VocabularyConfig {
-  std::array<Binning, kDims> bins{{{0.1f, 6}, {16.0f, 10}, {8.0f, 4}, {0.03f, 3}, {15.0f, 3}, {0.25f, 5}}};
+  std::array<Binning, kDims> bins{{{0.1f, 6}, {16.0f, 10}, {8.0f, 4}, {0.03f, 3}, {15.0f, 3}, {0.4f, 5}}};
   FeatureSet set = FeatureSet::full;
 };
 // "" if usable, else what is wrong (bins 1..64 per dimension, finite positive
