@@ -165,6 +165,14 @@ LayerRun run_layer(const std::string& scenario, double seconds, const std::strin
       out.other_traversable += traversable ? 1u : 0u;
     }
   }
+  // The terrain and demonstration tasks' rows of trailnavd's report (docs/traversability.md quotes them).
+  for (std::size_t a = 0; a < out.stderr_text.size();) {
+    std::size_t b = out.stderr_text.find('\n', a);
+    if (b == std::string::npos) b = out.stderr_text.size();
+    const std::string line = out.stderr_text.substr(a, b - a);
+    if (line.find("  terrain ") == 0 || line.find("  demonstration ") == 0) std::printf("[ trav-daemon ] %s\n", line.c_str());
+    a = b + 1;
+  }
   std::printf("[ trav-daemon ] %s: %zu grids (first with %zu known cells, last %zu); driven path %zu of %zu cells "
               "traversable (its last 12 m %zu of %zu), elsewhere %zu of %zu\n",
               scenario.c_str(), out.grids, out.first_grid_known, out.last_known, out.path_traversable, out.path_cells,
