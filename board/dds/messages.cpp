@@ -92,44 +92,42 @@ void OccupancyGridMessage::fill(const perception::ObstacleSnapshot& s, bool stal
   }
 }
 
-void OccupancyGridMessage::fill_cost(const perception::TerrainClassMap& map,
-                                     const std::array<float, perception::kTerrainClasses>& cost, float unknown_cost) noexcept {
+namespace {
+// A terrain layer's grid (the class map's cells, row-major from its origin)
+// as a cost per cell: `cost(cell)` gives 0..100 or -1.
+template <typename Cost>
+void fill_terrain_layer(nav_msgs_msg_dds__OccupancyGrid_& msg, std::vector<std::int8_t>& data,
+                        const perception::TerrainClassMap& map, const Cost& cost) noexcept {
   const auto& g = map.grid();
-  msg_.header.stamp = to_time(map.time_ns);
-  msg_.info.map_load_time = msg_.header.stamp;
-  msg_.info.resolution = static_cast<float>(g.resolution());
-  msg_.info.origin.position.x = g.origin().x * g.resolution();
-  msg_.info.origin.position.y = g.origin().y * g.resolution();
-  msg_.info.origin.position.z = 0.0;
+  msg.header.stamp = to_time(map.time_ns);
+  msg.info.map_load_time = msg.header.stamp;
+  msg.info.resolution = static_cast<float>(g.resolution());
+  msg.info.origin.position.x = g.origin().x * g.resolution();
+  msg.info.origin.position.y = g.origin().y * g.resolution();
+  msg.info.origin.position.z = 0.0;
   const CellIndex o = g.origin();
-  const auto w = static_cast<std::int32_t>(msg_.info.width), h = static_cast<std::int32_t>(msg_.info.height);
+  const auto w = static_cast<std::int32_t>(msg.info.width), h = static_cast<std::int32_t>(msg.info.height);
   for (std::int32_t y = 0; y < std::min(h, g.size_y()); ++y) {
     for (std::int32_t x = 0; x < std::min(w, g.size_x()); ++x) {
-      const perception::TerrainCell& c = g.at({o.x + x, o.y + y});
-      const float v = perception::terrain_cost(c, cost, unknown_cost);
-      data_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
-          c.known ? static_cast<std::int8_t>(std::lround(100.0f * std::clamp(v, 0.0f, 1.0f))) : std::int8_t{-1};
+      data[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] = cost(g.at({o.x + x, o.y + y}));
     }
   }
 }
+}  // namespace
+
+void OccupancyGridMessage::fill_cost(const perception::TerrainClassMap& map,
+                                     const std::array<float, perception::kTerrainClasses>& cost, float unknown_cost) noexcept {
+  fill_terrain_layer(msg_, data_, map, [&](const perception::TerrainCell& c) {
+    const float v = perception::terrain_cost(c, cost, unknown_cost);
+    return c.known ? static_cast<std::int8_t>(std::lround(100.0f * std::clamp(v, 0.0f, 1.0f))) : std::int8_t{-1};
+  });
+}
 
 void OccupancyGridMessage::fill_traversability(const perception::TerrainClassMap& map) noexcept {
-  const auto& g = map.grid();
-  msg_.header.stamp = to_time(map.time_ns);
-  msg_.info.map_load_time = msg_.header.stamp;
-  msg_.info.resolution = static_cast<float>(g.resolution());
-  msg_.info.origin.position.x = g.origin().x * g.resolution();
-  msg_.info.origin.position.y = g.origin().y * g.resolution();
-  msg_.info.origin.position.z = 0.0;
-  const CellIndex o = g.origin();
-  const auto w = static_cast<std::int32_t>(msg_.info.width), h = static_cast<std::int32_t>(msg_.info.height);
-  for (std::int32_t y = 0; y < std::min(h, g.size_y()); ++y) {
-    for (std::int32_t x = 0; x < std::min(w, g.size_x()); ++x) {
-      const float p = g.at({o.x + x, o.y + y}).traversable;
-      data_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
-          p < 0.0f ? std::int8_t{-1} : static_cast<std::int8_t>(std::lround(100.0f * (1.0f - std::min(p, 1.0f))));
-    }
-  }
+  fill_terrain_layer(msg_, data_, map, [](const perception::TerrainCell& c) {
+    return c.traversable < 0.0f ? std::int8_t{-1}
+                                : static_cast<std::int8_t>(std::lround(100.0f * (1.0f - std::min(c.traversable, 1.0f))));
+  });
 }
 
 // --- PoseStamped ---

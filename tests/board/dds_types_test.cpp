@@ -483,6 +483,37 @@ TEST(CoarseMap, BlocksKeepTheirObstaclesAndFollowTheRobot) {
   EXPECT_EQ(whole.sample().data._buffer[2 * 4 + 3], 90);
 }
 
+// The terrain map's two cost layers, row-major from the map's origin: the
+// class costs (§8.1.2) and the learnt traversability, 100 (1 - P(trav)),
+// each -1 where it knows nothing.
+TEST(TerrainLayers, ClassCostsAndTheLearntTraversabilityAsOccupancyGrids) {
+  perception::TerrainClassMap map({2, 2, 0.5});
+  map.grid().move_to(0.0, 0.0);
+  map.time_ns = 1'500'000'000;
+  const CellIndex o = map.grid().origin();
+  perception::TerrainCell& street = map.grid().at({o.x, o.y});
+  street.set({1.0f, 0.0f, 0.0f, 0.0f, 0.0f});
+  street.traversable = 0.9f;
+  map.grid().at({o.x + 1, o.y}).traversable = 0.0f;  // a cell only the learnt layer saw: surely not
+  map.grid().at({o.x, o.y + 1}).set({0.0f, 0.0f, 0.0f, 0.0f, 1.0f});  // `other`, no layer evidence
+  dds::OccupancyGridMessage cost(2, 2, "odom"), trav(2, 2, "odom");
+  cost.fill_cost(map, {0.1f, 0.2f, 0.4f, 0.8f, 1.0f}, 1.0f);
+  trav.fill_traversability(map);
+  const std::int8_t* c = cost.sample().data._buffer;
+  const std::int8_t* t = trav.sample().data._buffer;
+  EXPECT_EQ(c[0], 10);
+  EXPECT_EQ(c[1], -1);
+  EXPECT_EQ(c[2], 100);
+  EXPECT_EQ(c[3], -1);
+  EXPECT_EQ(t[0], 10);
+  EXPECT_EQ(t[1], 100);
+  EXPECT_EQ(t[2], -1);
+  EXPECT_EQ(t[3], -1);
+  EXPECT_EQ(trav.sample().header.stamp.sec, 1);
+  EXPECT_DOUBLE_EQ(trav.sample().info.origin.position.x, o.x * 0.5);
+  EXPECT_FLOAT_EQ(trav.sample().info.resolution, 0.5f);
+}
+
 // trailnavd's own Cyclone configuration: the shipped one with an 80 kB
 // receive buffer, inside the Internal element it has or a new one.
 TEST(CycloneConfig, TrailnavdsOwnReceiveBufferIsSmall) {
