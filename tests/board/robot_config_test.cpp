@@ -370,3 +370,54 @@ TEST(RobotConfig, EveryPresetsBudgetIsItsNeedWithTheStatedMargin) {
     }
   }
 }
+
+namespace {
+
+// The traversability section: the shipped examples' (bench: the built-in
+// model; the robot example's, commented out, as a robot would uncomment it),
+// its checks (a terrain section, the pose for a demonstration, its task, the
+// aligner's learnt cost only with it) and the task table's new row.
+TEST(RobotConfig, TheTraversabilitySectionAndItsChecks) {
+  const auto bench = daemon::load_robot_config("board/robots/bench.yaml");
+  ASSERT_TRUE(bench.config) << bench.error;
+  ASSERT_TRUE(bench.config->traversability.has_value());
+  EXPECT_TRUE(fs::exists(bench.config->traversability->model));
+  EXPECT_FALSE(bench.config->traversability->demonstration);
+
+  std::ifstream in("board/robots/robot-example.yaml");
+  std::string example((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  for (const char* line : {"# traversability:\n", "#   model: ", "#   method: ", "#   demonstration: "}) {
+    const std::size_t at = example.find(line);
+    ASSERT_NE(at, std::string::npos) << line;
+    example.erase(at, 2);
+  }
+  const auto robot = load(example);
+  ASSERT_TRUE(robot.config) << robot.error;
+  ASSERT_TRUE(robot.config->traversability.has_value());
+  EXPECT_TRUE(robot.config->traversability->demonstration);
+  EXPECT_EQ(robot.config->traversability->profile, "large");
+  EXPECT_DOUBLE_EQ(robot.config->traversability->footprint.length, 1.2);
+  const auto demo_task = std::find_if(robot.config->tasks.begin(), robot.config->tasks.end(),
+                                      [](const TaskSpec& t) { return t.name == "demonstration"; });
+  ASSERT_NE(demo_task, robot.config->tasks.end()) << "the preset gives the demonstration its task";
+  EXPECT_EQ(demo_task->priority, 0);
+
+  std::ifstream bin("board/robots/bench.yaml");
+  const std::string bench_text((std::istreambuf_iterator<char>(bin)), std::istreambuf_iterator<char>());
+  std::string text = bench_text;
+  text.replace(text.find("feed_terrain: true"), 18, "feed_terrain: false");
+  text.replace(text.find("  local_map_m: 20"), 17, "  local_map_m: 20\n  demonstration: {profile: large}");
+  std::string e = load_error(text);
+  EXPECT_NE(e.find("feed_terrain: true"), std::string::npos) << e;
+  text = bench_text;
+  text.replace(text.find("trav-large.tntrav"), 17, "nothing-here.tntrav");
+  e = load_error(text);
+  EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+  text = bench_text;
+  text.replace(text.find("  method: pnb"), 13, "  method: svm");
+  e = load_error(text);
+  EXPECT_NE(e.find("method"), std::string::npos) << e;
+  EXPECT_NE(e.find("test-"), std::string::npos) << "names the file: " << e;
+}
+
+}  // namespace
