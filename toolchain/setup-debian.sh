@@ -20,6 +20,8 @@ packages=(
   libgeographiclib-dev
   libgpiod-dev gpiod
   libpcap-dev
+  # LZF: PCD point clouds' binary_compressed data (drivers/cloud)
+  liblzf-dev
   libosmium2-dev libprotozero-dev zlib1g-dev libbz2-dev libexpat1-dev liblz4-dev
   libyaml-cpp-dev
   libcli11-dev
