@@ -1,0 +1,77 @@
+// A point cloud as a range image (drivers/velodyne/range_image.hpp), so any
+// spinning lidar's points run through the obstacle and terrain pipelines:
+// each point's row is its laser ring — from the file's ring field when it
+// has one, else inferred from the point's elevation and the sensor's ring
+// layout — and its column the bin of its azimuth (atan2(y, x) from +x,
+// counter-clockwise, as the KITTI loader has it). Every point is accounted
+// for: the first in a cell fills layer 0, a second layer 1 (the image's
+// second layer, as for dual returns), any further one is counted, never
+// silently dropped. No allocation after construction.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "trailnav/drivers/cloud/point_cloud.hpp"
+#include "trailnav/drivers/velodyne/calibration.hpp"
+#include "trailnav/drivers/velodyne/range_image.hpp"
+
+namespace trailnav::cloud {
+
+// A spinning lidar's rings: each one's elevation (degrees), indexed by the
+// ring number its files use, and the columns of one revolution.
+struct RingLayout {
+  std::string name;
+  std::vector<float> elevation_deg;  // by the file's ring number
+  int columns = 2048;
+};
+
+// Velodyne models from their built-in calibrations ("VLP-16", "VLP-32C",
+// "HDL-32E"; ring numbers: the laser ids) and the HDL-64E's nominal layout
+// (its units are calibrated one by one: rings 0-31 the upper block from the
+// top, 32-63 the lower). Nothing for another name.
+std::optional<RingLayout> ring_layout_preset(std::string_view name);
+RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration, std::string name, int columns);
+// Evenly spaced rings from `lowest_deg` to `highest_deg` (ring 0 the lowest).
+RingLayout uniform_ring_layout(std::string name, int rings, double lowest_deg, double highest_deg, int columns);
+
+struct CloudImageStats {
+  std::uint64_t points = 0;
+  std::uint64_t placed = 0;        // in layer 0
+  std::uint64_t second = 0;        // a second point of its cell, in layer 1
+  std::uint64_t collisions = 0;    // a third or later (or a second with one layer): counted, not placed
+  std::uint64_t invalid = 0;       // non-finite or at the origin
+  std::uint64_t bad_ring = 0;      // a ring field beyond the layout's rings
+  std::uint64_t inferred = 0;      // rows found from the elevation
+};
+
+struct CloudImageOptions {
+  float intensity_scale = 1.0f;    // the file's intensity to 0..255 (KITTI's 0..1: 255)
+  double period_s = 0.1;           // a revolution, for points without a time of their own
+};
+
+class CloudImager {
+ public:
+  explicit CloudImager(const RingLayout& layout, int layers = 2, CloudImageOptions options = {});
+  // The shape of the images fill() writes.
+  velodyne::RangeImageShape shape() const noexcept;
+  // Fills `image` (of shape()) from the cloud.
+  void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats) const noexcept;
+  // The row (0 = the lowest ring) of a point by its elevation alone.
+  int row_of_elevation(float z, float horizontal) const noexcept;
+
+ private:
+  int rings_;
+  int columns_;
+  int layers_;
+  CloudImageOptions options_;
+  std::vector<std::uint16_t> row_of_ring_;  // the file's ring number -> row
+  // Row by tan(elevation): kSlopeBins bins over [slope_lo_, slope_hi_].
+  std::vector<std::uint16_t> slope_rows_;
+  float slope_lo_ = 0.0f, slope_scale_ = 0.0f;
+};
+
+}  // namespace trailnav::cloud

@@ -1,0 +1,194 @@
+#include "trailnav/drivers/cloud/cloud_image.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <numeric>
+
+#include "trailnav/drivers/velodyne/model.hpp"
+
+namespace trailnav::cloud {
+
+namespace {
+
+constexpr int kSlopeBins = 16384;
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+// atan2 in [0, 2 pi) to about 1e-5 rad: a polynomial for atan on [0, 1]
+// and the octant's symmetry (the column bins are 3e-3 rad wide at 2,048).
+inline float azimuth(float y, float x) noexcept {
+  const float ax = std::fabs(x), ay = std::fabs(y);
+  const float mx = std::max(ax, ay), mn = std::min(ax, ay);
+  const float a = mx > 0.0f ? mn / mx : 0.0f;
+  const float s = a * a;
+  // Minimax coefficients for atan(a), a in [0, 1].
+  float r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
+  r *= a;
+  if (ay > ax) r = 1.57079637f - r;
+  if (x < 0.0f) r = 3.14159274f - r;
+  if (y < 0.0f) r = 6.28318548f - r;
+  return r >= 6.28318548f ? 0.0f : r;
+}
+
+}  // namespace
+
+RingLayout uniform_ring_layout(std::string name, int rings, double lowest_deg, double highest_deg, int columns) {
+  RingLayout l;
+  l.name = std::move(name);
+  l.columns = columns;
+  for (int r = 0; r < rings; ++r) {
+    l.elevation_deg.push_back(
+        static_cast<float>(rings == 1 ? lowest_deg : lowest_deg + (highest_deg - lowest_deg) * r / (rings - 1)));
+  }
+  return l;
+}
+
+RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration, std::string name, int columns) {
+  RingLayout l;
+  l.name = std::move(name);
+  l.columns = columns;
+  for (const velodyne::LaserCorrection& c : calibration.lasers) {
+    l.elevation_deg.push_back(static_cast<float>(c.vert_correction * 180.0 / std::numbers::pi));
+  }
+  return l;
+}
+
+std::optional<RingLayout> ring_layout_preset(std::string_view name) {
+  const auto model = velodyne::parse_model(name);
+  if (!model) return std::nullopt;
+  if (*model == velodyne::Model::hdl64e) {
+    // Each HDL-64E is calibrated on its own (no built-in calibration): the
+    // nominal layout, the upper block's 32 lasers from +2 deg down in steps
+    // of 1/3 deg, the lower block's from -8.83 deg down in steps of 1/2 deg.
+    // A unit's own file (ring_layout_from_calibration) is closer.
+    RingLayout l;
+    l.name = "HDL-64E (nominal)";
+    l.columns = 2083;
+    for (int k = 0; k < 32; ++k) l.elevation_deg.push_back(static_cast<float>(2.0 - k / 3.0));
+    for (int k = 0; k < 32; ++k) l.elevation_deg.push_back(static_cast<float>(-8.83 - k * 0.5));
+    return l;
+  }
+  const auto calibration = velodyne::builtin_calibration(*model);
+  if (!calibration) return std::nullopt;
+  // Columns of a revolution at 600 rpm: the models' firing rates.
+  int columns = 1808;  // VLP-16 (and VLP-32C): 55.296 us a firing
+  if (*model == velodyne::Model::hdl32e) columns = 2170;
+  if (*model == velodyne::Model::hdl64e) columns = 2083;
+  return ring_layout_from_calibration(*calibration, std::string(velodyne::model_info(*model).name), columns);
+}
+
+CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions options)
+    : rings_(static_cast<int>(layout.elevation_deg.size())),
+      columns_(layout.columns),
+      layers_(std::clamp(layers, 1, 2)),
+      options_(options),
+      row_of_ring_(layout.elevation_deg.size()),
+      slope_rows_(kSlopeBins) {
+  // Rows: the rings sorted by elevation (row 0 the lowest).
+  std::vector<int> order(static_cast<std::size_t>(rings_));
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return layout.elevation_deg[static_cast<std::size_t>(a)] < layout.elevation_deg[static_cast<std::size_t>(b)];
+  });
+  std::vector<float> slope(static_cast<std::size_t>(rings_));
+  for (int row = 0; row < rings_; ++row) {
+    const int ring = order[static_cast<std::size_t>(row)];
+    row_of_ring_[static_cast<std::size_t>(ring)] = static_cast<std::uint16_t>(row);
+    slope[static_cast<std::size_t>(row)] =
+        std::tan(layout.elevation_deg[static_cast<std::size_t>(ring)] * static_cast<float>(std::numbers::pi / 180.0));
+  }
+  if (rings_ == 0) return;
+  // The table reaches half a ring spacing beyond the outermost rings.
+  const float margin = rings_ > 1 ? 0.5f * (slope.back() - slope.front()) / static_cast<float>(rings_ - 1) : 0.1f;
+  slope_lo_ = slope.front() - margin;
+  const float hi = slope.back() + margin;
+  slope_scale_ = static_cast<float>(kSlopeBins) / (hi - slope_lo_);
+  // Each bin: the ring nearest by elevation angle to the bin's centre.
+  int row = 0;
+  for (int b = 0; b < kSlopeBins; ++b) {
+    const float t = slope_lo_ + (static_cast<float>(b) + 0.5f) / slope_scale_;
+    const float e = std::atan(t);
+    while (row + 1 < rings_ &&
+           std::fabs(std::atan(slope[static_cast<std::size_t>(row + 1)]) - e) <= std::fabs(std::atan(slope[static_cast<std::size_t>(row)]) - e)) {
+      ++row;
+    }
+    slope_rows_[static_cast<std::size_t>(b)] = static_cast<std::uint16_t>(row);
+  }
+}
+
+velodyne::RangeImageShape CloudImager::shape() const noexcept { return {rings_, columns_, layers_}; }
+
+int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
+  const float t = horizontal > 0.0f ? z / horizontal : (z >= 0.0f ? 1e9f : -1e9f);
+  const float k = (t - slope_lo_) * slope_scale_;
+  const int b = k <= 0.0f ? 0 : k >= static_cast<float>(kSlopeBins - 1) ? kSlopeBins - 1 : static_cast<int>(k);
+  return slope_rows_[static_cast<std::size_t>(b)];
+}
+
+void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st) const noexcept {
+  st = CloudImageStats{};
+  const std::uint64_t sequence = image.sequence;
+  image.reset(columns_);
+  image.mark_received(0, columns_);
+  image.sequence = sequence + 1;
+  image.start_ns = 0;
+  image.end_ns = static_cast<std::int64_t>(options_.period_s * 1e9);
+  image.rpm = 60.0 / options_.period_s;
+  const auto cols = static_cast<float>(columns_);
+  const float to_column = cols / static_cast<float>(kTwoPi);
+  const auto period = static_cast<float>(options_.period_s);
+  st.points = c.size;
+  // Times relative to the cloud's first (a file may hold absolute ones).
+  double t0 = 0.0;
+  if (c.has_time) {
+    t0 = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < c.size; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
+    if (!std::isfinite(t0)) t0 = 0.0;
+  }
+  for (std::size_t i = 0; i < c.size; ++i) {
+    const float x = c.x[i], y = c.y[i], z = c.z[i];
+    const float h2 = x * x + y * y;
+    const float d = std::sqrt(h2 + z * z);
+    if (!std::isfinite(d) || d <= 0.0f) {
+      ++st.invalid;
+      continue;
+    }
+    int row = 0;
+    if (c.has_ring) {
+      const std::uint16_t ring = c.ring[i];
+      if (ring >= rings_) {
+        ++st.bad_ring;
+        continue;
+      }
+      row = row_of_ring_[ring];
+    } else {
+      row = row_of_elevation(z, std::sqrt(h2));
+      ++st.inferred;
+    }
+    const float az = azimuth(y, x);
+    const int col = std::min(columns_ - 1, static_cast<int>(az * to_column));
+    velodyne::RangeCell* cell = &image.at(0, row, col);
+    if (cell->valid()) {
+      if (layers_ < 2 || image.at(1, row, col).valid()) {
+        ++st.collisions;
+        continue;
+      }
+      cell = &image.at(1, row, col);
+      ++st.second;
+    } else {
+      ++st.placed;
+    }
+    cell->x = x;
+    cell->y = y;
+    cell->z = z;
+    cell->distance = d;
+    cell->azimuth = az;
+    cell->time = c.has_time ? static_cast<float>(c.time[i] - t0) : az / static_cast<float>(kTwoPi) * period;
+    cell->intensity = std::clamp(c.intensity[i] * options_.intensity_scale, 0.0f, 255.0f);
+  }
+  image.finish();
+  image.points = static_cast<int>(st.placed + st.second);
+}
+
+}  // namespace trailnav::cloud

@@ -1,0 +1,194 @@
+// Point clouds as range images (drivers/cloud/cloud_image.hpp): rows from a
+// ring field or inferred from the elevation with a sensor's ring layout,
+// columns from the azimuth, every point accounted for (a cell's second
+// point in the second layer, further ones counted), no heap.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <tuple>
+
+#include "test_data.hpp"
+#include "trailnav/drivers/cloud/cloud_file.hpp"
+#include "trailnav/drivers/cloud/cloud_image.hpp"
+#include "trailnav/runtime/alloc_guard.hpp"
+
+namespace trailnav::cloud {
+namespace {
+
+PointCloud points(const std::vector<std::array<float, 3>>& xyz, const std::vector<int>& rings = {}) {
+  PointCloud c(xyz.size());
+  c.size = xyz.size();
+  for (std::size_t k = 0; k < xyz.size(); ++k) {
+    c.x[k] = xyz[k][0], c.y[k] = xyz[k][1], c.z[k] = xyz[k][2];
+    c.intensity[k] = 0.5f;
+  }
+  c.has_intensity = true;
+  if (!rings.empty()) {
+    c.has_ring = true;
+    for (std::size_t k = 0; k < rings.size(); ++k) c.ring[k] = static_cast<std::uint16_t>(rings[k]);
+  }
+  return c;
+}
+
+// A point at `elevation_deg` and `azimuth_deg`, 10 m away.
+std::array<float, 3> at(double elevation_deg, double azimuth_deg, double range = 10.0) {
+  const double e = elevation_deg * std::numbers::pi / 180.0, a = azimuth_deg * std::numbers::pi / 180.0;
+  return {static_cast<float>(range * std::cos(e) * std::cos(a)), static_cast<float>(range * std::cos(e) * std::sin(a)),
+          static_cast<float>(range * std::sin(e))};
+}
+
+TEST(CloudImage, RowsFromTheElevationOrTheRingFieldColumnsFromTheAzimuth) {
+  // Four rings numbered out of elevation order, as Velodyne's lasers are.
+  RingLayout l;
+  l.name = "test";
+  l.elevation_deg = {-1.0f, 3.0f, -5.0f, 1.0f};  // rows: ring 2 (-5), ring 0 (-1), ring 3 (1), ring 1 (3)
+  l.columns = 360;
+  const CloudImager imager(l, 2, {255.0f, 0.1});
+  EXPECT_EQ(imager.shape().rings, 4);
+  EXPECT_EQ(imager.shape().max_columns, 360);
+  velodyne::RangeImage image(imager.shape());
+  CloudImageStats st;
+  // By elevation: -4.2 deg is nearest -5 (row 0), 0.1 deg nearest 1 (row 2: -1 and 1 are 1.1 and 0.9 away).
+  imager.fill(points({at(-4.2, 10.5), at(0.1, 90.5), at(2.6, 359.6)}), image, st);
+  EXPECT_EQ(st.inferred, 3u);
+  EXPECT_EQ(st.placed, 3u);
+  EXPECT_TRUE(image.at(0, 0, 10).valid());
+  EXPECT_TRUE(image.at(0, 2, 90).valid());
+  EXPECT_TRUE(image.at(0, 3, 359).valid());
+  EXPECT_NEAR(image.at(0, 0, 10).intensity, 127.5f, 1e-3f);
+  EXPECT_NEAR(image.at(0, 2, 90).azimuth, 90.5 * std::numbers::pi / 180.0, 1e-4);
+  EXPECT_NEAR(image.at(0, 2, 90).distance, 10.0f, 1e-4f);
+  // The file's ring wins over the elevation; a ring beyond the layout is counted.
+  imager.fill(points({at(-4.2, 10.5), at(0.1, 90.5), at(2.6, 200.2)}, {1, 2, 7}), image, st);
+  EXPECT_EQ(st.inferred, 0u);
+  EXPECT_EQ(st.bad_ring, 1u);
+  EXPECT_TRUE(image.at(0, 3, 10).valid());  // ring 1: row 3
+  EXPECT_TRUE(image.at(0, 0, 90).valid());  // ring 2: row 0
+}
+
+TEST(CloudImage, EveryPointIsAccountedFor) {
+  RingLayout l = uniform_ring_layout("u", 2, -1.0, 1.0, 100);
+  const CloudImager two(l, 2), one(l, 1);
+  velodyne::RangeImage image2(two.shape()), image1(one.shape());
+  CloudImageStats st;
+  // Three points in one cell, an invalid one, one elsewhere.
+  const PointCloud c = points({at(-1.0, 5.0), at(-1.0, 5.1, 12.0), at(-1.0, 5.2, 15.0), {NAN, 0.0f, 0.0f}, {0, 0, 0}, at(1.0, 50.0)});
+  two.fill(c, image2, st);
+  EXPECT_EQ(st.points, 6u);
+  EXPECT_EQ(st.placed, 2u);
+  EXPECT_EQ(st.second, 1u);
+  EXPECT_EQ(st.collisions, 1u);
+  EXPECT_EQ(st.invalid, 2u);
+  EXPECT_EQ(st.placed + st.second + st.collisions + st.invalid + st.bad_ring, st.points);
+  EXPECT_NEAR(image2.at(1, 0, 1).distance, 12.0f, 1e-4f);
+  EXPECT_EQ(image2.points, 3);
+  one.fill(c, image1, st);
+  EXPECT_EQ(st.second, 0u);
+  EXPECT_EQ(st.collisions, 2u);
+}
+
+// The real SemanticKITTI scan: the rows inferred from the elevation
+// against those found from the order of the points (each laser's points
+// come one after another, as the KITTI loader uses), with three layouts:
+// the scan's own lasers' median elevations, the HDL-64E's nominal one, and
+// another HDL-64E S2 unit's calibration.
+TEST(CloudImage, ElevationRowsOnARealHdl64eScan) {
+  PointCloud c;
+  CloudScratch s;
+  ASSERT_TRUE(load_cloud(test::shared_data("semantickitti/000000.bin"), c, s));
+  // Rows from the order of the points: a new laser where the azimuth wraps
+  // after most of a turn (as perception/kitti.cpp does), sorted by median elevation.
+  std::vector<int> laser(c.size, 0);
+  int current = 0;
+  double swept = 0.0, prev = std::atan2(c.y[0], c.x[0]);
+  for (std::size_t k = 1; k < c.size; ++k) {
+    const double a = std::atan2(c.y[k], c.x[k]);
+    double d = a - prev;
+    if (d < -std::numbers::pi) d += 2 * std::numbers::pi;
+    if (d > std::numbers::pi) d -= 2 * std::numbers::pi;
+    if (prev < 0.0 && a >= 0.0 && swept > 1.5 * std::numbers::pi) {
+      ++current;
+      swept = 0.0;
+    }
+    swept += std::fabs(d);
+    prev = a;
+    laser[k] = current;
+  }
+  ASSERT_EQ(current + 1, 64);
+  std::map<int, std::vector<float>> el;
+  for (std::size_t k = 0; k < c.size; ++k) el[laser[k]].push_back(std::atan2(c.z[k], std::hypot(c.x[k], c.y[k])));
+  RingLayout measured;  // each laser's median elevation in this scan, by its order
+  measured.name = "this scan's lasers' median elevations";
+  measured.columns = 2083;
+  std::vector<std::pair<float, int>> med;
+  for (auto& [l, v] : el) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    med.push_back({v[v.size() / 2], l});
+    measured.elevation_deg.push_back(static_cast<float>(static_cast<double>(v[v.size() / 2]) * 180.0 / std::numbers::pi));
+  }
+  std::sort(med.begin(), med.end());
+  std::map<int, int> row_of;
+  for (std::size_t r = 0; r < med.size(); ++r) row_of[med[r].second] = static_cast<int>(r);
+
+  const auto nominal = ring_layout_preset("HDL-64E");
+  ASSERT_TRUE(nominal);
+  ASSERT_EQ(nominal->elevation_deg.size(), 64u);
+  // An HDL-64E S2's own calibration (another unit than KITTI's).
+  const auto cal = velodyne::load_calibration(test::shared_data("velodyne/calibration/ros_velodyne_64e_s2.1-sztaki.yaml"));
+  ASSERT_TRUE(cal.calibration) << cal.error;
+  const RingLayout unit = ring_layout_from_calibration(*cal.calibration, "an HDL-64E S2's calibration (sztaki)", 2083);
+  for (const RingLayout* layout : {static_cast<const RingLayout*>(&measured), &*nominal, &unit}) {
+    const CloudImager imager(*layout, 2, {255.0f, 0.1});
+    velodyne::RangeImage image(imager.shape());
+    CloudImageStats st;
+    imager.fill(c, image, st);
+    EXPECT_EQ(st.placed + st.second + st.collisions + st.invalid + st.bad_ring, st.points);
+    EXPECT_EQ(st.inferred, st.points - st.invalid);
+    std::uint64_t same = 0, within_one = 0, n = 0;
+    for (std::size_t k = 0; k < c.size; ++k) {
+      const float h = std::hypot(c.x[k], c.y[k]);
+      if (!(h > 0.0f)) continue;
+      const int a = imager.row_of_elevation(c.z[k], h), b = row_of[laser[k]];
+      ++n;
+      same += a == b ? 1u : 0u;
+      within_one += std::abs(a - b) <= 1 ? 1u : 0u;
+    }
+    const double share = static_cast<double>(same) / static_cast<double>(n);
+    const double near = static_cast<double>(within_one) / static_cast<double>(n);
+    std::printf("[ cloud ] %s: %llu points in layer 0, %llu in layer 1, %llu beyond; rows from the elevation agree "
+                "with those from the order for %.3f of the points, within one ring %.3f\n",
+                layout->name.c_str(), static_cast<unsigned long long>(st.placed), static_cast<unsigned long long>(st.second),
+                static_cast<unsigned long long>(st.collisions), share, near);
+    // Even with the lasers' own median elevations a point's elevation from
+    // the origin names its laser exactly for only 0.41 of the points (within
+    // one ring 0.90): the HDL-64E's lasers sit at different heights and its
+    // rings are a third of a degree apart, so near points' elevations cross
+    // into the next ring's. Elevation alone is not enough for it
+    // (docs/pointcloud.md): measured here, to be bettered.
+    if (layout == &measured) EXPECT_GT(near, 0.88);
+  }
+}
+
+TEST(CloudImage, FillingTouchesNoHeap) {
+  PointCloud c;
+  CloudScratch s;
+  ASSERT_TRUE(load_cloud(test::shared_data("semantickitti/000000.bin"), c, s));
+  const CloudImager imager(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1});
+  velodyne::RangeImage image(imager.shape());
+  CloudImageStats st;
+  imager.fill(c, image, st);  // first touch of the image's pages
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("cloud");
+  ASSERT_TRUE(alloc_guard::arm());
+  imager.fill(c, image, st);
+  imager.fill(c, image, st);
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  EXPECT_GT(st.placed, 0u);
+}
+
+}  // namespace
+}  // namespace trailnav::cloud
