@@ -167,7 +167,9 @@ TEST(CloudImage, ElevationRowsOnARealHdl64eScan) {
     // rings are a third of a degree apart, so near points' elevations cross
     // into the next ring's. Elevation alone is not enough for it
     // (docs/pointcloud.md): measured here, to be bettered.
-    if (layout == &measured) EXPECT_GT(near, 0.88);
+    if (layout == &measured) {
+      EXPECT_GT(near, 0.88);
+    }
   }
 }
 
