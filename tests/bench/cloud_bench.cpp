@@ -1,0 +1,56 @@
+// Point clouds from files (drivers/cloud) on the real SemanticKITTI scan
+// (123,389 points, HDL-64E): parsing the KITTI .bin from memory, and
+// filling the range image from the cloud (rows from the elevation, columns
+// from the azimuth). Issue 39's goal: 1 ms for 125,000 points.
+#include <benchmark/benchmark.h>
+
+#include <fstream>
+#include <iterator>
+#include <stdexcept>
+#include <vector>
+
+#include "trailnav/drivers/cloud/cloud_file.hpp"
+#include "trailnav/drivers/cloud/cloud_image.hpp"
+
+namespace {
+
+using namespace trailnav::cloud;
+
+const std::vector<std::uint8_t>& scan_bytes() {
+  static const std::vector<std::uint8_t> bytes = [] {
+    std::ifstream in("../shared/data/semantickitti/000000.bin", std::ios::binary);
+    if (!in) throw std::runtime_error("run from the repository: ../shared/data/semantickitti/000000.bin");
+    return std::vector<std::uint8_t>((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }();
+  return bytes;
+}
+
+void BM_CloudReadKitti(benchmark::State& state) {
+  PointCloud cloud(130000);
+  CloudScratch scratch;
+  for (auto _ : state) {
+    if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
+    benchmark::DoNotOptimize(cloud.x.data());
+  }
+  state.counters["points"] = static_cast<double>(cloud.size);
+}
+BENCHMARK(BM_CloudReadKitti)->Unit(benchmark::kMillisecond);
+
+void BM_CloudImage(benchmark::State& state) {
+  PointCloud cloud(130000);
+  CloudScratch scratch;
+  if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
+  const CloudImager imager(*ring_layout_preset("HDL-64E"), static_cast<int>(state.range(0)), {255.0f, 0.1});
+  trailnav::velodyne::RangeImage image(imager.shape());
+  CloudImageStats stats;
+  for (auto _ : state) {
+    imager.fill(cloud, image, stats);
+    benchmark::DoNotOptimize(image.points);
+  }
+  state.counters["points"] = static_cast<double>(stats.points);
+}
+BENCHMARK(BM_CloudImage)->ArgName("layers")->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
