@@ -40,7 +40,8 @@ void BM_CloudImage(benchmark::State& state) {
   PointCloud cloud(130000);
   CloudScratch scratch;
   if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
-  const CloudImager imager(*ring_layout_preset("HDL-64E"), static_cast<int>(state.range(0)), {255.0f, 0.1});
+  CloudImageOptions o{255.0f, 0.1, state.range(1) != 0 ? RingSource::order : RingSource::elevation};
+  CloudImager imager(*ring_layout_preset("HDL-64E"), static_cast<int>(state.range(0)), o);
   trailnav::velodyne::RangeImage image(imager.shape());
   CloudImageStats stats;
   for (auto _ : state) {
@@ -49,7 +50,8 @@ void BM_CloudImage(benchmark::State& state) {
   }
   state.counters["points"] = static_cast<double>(stats.points);
 }
-BENCHMARK(BM_CloudImage)->ArgName("layers")->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+// order 0: rows from the elevation; 1: from the sensor's order (KITTI's files).
+BENCHMARK(BM_CloudImage)->ArgNames({"layers", "order"})->Args({1, 0})->Args({2, 0})->Args({2, 1})->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -12,6 +12,7 @@
 #include "test_data.hpp"
 #include "trailnav/drivers/cloud/cloud_file.hpp"
 #include "trailnav/drivers/cloud/cloud_image.hpp"
+#include "trailnav/perception/kitti.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 
 namespace trailnav::cloud {
@@ -45,7 +46,7 @@ TEST(CloudImage, RowsFromTheElevationOrTheRingFieldColumnsFromTheAzimuth) {
   l.name = "test";
   l.elevation_deg = {-1.0f, 3.0f, -5.0f, 1.0f};  // rows: ring 2 (-5), ring 0 (-1), ring 3 (1), ring 1 (3)
   l.columns = 360;
-  const CloudImager imager(l, 2, {255.0f, 0.1});
+  CloudImager imager(l, 2, {255.0f, 0.1});
   EXPECT_EQ(imager.shape().rings, 4);
   EXPECT_EQ(imager.shape().max_columns, 360);
   velodyne::RangeImage image(imager.shape());
@@ -70,7 +71,7 @@ TEST(CloudImage, RowsFromTheElevationOrTheRingFieldColumnsFromTheAzimuth) {
 
 TEST(CloudImage, EveryPointIsAccountedFor) {
   RingLayout l = uniform_ring_layout("u", 2, -1.0, 1.0, 100);
-  const CloudImager two(l, 2), one(l, 1);
+  CloudImager two(l, 2), one(l, 1);
   velodyne::RangeImage image2(two.shape()), image1(one.shape());
   CloudImageStats st;
   // Three points in one cell, an invalid one, one elsewhere.
@@ -140,7 +141,7 @@ TEST(CloudImage, ElevationRowsOnARealHdl64eScan) {
   ASSERT_TRUE(cal.calibration) << cal.error;
   const RingLayout unit = ring_layout_from_calibration(*cal.calibration, "an HDL-64E S2's calibration (sztaki)", 2083);
   for (const RingLayout* layout : {static_cast<const RingLayout*>(&measured), &*nominal, &unit}) {
-    const CloudImager imager(*layout, 2, {255.0f, 0.1});
+    CloudImager imager(*layout, 2, {255.0f, 0.1});
     velodyne::RangeImage image(imager.shape());
     CloudImageStats st;
     imager.fill(c, image, st);
@@ -173,11 +174,49 @@ TEST(CloudImage, ElevationRowsOnARealHdl64eScan) {
   }
 }
 
+// The sensor's order (RingSource::order) on the real scans: the KITTI
+// loader's image (perception/kitti.cpp, the same sweeps, ordered by median
+// elevation, a cell's first point kept) is this one's first layer, cell
+// for cell; this one also keeps each cell's second point (layer 1) and
+// counts the rest.
+TEST(CloudImage, TheSensorsOrderGivesTheKittiLoadersRows) {
+  for (const char* file : {"kitti/000000.bin", "kitti/000001.bin", "semantickitti/000000.bin"}) {
+    PointCloud c;
+    CloudScratch s;
+    ASSERT_TRUE(load_cloud(test::shared_data(file), c, s));
+    RingLayout layout = *ring_layout_preset("HDL-64E");
+    layout.columns = perception::kKittiColumns;
+    CloudImager imager(layout, 2, {255.0f, 0.1, RingSource::order});
+    velodyne::RangeImage mine(imager.shape()), kitti(perception::kitti_shape());
+    CloudImageStats st;
+    imager.fill(c, mine, st);
+    std::vector<float> buffer;
+    ASSERT_TRUE(perception::load_kitti_scan(test::shared_data(file), buffer, kitti));
+    EXPECT_EQ(st.sweeps, 64u) << file;
+    EXPECT_EQ(st.placed + st.second + st.collisions + st.invalid + st.bad_ring, st.points);
+    std::uint64_t cells = 0, same = 0;
+    for (int r = 0; r < 64; ++r) {
+      for (int col = 0; col < perception::kKittiColumns; ++col) {
+        const velodyne::RangeCell& a = kitti.at(0, r, col);
+        const velodyne::RangeCell& b = mine.at(0, r, col);
+        if (!a.valid() && !b.valid()) continue;
+        ++cells;
+        same += a.valid() && b.valid() && a.x == b.x && a.y == b.y && a.z == b.z ? 1u : 0u;
+      }
+    }
+    std::printf("[ cloud ] %s in sensor order: %llu of %llu cells hold the KITTI loader's point; %llu second points "
+                "kept in layer 1, %llu more counted\n",
+                file, static_cast<unsigned long long>(same), static_cast<unsigned long long>(cells),
+                static_cast<unsigned long long>(st.second), static_cast<unsigned long long>(st.collisions));
+    EXPECT_GT(static_cast<double>(same) / static_cast<double>(cells), 0.99) << file;
+  }
+}
+
 TEST(CloudImage, FillingTouchesNoHeap) {
   PointCloud c;
   CloudScratch s;
   ASSERT_TRUE(load_cloud(test::shared_data("semantickitti/000000.bin"), c, s));
-  const CloudImager imager(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1});
+  CloudImager imager(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, RingSource::order});
   velodyne::RangeImage image(imager.shape());
   CloudImageStats st;
   imager.fill(c, image, st);  // first touch of the image's pages

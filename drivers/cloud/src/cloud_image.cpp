@@ -84,7 +84,12 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
       layers_(std::clamp(layers, 1, 2)),
       options_(options),
       row_of_ring_(layout.elevation_deg.size()),
-      slope_rows_(kSlopeBins) {
+      slope_rows_(kSlopeBins),
+      sweep_start_(layout.elevation_deg.size() + 2),
+      sweep_sum_(layout.elevation_deg.size() + 1),
+      sweep_count_(layout.elevation_deg.size() + 1),
+      sweep_row_(layout.elevation_deg.size() + 1),
+      sweep_order_(layout.elevation_deg.size() + 1) {
   // Rows: the rings sorted by elevation (row 0 the lowest).
   std::vector<int> order(static_cast<std::size_t>(rings_));
   std::iota(order.begin(), order.end(), 0);
@@ -126,7 +131,7 @@ int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
   return slope_rows_[static_cast<std::size_t>(b)];
 }
 
-void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st) const noexcept {
+void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st) noexcept {
   st = CloudImageStats{};
   const std::uint64_t sequence = image.sequence;
   image.reset(columns_);
@@ -146,7 +151,61 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     for (std::size_t i = 0; i < c.size; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
     if (!std::isfinite(t0)) t0 = 0.0;
   }
+  const bool use_field = options_.rings == RingSource::field || (options_.rings == RingSource::automatic && c.has_ring);
+  const bool use_order = options_.rings == RingSource::order;
+  std::size_t sweeps = 0;
+  if (use_order) {
+    // Pass 1: the sweeps (a new one where the azimuth passes 0 from below
+    // after more than 1.5 pi of travel) and their mean slopes; at most
+    // the layout's rings + 1 (the extra one's points are counted bad_ring).
+    const auto max_sweeps = static_cast<std::size_t>(rings_) + 1;
+    sweep_start_[0] = 0;
+    sweeps = 1;
+    std::fill(sweep_sum_.begin(), sweep_sum_.end(), 0.0);
+    std::fill(sweep_count_.begin(), sweep_count_.end(), 0);
+    double travel = 0.0, previous = 0.0;
+    for (std::size_t i = 0; i < c.size; ++i) {
+      // The azimuth in [-pi, pi) and the slope z / h (in order with the elevation), both without trigonometry.
+      const float a = azimuth(c.y[i], c.x[i]);
+      const double az = a >= 3.14159274f ? static_cast<double>(a) - kTwoPi : static_cast<double>(a);
+      if (i > 0) {
+        double dz = az - previous;
+        if (dz > std::numbers::pi) dz -= kTwoPi;
+        if (dz < -std::numbers::pi) dz += kTwoPi;
+        if (previous < 0.0 && az >= 0.0 && travel > 1.5 * std::numbers::pi && sweeps < max_sweeps) {
+          sweep_start_[sweeps++] = i;
+          travel = 0.0;
+        } else {
+          travel += dz;
+        }
+      }
+      previous = az;
+      const float h = std::sqrt(c.x[i] * c.x[i] + c.y[i] * c.y[i]);
+      if (h > 0.0f && std::isfinite(h) && std::isfinite(c.z[i])) {
+        sweep_sum_[sweeps - 1] += static_cast<double>(c.z[i] / h);
+        ++sweep_count_[sweeps - 1];
+      }
+    }
+    sweep_start_[sweeps] = c.size;
+    st.sweeps = sweeps;
+    // Rows: the first `rings_` sweeps by mean slope (the elevation's order); a sweep beyond has none.
+    const std::size_t ranked = std::min(sweeps, static_cast<std::size_t>(rings_));
+    for (std::size_t k = 0; k < ranked; ++k) sweep_order_[k] = static_cast<int>(k);
+    std::sort(sweep_order_.begin(), sweep_order_.begin() + static_cast<std::ptrdiff_t>(ranked), [&](int a, int b) {
+      const auto ua = static_cast<std::size_t>(a), ub = static_cast<std::size_t>(b);
+      const double ma = sweep_count_[ua] > 0 ? sweep_sum_[ua] / static_cast<double>(sweep_count_[ua]) : 0.0;
+      const double mb = sweep_count_[ub] > 0 ? sweep_sum_[ub] / static_cast<double>(sweep_count_[ub]) : 0.0;
+      return ma < mb;
+    });
+    // (With fewer sweeps than rings, the rows above the last stay empty.)
+    for (std::size_t r = 0; r < ranked; ++r) sweep_row_[static_cast<std::size_t>(sweep_order_[r])] = static_cast<int>(r);
+    for (std::size_t k = ranked; k < sweeps; ++k) sweep_row_[k] = -1;
+  }
+  std::size_t sweep = 0;
   for (std::size_t i = 0; i < c.size; ++i) {
+    if (use_order) {
+      while (sweep + 1 < sweeps && i >= sweep_start_[sweep + 1]) ++sweep;
+    }
     const float x = c.x[i], y = c.y[i], z = c.z[i];
     const float h2 = x * x + y * y;
     const float d = std::sqrt(h2 + z * z);
@@ -155,7 +214,17 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       continue;
     }
     int row = 0;
-    if (c.has_ring) {
+    if (use_order) {
+      row = sweep_row_[sweep];
+      if (row < 0) {
+        ++st.bad_ring;
+        continue;
+      }
+    } else if (use_field) {
+      if (!c.has_ring) {
+        ++st.bad_ring;
+        continue;
+      }
       const std::uint16_t ring = c.ring[i];
       if (ring >= rings_) {
         ++st.bad_ring;

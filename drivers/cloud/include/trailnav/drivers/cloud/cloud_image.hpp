@@ -46,11 +46,27 @@ struct CloudImageStats {
   std::uint64_t invalid = 0;       // non-finite or at the origin
   std::uint64_t bad_ring = 0;      // a ring field beyond the layout's rings
   std::uint64_t inferred = 0;      // rows found from the elevation
+  std::uint64_t sweeps = 0;        // RingSource::order: the sweeps found (the layout's rings: every point placed)
+};
+
+// Where a point's ring comes from.
+enum class RingSource : std::uint8_t {
+  automatic,  // the file's ring field when it has one, else the elevation
+  field,      // the file's ring field (a file without one: every point bad_ring)
+  elevation,  // the ring whose elevation is nearest the point's
+  // The file keeps the sensor's order, each laser's points one sweep after
+  // another (KITTI): a new ring where the azimuth passes 0 after most of a
+  // turn; the sweeps ordered by their mean slope (z / horizontal distance:
+  // the elevation's order). For lidars whose
+  // lasers sit at different heights (the HDL-64E), where a point's
+  // elevation from the origin lands in the neighbouring ring's.
+  order,
 };
 
 struct CloudImageOptions {
   float intensity_scale = 1.0f;    // the file's intensity to 0..255 (KITTI's 0..1: 255)
   double period_s = 0.1;           // a revolution, for points without a time of their own
+  RingSource rings = RingSource::automatic;
 };
 
 class CloudImager {
@@ -59,7 +75,7 @@ class CloudImager {
   // The shape of the images fill() writes.
   velodyne::RangeImageShape shape() const noexcept;
   // Fills `image` (of shape()) from the cloud.
-  void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats) const noexcept;
+  void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats) noexcept;
   // The row (0 = the lowest ring) of a point by its elevation alone.
   int row_of_elevation(float z, float horizontal) const noexcept;
 
@@ -72,6 +88,11 @@ class CloudImager {
   // Row by tan(elevation): kSlopeBins bins over [slope_lo_, slope_hi_].
   std::vector<std::uint16_t> slope_rows_;
   float slope_lo_ = 0.0f, slope_scale_ = 0.0f;
+  // RingSource::order: each sweep's first point, elevation sum and count, its row.
+  std::vector<std::size_t> sweep_start_;
+  std::vector<double> sweep_sum_;
+  std::vector<std::uint64_t> sweep_count_;
+  std::vector<int> sweep_row_, sweep_order_;
 };
 
 }  // namespace trailnav::cloud
