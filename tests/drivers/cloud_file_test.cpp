@@ -183,6 +183,40 @@ TEST(CloudFile, EveryEncodingOfTheSamePointsReadsTheSame) {
   }
 }
 
+// PCL pads binary records with fields named "_" and leaves them out of
+// binary_compressed data: both read.
+TEST(CloudFile, PclsPaddingFieldsInBinaryAndCompressedData) {
+  const std::string head = "FIELDS x y z _ intensity\nSIZE 4 4 4 1 4\nTYPE F F F U F\nCOUNT 1 1 1 4 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\n";
+  std::vector<std::uint8_t> binary = as_bytes(head + "DATA binary\n");
+  const float p[2][4] = {{1.0f, 2.0f, 3.0f, 9.0f}, {4.0f, 5.0f, 6.0f, 8.0f}};
+  for (const auto& q : p) {
+    put(binary, &q[0], 12);
+    binary.insert(binary.end(), 4, 0xee);  // the padding
+    put(binary, &q[3], 4);
+  }
+  std::vector<std::uint8_t> columns;
+  for (int f = 0; f < 4; ++f) {
+    for (const auto& q : p) put(columns, &q[f], 4);
+  }
+  std::vector<std::uint8_t> compressed = as_bytes(head + "DATA binary_compressed\n");
+  std::vector<std::uint8_t> packed(columns.size() + 64);
+  const unsigned n = lzf_compress(columns.data(), static_cast<unsigned>(columns.size()), packed.data(), static_cast<unsigned>(packed.size()));
+  const std::uint32_t sizes[2] = {n, static_cast<std::uint32_t>(columns.size())};
+  put(compressed, &sizes[0], 4), put(compressed, &sizes[1], 4);
+  compressed.insert(compressed.end(), packed.begin(), packed.begin() + n);
+  PointCloud c;
+  CloudScratch s;
+  for (const auto* b : {&binary, &compressed}) {
+    const Status st = read_cloud(*b, CloudFormat::pcd, "padded.pcd", c, s);
+    ASSERT_TRUE(st) << st.message();
+    ASSERT_EQ(c.size, 2u);
+    EXPECT_FLOAT_EQ(c.x[1], 4.0f);
+    EXPECT_FLOAT_EQ(c.z[0], 3.0f);
+    EXPECT_FLOAT_EQ(c.intensity[0], 9.0f);
+    EXPECT_FLOAT_EQ(c.intensity[1], 8.0f);
+  }
+}
+
 TEST(CloudFile, MalformedFilesAreRefusedWithWhereAndWhat) {
   const Sample s = sample(10);
   PointCloud c;

@@ -68,6 +68,7 @@ struct Field {
   std::size_t offset = 0;      // bytes into a binary record
   std::size_t bytes = 0;       // of all its elements in a binary record (PCD: SIZE x COUNT)
   bool list = false;           // PLY list property: a count of `count_type`, then that many `type`
+  bool padding = false;        // PCD field "_": PCL writes it in binary records, leaves it out of compressed data
   Scalar count_type = Scalar::u8;
 };
 
@@ -311,7 +312,11 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
     if (same(key, "version") || same(key, "viewpoint")) continue;
     if (same(key, "fields")) {
       if (!fields.empty()) return at("FIELDS given twice");
-      for (std::size_t k = 1; k < w.size(); ++k) fields.push({role_of(w[k])});
+      for (std::size_t k = 1; k < w.size(); ++k) {
+        Field f{role_of(w[k])};
+        f.padding = w[k] == "_";
+        fields.push(f);
+      }
       continue;
     }
     if (same(key, "size") || same(key, "count")) {
@@ -435,9 +440,13 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
     std::uint32_t packed = 0, unpacked = 0;
     std::memcpy(&packed, body.data(), 4);
     std::memcpy(&unpacked, body.data() + 4, 4);
-    if (unpacked != points * record) {
+    // PCL leaves padding fields ("_") out of compressed data.
+    std::size_t packed_record = 0;
+    for (const Field& f : fields) packed_record += f.padding ? 0 : f.bytes;
+    if (unpacked != points * packed_record) {
       return fail(name, "binary_compressed data of " + std::to_string(unpacked) + " bytes; " + std::to_string(points) +
-                            " points of " + std::to_string(record) + " bytes are " + std::to_string(points * record));
+                            " points of " + std::to_string(packed_record) + " bytes are " +
+                            std::to_string(points * packed_record));
     }
     if (body.size() - 8 < packed) return fail(name, "binary_compressed data cut short (" + std::to_string(packed) + " bytes said)");
     if (scratch.inflated.size() < unpacked) scratch.inflated.resize(unpacked);
@@ -452,6 +461,7 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
   }
   std::size_t column_start = 0;
   for (const Field& f : fields) {
+    if (columns && f.padding) continue;
     const std::size_t fsize = f.bytes;  // the file's SIZE x COUNT, whatever the type (a field not read may be any)
     if (f.role != Role::none) {
       for (std::size_t i = 0; i < points; ++i) {
