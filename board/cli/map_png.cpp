@@ -52,14 +52,19 @@ std::vector<LegendEntry> terrain_legend() {
   return legend;
 }
 
-Status write_occupancy_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g, std::string_view title) {
+namespace {
+// An occupancy grid's cells as colours (north up: row 0 of the picture is
+// the grid's last row) with its panel: stamp, size, `note`, `legend`.
+template <typename Color>
+Status write_grid_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g, std::string_view title,
+                      const std::string& note, std::vector<LegendEntry> legend, const Color& color) {
   const std::uint32_t w = g.info.width, h = g.info.height;
   std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
   for (std::uint32_t row = 0; row < h; ++row) {
     const std::uint32_t y = h - 1 - row;
     for (std::uint32_t x = 0; x < w; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      const Rgb c = occupancy_color(i < g.data._length ? g.data._buffer[i] : -1);
+      const Rgb c = color(i < g.data._length ? g.data._buffer[i] : -1);
       std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
       px[0] = c.r, px[1] = c.g, px[2] = c.b;
     }
@@ -67,10 +72,15 @@ Status write_occupancy_png(const std::string& path, const nav_msgs_msg_dds__Occu
   MapFigure figure;
   figure.title = std::string(title);
   figure.notes = {stamp_note(g.header.frame_id, g.header.stamp.sec, g.header.stamp.nanosec),
-                  grid_note(w, h, g.info.resolution), "occupancy in percent, north up"};
-  figure.legend = occupancy_legend();
+                  grid_note(w, h, g.info.resolution), note};
+  figure.legend = std::move(legend);
   figure.metres_per_pixel = g.info.resolution;
   return write_map_figure(path, rgb, static_cast<int>(w), static_cast<int>(h), figure);
+}
+}  // namespace
+
+Status write_occupancy_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g, std::string_view title) {
+  return write_grid_png(path, g, title, "occupancy in percent, north up", occupancy_legend(), occupancy_color);
 }
 
 Rgb cost_color(int v) noexcept {
@@ -92,24 +102,7 @@ std::vector<LegendEntry> cost_legend(std::string_view low, std::string_view high
 
 Status write_cost_png(const std::string& path, const nav_msgs_msg_dds__OccupancyGrid_& g, std::string_view title,
                       std::string_view note, std::string_view low, std::string_view high) {
-  const std::uint32_t w = g.info.width, h = g.info.height;
-  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * h * 3);
-  for (std::uint32_t row = 0; row < h; ++row) {
-    const std::uint32_t y = h - 1 - row;
-    for (std::uint32_t x = 0; x < w; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      const Rgb c = cost_color(i < g.data._length ? g.data._buffer[i] : -1);
-      std::uint8_t* px = &rgb[(static_cast<std::size_t>(row) * w + x) * 3];
-      px[0] = c.r, px[1] = c.g, px[2] = c.b;
-    }
-  }
-  MapFigure figure;
-  figure.title = std::string(title);
-  figure.notes = {stamp_note(g.header.frame_id, g.header.stamp.sec, g.header.stamp.nanosec),
-                  grid_note(w, h, g.info.resolution), std::string(note) + ", north up"};
-  figure.legend = cost_legend(low, high);
-  figure.metres_per_pixel = g.info.resolution;
-  return write_map_figure(path, rgb, static_cast<int>(w), static_cast<int>(h), figure);
+  return write_grid_png(path, g, title, std::string(note) + ", north up", cost_legend(low, high), cost_color);
 }
 
 Status write_class_png(const std::string& path, std::uint32_t w, std::uint32_t h, const std::uint8_t* class_id,
