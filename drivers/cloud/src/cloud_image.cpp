@@ -101,7 +101,7 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
     const int ring = order[static_cast<std::size_t>(row)];
     row_of_ring_[static_cast<std::size_t>(ring)] = static_cast<std::uint16_t>(row);
     slope[static_cast<std::size_t>(row)] =
-        std::tan(layout.elevation_deg[static_cast<std::size_t>(ring)] * static_cast<float>(std::numbers::pi / 180.0));
+        std::sin(layout.elevation_deg[static_cast<std::size_t>(ring)] * static_cast<float>(std::numbers::pi / 180.0));
   }
   if (rings_ == 0) return;
   // The table reaches half a ring spacing beyond the outermost rings.
@@ -113,9 +113,9 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
   int row = 0;
   for (int b = 0; b < kSlopeBins; ++b) {
     const float t = slope_lo_ + (static_cast<float>(b) + 0.5f) / slope_scale_;
-    const float e = std::atan(t);
+    const float e = std::asin(std::clamp(t, -1.0f, 1.0f));
     while (row + 1 < rings_ &&
-           std::fabs(std::atan(slope[static_cast<std::size_t>(row + 1)]) - e) <= std::fabs(std::atan(slope[static_cast<std::size_t>(row)]) - e)) {
+           std::fabs(std::asin(slope[static_cast<std::size_t>(row + 1)]) - e) <= std::fabs(std::asin(slope[static_cast<std::size_t>(row)]) - e)) {
       ++row;
     }
     slope_rows_[static_cast<std::size_t>(b)] = static_cast<std::uint16_t>(row);
@@ -124,11 +124,15 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
 
 velodyne::RangeImageShape CloudImager::shape() const noexcept { return {rings_, columns_, layers_}; }
 
-int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
-  const float t = horizontal > 0.0f ? z / horizontal : (z >= 0.0f ? 1e9f : -1e9f);
-  const float k = (t - slope_lo_) * slope_scale_;
+int CloudImager::row_of_sine(float sine) const noexcept {
+  const float k = (sine - slope_lo_) * slope_scale_;
   const int b = k <= 0.0f ? 0 : k >= static_cast<float>(kSlopeBins - 1) ? kSlopeBins - 1 : static_cast<int>(k);
   return slope_rows_[static_cast<std::size_t>(b)];
+}
+
+int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
+  const float d = std::sqrt(z * z + horizontal * horizontal);
+  return row_of_sine(d > 0.0f ? z / d : 0.0f);
 }
 
 void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st) noexcept {
@@ -232,7 +236,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       }
       row = row_of_ring_[ring];
     } else {
-      row = row_of_elevation(z, std::sqrt(h2));
+      row = row_of_sine(z / d);
       ++st.inferred;
     }
     const float az = azimuth(y, x);

@@ -85,7 +85,8 @@ class CloudImager {
   int layers_;
   CloudImageOptions options_;
   std::vector<std::uint16_t> row_of_ring_;  // the file's ring number -> row
-  // Row by tan(elevation): kSlopeBins bins over [slope_lo_, slope_hi_].
+  int row_of_sine(float sine) const noexcept;
+  // Row by sin(elevation) (z / distance): kSlopeBins bins from slope_lo_.
   std::vector<std::uint16_t> slope_rows_;
   float slope_lo_ = 0.0f, slope_scale_ = 0.0f;
   // RingSource::order: each sweep's first point, elevation sum and count, its row.
