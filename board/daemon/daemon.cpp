@@ -671,6 +671,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
       m.value("without_positive", t.without_positive);
       m.value("lost", t.lost);
       m.value("created", t.created);
+      m.value("forced", t.forced);
       m.value("saves", t.saves);
       m.value("save_failures", t.save_failures);
       if (t.save_errno != 0) m.value("save_error", std::string_view(std::strerror(t.save_errno)));

@@ -4,6 +4,7 @@
 // from the azimuth). Issue 39's goal: 1 ms for 125,000 points.
 #include <benchmark/benchmark.h>
 
+#include <cstring>
 #include <fstream>
 #include <iterator>
 #include <stdexcept>
@@ -11,6 +12,7 @@
 
 #include "trailnav/drivers/cloud/cloud_file.hpp"
 #include "trailnav/drivers/cloud/cloud_image.hpp"
+#include "trailnav/perception/kitti.hpp"
 
 namespace {
 
@@ -35,6 +37,21 @@ void BM_CloudReadKitti(benchmark::State& state) {
   state.counters["points"] = static_cast<double>(cloud.size);
 }
 BENCHMARK(BM_CloudReadKitti)->Unit(benchmark::kMillisecond);
+
+// The peer in the same run: the KITTI loader (perception/kitti.cpp) from the
+// same points in memory to its one-layer image (it drops a cell's second point).
+void BM_KittiLoader(benchmark::State& state) {
+  const std::vector<std::uint8_t>& b = scan_bytes();
+  std::vector<float> points(b.size() / 4);
+  std::memcpy(points.data(), b.data(), points.size() * 4);
+  trailnav::velodyne::RangeImage image(trailnav::perception::kitti_shape());
+  for (auto _ : state) {
+    if (!trailnav::perception::kitti_to_range_image(points, "scan", image)) throw std::runtime_error("kitti");
+    benchmark::DoNotOptimize(image.points);
+  }
+  state.counters["points"] = static_cast<double>(points.size() / 4);
+}
+BENCHMARK(BM_KittiLoader)->Unit(benchmark::kMillisecond);
 
 void BM_CloudImage(benchmark::State& state) {
   PointCloud cloud(130000);

@@ -46,6 +46,20 @@ std::string load_error(const std::string& text) {
   return r.config ? std::string() : r.error;
 }
 
+// A file's text (the shipped configs).
+std::string text_of(const std::string& path) {
+  std::ifstream in(path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// `text` with its first `from` replaced by `to` (which must be there).
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const std::size_t at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  if (at != std::string::npos) text.replace(at, from.size(), to);
+  return text;
+}
+
 daemon::RobotConfigResult load(const std::string& text) {
   const fs::path p = fs::path("board/robots") / ("test-" + std::to_string(::getpid()) + ".yaml");
   { std::ofstream(p) << text; }
@@ -329,8 +343,7 @@ TEST(RobotConfig, TaskPresetIsTheLidarsMeasuredTableForThePartsConfigured) {
 // The presets put the IMU, CAN and GPS readers and the pose estimator on one
 // thread; a row changed to another rate must leave it.
 TEST(RobotConfig, ThePresetsSensorsShareAThreadAndAChangedRateMustLeaveIt) {
-  std::ifstream in("board/robots/bench.yaml");
-  const std::string bench((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bench = text_of("board/robots/bench.yaml");
   ASSERT_NE(bench.find("  preset: auto\n"), std::string::npos);
   auto r = load(bench);
   ASSERT_TRUE(r.config) << r.error;
@@ -384,8 +397,7 @@ TEST(RobotConfig, TheTraversabilitySectionAndItsChecks) {
   EXPECT_TRUE(fs::exists(bench.config->traversability->model));
   EXPECT_FALSE(bench.config->traversability->demonstration);
 
-  std::ifstream in("board/robots/robot-example.yaml");
-  std::string example((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string example = text_of("board/robots/robot-example.yaml");
   for (const char* line : {"# traversability:\n", "#   model: ", "#   method: ", "#   demonstration: "}) {
     const std::size_t at = example.find(line);
     ASSERT_NE(at, std::string::npos) << line;
@@ -402,20 +414,13 @@ TEST(RobotConfig, TheTraversabilitySectionAndItsChecks) {
   ASSERT_NE(demo_task, robot.config->tasks.end()) << "the preset gives the demonstration its task";
   EXPECT_EQ(demo_task->priority, 0);
 
-  std::ifstream bin("board/robots/bench.yaml");
-  const std::string bench_text((std::istreambuf_iterator<char>(bin)), std::istreambuf_iterator<char>());
-  std::string text = bench_text;
-  text.replace(text.find("feed_terrain: true"), 18, "feed_terrain: false");
-  text.replace(text.find("  local_map_m: 20"), 17, "  local_map_m: 20\n  demonstration: {profile: large}");
-  std::string e = load_error(text);
+  const std::string bench_text = text_of("board/robots/bench.yaml");
+  std::string e = load_error(replaced(replaced(bench_text, "feed_terrain: true", "feed_terrain: false"), "  local_map_m: 20",
+                                      "  local_map_m: 20\n  demonstration: {profile: large}"));
   EXPECT_NE(e.find("feed_terrain: true"), std::string::npos) << e;
-  text = bench_text;
-  text.replace(text.find("trav-large.tntrav"), 17, "nothing-here.tntrav");
-  e = load_error(text);
+  e = load_error(replaced(bench_text, "trav-large.tntrav", "nothing-here.tntrav"));
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;
-  text = bench_text;
-  text.replace(text.find("  method: pnb"), 13, "  method: svm");
-  e = load_error(text);
+  e = load_error(replaced(bench_text, "  method: pnb", "  method: svm"));
   EXPECT_NE(e.find("method"), std::string::npos) << e;
   EXPECT_NE(e.find("test-"), std::string::npos) << "names the file: " << e;
 }

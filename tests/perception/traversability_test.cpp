@@ -547,34 +547,25 @@ TEST(TravRecorder, FarCellsAndWordsBeyondItsCapacityAreCounted) {
   EXPECT_NE(check_recorder(rc).find("footprint"), std::string::npos);
 }
 
-// Real KITTI revolutions through the terrain mapper into the recorder while
-// the robot drives 0.3 m a revolution: words are recorded at the steps, the
-// local map ends after d_M, its positives are the cells under the path, and
-// after arming no heap operation happens (train included).
-TEST(TravRecorder, RealRevolutionsThroughTheTerrainStepWithoutAllocating) {
+// Two real KITTI scans taking turns as the revolutions of a car driving
+// 0.3 m a revolution along x, through a terrain mapper (no forest).
+struct KittiDrive {
   std::array<velodyne::RangeImage, 2> scans{velodyne::RangeImage(kitti_shape()), velodyne::RangeImage(kitti_shape())};
-  std::vector<float> buffer;
-  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, scans[0]));
-  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, scans[1]));
-  MountParams mount;
-  mount.translation = {0.0, 0.0, 1.73};
-  TerrainConfig tc;
-  auto mapper = TerrainMapper::create(tc, mount, kitti_shape(), nullptr);
-  ASSERT_TRUE(mapper.mapper) << mapper.error;
-  const Vocabulary v{VocabularyConfig{}};
-  RecorderConfig rc;
-  rc.local_map_distance = 2.0;  // 9 m driven: four local maps
-  TravRecorder rec(rc, v, tc.map.size_x, tc.map.size_y, tc.map.resolution);
-  mapper.mapper->set_sums_sink(&rec);
-  TravModels models(v, LearnerConfig{});
-  WordCounts counts(v.size());
-  PoseTrack poses(64);
-
-  alloc_guard::set_fatal(false);
-  alloc_guard::mark_realtime_thread("terrain");
-  ASSERT_TRUE(alloc_guard::arm());
-  std::uint64_t trained = 0, positives = 0, unlabelled = 0;
-  for (int n = 1; n <= 30; ++n) {
+  TerrainConfig config;
+  std::unique_ptr<TerrainMapper> mapper;
+  PoseTrack poses{64};
+  KittiDrive() {
+    std::vector<float> buffer;
+    EXPECT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, scans[0]));
+    EXPECT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, scans[1]));
+    MountParams mount;
+    mount.translation = {0.0, 0.0, 1.73};
+    auto made = TerrainMapper::create(config, mount, kitti_shape(), nullptr);
+    EXPECT_TRUE(made.mapper) << made.error;
+    mapper = std::move(made.mapper);
+  }
+  // Revolution n (1, 2, ...): its poses, then registration and, when due, a step. No allocation.
+  void revolution(int n) noexcept {
     const std::int64_t t = std::int64_t{n} * 100'000'000;
     poses.push({t - 100'000'000, 0.3 * (n - 1), 0.0, 0.0, 0.0, 0.0, 0.0});
     poses.push({t, 0.3 * n, 0.0, 0.0, 0.0, 0.0, 0.0});
@@ -582,8 +573,33 @@ TEST(TravRecorder, RealRevolutionsThroughTheTerrainStepWithoutAllocating) {
     image.sequence = static_cast<std::uint64_t>(n);
     image.start_ns = t - 100'000'000;
     image.end_ns = t;
+    mapper->process(image, &poses);
+  }
+};
+
+// Real KITTI revolutions through the terrain mapper into the recorder while
+// the robot drives 0.3 m a revolution: words are recorded at the steps, the
+// local map ends after d_M, its positives are the cells under the path, and
+// after arming no heap operation happens (train included).
+TEST(TravRecorder, RealRevolutionsThroughTheTerrainStepWithoutAllocating) {
+  KittiDrive drive;
+  ASSERT_TRUE(drive.mapper);
+  const TerrainConfig& tc = drive.config;
+  const Vocabulary v{VocabularyConfig{}};
+  RecorderConfig rc;
+  rc.local_map_distance = 2.0;  // 9 m driven: four local maps
+  TravRecorder rec(rc, v, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  drive.mapper->set_sums_sink(&rec);
+  TravModels models(v, LearnerConfig{});
+  WordCounts counts(v.size());
+
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("terrain");
+  ASSERT_TRUE(alloc_guard::arm());
+  std::uint64_t trained = 0, positives = 0, unlabelled = 0;
+  for (int n = 1; n <= 30; ++n) {
     rec.drive(0.3 * n, 0.0, 0.0);
-    mapper.mapper->process(image, &poses);
+    drive.revolution(n);
     if (rec.local_map_complete()) {
       rec.finish_local_map(counts);
       positives += counts.total_positive();
@@ -838,15 +854,9 @@ namespace {
 // serialisation and its write included. The class map then carries P(trav)
 // on the cells the layer saw, and the file on disk holds the trainer's models.
 TEST(TravDemonstration, RealRevolutionsTrainOnlineSaveAtomicallyAndFillTheClassMap) {
-  std::array<velodyne::RangeImage, 2> scans{velodyne::RangeImage(kitti_shape()), velodyne::RangeImage(kitti_shape())};
-  std::vector<float> buffer;
-  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000000.bin"), buffer, scans[0]));
-  ASSERT_TRUE(load_kitti_scan(test::shared_data("kitti/000001.bin"), buffer, scans[1]));
-  MountParams mount;
-  mount.translation = {0.0, 0.0, 1.73};
-  TerrainConfig tc;
-  auto mapper = TerrainMapper::create(tc, mount, kitti_shape(), nullptr);
-  ASSERT_TRUE(mapper.mapper) << mapper.error;
+  KittiDrive drive;
+  ASSERT_TRUE(drive.mapper);
+  const TerrainConfig& tc = drive.config;
   const Vocabulary v{VocabularyConfig{}};
   const TravModels start(v, LearnerConfig{});  // a new demonstration: no model yet
   auto made = TravLayer::create(start, Method::pnb, 6.0, 20.0, tc.map.size_x, tc.map.size_y, tc.map.resolution);
@@ -861,22 +871,14 @@ TEST(TravDemonstration, RealRevolutionsTrainOnlineSaveAtomicallyAndFillTheClassM
   const std::string path = (dir / "robot.tntrav").string();
   TravOnline online(*made.layer, &recorder, &local_maps, &models);
   TravTrainer trainer(start, "kitti-car", path, local_maps, models);
-  mapper.mapper->set_sums_sink(&online);
-  PoseTrack poses(64);
+  drive.mapper->set_sums_sink(&online);
   constexpr int kRevolutions = 80;  // 24 m: four local maps of 6 m
 
   alloc_guard::set_fatal(false);
   alloc_guard::mark_realtime_thread("terrain");
   ASSERT_TRUE(alloc_guard::arm());
   for (int n = 1; n <= kRevolutions; ++n) {
-    const std::int64_t t = std::int64_t{n} * 100'000'000;
-    poses.push({t - 100'000'000, 0.3 * (n - 1), 0.0, 0.0, 0.0, 0.0, 0.0});
-    poses.push({t, 0.3 * n, 0.0, 0.0, 0.0, 0.0, 0.0});
-    velodyne::RangeImage& image = scans[static_cast<std::size_t>(n % 2)];
-    image.sequence = static_cast<std::uint64_t>(n);
-    image.start_ns = t - 100'000'000;
-    image.end_ns = t;
-    mapper.mapper->process(image, &poses);
+    drive.revolution(n);
     while (trainer.poll()) {
     }
   }
@@ -895,7 +897,7 @@ TEST(TravDemonstration, RealRevolutionsTrainOnlineSaveAtomicallyAndFillTheClassM
   EXPECT_GE(made.layer->models().models(), 1u);
   // The class map carries the layer: cells with P(trav), the lane ahead
   // (within 1 m of the path, 2–8 m beyond the last pose) mostly traversable.
-  const TerrainClassMap& map = mapper.mapper->map();
+  const TerrainClassMap& map = drive.mapper->map();
   constexpr double kEnd = 0.3 * kRevolutions;  // the last pose's x
   std::uint64_t with_p = 0, called = 0, lane = 0, lane_called = 0;
   const auto& g = map.grid();

@@ -72,43 +72,27 @@ struct Field {
   Scalar count_type = Scalar::u8;
 };
 
+// One value of `T` from its bytes (already in the host's order).
+template <typename T>
+double as(const std::array<std::uint8_t, 8>& b) noexcept {
+  T v;
+  std::memcpy(&v, b.data(), sizeof v);
+  return static_cast<double>(v);
+}
+
 double read_scalar(const std::uint8_t* p, Scalar s, bool big_endian) noexcept {
   std::array<std::uint8_t, 8> b{};
   const std::size_t n = scalar_size(s);
   for (std::size_t k = 0; k < n; ++k) b[k] = big_endian ? p[n - 1 - k] : p[k];
   switch (s) {
-    case Scalar::i8: return static_cast<double>(static_cast<std::int8_t>(b[0]));
-    case Scalar::u8: return static_cast<double>(b[0]);
-    case Scalar::i16: {
-      std::int16_t v;
-      std::memcpy(&v, b.data(), 2);
-      return v;
-    }
-    case Scalar::u16: {
-      std::uint16_t v;
-      std::memcpy(&v, b.data(), 2);
-      return v;
-    }
-    case Scalar::i32: {
-      std::int32_t v;
-      std::memcpy(&v, b.data(), 4);
-      return v;
-    }
-    case Scalar::u32: {
-      std::uint32_t v;
-      std::memcpy(&v, b.data(), 4);
-      return v;
-    }
-    case Scalar::f32: {
-      float v;
-      std::memcpy(&v, b.data(), 4);
-      return static_cast<double>(v);
-    }
-    case Scalar::f64: {
-      double v;
-      std::memcpy(&v, b.data(), 8);
-      return v;
-    }
+    case Scalar::i8: return as<std::int8_t>(b);
+    case Scalar::u8: return as<std::uint8_t>(b);
+    case Scalar::i16: return as<std::int16_t>(b);
+    case Scalar::u16: return as<std::uint16_t>(b);
+    case Scalar::i32: return as<std::int32_t>(b);
+    case Scalar::u32: return as<std::uint32_t>(b);
+    case Scalar::f32: return as<float>(b);
+    case Scalar::f64: return as<double>(b);
   }
   return 0.0;
 }

@@ -1,5 +1,7 @@
 #include "trailnav/perception/random_forest.hpp"
 
+#include "trailnav/runtime/atomic_file.hpp"
+
 #include <zlib.h>
 
 #include <algorithm>
@@ -157,13 +159,9 @@ Status RandomForest::save(const std::string& path) const {
   }
   for (float p : leaves_) put_f32(out, p);
   put_u32(out, static_cast<std::uint32_t>(crc32(0L, out.data(), static_cast<uInt>(out.size()))));
-  const std::string tmp = path + ".tmp";
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (f == nullptr) return Status::error("cannot write " + path + ": " + std::strerror(errno));
-  const bool ok = std::fwrite(out.data(), 1, out.size(), f) == out.size();
-  if (std::fclose(f) != 0 || !ok || std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    return Status::error("cannot write " + path + ": " + std::strerror(errno));
+  // Whole or not at all, and flushed to the disk (runtime/atomic_file.hpp).
+  if (const int e = AtomicFile(path).write(out); e != 0) {
+    return Status::error("cannot write " + path + ": " + std::strerror(e));
   }
   return Status::ok();
 }

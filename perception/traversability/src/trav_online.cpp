@@ -32,7 +32,6 @@ void TravOnline::robot_pose(double x, double y, double yaw, std::int64_t) noexce
 
 void TravOnline::hand_over(bool partial) noexcept {
   LocalMapWords& slot = local_maps_->write_slot();
-  slot.number = recorder_->local_map();
   recorder_->finish_local_map(slot.counts);
   if (partial && slot.counts.total_positive() == 0) return;
   local_maps_->publish();
@@ -51,7 +50,6 @@ void TravOnline::step_begins(double robot_x, double robot_y, std::int64_t now_ns
   counters_.layer = layer_.counters();
   if (recorder_ != nullptr) counters_.recorder = recorder_->counters();
   counters_.models = std::min(layer_.models().models(), kLayerModels);
-  counters_.last_step_ns = now_ns;
   shared_.post(counters_);
 }
 
@@ -91,7 +89,6 @@ bool TravTrainer::poll() noexcept {
   ++counters_.trained;
   if (a.created) ++counters_.created;
   if (a.forced) ++counters_.forced;
-  counters_.last_p_value = a.test.p_value;
   counters_.models = models_.models();
   // The layer's copy: same tables, so the assignment copies in place.
   models_out_.write_slot() = models_;

@@ -34,7 +34,6 @@ namespace trailnav::perception::trav {
 struct LocalMapWords {
   explicit LocalMapWords(std::uint32_t vocabulary) : counts(vocabulary) {}
   WordCounts counts;
-  std::uint32_t number = 0;  // the recorder's local map (1 for the first)
 };
 
 struct OnlineCounters {
@@ -43,7 +42,6 @@ struct OnlineCounters {
   std::uint64_t handed = 0;         // local maps handed to the trainer
   std::uint64_t model_updates = 0;  // newer models the layer took
   std::uint32_t models = 0;         // terrain models the layer classifies with
-  std::int64_t last_step_ns = 0;
 };
 
 // The terrain thread's half: set as the TerrainMapper's sums sink.
@@ -84,7 +82,6 @@ struct TrainerCounters {
   std::uint64_t created = 0;        // terrain models the χ² test opened
   std::uint64_t forced = 0;         // local maps merged into the closest model, none being left to open
   std::uint32_t models = 0;
-  double last_p_value = 1.0;        // the χ² test of the last local map against its model
   std::uint64_t saves = 0;
   std::uint64_t save_failures = 0;
   int save_errno = 0;               // of the last failure (0: none)
