@@ -62,7 +62,10 @@ done
 # systemd's own libraries live in /lib/x86_64-linux-gnu/systemd or /usr/lib/...; ldd found them above.
 cp board/robots/bench.yaml "$root/etc/trailnav/robots/"
 cp board/sim/trailnav-robot.dbc "$root/etc/trailnav/sim/"
-cp board/models/terrain-sim.tnrf "$root/etc/trailnav/models/"
+# Every model the bench configuration names (../models/X), so a new section's model is never left behind.
+for m in $(grep -o '\.\./models/[^ ]*' board/robots/bench.yaml | sort -u); do
+  cp "board/models/${m#../models/}" "$root/etc/trailnav/models/"
+done
 printf 'root:x:0:0:root:/root:/bin/sh\n' > "$root/etc/passwd"
 printf 'root:x:0:\ndialout:x:20:\n' > "$root/etc/group"
 printf 'passwd: files systemd\ngroup: files systemd\n' > "$root/etc/nsswitch.conf"
@@ -88,7 +91,12 @@ pid=$(systemctl show -p MainPID --value trailnavd)
 restarts=$(systemctl show -p NRestarts --value trailnavd)
 out "trailnavd: $state, main pid $pid, restarts $restarts, status '$(systemctl show -p StatusText --value trailnavd)'"
 rc=0
-[ "$state" = active ] || rc=1
+if [ "$state" != active ]; then
+  rc=1
+  # Why: the unit's own check, run by hand, prints the daemon's error (there is no journal in this machine).
+  out "trailnavd --check says:"
+  /usr/bin/trailnavd --config /etc/trailnav/robots/bench.yaml --check 2>&1 | sed 's/^/service-vm:   /'
+fi
 if [ -n "$pid" ] && [ "$pid" != 0 ]; then
   out "user: $(awk '/^Uid:/ {print $2}' /proc/$pid/status) (DynamicUser), capabilities in effect: $(awk '/^CapEff:/ {print $2}' /proc/$pid/status)"
   fifo=0 all=0
