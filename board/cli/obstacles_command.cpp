@@ -12,7 +12,9 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "label_score.hpp"
 #include "obstacle_run.hpp"
+#include "trailnav/drivers/cloud/cloud_file.hpp"
 #include "trailnav/perception/terrain_config.hpp"
 #include "trailnav/runtime/config.hpp"
 #include "terminal.hpp"
@@ -31,8 +33,72 @@ struct ObstaclesCliOptions {
   std::string blocked_file;
   std::string points_file;
   std::vector<double> points_box;
+  std::string rings;
+  std::string labels_out;
+  std::string labels_ply;
+  std::string score_labels;
   bool quiet = false;
 };
+
+// --labels-out: one line per input point, in input order: the answer (1, 0,
+// -1), the code (eval::AnswerCode) and P(obstacle) ("nan" when not evaluated).
+bool write_labels_text(const std::string& path, const eval::ScanAnswers& a) {
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (!f) {
+    std::fprintf(stderr, "trailnav obstacles: --labels-out %s: cannot write: %s\n", path.c_str(), std::strerror(errno));
+    return false;
+  }
+  for (const eval::ScanPointAnswer& p : a.answers) {
+    if (std::isnan(p.probability)) {
+      std::fprintf(f.get(), "%d %d nan\n", p.obstacle, static_cast<int>(p.code));
+    } else {
+      std::fprintf(f.get(), "%d %d %.4f\n", p.obstacle, static_cast<int>(p.code), static_cast<double>(p.probability));
+    }
+  }
+  const bool ok = std::ferror(f.get()) == 0;
+  if (std::fclose(f.release()) != 0 || !ok) {
+    std::fprintf(stderr, "trailnav obstacles: --labels-out %s: writing failed\n", path.c_str());
+    return false;
+  }
+  return true;
+}
+
+// --labels-ply: the points with their answers as fields (binary little-endian PLY).
+bool write_labels_ply(const std::string& path, const eval::ScanAnswers& a) {
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "wb"), &std::fclose);
+  if (!f) {
+    std::fprintf(stderr, "trailnav obstacles: --labels-ply %s: cannot write: %s\n", path.c_str(), std::strerror(errno));
+    return false;
+  }
+  std::fprintf(f.get(),
+               "ply\nformat binary_little_endian 1.0\ncomment trailnav obstacles: per-point answers for %s\n"
+               "comment obstacle: 1, 0, or -1 not evaluated (code says why: docs/obstacles.md)\n"
+               "element vertex %zu\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\n"
+               "property char obstacle\nproperty uchar code\nproperty float p_obstacle\nend_header\n",
+               a.file.c_str(), a.answers.size());
+  std::vector<unsigned char> record(4 * 4 + 2 + 4);
+  auto put = [&](std::size_t at, float v) {
+    std::uint32_t u;
+    std::memcpy(&u, &v, 4);
+    for (int b = 0; b < 4; ++b) record[at + static_cast<std::size_t>(b)] = static_cast<unsigned char>(u >> (8 * b));
+  };
+  for (std::size_t i = 0; i < a.answers.size(); ++i) {
+    put(0, a.cloud.x[i]);
+    put(4, a.cloud.y[i]);
+    put(8, a.cloud.z[i]);
+    put(12, a.cloud.intensity[i]);
+    record[16] = static_cast<unsigned char>(a.answers[i].obstacle);
+    record[17] = static_cast<unsigned char>(a.answers[i].code);
+    put(18, a.answers[i].probability);
+    std::fwrite(record.data(), 1, record.size(), f.get());
+  }
+  const bool ok = std::ferror(f.get()) == 0;
+  if (std::fclose(f.release()) != 0 || !ok) {
+    std::fprintf(stderr, "trailnav obstacles: --labels-ply %s: writing failed\n", path.c_str());
+    return false;
+  }
+  return true;
+}
 
 // A CSV file a command option asked for (--misses, --blocked, --points): opened with
 // its header before the run, checked and closed after it. Errors name the
@@ -238,6 +304,45 @@ int run(ObstaclesCliOptions& o) {
       ++point_lines;
     };
   }
+  if (!o.rings.empty()) {
+    if (o.rings == "automatic") o.run.cloud.rings = cloud::RingSource::automatic;
+    else if (o.rings == "field") o.run.cloud.rings = cloud::RingSource::field;
+    else if (o.rings == "elevation") o.run.cloud.rings = cloud::RingSource::elevation;
+    else if (o.rings == "order") o.run.cloud.rings = cloud::RingSource::order;
+    else {
+      std::fprintf(stderr, "trailnav obstacles: --rings %s: allowed are automatic, field, elevation and order\n",
+                   o.rings.c_str());
+      return 2;
+    }
+  }
+  // Per-point answers of one point-cloud file.
+  const bool per_point = !o.labels_out.empty() || !o.labels_ply.empty() || !o.score_labels.empty();
+  std::vector<std::uint32_t> truth_labels;
+  std::vector<std::int8_t> answered;
+  bool answers_written = true;
+  std::uint64_t answer_codes[eval::kAnswerCodes] = {};
+  if (per_point) {
+    if (o.run.inputs.size() != 1 || !cloud::cloud_format_of(o.run.inputs[0])) {
+      std::fprintf(stderr, "trailnav obstacles: --labels-out, --labels-ply and --score-labels take one point-cloud file "
+                           "(.bin, .pcd or .ply)\n");
+      return 2;
+    }
+    if (!o.score_labels.empty()) {
+      if (Status st = eval::load_semantickitti_labels(o.score_labels, truth_labels); !st) {
+        std::fprintf(stderr, "trailnav obstacles: --score-labels %s\n", st.message().c_str());
+        return 2;
+      }
+    }
+    o.run.on_scan_answers = [&](const eval::ScanAnswers& a) {
+      answered.resize(a.answers.size());
+      for (std::size_t i = 0; i < a.answers.size(); ++i) {
+        answered[i] = a.answers[i].obstacle;
+        ++answer_codes[static_cast<int>(a.answers[i].code)];
+      }
+      if (!o.labels_out.empty()) answers_written = write_labels_text(o.labels_out, a) && answers_written;
+      if (!o.labels_ply.empty()) answers_written = write_labels_ply(o.labels_ply, a) && answers_written;
+    };
+  }
   ProgressBar progress("obstacles", 100.0, "%");
   if (!o.quiet) o.run.progress = [&](double f) { progress.update(100.0 * f); };
   const eval::ObstacleRunReport r = eval::run_obstacles(o.run);
@@ -246,7 +351,12 @@ int run(ObstaclesCliOptions& o) {
     std::fprintf(stderr, "trailnav obstacles: %s\n", r.error.c_str());
     return 2;
   }
-  if (!points.close() || !misses.close() || !blocked.close()) return 2;
+  if (!points.close() || !misses.close() || !blocked.close() || !answers_written) return 2;
+  if (!truth_labels.empty() && truth_labels.size() != answered.size()) {
+    std::fprintf(stderr, "trailnav obstacles: --score-labels %s: %zu labels for %zu points\n", o.score_labels.c_str(),
+                 truth_labels.size(), answered.size());
+    return 2;
+  }
   if (blocked.wanted() && !r.scored) {
     std::fprintf(stderr, "trailnav obstacles: --blocked needs a simulated recording (its truth says where the path and "
                          "the obstacles are); %s is empty\n", o.blocked_file.c_str());
@@ -278,6 +388,23 @@ int run(ObstaclesCliOptions& o) {
                 r.input_kind.c_str(), static_cast<double>(b[0]), static_cast<double>(b[1]), static_cast<double>(b[2]),
                 static_cast<double>(b[3]), static_cast<double>(b[4]), static_cast<double>(b[5]));
   }
+  if (r.input_kind == "kitti" || r.input_kind == "cloud") {
+    const auto& p = r.cloud_points;
+    std::printf("  file points %llu: %llu placed, %llu second in their cell (layer 1), %llu more counted, %llu without a "
+                "return, %llu without a ring of the layout\n",
+                static_cast<unsigned long long>(p.points), static_cast<unsigned long long>(p.placed),
+                static_cast<unsigned long long>(p.second), static_cast<unsigned long long>(p.collisions),
+                static_cast<unsigned long long>(p.invalid), static_cast<unsigned long long>(p.bad_ring));
+  }
+  if (per_point) {
+    std::printf("  per-point answers:");
+    for (int k = 0; k < eval::kAnswerCodes; ++k) {
+      if (answer_codes[k] == 0) continue;
+      std::printf(" %s%d %s %llu", k == 0 ? "" : ";", k, std::string(eval::answer_code_name(static_cast<eval::AnswerCode>(k))).c_str(),
+                  static_cast<unsigned long long>(answer_codes[k]));
+    }
+    std::printf("\n");
+  }
   std::printf("  time per revolution: align %.3f ms, smoothing + features %.3f ms, map update%s %.3f ms\n", r.align_ms,
               r.features_ms, r.kl ? " (PW + PS + PC)" : "", r.map_ms);
   if (o.run.terrain == eval::TerrainMode::estimated) {
@@ -302,6 +429,13 @@ int run(ObstaclesCliOptions& o) {
   for (const std::string& f : r.files) {
     if (f.find("-0") == std::string::npos) std::printf("  wrote %s\n", f.c_str());
   }
+  if (!o.labels_out.empty()) std::printf("  wrote %s (one line per point: answer, code, P(obstacle))\n", o.labels_out.c_str());
+  if (!o.labels_ply.empty()) std::printf("  wrote %s\n", o.labels_ply.c_str());
+  if (!truth_labels.empty()) {
+    const eval::LabelScore score = eval::score_labels(answered, truth_labels);
+    std::printf("\nagainst %s (SemanticKITTI labels; docs/obstacles.md \"On real labelled lidar\"):\n\n%s",
+                o.score_labels.c_str(), eval::label_score_table(score, "class").c_str());
+  }
   if (!o.points_file.empty()) {
     std::printf("  wrote %s (%llu points in the box, over all revolutions)\n", o.points_file.c_str(),
                 static_cast<unsigned long long>(point_lines));
@@ -323,7 +457,7 @@ void add_obstacles_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "obstacles",
       "Run the obstacle detection (thesis §7.1, §7.3) offline and deterministically on a recording\n"
-      "directory, a pcap file or KITTI .bin scans. Writes the obstacle maps as PNG (and the last one's\n"
+      "directory, a pcap file or point-cloud files (KITTI .bin, PCD, PLY). Writes the obstacle maps as PNG (and the last one's\n"
       "probabilities as float32) to --out. On a simulated recording (`trailnav sim`) it follows the true\n"
       "trajectory, keeps PW, PS and PC maps side by side, scores them against the truth (obstacle recall,\n"
       "fake obstacles per terrain class, path blocked) and prints their KL divergence (§7.4.4).\n"
@@ -331,9 +465,13 @@ void add_obstacles_command(CLI::App& app) {
       "  trailnav obstacles build/sim/meadow --terrain truth --out build/obstacles\n"
       "  trailnav obstacles build/sim/meadow --terrain street     # the basic approach with street parameters\n"
       "  trailnav obstacles build/sim/meadow --terrain estimated --terrain-model board/models/terrain-sim.tnrf\n"
-      "  trailnav obstacles ../shared/data/kitti/*.bin --out build/kitti");
+      "  trailnav obstacles ../shared/data/kitti/*.bin --out build/kitti\n"
+      "  trailnav obstacles scan.bin --labels-out scan.answers --score-labels scan.label   # per point, scored\n"
+      "  trailnav obstacles scan.pcd --lidar VLP-16 --labels-ply scan-answers.ply");
   static ObstaclesCliOptions o;
-  cmd->add_option("inputs", o.run.inputs, "A recording directory, a pcap file, or KITTI .bin files")->required();
+  cmd->add_option("inputs", o.run.inputs,
+                  "A recording directory, a pcap file, or point-cloud files (KITTI .bin, PCD, PLY; one revolution each)")
+      ->required();
   cmd->add_option("--config", o.config_file, "YAML file with an `obstacles:` section (docs/obstacles.md)");
   cmd->add_option("--model", o.model, "Fusion model of the main map: PW (Dirac, most likely class; default), PS (smooth, "
                                       "most likely class) or PC (smooth, full class distribution)");
@@ -367,6 +505,25 @@ void add_obstacles_command(CLI::App& app) {
       ->delimiter(',');
   cmd->add_option("--revolutions", o.run.max_revolutions, "Stop after N revolutions (0: all)")->capture_default_str();
   cmd->add_option("--calibration", o.run.calibration, "Lidar calibration file (default: the recording's or the model's)");
+  cmd->add_option("--lidar", o.run.cloud.lidar,
+                  "Point-cloud files: the lidar whose ring layout they follow (HDL-64E, VLP-16, VLP-32C, HDL-32E; "
+                  "default for KITTI .bin: HDL-64E); or give its --calibration file");
+  cmd->add_option("--rings", o.rings,
+                  "Point-cloud files: where a point's ring comes from: automatic (the file's ring field, else the "
+                  "elevation; PCD and PLY default), field, elevation, or order (the sensor's firing order kept in the "
+                  "file; KITTI .bin default)");
+  cmd->add_option("--columns", o.run.cloud.columns, "Point-cloud files: azimuth columns of a revolution (0: the lidar's)");
+  cmd->add_option("--labels-out", o.labels_out,
+                  "One point-cloud file: write one line per input point, in input order: the obstacle answer (1, 0, or "
+                  "-1 not evaluated), a code (0 evaluated, 1 its range-image cell's answer, 2 no return, 3 not placed, "
+                  "4 apart in its cell, 5 out of range, 6 the vehicle, 7 dropped in alignment, 8 isolated) and "
+                  "P(obstacle) of the smooth model (nan when not evaluated)");
+  cmd->add_option("--labels-ply", o.labels_ply,
+                  "One point-cloud file: write its points as PLY with the answers as fields (obstacle, code, p_obstacle)");
+  cmd->add_option("--score-labels", o.score_labels,
+                  "One point-cloud file: score the answers against its SemanticKITTI .label file (ground: road, "
+                  "parking, sidewalk, other-ground, terrain; obstacles: building, fence, vehicles, people, pole, "
+                  "traffic-sign, trunk; vegetation apart) and print precision, recall, F1 and a table per class");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([&] { std::exit(run(o)); });
 }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <unordered_set>
 
 #include "figure.hpp"
@@ -450,9 +451,93 @@ Status write_obstacle_png(const std::string& path, const ObstacleMap& map, doubl
   return cli::write_map_figure(path, rgb, static_cast<int>(w), static_cast<int>(h), figure);
 }
 
+std::string_view answer_code_name(AnswerCode c) noexcept {
+  switch (c) {
+    case AnswerCode::evaluated: return "evaluated";
+    case AnswerCode::cell_shared: return "its cell's answer";
+    case AnswerCode::no_return: return "no return";
+    case AnswerCode::not_placed: return "not placed";
+    case AnswerCode::apart_in_cell: return "apart in its cell";
+    case AnswerCode::out_of_range: return "out of range";
+    case AnswerCode::vehicle: return "the vehicle";
+    case AnswerCode::dropped: return "dropped in alignment";
+    case AnswerCode::isolated: return "isolated";
+  }
+  return "?";
+}
+
+namespace {
+
+// Each point of a point-cloud file: where it went in the range image
+// (CloudImager), what alignment made of it (AlignFate), and the answer of
+// the cloud point it became.
+void answer_points(const RevolutionSource& source, const vel::RangeImage& image, const perception::ObstaclePipeline& pipeline,
+                   const perception::TerrainClassMap* classes, std::vector<ScanPointAnswer>& out) {
+  const cloud::PointCloud& c = *source.scan_cloud();
+  const std::span<const cloud::PointPlace> places = source.scan_places();
+  const std::vector<std::int32_t>& fates = pipeline.point_fates();
+  const perception::TerrainSource terrain = pipeline.terrain_source(classes);
+  const bool dirac = pipeline.config().model == FusionModel::pw;
+  const auto stride = static_cast<std::size_t>(pipeline.cloud().stride());
+  out.assign(c.size, ScanPointAnswer{});
+  constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+  auto from_fate = [&](std::int32_t fate, ScanPointAnswer& a) {
+    a.probability = kNan;
+    if (fate >= 0) {
+      const auto k = static_cast<std::size_t>(fate);
+      const perception::PointState st = pipeline.cloud().state[k];
+      if (st == perception::PointState::measured || st == perception::PointState::flat) {
+        const auto ans = pipeline.answer(terrain, k);
+        a.probability = ans.smooth;
+        a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
+        return;
+      }
+      a.code = AnswerCode::isolated;
+      return;
+    }
+    a.code = fate == perception::kFateOutOfRange ? AnswerCode::out_of_range
+             : fate == perception::kFateSelf     ? AnswerCode::vehicle
+             : fate == perception::kFateNoReturn ? AnswerCode::no_return
+                                                 : AnswerCode::dropped;
+  };
+  for (std::size_t i = 0; i < c.size && i < places.size(); ++i) {
+    const cloud::PointPlace& p = places[i];
+    ScanPointAnswer& a = out[i];
+    const std::size_t cell = static_cast<std::size_t>(p.row) * stride + p.column;
+    switch (p.outcome) {
+      case cloud::PlaceOutcome::placed:
+        a.code = AnswerCode::evaluated;
+        from_fate(fates[cell], a);
+        break;
+      case cloud::PlaceOutcome::second: {
+        const float gap = std::abs(image.at(1, p.row, p.column).distance - image.at(0, p.row, p.column).distance);
+        if (gap <= kSharedCellGap) {
+          a.code = AnswerCode::cell_shared;
+          from_fate(fates[cell], a);
+        } else {
+          a.code = AnswerCode::apart_in_cell;
+          a.probability = kNan;
+        }
+        break;
+      }
+      case cloud::PlaceOutcome::invalid:
+        a.code = AnswerCode::no_return;
+        a.probability = kNan;
+        break;
+      case cloud::PlaceOutcome::collision:
+      case cloud::PlaceOutcome::bad_ring:
+        a.code = AnswerCode::not_placed;
+        a.probability = kNan;
+        break;
+    }
+  }
+}
+
+}  // namespace
+
 ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   ObstacleRunReport report;
-  auto opened = RevolutionSource::open(options.inputs, options.calibration);
+  auto opened = RevolutionSource::open(options.inputs, options.calibration, options.cloud);
   if (!opened.source) {
     report.error = opened.error;
     return report;
@@ -488,6 +573,9 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     return report;
   }
   perception::ObstaclePipeline& pipeline = *made.pipeline;
+  const bool answers = options.on_scan_answers && source.scan_cloud() != nullptr;
+  if (answers) pipeline.keep_point_fates();
+  std::vector<ScanPointAnswer> scan_answers;
 
   std::optional<perception::PoseTrack> poses;
   if (truth && options.truth_poses) {
@@ -576,6 +664,10 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     pipeline.update_maps(classes);
     map_ms += ms_since(t0);
     if (options.on_processed) options.on_processed(pipeline);
+    if (answers) {
+      answer_points(source, image, pipeline, classes, scan_answers);
+      options.on_scan_answers(ScanAnswers{source.scan_file(), *source.scan_cloud(), scan_answers});
+    }
     if (options.points_box && options.on_point) {
       if (first_ns == 0) first_ns = truth ? truth->scenario.start_utc_ns : pipeline.cloud().time_ns;
       report_points(pipeline, classes, *options.points_box, report.revolutions, first_ns, options.on_point);
@@ -613,6 +705,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     return report;
   }
   report.malformed_packets = source.malformed_packets();
+  report.cloud_points = source.cloud_totals();
 
   write_pngs("");
   if (!options.out_dir.empty()) {

@@ -8,9 +8,12 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "revolution_source.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 #include "trailnav/perception/random_forest.hpp"
@@ -71,8 +74,39 @@ struct PointRecord {
   float smooth = 0.0f;            // Eq. 7.12 with that class's alpha and beta
 };
 
+// Why a point of a point-cloud file has the answer it has (`trailnav
+// obstacles --labels-out`); codes 0 and 1 answer, the others say why not.
+enum class AnswerCode : std::uint8_t {
+  evaluated = 0,      // its own features (Eqs. 7.5, 7.6) with its cell's terrain class
+  cell_shared = 1,    // a second point of its range-image cell, within kSharedCellGap of the first: that one's answer
+  no_return = 2,      // non-finite, or at the origin
+  not_placed = 3,     // its ring is not the layout's, or a third point of its cell
+  apart_in_cell = 4,  // a second point of its cell, farther than kSharedCellGap from the first
+  out_of_range = 5,   // outside the obstacle detection's range limits
+  vehicle = 6,        // inside the recording vehicle's box (features.self_box)
+  dropped = 7,        // in alignment: its ring's azimuth column already taken, or too far from its firing
+  isolated = 8,       // no neighbour to measure its features against
+};
+inline constexpr int kAnswerCodes = 9;
+inline constexpr float kSharedCellGap = 0.2f;  // m of range
+std::string_view answer_code_name(AnswerCode c) noexcept;
+
+struct ScanPointAnswer {
+  std::int8_t obstacle = -1;  // 1 an obstacle, 0 not, -1 not evaluated (code says why)
+  AnswerCode code = AnswerCode::no_return;
+  float probability = 0.0f;   // P(obstacle) of the smooth model (Eq. 7.12); NaN when not evaluated
+};
+
+// One point-cloud file's answers, every point in the file's order.
+struct ScanAnswers {
+  const std::string& file;
+  const cloud::PointCloud& cloud;
+  std::span<const ScanPointAnswer> answers;
+};
+
 struct ObstacleRunOptions {
-  std::vector<std::string> inputs;  // one recording directory or capture file, or KITTI .bin files
+  std::vector<std::string> inputs;  // one recording directory or capture file, or point-cloud files
+  CloudInputOptions cloud;          // how point-cloud files become range images
   perception::ObstacleConfig config;
   TerrainMode terrain = TerrainMode::config;
   // TerrainMode::estimated: the terrain analysis' settings and its model.
@@ -100,6 +134,8 @@ struct ObstacleRunOptions {
   // frame) goes to on_point after its revolution is processed.
   std::optional<std::array<double, 4>> points_box;
   std::function<void(const PointRecord&)> on_point;
+  // Point-cloud inputs: every file's per-point answers after it is processed.
+  std::function<void(const ScanAnswers&)> on_scan_answers;
   // A simulated recording's true trajectory as the pose stream; false: no
   // pose stream (fixed orientation, the map stays where it started).
   bool truth_poses = true;
@@ -167,6 +203,7 @@ struct ObstacleRunReport {
   double terrain_ms = 0.0;   // terrain analysis (estimated classes), mean per revolution
   std::uint64_t terrain_steps = 0;
   std::uint64_t malformed_packets = 0;
+  cloud::CloudImageStats cloud_points;  // point-cloud inputs: where their points went, summed
   std::vector<std::string> files;  // written
 };
 

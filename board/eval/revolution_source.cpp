@@ -9,6 +9,7 @@
 #include "trailnav/drivers/velodyne/decoder.hpp"
 #include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
+#include "trailnav/drivers/cloud/cloud_file.hpp"
 #include "trailnav/perception/kitti.hpp"
 
 namespace trailnav::eval {
@@ -55,7 +56,14 @@ std::optional<vel::Model> sniff_model(const std::string& input, int stream, std:
 
 struct RevolutionSource::Impl {
   std::vector<std::string> inputs;
-  bool kitti = false;
+  bool clouds = false;
+  // Point-cloud files.
+  std::optional<cloud::CloudImager> imager;
+  cloud::PointCloud cloud;
+  cloud::CloudScratch scratch;
+  std::vector<cloud::PointPlace> places;
+  cloud::CloudImageStats stats, totals;
+  std::string file;
   int lidar_stream = -1;
   int position_stream = -1;
   std::optional<vel::PacketDecoder> decoder;
@@ -72,28 +80,74 @@ std::array<double, 3> RevolutionSource::mount_translation() const noexcept {
   return {m.x(), m.y(), m.z()};
 }
 
+const cloud::PointCloud* RevolutionSource::scan_cloud() const noexcept {
+  return impl_->clouds ? &impl_->cloud : nullptr;
+}
+std::span<const cloud::PointPlace> RevolutionSource::scan_places() const noexcept {
+  if (!impl_->clouds) return {};
+  return {impl_->places.data(), std::min(impl_->places.size(), impl_->cloud.size)};
+}
+const std::string& RevolutionSource::scan_file() const noexcept { return impl_->file; }
+const cloud::CloudImageStats& RevolutionSource::scan_stats() const noexcept { return impl_->stats; }
+const cloud::CloudImageStats& RevolutionSource::cloud_totals() const noexcept { return impl_->totals; }
+
 std::optional<std::array<float, 6>> RevolutionSource::self_box() const noexcept {
   if (kind_ == "kitti") return perception::kKittiCarBox;
   return std::nullopt;
 }
 
-RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& inputs, const std::string& calibration) {
-  if (inputs.empty()) return {std::nullopt, "no input: give a recording directory, a pcap file or KITTI .bin scans"};
-  const bool kitti = std::all_of(inputs.begin(), inputs.end(), [](const std::string& p) { return fs::path(p).extension() == ".bin"; });
-  if (!kitti && inputs.size() > 1) return {std::nullopt, "give one recording or capture file (or only KITTI .bin scans)"};
+RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& inputs, const std::string& calibration,
+                                                const CloudInputOptions& cloud_options) {
+  if (inputs.empty()) {
+    return {std::nullopt, "no input: give a recording directory, a pcap file, or point-cloud files (KITTI .bin, PCD, PLY)"};
+  }
+  const bool clouds = std::all_of(inputs.begin(), inputs.end(), [](const std::string& p) {
+    return !fs::is_directory(p) && cloud::cloud_format_of(p).has_value();
+  });
+  if (!clouds && inputs.size() > 1) {
+    return {std::nullopt, "give one recording or capture file, or only point-cloud files (.bin, .pcd, .ply)"};
+  }
   RevolutionSource s;
   Impl& im = *s.impl_;
   im.inputs = inputs;
-  im.kitti = kitti;
-  if (!kitti && fs::is_directory(fs::path(inputs[0]) / "truth")) {
+  im.clouds = clouds;
+  if (!clouds && fs::is_directory(fs::path(inputs[0]) / "truth")) {
     auto loaded = load_sim_truth((fs::path(inputs[0]) / "truth").string());
     if (!loaded.truth) return {std::nullopt, loaded.error};
     s.truth_ = std::move(loaded.truth);
   }
-  if (kitti) {
-    s.kind_ = "kitti";
-    s.model_ = "HDL-64E (KITTI)";
-    s.shape_ = perception::kitti_shape();
+  if (clouds) {
+    const bool kitti = std::all_of(inputs.begin(), inputs.end(), [](const std::string& p) {
+      return cloud::cloud_format_of(p) == cloud::CloudFormat::kitti_bin;
+    });
+    std::string lidar = cloud_options.lidar;
+    if (lidar.empty() && kitti) lidar = "HDL-64E";
+    if (lidar.empty() && (calibration.empty() || calibration == "builtin")) {
+      return {std::nullopt, "PCD and PLY files need the lidar's ring layout: give --lidar (a preset: HDL-64E, VLP-16, "
+                            "VLP-32C, HDL-32E) or --calibration FILE"};
+    }
+    std::optional<cloud::RingLayout> layout;
+    if (!lidar.empty()) {
+      layout = cloud::ring_layout_preset(lidar);
+      if (!layout) return {std::nullopt, "unknown lidar '" + lidar + "': give a preset (HDL-64E, VLP-16, VLP-32C, HDL-32E)"};
+    }
+    if (!calibration.empty() && calibration != "builtin") {
+      auto c = vel::load_calibration(calibration);
+      if (!c.calibration) return {std::nullopt, c.error};
+      layout = cloud::ring_layout_from_calibration(*c.calibration, lidar.empty() ? calibration : lidar,
+                                                   layout ? layout->columns : 2048);
+    }
+    if (kitti) layout->columns = perception::kKittiColumns;
+    if (cloud_options.columns > 0) layout->columns = cloud_options.columns;
+    cloud::CloudImageOptions copt;
+    // KITTI's reflectance is 0..1; PCD and PLY writers give the sensor's 0..255 as it is.
+    copt.intensity_scale = kitti ? 255.0f : 1.0f;
+    copt.rings = cloud_options.rings.value_or(kitti ? cloud::RingSource::order : cloud::RingSource::automatic);
+    im.imager.emplace(*layout, 2, copt);
+    s.kind_ = kitti ? "kitti" : "cloud";
+    s.lidar_ = lidar.empty() ? layout->name : lidar;
+    s.model_ = kitti ? "HDL-64E (KITTI)" : layout->name;
+    s.shape_ = im.imager->shape();
     return {std::move(s), {}};
   }
   s.kind_ = "recording";
@@ -141,11 +195,20 @@ RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& 
 std::string RevolutionSource::run(const std::function<bool(const vel::RangeImage&)>& on_image,
                                   const std::function<void(double)>& progress) {
   Impl& im = *impl_;
-  if (im.kitti) {
+  if (im.clouds) {
     vel::RangeImage image(shape_);
-    std::vector<float> buffer;
+    im.totals = {};
     for (std::size_t i = 0; i < im.inputs.size(); ++i) {
-      if (Status st = perception::load_kitti_scan(im.inputs[i], buffer, image); !st) return st.message();
+      im.file = im.inputs[i];
+      if (Status st = cloud::load_cloud(im.file, im.cloud, im.scratch); !st) return st.message();
+      if (im.places.size() < im.cloud.size) im.places.resize(im.cloud.capacity());
+      im.imager->fill(im.cloud, image, im.stats, im.places);
+      for (auto [total, one] : {std::pair{&im.totals.points, im.stats.points}, {&im.totals.placed, im.stats.placed},
+                                {&im.totals.second, im.stats.second}, {&im.totals.collisions, im.stats.collisions},
+                                {&im.totals.invalid, im.stats.invalid}, {&im.totals.bad_ring, im.stats.bad_ring},
+                                {&im.totals.inferred, im.stats.inferred}, {&im.totals.sweeps, im.stats.sweeps}}) {
+        *total += one;
+      }
       if (!on_image(image)) break;
       if (progress) progress(static_cast<double>(i + 1) / static_cast<double>(im.inputs.size()));
     }

@@ -10,29 +10,48 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "sim_truth.hpp"
+#include "trailnav/drivers/cloud/cloud_image.hpp"
+#include "trailnav/drivers/cloud/point_cloud.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
 
 namespace trailnav::eval {
 
+// How point-cloud files (.bin, .pcd, .ply) become range images (drivers/cloud).
+struct CloudInputOptions {
+  // The lidar's ring layout: a preset name (cloud::ring_layout_preset);
+  // empty: the HDL-64E for KITTI .bin scans, else needed. A calibration file
+  // given to open() wins over the preset's elevations.
+  std::string lidar;
+  // Where a point's ring comes from; unset: the sensor's order for KITTI
+  // .bin scans (they keep it and have no ring field), the file's ring field
+  // or else the elevation for PCD and PLY.
+  std::optional<cloud::RingSource> rings;
+  int columns = 0;  // columns of a revolution; 0: the layout's (KITTI: 2160)
+};
+
 class RevolutionSource {
  public:
   struct Opened;
-  // `inputs`: one recording directory or capture file, or KITTI .bin files.
-  // `calibration`: empty (the simulated scenario's or the model's default
-  // file), "builtin", or a calibration file.
-  static Opened open(const std::vector<std::string>& inputs, const std::string& calibration);
+  // `inputs`: one recording directory or capture file, or point-cloud files
+  // (KITTI .bin, PCD, PLY; each one revolution). `calibration`: empty (the
+  // simulated scenario's or the model's default file), "builtin", or a
+  // calibration file.
+  static Opened open(const std::vector<std::string>& inputs, const std::string& calibration,
+                     const CloudInputOptions& cloud_options = {});
   ~RevolutionSource();
   RevolutionSource(RevolutionSource&&) noexcept;
 
-  const std::string& input_kind() const noexcept { return kind_; }    // "recording", "kitti"
+  // "recording", "kitti" (KITTI .bin scans), "cloud" (PCD or PLY files, or a mix)
+  const std::string& input_kind() const noexcept { return kind_; }
   const std::string& model_name() const noexcept { return model_; }
   // The lidar model as velodyne::Model spells it ("HDL-64E" for KITTI scans).
   std::string_view lidar_model() const noexcept {
-    return kind_ == "kitti" ? std::string_view("HDL-64E") : std::string_view(model_);
+    return kind_ == "kitti" ? std::string_view("HDL-64E") : kind_ == "cloud" ? std::string_view(lidar_) : std::string_view(model_);
   }
   velodyne::RangeImageShape shape() const noexcept { return shape_; }
   // The simulated recording's truth, if it has one.
@@ -50,11 +69,21 @@ class RevolutionSource {
                   const std::function<void(double)>& progress = {});
   std::uint64_t malformed_packets() const noexcept { return malformed_; }
 
+  // Point-cloud inputs, inside on_image: the file the revolution came from,
+  // its points (in the file's order), where each went in the range image
+  // and the counts; null / empty for recordings.
+  const cloud::PointCloud* scan_cloud() const noexcept;
+  std::span<const cloud::PointPlace> scan_places() const noexcept;
+  const std::string& scan_file() const noexcept;
+  const cloud::CloudImageStats& scan_stats() const noexcept;
+  // Every file's counts summed.
+  const cloud::CloudImageStats& cloud_totals() const noexcept;
+
  private:
   struct Impl;
   RevolutionSource();
   std::unique_ptr<Impl> impl_;
-  std::string kind_, model_;
+  std::string kind_, model_, lidar_;
   velodyne::RangeImageShape shape_{};
   std::optional<SimTruth> truth_;
   std::uint64_t malformed_ = 0;

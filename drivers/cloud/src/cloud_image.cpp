@@ -135,7 +135,12 @@ int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
   return row_of_sine(d > 0.0f ? z / d : 0.0f);
 }
 
-void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st) noexcept {
+void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st,
+                       std::span<PointPlace> places) noexcept {
+  const bool trace = places.size() >= c.size && c.size > 0;
+  auto note = [&](std::size_t i, PlaceOutcome o, int row, int col) {
+    if (trace) places[i] = PointPlace{static_cast<std::uint16_t>(row), static_cast<std::uint16_t>(col), o};
+  };
   st = CloudImageStats{};
   const std::uint64_t sequence = image.sequence;
   image.reset(columns_);
@@ -215,6 +220,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     const float d = std::sqrt(h2 + z * z);
     if (!std::isfinite(d) || d <= 0.0f) {
       ++st.invalid;
+      note(i, PlaceOutcome::invalid, 0, 0);
       continue;
     }
     int row = 0;
@@ -222,16 +228,19 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       row = sweep_row_[sweep];
       if (row < 0) {
         ++st.bad_ring;
+        note(i, PlaceOutcome::bad_ring, 0, 0);
         continue;
       }
     } else if (use_field) {
       if (!c.has_ring) {
         ++st.bad_ring;
+        note(i, PlaceOutcome::bad_ring, 0, 0);
         continue;
       }
       const std::uint16_t ring = c.ring[i];
       if (ring >= rings_) {
         ++st.bad_ring;
+        note(i, PlaceOutcome::bad_ring, 0, 0);
         continue;
       }
       row = row_of_ring_[ring];
@@ -245,12 +254,15 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     if (cell->valid()) {
       if (layers_ < 2 || image.at(1, row, col).valid()) {
         ++st.collisions;
+        note(i, PlaceOutcome::collision, row, col);
         continue;
       }
       cell = &image.at(1, row, col);
       ++st.second;
+      note(i, PlaceOutcome::second, row, col);
     } else {
       ++st.placed;
+      note(i, PlaceOutcome::placed, row, col);
     }
     cell->x = x;
     cell->y = y;

@@ -109,6 +109,7 @@ void CloudAligner::begin(const velodyne::RangeImage& image, const PoseTrack* pos
   // Only what the assembler sets when the revolution begins: the rest (its
   // sequence, its end) is the lidar task's to write until it is complete.
   out.reset(columns_);
+  if (fates_ != nullptr) std::fill(fates_, fates_ + fate_size_, kFateNoReturn);
   out.sequence = 0;
   out.time_ns = image.start_ns;  // finish() sets the end
   out.start_ns = image.start_ns;
@@ -205,6 +206,7 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
   const int spread = spread_columns_;
   const bool smoothing = out.shape().features;
   std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0, beyond = 0;
+  const int fate_rows = fate_stride_ > 0 ? static_cast<int>(fate_size_ / static_cast<std::size_t>(fate_stride_)) : 0;
   for (int i = 0; i < rings; ++i) {
     const velodyne::RangeCell* row = image.row(0, i).data();
     const std::size_t base = out.index(i, 0);
@@ -214,17 +216,22 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
     float* oz = (smoothing ? out.aligned_z : out.z).data() + base;
     float* orange = out.range.data() + base;
     float* ointensity = out.intensity.data() + base;
+    std::int32_t* fate =
+        fates_ != nullptr && i < fate_rows ? fates_ + static_cast<std::size_t>(i) * static_cast<std::size_t>(fate_stride_)
+                                           : nullptr;
     for (int c = first; c < end; ++c) {
       const velodyne::RangeCell& cell = row[c];
       if (!cell.valid() || image.column_state(c) != velodyne::ColumnState::received) continue;
       ++points;
       if (cell.distance < min_r || cell.distance > max_r) {
         ++out_of_range;
+        if (fate != nullptr && c < fate_stride_) fate[c] = kFateOutOfRange;
         continue;
       }
       if (self_filter_ && cell.x >= self_box_[0] && cell.x <= self_box_[1] && cell.y >= self_box_[2] &&
           cell.y <= self_box_[3] && cell.z >= self_box_[4] && cell.z <= self_box_[5]) {
         ++self_hits;
+        if (fate != nullptr && c < fate_stride_) fate[c] = kFateSelf;
         continue;
       }
       double rel = static_cast<double>(cell.azimuth - cut);
@@ -234,13 +241,16 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
       apart = std::min(apart, columns - apart);
       if (apart > spread) {
         ++beyond;
+        if (fate != nullptr && c < fate_stride_) fate[c] = kFateBeyondSpread;
         continue;
       }
       const auto k = static_cast<std::size_t>(target);
       if (st[k] != PointState::none) {
         ++collisions;
+        if (fate != nullptr && c < fate_stride_) fate[c] = kFateCollision;
         continue;
       }
+      if (fate != nullptr && c < fate_stride_) fate[c] = static_cast<std::int32_t>(base + k);
       const float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
       ox[k] = t[0] * cell.x + t[1] * cell.y + t[2] * cell.z + t[9];
       oy[k] = t[3] * cell.x + t[4] * cell.y + t[5] * cell.z + t[10];

@@ -135,6 +135,17 @@ struct AlignCounters {
   std::uint64_t beyond_spread = 0;      // points farther from their firing's column than RangeImage::azimuth_spread: dropped
 };
 
+// What became of a range-image point (layer 0) in alignment, when the
+// offline tools ask (CloudAligner::keep_fates): its cloud index (>= 0), or
+// one of these.
+enum AlignFate : std::int32_t {
+  kFateNoReturn = -1,       // no return there, or its column was not received
+  kFateOutOfRange = -2,     // outside [min_range, max_range]
+  kFateSelf = -3,           // inside features.self_box
+  kFateBeyondSpread = -4,   // farther from its firing's column than the spread
+  kFateCollision = -5,      // its azimuth column already had a point of its ring
+};
+
 // Range image -> gravity-aligned cloud, compensating the sensor's motion
 // column by column (the pose at each column's firing) when a pose history is
 // given. Writes x, y, z of a cloud without features, aligned_x/y/z of one
@@ -164,6 +175,15 @@ class CloudAligner {
 
   const AlignCounters& counters() const noexcept { return counters_; }
 
+  // Keep, per range-image cell of layer 0 (index ring * `stride` + column),
+  // what became of its point (AlignFate or the cloud index) in `fates`
+  // (rings * stride long, the caller's; null: not kept). begin() resets it.
+  void keep_fates(std::int32_t* fates, int stride, std::size_t size) noexcept {
+    fates_ = fates;
+    fate_stride_ = stride;
+    fate_size_ = size;
+  }
+
  private:
   static void set_robot(const Pose& p, RevolutionCloud& out) noexcept;
 
@@ -181,6 +201,9 @@ class CloudAligner {
   int spread_columns_ = 0;
   bool moving_ = false;
   Pose fixed_pose_{};
+  std::int32_t* fates_ = nullptr;
+  int fate_stride_ = 0;
+  std::size_t fate_size_ = 0;
 };
 
 struct FeatureCounters {

@@ -78,6 +78,16 @@ class ObstaclePipeline {
   };
   PointAnswer answer(const TerrainSource& terrain, std::size_t k) const noexcept;
 
+  // Keep what alignment made of every range-image point (AlignFate, or its
+  // index in cloud()), for the offline tools' per-point answers: allocates
+  // here, once; every revolution after fills it.
+  void keep_point_fates() {
+    fates_.assign(static_cast<std::size_t>(cloud_.rings()) * static_cast<std::size_t>(cloud_.stride()), kFateNoReturn);
+    aligner_.keep_fates(fates_.data(), cloud_.stride(), fates_.size());
+  }
+  // The last revolution's, by range-image cell (ring * cloud().stride() + column); empty unless kept.
+  const std::vector<std::int32_t>& point_fates() const noexcept { return fates_; }
+
   const ObstacleConfig& config() const noexcept { return config_; }
   const RevolutionCloud& cloud() const noexcept { return cloud_; }
   // The last revolution's points as aligned, to `to` (RevolutionCloud::
@@ -123,6 +133,7 @@ class ObstaclePipeline {
   int aligned_blocks_ = 0;
   int mapped_ = 0;        // map_block(0 .. mapped_ - 1) done
   std::vector<std::uint8_t> smoothed_, featured_;  // per block
+  std::vector<std::int32_t> fates_;                // keep_point_fates()
 };
 
 struct ObstaclePipeline::Created {

@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -63,6 +64,20 @@ enum class RingSource : std::uint8_t {
   order,
 };
 
+// Where fill() put a point: its cell (row, column) and layer, or why none.
+enum class PlaceOutcome : std::uint8_t {
+  placed,     // layer 0 of its cell
+  second,     // layer 1: its cell already had a point
+  collision,  // its cell's layers were full: counted, not placed
+  invalid,    // non-finite or at the origin
+  bad_ring,   // its ring is not one of the layout's
+};
+struct PointPlace {
+  std::uint16_t row = 0;
+  std::uint16_t column = 0;
+  PlaceOutcome outcome = PlaceOutcome::invalid;
+};
+
 struct CloudImageOptions {
   float intensity_scale = 1.0f;    // the file's intensity to 0..255 (KITTI's 0..1: 255)
   double period_s = 0.1;           // a revolution, for points without a time of their own
@@ -75,7 +90,13 @@ class CloudImager {
   // The shape of the images fill() writes.
   velodyne::RangeImageShape shape() const noexcept;
   // Fills `image` (of shape()) from the cloud.
-  void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats) noexcept;
+  void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats) noexcept {
+    fill(cloud, image, stats, {});
+  }
+  // The same, and where each point went: `places` empty, or at least
+  // cloud.size long (places[i] for the cloud's point i).
+  void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats,
+            std::span<PointPlace> places) noexcept;
   // The row (0 = the lowest ring) of a point by its elevation alone.
   int row_of_elevation(float z, float horizontal) const noexcept;
 
