@@ -74,9 +74,10 @@ bool write_labels_ply(const std::string& path, const eval::ScanAnswers& a) {
                "ply\nformat binary_little_endian 1.0\ncomment trailnav obstacles: per-point answers for %s\n"
                "comment obstacle: 1, 0, or -1 not evaluated (code says why: docs/obstacles.md)\n"
                "element vertex %zu\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\n"
-               "property char obstacle\nproperty uchar code\nproperty float p_obstacle\nend_header\n",
+               "property char obstacle\nproperty uchar code\nproperty float p_obstacle\nproperty float step_height\n"
+               "property float incline_deg\nproperty float height_above_ground\nend_header\n",
                a.file.c_str(), a.answers.size());
-  std::vector<unsigned char> record(4 * 4 + 2 + 4);
+  std::vector<unsigned char> record(4 * 4 + 2 + 4 * 4);
   auto put = [&](std::size_t at, float v) {
     std::uint32_t u;
     std::memcpy(&u, &v, 4);
@@ -90,6 +91,9 @@ bool write_labels_ply(const std::string& path, const eval::ScanAnswers& a) {
     record[16] = static_cast<unsigned char>(a.answers[i].obstacle);
     record[17] = static_cast<unsigned char>(a.answers[i].code);
     put(18, a.answers[i].probability);
+    put(22, a.answers[i].step_height);
+    put(26, static_cast<float>(std::asin(std::clamp(static_cast<double>(a.answers[i].sin_incline), 0.0, 1.0)) * 180.0 / M_PI));
+    put(30, a.answers[i].height);
     std::fwrite(record.data(), 1, record.size(), f.get());
   }
   const bool ok = std::ferror(f.get()) == 0;
@@ -516,10 +520,12 @@ void add_obstacles_command(CLI::App& app) {
   cmd->add_option("--labels-out", o.labels_out,
                   "One point-cloud file: write one line per input point, in input order: the obstacle answer (1, 0, or "
                   "-1 not evaluated), a code (0 evaluated, 1 its range-image cell's answer, 2 no return, 3 not placed, "
-                  "4 apart in its cell, 5 out of range, 6 the vehicle, 7 dropped in alignment, 8 isolated) and "
+                  "4 apart in its cell, 5 out of range, 6 the vehicle, 7 dropped in alignment, 8 isolated, 9 by its height "
+                  "above the ground alone: a second point apart in its cell or a third, obstacles.ground on) and "
                   "P(obstacle) of the smooth model (nan when not evaluated)");
   cmd->add_option("--labels-ply", o.labels_ply,
-                  "One point-cloud file: write its points as PLY with the answers as fields (obstacle, code, p_obstacle)");
+                  "One point-cloud file: write its points as PLY with the answers as fields (obstacle, code, p_obstacle, "
+                  "step_height, incline_deg, height_above_ground: NaN unless obstacles.ground is on)");
   cmd->add_option("--score-labels", o.score_labels,
                   "One point-cloud file: score the answers against its SemanticKITTI .label file (ground: road, "
                   "parking, sidewalk, other-ground, terrain; obstacles: building, fence, vehicles, people, pole, "

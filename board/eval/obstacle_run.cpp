@@ -11,6 +11,7 @@
 #include "figure.hpp"
 #include "png.hpp"
 #include "revolution_source.hpp"
+#include "trailnav/perception/ground_height.hpp"
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "sim_truth.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
@@ -462,6 +463,7 @@ std::string_view answer_code_name(AnswerCode c) noexcept {
     case AnswerCode::vehicle: return "the vehicle";
     case AnswerCode::dropped: return "dropped in alignment";
     case AnswerCode::isolated: return "isolated";
+    case AnswerCode::ground_only: return "by its height above the ground";
   }
   return "?";
 }
@@ -489,6 +491,9 @@ void answer_points(const RevolutionSource& source, const vel::RangeImage& image,
       if (st == perception::PointState::measured || st == perception::PointState::flat) {
         const auto ans = pipeline.answer(terrain, k);
         a.probability = ans.smooth;
+        a.step_height = pipeline.cloud().step_height[k];
+        a.sin_incline = pipeline.cloud().sin_incline[k];
+        if (!pipeline.ground_height().empty()) a.height = pipeline.ground_height()[k];
         a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
         return;
       }
@@ -499,6 +504,31 @@ void answer_points(const RevolutionSource& source, const vel::RangeImage& image,
              : fate == perception::kFateSelf     ? AnswerCode::vehicle
              : fate == perception::kFateNoReturn ? AnswerCode::no_return
                                                  : AnswerCode::dropped;
+  };
+  // A point alignment did not take (a second one apart in its cell, a
+  // third one): by its height above the ground alone, when the ground is
+  // on. Into the cloud's frame as alignment takes its cell's points (the
+  // transform of the column it fired in).
+  const perception::GroundGrid* ground = pipeline.ground();
+  auto by_ground = [&](std::size_t i, const cloud::PointPlace& p, AnswerCode otherwise, ScanPointAnswer& a) {
+    a.probability = kNan;
+    a.code = otherwise;
+    if (ground == nullptr) return;
+    const float* t = pipeline.cloud().column_transforms.data() +
+                     static_cast<std::size_t>(p.column) * perception::RevolutionCloud::kTransformFloats;
+    const float px = c.x[i], py = c.y[i], pz = c.z[i];
+    const float x = t[0] * px + t[1] * py + t[2] * pz + t[9];
+    const float y = t[3] * px + t[4] * py + t[5] * pz + t[10];
+    const float z = t[6] * px + t[7] * py + t[8] * pz + t[11];
+    const float g = ground->ground_at(x, y);
+    if (std::isnan(g)) return;
+    const float h = z - g;
+    const bool up = pipeline.config().ground.raise && h > pipeline.config().ground.height;
+    const auto ans = pipeline.answer_at(terrain, x, y, up ? h : 0.0f, up ? 1.0f : 0.0f);
+    a.code = AnswerCode::ground_only;
+    a.height = h;
+    a.probability = ans.smooth;
+    a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
   };
   for (std::size_t i = 0; i < c.size && i < places.size(); ++i) {
     const cloud::PointPlace& p = places[i];
@@ -515,16 +545,17 @@ void answer_points(const RevolutionSource& source, const vel::RangeImage& image,
           a.code = AnswerCode::cell_shared;
           from_fate(fates[cell], a);
         } else {
-          a.code = AnswerCode::apart_in_cell;
-          a.probability = kNan;
+          by_ground(i, p, AnswerCode::apart_in_cell, a);
         }
         break;
       }
+      case cloud::PlaceOutcome::collision:
+        by_ground(i, p, AnswerCode::not_placed, a);
+        break;
       case cloud::PlaceOutcome::invalid:
         a.code = AnswerCode::no_return;
         a.probability = kNan;
         break;
-      case cloud::PlaceOutcome::collision:
       case cloud::PlaceOutcome::bad_ring:
         a.code = AnswerCode::not_placed;
         a.probability = kNan;

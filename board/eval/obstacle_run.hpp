@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -75,7 +76,7 @@ struct PointRecord {
 };
 
 // Why a point of a point-cloud file has the answer it has (`trailnav
-// obstacles --labels-out`); codes 0 and 1 answer, the others say why not.
+// obstacles --labels-out`); codes 0, 1 and 9 answer, the others say why not.
 enum class AnswerCode : std::uint8_t {
   evaluated = 0,      // its own features (Eqs. 7.5, 7.6) with its cell's terrain class
   cell_shared = 1,    // a second point of its range-image cell, within kSharedCellGap of the first: that one's answer
@@ -86,8 +87,11 @@ enum class AnswerCode : std::uint8_t {
   vehicle = 6,        // inside the recording vehicle's box (features.self_box)
   dropped = 7,        // in alignment: its ring's azimuth column already taken, or too far from its firing
   isolated = 8,       // no neighbour to measure its features against
+  // A second point of its cell farther than kSharedCellGap from the first, or a third,
+  // answered by its height above the ground alone (obstacles.ground on).
+  ground_only = 9,
 };
-inline constexpr int kAnswerCodes = 9;
+inline constexpr int kAnswerCodes = 10;
 inline constexpr float kSharedCellGap = 0.2f;  // m of range
 std::string_view answer_code_name(AnswerCode c) noexcept;
 
@@ -95,6 +99,9 @@ struct ScanPointAnswer {
   std::int8_t obstacle = -1;  // 1 an obstacle, 0 not, -1 not evaluated (code says why)
   AnswerCode code = AnswerCode::no_return;
   float probability = 0.0f;   // P(obstacle) of the smooth model (Eq. 7.12); NaN when not evaluated
+  float step_height = 0.0f;   // m, Eq. 7.5 (0 when flat or not evaluated)
+  float sin_incline = 0.0f;   // Eq. 7.6
+  float height = std::numeric_limits<float>::quiet_NaN();  // m above the ground (obstacles.ground), NaN: not known
 };
 
 // One point-cloud file's answers, every point in the file's order.

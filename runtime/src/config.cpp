@@ -3,6 +3,8 @@
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 namespace trailnav {
 namespace {
@@ -50,6 +52,33 @@ ConfigNode ConfigNode::load_file(const std::string& path) {
   return parse(text.str(), path);
 }
 
+namespace {
+
+// YAML says a mapping's keys are unique; yaml-cpp keeps the first of two and
+// says nothing, so a setting written twice would be silently dropped.
+void refuse_duplicate_keys(const YAML::Node& node, const std::string& source, const std::string& path) {
+  if (node.IsMap()) {
+    std::vector<std::pair<std::string, int>> seen;
+    for (const auto& kv : node) {
+      const std::string key = kv.first.IsScalar() ? kv.first.Scalar() : std::string();
+      const int line = kv.first.Mark().line >= 0 ? kv.first.Mark().line + 1 : 0;
+      const std::string here = path.empty() ? key : path + "." + key;
+      for (const auto& [k, l] : seen) {
+        if (k == key && kv.first.IsScalar()) {
+          throw ConfigError(source, line, here,
+                            "given twice (first at line " + std::to_string(l) + "): give each setting once");
+        }
+      }
+      seen.emplace_back(key, line);
+      refuse_duplicate_keys(kv.second, source, here);
+    }
+  } else if (node.IsSequence()) {
+    for (std::size_t i = 0; i < node.size(); ++i) refuse_duplicate_keys(node[i], source, path + "[" + std::to_string(i) + "]");
+  }
+}
+
+}  // namespace
+
 ConfigNode ConfigNode::parse(const std::string& text, const std::string& source_name) {
   YAML::Node root;
   try {
@@ -59,6 +88,7 @@ ConfigNode ConfigNode::parse(const std::string& text, const std::string& source_
   }
   if (root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
   if (!root.IsMap()) throw ConfigError(source_name, 1, "", "the file must be a YAML mapping of sections");
+  refuse_duplicate_keys(root, source_name, "");
   return ConfigNode(root, source_name, "");
 }
 

@@ -14,6 +14,7 @@
 #include "simulator.hpp"
 #include "kitti_scans.hpp"
 #include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/ground_height.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
 
 namespace {
@@ -152,6 +153,28 @@ void BM_FeatureSearch(benchmark::State& state) {
   points_counter(state, f.fixture);
 }
 BENCHMARK(BM_FeatureSearch)->ArgsProduct({{0, 1}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
+
+// The height above the ground (ground_height.hpp) on one smoothed, featured
+// revolution: the grid built (second argument 0), applied to the points (1),
+// both (2). The steps it changes stay changed: the same work each time.
+void BM_GroundHeight(benchmark::State& state) {
+  CloudFixture f(static_cast<int>(state.range(0)));
+  smooth_rings(*f.cloud, f.config.features);
+  FeatureCounters counters;
+  compute_features(*f.cloud, f.config.features, counters);
+  GroundGrid ground(GroundParams{true}, f.config.features.max_range, f.cloud->x.size());
+  std::vector<float> height(f.cloud->x.size());
+  ground.build(*f.cloud);
+  const auto what = state.range(1);
+  for (auto _ : state) {
+    if (what != 1) ground.build(*f.cloud);
+    if (what != 0) ground.apply(*f.cloud, height);
+    benchmark::ClobberMemory();
+  }
+  state.SetLabel(std::string(source_name(state.range(0))) + (what == 0 ? ", build" : what == 1 ? ", apply" : ", both"));
+  points_counter(state, f.fixture);
+}
+BENCHMARK(BM_GroundHeight)->ArgsProduct({{0, 1}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
 
 void BM_MapUpdate(benchmark::State& state) {
   Fixture f(static_cast<int>(state.range(0)), static_cast<FusionModel>(state.range(1)));

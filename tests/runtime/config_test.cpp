@@ -70,6 +70,18 @@ TEST(Config, UnknownKeyNamesFileLineKeyAndTheAllowedKeys) {
   EXPECT_THAT(msg, HasSubstr("lock_memory"));
 }
 
+// yaml-cpp keeps the first of two equal keys and says nothing: the loader
+// refuses them, nested or at the top, so no setting is silently dropped.
+TEST(Config, AKeyGivenTwiceIsAnError) {
+  const std::string msg = error_of("obstacles:\n  ground: {height: 0.2}\n  model: PW\n  ground: {cut: false}\n",
+                                   [](const ConfigNode&) {});
+  EXPECT_THAT(msg, HasSubstr("robot.yaml:4:"));
+  EXPECT_THAT(msg, HasSubstr("'obstacles.ground'"));
+  EXPECT_THAT(msg, HasSubstr("given twice (first at line 2)"));
+  EXPECT_THAT(error_of("runtime: {}\nruntime: {}\n", [](const ConfigNode&) {}), HasSubstr("given twice"));
+  EXPECT_THAT(error_of("tasks:\n  - {name: a, name: b}\n", [](const ConfigNode&) {}), HasSubstr("'tasks[0].name'"));
+}
+
 TEST(Config, OutOfRangeValueSaysWhatIsAllowed) {
   const std::string msg = error_of(
       "tasks:\n  - name: imu\n    kind: periodic\n    rate_hz: 200\n    budget_ms: 0.5\n    priority: 140\n",

@@ -89,6 +89,18 @@ ObstacleConfig parse_obstacle_config(const ConfigNode& node) {
     }
     f->reject_unknown_keys();
   }
+  if (auto g = node.optional_map("ground")) {
+    GroundParams& p = c.ground;
+    p.enabled = g->boolean("enabled", true);
+    p.cell = number_f(*g, "cell", 0.05, 5.0, p.cell);
+    p.radius = number_f(*g, "radius", 0.0, 20.0, p.radius);
+    p.max_slope = number_f(*g, "max_slope", 0.0, 2.0, p.max_slope);
+    p.height = number_f(*g, "height", 0.01, 10.0, p.height);
+    p.raise = g->boolean("raise", p.raise);
+    p.cut = g->boolean("cut", p.cut);
+    if (p.radius < p.cell && p.radius > 0.0f) g->fail("radius", "must be 0 or at least one cell");
+    g->reject_unknown_keys();
+  }
   if (auto m = node.optional_map("map")) {
     MapParams& p = c.map;
     p.size = static_cast<int>(m->integer("size", 16, 4000, p.size));

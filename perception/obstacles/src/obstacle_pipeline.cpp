@@ -22,6 +22,10 @@ ObstaclePipeline::ObstaclePipeline(const ObstacleConfig& config, const velodyne:
       models_(config.classes, config.map),
       smoothed_(static_cast<std::size_t>((shape.max_columns + kBlockColumns - 1) / kBlockColumns), 0),
       featured_(smoothed_.size(), 0) {
+  if (config.ground.enabled) {
+    ground_.emplace(config.ground, config.features.max_range, cloud_.x.size());
+    ground_height_.assign(cloud_.x.size(), 0.0f);
+  }
   for (int m = 0; m < kFusionModels; ++m) {
     const auto model = static_cast<FusionModel>(m);
     if (model == config.model || config.compare_models) {
@@ -35,6 +39,7 @@ void ObstaclePipeline::start_blocks(int columns) noexcept {
   blocks_ = (columns + kBlockColumns - 1) / kBlockColumns;
   aligned_blocks_ = 0;
   mapped_ = 0;
+  grounded_ = false;
   std::fill_n(smoothed_.begin(), blocks_, std::uint8_t{0});
   std::fill_n(featured_.begin(), blocks_, std::uint8_t{0});
   // A block's features read the smoothed blocks ring_neighbours columns on,
@@ -74,6 +79,22 @@ bool ObstaclePipeline::smoothed_through(int lo, int hi) const noexcept {
   return true;
 }
 
+// Without the ground, a block is mapped once its features are there. The
+// ground needs every point of the revolution (a cell near the sensor takes
+// points from many columns): the maps then wait for the last block's
+// features, and the ground goes first.
+bool ObstaclePipeline::ready_to_map() noexcept {
+  if (!ground_) return true;
+  if (grounded_) return true;
+  for (int b = 0; b < blocks_; ++b) {
+    if (featured_[static_cast<std::size_t>(b)] == 0) return false;
+  }
+  ground_->build(cloud_);
+  ground_->apply(cloud_, ground_height_);
+  grounded_ = true;
+  return true;
+}
+
 int ObstaclePipeline::work_blocks(const PoseTrack* poses, const velodyne::RangeImage* image, int final_columns) noexcept {
   const int half = config_.features.smoothing_half_window;
   const int k = std::min(config_.features.ring_neighbours, std::max(columns_ / 2 - 1, 0));
@@ -108,7 +129,7 @@ int ObstaclePipeline::work_blocks(const PoseTrack* poses, const velodyne::RangeI
         ++done;
       }
     }
-    while (mapped_ < blocks_ && featured_[static_cast<std::size_t>(map_block(mapped_))] != 0) {
+    while (mapped_ < blocks_ && featured_[static_cast<std::size_t>(map_block(mapped_))] != 0 && ready_to_map()) {
       const int b = map_block(mapped_);
       for (auto& m : maps_) {
         if (m) m->integrate_columns(cloud_, models_, source, block_begin(b), block_end(b));
@@ -163,6 +184,8 @@ void ObstaclePipeline::features() noexcept {
   compute_features(cloud_, config_.features, feature_counters_);
   std::fill_n(smoothed_.begin(), blocks_, std::uint8_t{1});
   std::fill_n(featured_.begin(), blocks_, std::uint8_t{1});
+  grounded_ = false;
+  ready_to_map();
 }
 
 TerrainSource ObstaclePipeline::terrain_source(const TerrainClassMap* terrain) const noexcept {
@@ -189,21 +212,26 @@ PipelineCounters ObstaclePipeline::counters() const noexcept {
   c.align = aligner_.counters();
   c.features = feature_counters_;
   c.map = map().counters();
+  if (ground_) c.ground = ground_->counters();
   return c;
 }
 
 ObstaclePipeline::PointAnswer ObstaclePipeline::answer(const TerrainSource& terrain, std::size_t k) const noexcept {
+  const RevolutionCloud& c = cloud_;
+  const bool measured = c.state[k] == PointState::measured;
+  return answer_at(terrain, c.x[k], c.y[k], measured ? c.step_height[k] : 0.0f, measured ? c.sin_incline[k] : 0.0f);
+}
+
+ObstaclePipeline::PointAnswer ObstaclePipeline::answer_at(const TerrainSource& terrain, float x, float y, float step,
+                                                          float sin_incline) const noexcept {
   PointAnswer a;
   const RevolutionCloud& c = cloud_;
-  const TerrainCell* cell = terrain.known_cell(c.ref_x + static_cast<double>(c.x[k]), c.ref_y + static_cast<double>(c.y[k]));
+  const TerrainCell* cell = terrain.known_cell(c.ref_x + static_cast<double>(x), c.ref_y + static_cast<double>(y));
   a.terrain = cell != nullptr ? cell->best : terrain.fallback();
   a.terrain_known = cell != nullptr;
-  const bool measured = c.state[k] == PointState::measured;
-  const float step = measured ? c.step_height[k] : 0.0f;
-  const float incline = measured ? c.sin_incline[k] : 0.0f;
   const int cls = static_cast<int>(a.terrain);
-  a.dirac = models_.dirac(cls, step, incline);
-  a.smooth = models_.smooth(cls, step, incline);
+  a.dirac = models_.dirac(cls, step, sin_incline);
+  a.smooth = models_.smooth(cls, step, sin_incline);
   return a;
 }
 

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -58,6 +59,17 @@ struct FeatureParams {
   std::optional<std::array<float, 6>> self_box;
 };
 
+// The height above the ground (ground_height.hpp, docs/obstacles.md).
+struct GroundParams {
+  bool enabled = false;
+  float cell = 0.5f;       // m
+  float radius = 2.0f;     // m (L1)
+  float max_slope = 0.2f;  // rise per metre the ground may have
+  float height = 0.2f;     // m: a point this far above the ground stands on it
+  bool raise = true;       // such a point's step becomes its height (off: only cut)
+  bool cut = true;         // a step is cut to the point's height above the ground (off: only raise)
+};
+
 struct MapParams {
   int size = 600;               // cells per side
   double resolution = 0.1;      // m
@@ -89,6 +101,7 @@ struct MountParams {
 
 struct ObstacleConfig {
   FeatureParams features;
+  GroundParams ground;  // the height above the ground (ground_height.hpp); off unless configured
   std::array<ClassParams, kTerrainClasses> classes = default_class_params();
   MapParams map;
   MountParams mount;

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "trailnav/perception/cloud.hpp"
+#include "trailnav/perception/ground_height.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/obstacle_map.hpp"
 #include "trailnav/perception/obstacle_models.hpp"
@@ -34,6 +35,7 @@ struct PipelineCounters {
   AlignCounters align;
   FeatureCounters features;
   MapCounters map;  // of the primary map
+  GroundCounters ground;  // config().ground enabled
 };
 
 class ObstaclePipeline {
@@ -77,6 +79,9 @@ class ObstaclePipeline {
     float smooth = 0.0f;  // smooth model: P(obstacle)
   };
   PointAnswer answer(const TerrainSource& terrain, std::size_t k) const noexcept;
+  // The same for a step and incline at (x, y) of the last revolution's
+  // frame (the cloud's: metres from its reference point).
+  PointAnswer answer_at(const TerrainSource& terrain, float x, float y, float step, float sin_incline) const noexcept;
 
   // Keep what alignment made of every range-image point (AlignFate, or its
   // index in cloud()), for the offline tools' per-point answers: allocates
@@ -87,6 +92,10 @@ class ObstaclePipeline {
   }
   // The last revolution's, by range-image cell (ring * cloud().stride() + column); empty unless kept.
   const std::vector<std::int32_t>& point_fates() const noexcept { return fates_; }
+  // With config().ground enabled: each point's height above the ground
+  // (cloud().index(); NaN where no ground is known), and the ground's counts.
+  const std::vector<float>& ground_height() const noexcept { return ground_height_; }
+  const GroundGrid* ground() const noexcept { return ground_ ? &*ground_ : nullptr; }
 
   const ObstacleConfig& config() const noexcept { return config_; }
   const RevolutionCloud& cloud() const noexcept { return cloud_; }
@@ -134,6 +143,10 @@ class ObstaclePipeline {
   int mapped_ = 0;        // map_block(0 .. mapped_ - 1) done
   std::vector<std::uint8_t> smoothed_, featured_;  // per block
   std::vector<std::int32_t> fates_;                // keep_point_fates()
+  std::optional<GroundGrid> ground_;               // config_.ground.enabled
+  std::vector<float> ground_height_;
+  bool grounded_ = false;                          // this revolution's ground applied
+  bool ready_to_map() noexcept;
 };
 
 struct ObstaclePipeline::Created {
