@@ -16,6 +16,7 @@ void add_decode_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
 void add_sim_command(CLI::App& app);
 void add_obstacles_command(CLI::App& app);
+void add_score_labels_command(CLI::App& app);
 void add_gps_decode_command(CLI::App& app);
 void add_imu_decode_command(CLI::App& app);
 void add_can_decode_command(CLI::App& app);

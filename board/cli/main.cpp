@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_replay_command(app);
   trailnav::cli::add_sim_command(app);
   trailnav::cli::add_obstacles_command(app);
+  trailnav::cli::add_score_labels_command(app);
   trailnav::cli::add_terrain_commands(app);
   trailnav::cli::add_trav_commands(app);
   trailnav::cli::add_route_command(app);

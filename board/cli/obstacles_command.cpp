@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -456,6 +457,63 @@ int run(ObstaclesCliOptions& o) {
 }
 
 }  // namespace
+
+// `trailnav score-labels ANSWERS LABELS`: any tool's per-point answers (one
+// line per point, the first field 1 for an obstacle, 0 or -1 for not), scored
+// against SemanticKITTI labels as --score-labels scores trailnav's.
+int score_labels_file(const std::string& answers_file, const std::string& labels_file, const std::string& title) {
+  std::ifstream in(answers_file);
+  if (!in) {
+    std::fprintf(stderr, "trailnav score-labels: %s: cannot open: %s\n", answers_file.c_str(), std::strerror(errno));
+    return 2;
+  }
+  std::vector<std::int8_t> answers;
+  std::string line;
+  std::size_t number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const char* p = line.c_str();
+    char* end = nullptr;
+    errno = 0;
+    const long v = std::strtol(p, &end, 10);
+    if (end == p || errno != 0 || (v != 1 && v != 0 && v != -1) || (*end != '\0' && *end != ' ' && *end != '\t' && *end != '\r')) {
+      std::fprintf(stderr, "trailnav score-labels: %s:%zu: '%s': each line must begin with 1, 0 or -1\n",
+                   answers_file.c_str(), number, line.substr(0, 40).c_str());
+      return 2;
+    }
+    answers.push_back(static_cast<std::int8_t>(v));
+  }
+  std::vector<std::uint32_t> labels;
+  if (Status st = eval::load_semantickitti_labels(labels_file, labels); !st) {
+    std::fprintf(stderr, "trailnav score-labels: %s\n", st.message().c_str());
+    return 2;
+  }
+  if (labels.size() != answers.size()) {
+    std::fprintf(stderr, "trailnav score-labels: %zu answers in %s, %zu labels in %s: one of each per point\n",
+                 answers.size(), answers_file.c_str(), labels.size(), labels_file.c_str());
+    return 2;
+  }
+  std::printf("%s", eval::label_score_table(eval::score_labels(answers, labels), title).c_str());
+  return 0;
+}
+
+void add_score_labels_command(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "score-labels",
+      "Score per-point obstacle answers against SemanticKITTI labels (the protocol of docs/obstacles.md \"On real\n"
+      "labelled lidar\": ground = road, parking, sidewalk, other-ground, terrain; obstacles = building, fence,\n"
+      "car, truck, other-vehicle, person, bicyclist, pole, traffic-sign, trunk; vegetation shown apart; an answer\n"
+      "other than 1 counts as not an obstacle). ANSWERS has one line per point in the scan's order, its first\n"
+      "field 1, 0 or -1 (`trailnav obstacles SCAN --labels-out`, or any other tool's). Prints a table per class\n"
+      "and precision, recall and F1.\n"
+      "Example:\n"
+      "  trailnav score-labels scan.answers ../shared/data/semantickitti/000000.label");
+  static std::string answers, labels, title = "class";
+  cmd->add_option("answers", answers, "Per-point answers, one line per point")->required();
+  cmd->add_option("labels", labels, "The scan's SemanticKITTI .label file")->required();
+  cmd->add_option("--title", title, "The table's first column header (the tool's name)");
+  cmd->callback([&] { std::exit(score_labels_file(answers, labels, title)); });
+}
 
 void add_obstacles_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(

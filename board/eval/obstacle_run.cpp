@@ -468,20 +468,15 @@ std::string_view answer_code_name(AnswerCode c) noexcept {
   return "?";
 }
 
-namespace {
-
-// Each point of a point-cloud file: where it went in the range image
-// (CloudImager), what alignment made of it (AlignFate), and the answer of
-// the cloud point it became.
-void answer_points(const RevolutionSource& source, const vel::RangeImage& image, const perception::ObstaclePipeline& pipeline,
-                   const perception::TerrainClassMap* classes, std::vector<ScanPointAnswer>& out) {
-  const cloud::PointCloud& c = *source.scan_cloud();
-  const std::span<const cloud::PointPlace> places = source.scan_places();
+void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::PointPlace> places, const vel::RangeImage& image,
+                        const perception::ObstaclePipeline& pipeline, const perception::TerrainClassMap* classes,
+                        std::vector<ScanPointAnswer>& out) {
   const std::vector<std::int32_t>& fates = pipeline.point_fates();
   const perception::TerrainSource terrain = pipeline.terrain_source(classes);
   const bool dirac = pipeline.config().model == FusionModel::pw;
   const auto stride = static_cast<std::size_t>(pipeline.cloud().stride());
-  out.assign(c.size, ScanPointAnswer{});
+  if (out.size() != c.size) out.resize(c.size);
+  std::fill(out.begin(), out.end(), ScanPointAnswer{});
   constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
   auto from_fate = [&](std::int32_t fate, ScanPointAnswer& a) {
     a.probability = kNan;
@@ -563,8 +558,6 @@ void answer_points(const RevolutionSource& source, const vel::RangeImage& image,
     }
   }
 }
-
-}  // namespace
 
 ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   ObstacleRunReport report;
@@ -696,7 +689,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     map_ms += ms_since(t0);
     if (options.on_processed) options.on_processed(pipeline);
     if (answers) {
-      answer_points(source, image, pipeline, classes, scan_answers);
+      answer_scan_points(*source.scan_cloud(), source.scan_places(), image, pipeline, classes, scan_answers);
       options.on_scan_answers(ScanAnswers{source.scan_file(), *source.scan_cloud(), scan_answers});
     }
     if (options.points_box && options.on_point) {

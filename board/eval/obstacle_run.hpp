@@ -111,6 +111,14 @@ struct ScanAnswers {
   std::span<const ScanPointAnswer> answers;
 };
 
+// Each point of a point-cloud file: where the imager put it (`places`,
+// CloudImager::fill), what alignment made of it (the pipeline must keep
+// its fates: keep_point_fates()) and the answer of the point it became.
+// `out` is sized once; nothing else is allocated.
+void answer_scan_points(const cloud::PointCloud& cloud, std::span<const cloud::PointPlace> places,
+                        const velodyne::RangeImage& image, const perception::ObstaclePipeline& pipeline,
+                        const perception::TerrainClassMap* classes, std::vector<ScanPointAnswer>& out);
+
 struct ObstacleRunOptions {
   std::vector<std::string> inputs;  // one recording directory or capture file, or point-cloud files
   CloudInputOptions cloud;          // how point-cloud files become range images

@@ -12,7 +12,10 @@
 
 #include "trailnav/drivers/cloud/cloud_file.hpp"
 #include "trailnav/drivers/cloud/cloud_image.hpp"
+#include "obstacle_run.hpp"
 #include "trailnav/perception/kitti.hpp"
+#include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/obstacle_pipeline.hpp"
 
 namespace {
 
@@ -69,6 +72,44 @@ void BM_CloudImage(benchmark::State& state) {
 }
 // order 0: rows from the elevation; 1: from the sensor's order (KITTI's files).
 BENCHMARK(BM_CloudImage)->ArgNames({"layers", "order"})->Args({1, 0})->Args({2, 0})->Args({2, 1})->Unit(benchmark::kMillisecond);
+
+// A scan to its per-point answers, as `trailnav obstacles SCAN.bin --config
+// board/robots/kitti-car.yaml --labels-out` makes them: the file's bytes
+// parsed, the range image (the sensor's order, two layers), alignment,
+// smoothing, features, the height above the ground, and every point's
+// answer; second argument 1: the obstacle map updated too. The side by
+// side with Patchwork++ (toolchain/patchwork-side-by-side.sh) runs this.
+void BM_ScanToAnswers(benchmark::State& state) {
+  auto loaded = trailnav::perception::load_obstacle_config("board/robots/kitti-car.yaml");
+  if (!loaded.config) throw std::runtime_error(loaded.error);
+  trailnav::perception::ObstacleConfig config = *loaded.config;
+  config.features.self_box = trailnav::perception::kKittiCarBox;
+  PointCloud cloud(130000);
+  CloudScratch scratch;
+  RingLayout layout = *ring_layout_preset("HDL-64E");
+  layout.columns = trailnav::perception::kKittiColumns;
+  CloudImager imager(layout, 2, CloudImageOptions{255.0f, 0.1, RingSource::order});
+  trailnav::velodyne::RangeImage image(imager.shape());
+  std::vector<PointPlace> places(130000);
+  auto made = trailnav::perception::ObstaclePipeline::create(config, imager.shape());
+  if (!made.pipeline) throw std::runtime_error(made.error);
+  made.pipeline->keep_point_fates();
+  std::vector<trailnav::eval::ScanPointAnswer> answers(130000);
+  const bool map = state.range(0) != 0;
+  CloudImageStats stats;
+  for (auto _ : state) {
+    if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
+    imager.fill(cloud, image, stats, places);
+    made.pipeline->align(image, nullptr);
+    made.pipeline->features();
+    if (map) made.pipeline->update_maps(nullptr);
+    trailnav::eval::answer_scan_points(cloud, {places.data(), cloud.size}, image, *made.pipeline, nullptr, answers);
+    benchmark::DoNotOptimize(answers.data());
+  }
+  state.SetLabel(map ? "kitti-car.yaml, with the map" : "kitti-car.yaml, per-point answers");
+  state.counters["points"] = static_cast<double>(cloud.size);
+}
+BENCHMARK(BM_ScanToAnswers)->ArgName("map")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
