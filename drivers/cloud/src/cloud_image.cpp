@@ -20,14 +20,19 @@ constexpr double kTwoPi = 2.0 * std::numbers::pi;
 inline float azimuth(float y, float x) noexcept {
   const float ax = std::fabs(x), ay = std::fabs(y);
   const float mx = std::max(ax, ay), mn = std::min(ax, ay);
-  const float a = mx > 0.0f ? mn / mx : 0.0f;
+  // (No branch: mn is 0 where mx is.)
+  const float a = mn / std::max(mx, std::numeric_limits<float>::min());
   const float s = a * a;
   // Minimax coefficients for atan(a), a in [0, 1].
   float r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
   r *= a;
-  if (ay > ax) r = 1.57079637f - r;
-  if (x < 0.0f) r = 3.14159274f - r;
-  if (y < 0.0f) r = 6.28318548f - r;
+  // Each case computed, then chosen: selects, not branches.
+  const float r1 = 1.57079637f - r;
+  r = ay > ax ? r1 : r;
+  const float r2 = 3.14159274f - r;
+  r = x < 0.0f ? r2 : r;
+  const float r3 = 6.28318548f - r;
+  r = y < 0.0f ? r3 : r;
   return r >= 6.28318548f ? 0.0f : r;
 }
 
@@ -162,42 +167,72 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   }
   const bool use_field = options_.rings == RingSource::field || (options_.rings == RingSource::automatic && c.has_ring);
   const bool use_order = options_.rings == RingSource::order;
+  // Each point's distance, sin(elevation) and azimuth column, once, in a
+  // loop without branches; the passes below read them.
+  if (distance_.size() < c.size) {
+    distance_.resize(c.capacity());
+    sine_.resize(c.capacity());
+    column_.resize(c.capacity());
+  }
+  {
+    const float* px = c.x.data();
+    const float* py = c.y.data();
+    const float* pz = c.z.data();
+    float* dist = distance_.data();
+    float* sine = sine_.data();
+    std::int32_t* column = column_.data();
+    const int last = columns_ - 1;
+    for (std::size_t i = 0; i < c.size; ++i) {
+      const float x = px[i], y = py[i], z = pz[i];
+      const float d = std::sqrt(x * x + y * y + z * z);
+      dist[i] = d;
+      sine[i] = z / std::max(d, std::numeric_limits<float>::min());  // (0 at the origin, no branch)
+      const int col = static_cast<int>(azimuth(y, x) * to_column);
+      column[i] = col < last ? col : last;
+    }
+  }
   std::size_t sweeps = 0;
   if (use_order) {
     // Pass 1: the sweeps (a new one where the azimuth passes 0 from below
-    // after more than 1.5 pi of travel) and their mean slopes; at most
-    // the layout's rings + 1 (the extra one's points are counted bad_ring).
+    // after more than 1.5 pi of travel: the column passes from the last
+    // half's to the first's after more than three quarters of the columns)
+    // and their mean sin(elevation); at most the layout's rings + 1 (the
+    // extra one's points are counted bad_ring).
     const auto max_sweeps = static_cast<std::size_t>(rings_) + 1;
     sweep_start_[0] = 0;
     sweeps = 1;
     std::fill(sweep_sum_.begin(), sweep_sum_.end(), 0.0);
     std::fill(sweep_count_.begin(), sweep_count_.end(), 0);
-    double travel = 0.0, previous = 0.0;
+    // Columns counted from the azimuth -pi (the column of +pi is half way).
+    const int half = columns_ / 2;
+    long travel = 0;
+    int previous = 0;
     for (std::size_t i = 0; i < c.size; ++i) {
-      // The azimuth in [-pi, pi) and the slope z / h (in order with the elevation), both without trigonometry.
-      const float a = azimuth(c.y[i], c.x[i]);
-      const double az = a >= 3.14159274f ? static_cast<double>(a) - kTwoPi : static_cast<double>(a);
+      const int col = column_[i];
+      const int from_back = col >= half ? col - half : col + half;  // 0 at -pi
       if (i > 0) {
-        double dz = az - previous;
-        if (dz > std::numbers::pi) dz -= kTwoPi;
-        if (dz < -std::numbers::pi) dz += kTwoPi;
-        if (previous < 0.0 && az >= 0.0 && travel > 1.5 * std::numbers::pi && sweeps < max_sweeps) {
+        int dc = from_back - previous;
+        if (dc > half) dc -= columns_;
+        if (dc < -half) dc += columns_;
+        // The azimuth passes 0 from below: from the last half (negative) to the first.
+        const bool passes_zero = previous < half && from_back >= half;
+        if (passes_zero && 4 * travel > 3L * columns_ && sweeps < max_sweeps) {
           sweep_start_[sweeps++] = i;
-          travel = 0.0;
+          travel = 0;
         } else {
-          travel += dz;
+          travel += dc;
         }
       }
-      previous = az;
-      const float h = std::sqrt(c.x[i] * c.x[i] + c.y[i] * c.y[i]);
-      if (h > 0.0f && std::isfinite(h) && std::isfinite(c.z[i])) {
-        sweep_sum_[sweeps - 1] += static_cast<double>(c.z[i] / h);
+      previous = from_back;
+      const float d = distance_[i];
+      if (d > 0.0f && std::isfinite(d)) {
+        sweep_sum_[sweeps - 1] += static_cast<double>(sine_[i]);
         ++sweep_count_[sweeps - 1];
       }
     }
     sweep_start_[sweeps] = c.size;
     st.sweeps = sweeps;
-    // Rows: the first `rings_` sweeps by mean slope (the elevation's order); a sweep beyond has none.
+    // Rows: the first `rings_` sweeps by mean sin(elevation) (the elevation's order); a sweep beyond has none.
     const std::size_t ranked = std::min(sweeps, static_cast<std::size_t>(rings_));
     for (std::size_t k = 0; k < ranked; ++k) sweep_order_[k] = static_cast<int>(k);
     std::sort(sweep_order_.begin(), sweep_order_.begin() + static_cast<std::ptrdiff_t>(ranked), [&](int a, int b) {
@@ -215,9 +250,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     if (use_order) {
       while (sweep + 1 < sweeps && i >= sweep_start_[sweep + 1]) ++sweep;
     }
-    const float x = c.x[i], y = c.y[i], z = c.z[i];
-    const float h2 = x * x + y * y;
-    const float d = std::sqrt(h2 + z * z);
+    const float d = distance_[i];
     if (!std::isfinite(d) || d <= 0.0f) {
       ++st.invalid;
       note(i, PlaceOutcome::invalid, 0, 0);
@@ -245,11 +278,10 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       }
       row = row_of_ring_[ring];
     } else {
-      row = row_of_sine(z / d);
+      row = row_of_sine(sine_[i]);
       ++st.inferred;
     }
-    const float az = azimuth(y, x);
-    const int col = std::min(columns_ - 1, static_cast<int>(az * to_column));
+    const int col = column_[i];
     velodyne::RangeCell* cell = &image.at(0, row, col);
     if (cell->valid()) {
       if (layers_ < 2 || image.at(1, row, col).valid()) {
@@ -264,9 +296,11 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       ++st.placed;
       note(i, PlaceOutcome::placed, row, col);
     }
+    const float x = c.x[i], y = c.y[i];
+    const float az = azimuth(y, x);
     cell->x = x;
     cell->y = y;
-    cell->z = z;
+    cell->z = c.z[i];
     cell->distance = d;
     cell->azimuth = az;
     cell->time = c.has_time ? static_cast<float>(c.time[i] - t0) : az / static_cast<float>(kTwoPi) * period;

@@ -6,7 +6,8 @@
 // counter-clockwise, as the KITTI loader has it). Every point is accounted
 // for: the first in a cell fills layer 0, a second layer 1 (the image's
 // second layer, as for dual returns), any further one is counted, never
-// silently dropped. No allocation after construction.
+// silently dropped. No allocation after the first cloud of the largest size
+// (a few arrays per point, sized then).
 #pragma once
 
 #include <cstdint>
@@ -115,6 +116,9 @@ class CloudImager {
   std::vector<double> sweep_sum_;
   std::vector<std::uint64_t> sweep_count_;
   std::vector<int> sweep_row_, sweep_order_;
+  // Per point of the cloud filled (grown to a larger cloud's size, once).
+  std::vector<float> distance_, sine_;
+  std::vector<std::int32_t> column_;
 };
 
 }  // namespace trailnav::cloud
