@@ -568,8 +568,9 @@ void add_obstacles_command(CLI::App& app) {
   cmd->add_option("--revolutions", o.run.max_revolutions, "Stop after N revolutions (0: all)")->capture_default_str();
   cmd->add_option("--calibration", o.run.calibration, "Lidar calibration file (default: the recording's or the model's)");
   cmd->add_option("--lidar", o.run.cloud.lidar,
-                  "Point-cloud files: the lidar whose ring layout they follow (HDL-64E, VLP-16, VLP-32C, HDL-32E; "
-                  "default for KITTI .bin: HDL-64E); or give its --calibration file");
+                  "Point-cloud files: the lidar whose ring layout they follow: a preset (VLP-16, VLP-32C, HDL-32E, "
+                  "HDL-64E, Pandar40P, Pandar64, OS0-32 ... OS2-128) or a layout file (YAML: lidar_layout: {name, "
+                  "columns, elevations_deg}); default for KITTI .bin: HDL-64E; or give a Velodyne --calibration file");
   cmd->add_option("--rings", o.rings,
                   "Point-cloud files: where a point's ring comes from: automatic (the file's ring field, else the "
                   "elevation; PCD and PLY default), field, elevation, or order (the sensor's firing order kept in the "

@@ -10,6 +10,7 @@
 #include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 #include "trailnav/drivers/cloud/cloud_file.hpp"
+#include "trailnav/runtime/config.hpp"
 #include "trailnav/perception/kitti.hpp"
 
 namespace trailnav::eval {
@@ -122,14 +123,23 @@ RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& 
     });
     std::string lidar = cloud_options.lidar;
     if (lidar.empty() && kitti) lidar = "HDL-64E";
+    std::string presets;
+    for (const std::string& n : cloud::ring_layout_presets()) presets += (presets.empty() ? "" : ", ") + n;
     if (lidar.empty() && (calibration.empty() || calibration == "builtin")) {
-      return {std::nullopt, "PCD and PLY files need the lidar's ring layout: give --lidar (a preset: HDL-64E, VLP-16, "
-                            "VLP-32C, HDL-32E) or --calibration FILE"};
+      return {std::nullopt, "PCD and PLY files need the lidar's ring layout: give --lidar (a preset: " + presets +
+                                "; or a layout file, docs/pointcloud.md) or --calibration FILE"};
     }
     std::optional<cloud::RingLayout> layout;
-    if (!lidar.empty()) {
+    const std::string ext = fs::path(lidar).extension().string();
+    if (ext == ".yaml" || ext == ".yml") {
+      try {
+        layout = cloud::load_ring_layout(lidar);
+      } catch (const ConfigError& e) {
+        return {std::nullopt, e.what()};
+      }
+    } else if (!lidar.empty()) {
       layout = cloud::ring_layout_preset(lidar);
-      if (!layout) return {std::nullopt, "unknown lidar '" + lidar + "': give a preset (HDL-64E, VLP-16, VLP-32C, HDL-32E)"};
+      if (!layout) return {std::nullopt, "unknown lidar '" + lidar + "': give a preset (" + presets + ") or a layout file (.yaml)"};
     }
     if (!calibration.empty() && calibration != "builtin") {
       auto c = vel::load_calibration(calibration);

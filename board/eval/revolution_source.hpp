@@ -23,7 +23,8 @@ namespace trailnav::eval {
 
 // How point-cloud files (.bin, .pcd, .ply) become range images (drivers/cloud).
 struct CloudInputOptions {
-  // The lidar's ring layout: a preset name (cloud::ring_layout_preset);
+  // The lidar's ring layout: a preset name (cloud::ring_layout_preset) or a
+  // layout file (.yaml, cloud::load_ring_layout);
   // empty: the HDL-64E for KITTI .bin scans, else needed. A calibration file
   // given to open() wins over the preset's elevations.
   std::string lidar;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <numbers>
 #include <tuple>
@@ -14,6 +15,7 @@
 #include "trailnav/drivers/cloud/cloud_image.hpp"
 #include "trailnav/perception/kitti.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/config.hpp"
 
 namespace trailnav::cloud {
 namespace {
@@ -210,6 +212,80 @@ TEST(CloudImage, TheSensorsOrderGivesTheKittiLoadersRows) {
                 static_cast<unsigned long long>(st.second), static_cast<unsigned long long>(st.collisions));
     EXPECT_GT(static_cast<double>(same) / static_cast<double>(cells), 0.99) << file;
   }
+}
+
+// Hesai's and Ouster's presets: ring 0 the top beam, as their drivers
+// number the rings; points at each beam's elevation land in its row.
+TEST(CloudImage, HesaiAndOusterPresetsPlaceEachBeamInItsRow) {
+  const auto p40 = ring_layout_preset("Pandar40P");
+  ASSERT_TRUE(p40);
+  ASSERT_EQ(p40->elevation_deg.size(), 40u);
+  EXPECT_FLOAT_EQ(p40->elevation_deg[0], 15.21f);
+  EXPECT_FLOAT_EQ(p40->elevation_deg[39], -24.569f);
+  EXPECT_EQ(p40->columns, 1800);
+  const auto os1 = ring_layout_preset("OS1-64");
+  ASSERT_TRUE(os1);
+  ASSERT_EQ(os1->elevation_deg.size(), 64u);
+  EXPECT_FLOAT_EQ(os1->elevation_deg[0], 22.5f);
+  EXPECT_FLOAT_EQ(os1->elevation_deg[63], -22.5f);
+  EXPECT_EQ(ring_layout_preset("OS0-128")->elevation_deg.size(), 128u);
+  EXPECT_FLOAT_EQ(ring_layout_preset("OS2-32")->elevation_deg[31], -11.25f);
+  EXPECT_FALSE(ring_layout_preset("OS3-64"));
+  EXPECT_FALSE(ring_layout_preset("OS1-48"));
+  for (const std::string& n : ring_layout_presets()) EXPECT_TRUE(ring_layout_preset(n)) << n;
+
+  // The Pandar64's dense middle (beams 0.17 degrees apart), from the elevation alone.
+  const RingLayout p64 = *ring_layout_preset("Pandar64");
+  const auto rings = static_cast<int>(p64.elevation_deg.size());
+  PointCloud c(static_cast<std::size_t>(rings) * 90);
+  std::vector<int> ring_of;
+  for (int r = 0; r < rings; ++r) {
+    const double e = static_cast<double>(p64.elevation_deg[static_cast<std::size_t>(r)]) * std::numbers::pi / 180.0;
+    for (int k = 0; k < 90; ++k) {
+      const double a = k * 4.0 * std::numbers::pi / 180.0, d = 3.0 + 0.5 * k;
+      c.x[c.size] = static_cast<float>(d * std::cos(e) * std::cos(a));
+      c.y[c.size] = static_cast<float>(d * std::cos(e) * std::sin(a));
+      c.z[c.size] = static_cast<float>(d * std::sin(e));
+      ++c.size;
+      ring_of.push_back(r);
+    }
+  }
+  CloudImager imager(p64, 1, {1.0f, 0.1, RingSource::elevation});
+  velodyne::RangeImage image(imager.shape());
+  std::vector<PointPlace> places(c.size);
+  CloudImageStats st;
+  imager.fill(c, image, st, places);
+  EXPECT_EQ(st.placed, c.size);
+  std::size_t right = 0;
+  for (std::size_t i = 0; i < c.size; ++i) {
+    // Rows go from the lowest beam: ring r (0 the top) is row rings - 1 - r.
+    right += places[i].outcome == PlaceOutcome::placed && places[i].row == rings - 1 - ring_of[i] ? 1u : 0u;
+  }
+  EXPECT_EQ(right, c.size);
+}
+
+TEST(CloudImage, ALayoutFileGivesTheUnitsOwnBeams) {
+  const std::string path = ::testing::TempDir() + "/trailnav-layout.yaml";
+  auto write = [&](const char* text) {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs(text, f);
+    std::fclose(f);
+  };
+  write("lidar_layout:\n  name: OS1-32 gradient (unit 992)\n  columns: 2048\n"
+        "  elevations_deg: [12.75, 9.8, 7.0, 2.35, 2.0, 1.6, -2.96, -15.32]\n");
+  const RingLayout l = load_ring_layout(path);
+  EXPECT_EQ(l.name, "OS1-32 gradient (unit 992)");
+  EXPECT_EQ(l.columns, 2048);
+  ASSERT_EQ(l.elevation_deg.size(), 8u);
+  EXPECT_FLOAT_EQ(l.elevation_deg[7], -15.32f);
+  write("lidar_layout:\n  columns: 2048\n  elevations_deg: [12.75, 95.0]\n");
+  EXPECT_THROW(load_ring_layout(path), ConfigError);
+  write("lidar_layout:\n  columns: 8\n  elevations_deg: [1.0]\n");
+  EXPECT_THROW(load_ring_layout(path), ConfigError);
+  write("lidar_layout:\n  columns: 1024\n  elevations: [1.0]\n");
+  EXPECT_THROW(load_ring_layout(path), ConfigError);
+  std::remove(path.c_str());
 }
 
 TEST(CloudImage, FillingTouchesNoHeap) {

@@ -4,9 +4,11 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <iterator>
 #include <numeric>
 
 #include "trailnav/drivers/velodyne/model.hpp"
+#include "trailnav/runtime/config.hpp"
 
 namespace trailnav::cloud {
 
@@ -49,6 +51,19 @@ RingLayout uniform_ring_layout(std::string name, int rings, double lowest_deg, d
   return l;
 }
 
+RingLayout load_ring_layout(const std::string& path) {
+  const ConfigNode root = ConfigNode::load_file(path);
+  const ConfigNode l = root.map("lidar_layout");
+  RingLayout layout;
+  layout.name = l.has("name") ? l.string("name") : path;
+  layout.columns = static_cast<int>(l.integer("columns", 16, 65535));
+  const std::vector<double> e = l.number_list("elevations_deg", -90.0, 90.0);
+  if (e.empty() || e.size() > 1024) l.fail("elevations_deg", "needs one elevation per ring (1 to 1,024 rings)");
+  for (double v : e) layout.elevation_deg.push_back(static_cast<float>(v));
+  l.reject_unknown_keys();
+  return layout;
+}
+
 RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration, std::string name, int columns) {
   RingLayout l;
   l.name = std::move(name);
@@ -59,7 +74,67 @@ RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration
   return l;
 }
 
+namespace {
+
+// Hesai's default elevation tables (its published angle-correction files for
+// the Pandar40P and Pandar64; each unit ships its own, closer), channel 1
+// first: ring 0 is the top beam, as Hesai's drivers number the rings.
+constexpr float kPandar40P[] = {
+    15.21f,  11.36f,  8.387f,  5.385f,  3.368f,  2.356f,  2.016f,  1.679f,  1.341f,  1.003f,
+    0.665f,  0.328f,  -0.009f, -0.347f, -0.685f, -1.023f, -1.36f,  -1.7f,   -2.037f, -2.372f,
+    -2.712f, -3.047f, -3.384f, -3.722f, -4.057f, -4.392f, -4.729f, -5.063f, -5.398f, -5.733f,
+    -6.735f, -7.731f, -8.732f, -9.557f, -10.704f, -11.678f, -12.646f, -13.602f, -18.561f, -24.569f};
+constexpr float kPandar64[] = {
+    14.708f, 10.858f, 7.885f,  4.883f,  2.866f,  1.854f,  1.686f,  1.514f,  1.348f,  1.177f,
+    1.01f,   0.839f,  0.672f,  0.501f,  0.334f,  0.163f,  -0.005f, -0.174f, -0.343f, -0.511f,
+    -0.682f, -0.849f, -1.019f, -1.187f, -1.358f, -1.525f, -1.696f, -1.862f, -2.034f, -2.202f,
+    -2.372f, -2.539f, -2.71f,  -2.874f, -3.047f, -3.214f, -3.384f, -3.549f, -3.722f, -3.886f,
+    -4.058f, -4.224f, -4.395f, -4.559f, -4.732f, -4.894f, -5.066f, -5.231f, -5.403f, -5.565f,
+    -5.739f, -5.9f,   -6.072f, -6.235f, -7.237f, -8.233f, -9.234f, -10.059f, -11.206f, -12.18f,
+    -13.148f, -14.104f, -19.063f, -25.071f};
+
+// Evenly spaced beams from +half to -half degrees, ring 0 the top (Ouster's numbering).
+RingLayout top_first(std::string name, int rings, double half_deg, int columns) {
+  RingLayout l;
+  l.name = std::move(name);
+  l.columns = columns;
+  for (int r = 0; r < rings; ++r) l.elevation_deg.push_back(static_cast<float>(half_deg - 2.0 * half_deg * r / (rings - 1)));
+  return l;
+}
+
+}  // namespace
+
+std::vector<std::string> ring_layout_presets() {
+  std::vector<std::string> names{"VLP-16", "VLP-32C", "HDL-32E", "HDL-64E", "Pandar40P", "Pandar64"};
+  for (const char* os : {"OS0", "OS1", "OS2"}) {
+    for (int beams : {32, 64, 128}) names.push_back(std::string(os) + "-" + std::to_string(beams));
+  }
+  return names;
+}
+
 std::optional<RingLayout> ring_layout_preset(std::string_view name) {
+  if (name == "Pandar40P" || name == "Pandar64") {
+    // 1,800 firings a turn at 10 Hz (a block every 55.56 us): 0.2 degrees.
+    RingLayout l;
+    l.name = std::string(name) + " (Hesai's default table)";
+    l.columns = 1800;
+    if (name == "Pandar40P") l.elevation_deg.assign(std::begin(kPandar40P), std::end(kPandar40P));
+    else l.elevation_deg.assign(std::begin(kPandar64), std::end(kPandar64));
+    return l;
+  }
+  // Ouster OS0 / OS1 / OS2 with 32, 64 or 128 beams, the uniform beam
+  // configuration over the nominal field of view (90, 45, 22.5 degrees), at
+  // the default 1,024 columns. Units come gradient or below-horizon too, and
+  // each is calibrated: its own beam_altitude_angles (a layout file) are
+  // closer.
+  if (name.size() >= 6 && name.substr(0, 2) == "OS" && name[3] == '-') {
+    const char family = name[2];
+    const std::string_view beams = name.substr(4);
+    const int n = beams == "32" ? 32 : beams == "64" ? 64 : beams == "128" ? 128 : 0;
+    const double half = family == '0' ? 45.0 : family == '1' ? 22.5 : family == '2' ? 11.25 : 0.0;
+    if (n > 0 && half > 0.0) return top_first(std::string(name) + " (uniform, nominal)", n, half, 1024);
+    return std::nullopt;
+  }
   const auto model = velodyne::parse_model(name);
   if (!model) return std::nullopt;
   if (*model == velodyne::Model::hdl64e) {

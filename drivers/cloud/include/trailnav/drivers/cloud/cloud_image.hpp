@@ -35,7 +35,16 @@ struct RingLayout {
 // "HDL-32E"; ring numbers: the laser ids) and the HDL-64E's nominal layout
 // (its units are calibrated one by one: rings 0-31 the upper block from the
 // top, 32-63 the lower). Nothing for another name.
+// Also Hesai's Pandar40P and Pandar64 (its default elevation tables, ring 0
+// the top beam, 1,800 columns) and Ouster's OS0, OS1 and OS2 with 32, 64 or
+// 128 beams ("OS1-64": the uniform configuration over the nominal field of
+// view, ring 0 the top beam, 1,024 columns).
 std::optional<RingLayout> ring_layout_preset(std::string_view name);
+std::vector<std::string> ring_layout_presets();  // every name ring_layout_preset() knows
+// A layout from a YAML file: `lidar_layout: {name, columns, elevations_deg:
+// [one per ring, by the ring number the files use]}`. ConfigError (file,
+// line, key) on anything wrong.
+RingLayout load_ring_layout(const std::string& path);
 RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration, std::string name, int columns);
 // Evenly spaced rings from `lowest_deg` to `highest_deg` (ring 0 the lowest).
 RingLayout uniform_ring_layout(std::string name, int rings, double lowest_deg, double highest_deg, int columns);
