@@ -476,20 +476,40 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
   const bool dirac = pipeline.config().model == FusionModel::pw;
   const auto stride = static_cast<std::size_t>(pipeline.cloud().stride());
   if (out.size() != c.size) out.resize(c.size);
-  std::fill(out.begin(), out.end(), ScanPointAnswer{});
   constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+  // Without a terrain map every point takes one class: the models' answer
+  // straight from the features (the same as ObstaclePipeline::answer()).
+  const bool one_class = terrain.adaptive_map() == nullptr;
+  const int cls = static_cast<int>(terrain.fallback());
+  const perception::ObstacleModels& models = pipeline.models();
+  const perception::RevolutionCloud& cloud = pipeline.cloud();
+  const perception::PointState* state = cloud.state.data();
+  const float* step = cloud.step_height.data();
+  const float* sine = cloud.sin_incline.data();
+  const float* height = pipeline.ground_height().empty() ? nullptr : pipeline.ground_height().data();
   auto from_fate = [&](std::int32_t fate, ScanPointAnswer& a) {
     a.probability = kNan;
     if (fate >= 0) {
       const auto k = static_cast<std::size_t>(fate);
-      const perception::PointState st = pipeline.cloud().state[k];
+      const perception::PointState st = state[k];
       if (st == perception::PointState::measured || st == perception::PointState::flat) {
-        const auto ans = pipeline.answer(terrain, k);
-        a.probability = ans.smooth;
-        a.step_height = pipeline.cloud().step_height[k];
-        a.sin_incline = pipeline.cloud().sin_incline[k];
-        if (!pipeline.ground_height().empty()) a.height = pipeline.ground_height()[k];
-        a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
+        const bool measured = st == perception::PointState::measured;
+        const float h = measured ? step[k] : 0.0f, si = measured ? sine[k] : 0.0f;
+        bool is_dirac = false;
+        float smooth = 0.0f;
+        if (one_class) {
+          is_dirac = models.dirac(cls, h, si);
+          smooth = models.smooth(cls, h, si);
+        } else {
+          const auto ans = pipeline.answer(terrain, k);
+          is_dirac = ans.dirac;
+          smooth = ans.smooth;
+        }
+        a.probability = smooth;
+        a.step_height = step[k];
+        a.sin_incline = sine[k];
+        if (height != nullptr) a.height = height[k];
+        a.obstacle = (dirac ? is_dirac : smooth > 0.5f) ? 1 : 0;
         return;
       }
       a.code = AnswerCode::isolated;
@@ -528,6 +548,7 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
   for (std::size_t i = 0; i < c.size && i < places.size(); ++i) {
     const cloud::PointPlace& p = places[i];
     ScanPointAnswer& a = out[i];
+    a = ScanPointAnswer{};
     const std::size_t cell = static_cast<std::size_t>(p.row) * stride + p.column;
     switch (p.outcome) {
       case cloud::PlaceOutcome::placed:
