@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <optional>
@@ -22,6 +23,8 @@
 
 namespace trailnav::cli {
 namespace {
+
+namespace fs = std::filesystem;
 
 struct ObstaclesCliOptions {
   eval::ObstacleRunOptions run;
@@ -320,19 +323,44 @@ int run(ObstaclesCliOptions& o) {
       return 2;
     }
   }
-  // Per-point answers of one point-cloud file.
+  // Per-point answers of point-cloud files: for one file, the files given;
+  // for several, directories holding one file per scan (its name's stem).
   const bool per_point = !o.labels_out.empty() || !o.labels_ply.empty() || !o.score_labels.empty();
+  const bool several = o.run.inputs.size() > 1;
   std::vector<std::uint32_t> truth_labels;
   std::vector<std::int8_t> answered;
   bool answers_written = true;
+  std::string answers_error;
   std::uint64_t answer_codes[eval::kAnswerCodes] = {};
+  std::optional<eval::LabelScore> total_score;
+  std::vector<std::string> scan_scores;
+  auto path_for = [&](const std::string& given, const std::string& scan, const char* ext) {
+    return several ? (fs::path(given) / (fs::path(scan).stem().string() + ext)).string() : given;
+  };
   if (per_point) {
-    if (o.run.inputs.size() != 1 || !cloud::cloud_format_of(o.run.inputs[0])) {
-      std::fprintf(stderr, "trailnav obstacles: --labels-out, --labels-ply and --score-labels take one point-cloud file "
-                           "(.bin, .pcd or .ply)\n");
-      return 2;
+    for (const std::string& in : o.run.inputs) {
+      if (!cloud::cloud_format_of(in) || fs::is_directory(in)) {
+        std::fprintf(stderr, "trailnav obstacles: --labels-out, --labels-ply and --score-labels take point-cloud files "
+                             "(.bin, .pcd or .ply); %s is not one\n", in.c_str());
+        return 2;
+      }
     }
-    if (!o.score_labels.empty()) {
+    if (several) {
+      // Several scans: the outputs go to directories, the labels come from one.
+      for (const std::string* d : {&o.labels_out, &o.labels_ply}) {
+        std::error_code ec;
+        if (!d->empty() && !fs::is_directory(*d) && !fs::create_directories(*d, ec)) {
+          std::fprintf(stderr, "trailnav obstacles: %s: with several scans give a directory (cannot create it: %s)\n",
+                       d->c_str(), ec.message().c_str());
+          return 2;
+        }
+      }
+      if (!o.score_labels.empty() && !fs::is_directory(o.score_labels)) {
+        std::fprintf(stderr, "trailnav obstacles: --score-labels %s: with several scans give the directory of their "
+                             ".label files (SCAN.bin is scored against DIR/SCAN.label)\n", o.score_labels.c_str());
+        return 2;
+      }
+    } else if (!o.score_labels.empty()) {
       if (Status st = eval::load_semantickitti_labels(o.score_labels, truth_labels); !st) {
         std::fprintf(stderr, "trailnav obstacles: --score-labels %s\n", st.message().c_str());
         return 2;
@@ -344,8 +372,28 @@ int run(ObstaclesCliOptions& o) {
         answered[i] = a.answers[i].obstacle;
         ++answer_codes[static_cast<int>(a.answers[i].code)];
       }
-      if (!o.labels_out.empty()) answers_written = write_labels_text(o.labels_out, a) && answers_written;
-      if (!o.labels_ply.empty()) answers_written = write_labels_ply(o.labels_ply, a) && answers_written;
+      if (!o.labels_out.empty()) answers_written = write_labels_text(path_for(o.labels_out, a.file, ".answers"), a) && answers_written;
+      if (!o.labels_ply.empty()) answers_written = write_labels_ply(path_for(o.labels_ply, a.file, ".ply"), a) && answers_written;
+      if (o.score_labels.empty() || !answers_error.empty()) return;
+      const std::string labels_file = path_for(o.score_labels, a.file, ".label");
+      if (several) {
+        if (Status st = eval::load_semantickitti_labels(labels_file, truth_labels); !st) {
+          answers_error = "--score-labels " + st.message();
+          return;
+        }
+      }
+      if (truth_labels.size() != answered.size()) {
+        answers_error = "--score-labels " + labels_file + ": " + std::to_string(truth_labels.size()) + " labels for " +
+                        std::to_string(answered.size()) + " points of " + a.file;
+        return;
+      }
+      const eval::LabelScore one = eval::score_labels(answered, truth_labels);
+      char line[256];
+      std::snprintf(line, sizeof line, "  %s: precision %.3f, recall %.3f, F1 %.3f", a.file.c_str(), one.precision(),
+                    one.recall(), one.f1());
+      scan_scores.emplace_back(line);
+      if (!total_score) total_score = one;
+      else eval::merge_label_scores(*total_score, one);
     };
   }
   ProgressBar progress("obstacles", 100.0, "%");
@@ -357,9 +405,8 @@ int run(ObstaclesCliOptions& o) {
     return 2;
   }
   if (!points.close() || !misses.close() || !blocked.close() || !answers_written) return 2;
-  if (!truth_labels.empty() && truth_labels.size() != answered.size()) {
-    std::fprintf(stderr, "trailnav obstacles: --score-labels %s: %zu labels for %zu points\n", o.score_labels.c_str(),
-                 truth_labels.size(), answered.size());
+  if (!answers_error.empty()) {
+    std::fprintf(stderr, "trailnav obstacles: %s\n", answers_error.c_str());
     return 2;
   }
   if (blocked.wanted() && !r.scored) {
@@ -434,12 +481,18 @@ int run(ObstaclesCliOptions& o) {
   for (const std::string& f : r.files) {
     if (f.find("-0") == std::string::npos) std::printf("  wrote %s\n", f.c_str());
   }
-  if (!o.labels_out.empty()) std::printf("  wrote %s (one line per point: answer, code, P(obstacle))\n", o.labels_out.c_str());
-  if (!o.labels_ply.empty()) std::printf("  wrote %s\n", o.labels_ply.c_str());
-  if (!truth_labels.empty()) {
-    const eval::LabelScore score = eval::score_labels(answered, truth_labels);
-    std::printf("\nagainst %s (SemanticKITTI labels; docs/obstacles.md \"On real labelled lidar\"):\n\n%s",
-                o.score_labels.c_str(), eval::label_score_table(score, "class").c_str());
+  if (!o.labels_out.empty()) {
+    std::printf("  wrote %s%s (one line per point: answer, code, P(obstacle))\n", o.labels_out.c_str(),
+                several ? "/SCAN.answers" : "");
+  }
+  if (!o.labels_ply.empty()) std::printf("  wrote %s%s\n", o.labels_ply.c_str(), several ? "/SCAN.ply" : "");
+  if (total_score) {
+    std::printf("\nagainst %s (SemanticKITTI labels; docs/obstacles.md \"On real labelled lidar\")%s:\n",
+                o.score_labels.c_str(), several ? ", every scan's points together" : "");
+    if (several) {
+      for (const std::string& line : scan_scores) std::printf("%s\n", line.c_str());
+    }
+    std::printf("\n%s", eval::label_score_table(*total_score, "class").c_str());
   }
   if (!o.points_file.empty()) {
     std::printf("  wrote %s (%llu points in the box, over all revolutions)\n", o.points_file.c_str(),
@@ -577,16 +630,17 @@ void add_obstacles_command(CLI::App& app) {
                   "file; KITTI .bin default)");
   cmd->add_option("--columns", o.run.cloud.columns, "Point-cloud files: azimuth columns of a revolution (0: the lidar's)");
   cmd->add_option("--labels-out", o.labels_out,
-                  "One point-cloud file: write one line per input point, in input order: the obstacle answer (1, 0, or "
+                  "Point-cloud files: write (to this file; with several scans, to DIR/SCAN.answers) one line per input point, in input order: the obstacle answer (1, 0, or "
                   "-1 not evaluated), a code (0 evaluated, 1 its range-image cell's answer, 2 no return, 3 not placed, "
                   "4 apart in its cell, 5 out of range, 6 the vehicle, 7 dropped in alignment, 8 isolated, 9 by its height "
                   "above the ground alone: a second point apart in its cell or a third, obstacles.ground on) and "
                   "P(obstacle) of the smooth model (nan when not evaluated)");
   cmd->add_option("--labels-ply", o.labels_ply,
-                  "One point-cloud file: write its points as PLY with the answers as fields (obstacle, code, p_obstacle, "
+                  "Point-cloud files: write (to this file; with several scans, DIR/SCAN.ply) the points as PLY with the answers as fields (obstacle, code, p_obstacle, "
                   "step_height, incline_deg, height_above_ground: NaN unless obstacles.ground is on)");
   cmd->add_option("--score-labels", o.score_labels,
-                  "One point-cloud file: score the answers against its SemanticKITTI .label file (ground: road, "
+                  "Point-cloud files: score the answers against the SemanticKITTI .label file (with several scans: the directory "
+                  "holding SCAN.label for each; their points scored together, each scan's F1 printed too) (ground: road, "
                   "parking, sidewalk, other-ground, terrain; obstacles: building, fence, vehicles, people, pole, "
                   "traffic-sign, trunk; vegetation apart) and print precision, recall, F1 and a table per class");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");

@@ -105,6 +105,25 @@ LabelScore score_labels(std::span<const std::int8_t> obstacle, std::span<const s
   return s;
 }
 
+void merge_label_scores(LabelScore& into, const LabelScore& one) {
+  into.true_positives += one.true_positives;
+  into.false_positives += one.false_positives;
+  into.false_negatives += one.false_negatives;
+  into.true_negatives += one.true_negatives;
+  std::map<std::uint16_t, LabelClassRow> rows;
+  for (const LabelClassRow& r : into.classes) rows[r.id] = r;
+  for (const LabelClassRow& r : one.classes) {
+    LabelClassRow& t = rows[r.id];
+    t.id = r.id;
+    t.role = r.role;
+    t.points += r.points;
+    t.obstacle += r.obstacle;
+    t.unevaluated += r.unevaluated;
+  }
+  into.classes.clear();
+  for (auto& [id, row] : rows) into.classes.push_back(row);
+}
+
 std::string label_score_table(const LabelScore& s, const std::string& title) {
   std::string out = "| " + title + " | role | points | answered obstacle | share | not evaluated |\n|---|---|---|---|---|---|\n";
   char line[256];

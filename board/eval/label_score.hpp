@@ -52,6 +52,9 @@ struct LabelScore {
 // `obstacle[i]` is point i's answer (1, 0, -1); as many as `labels`.
 LabelScore score_labels(std::span<const std::int8_t> obstacle, std::span<const std::uint32_t> labels);
 
+// Adds `one`'s counts to `into` (several scans scored together).
+void merge_label_scores(LabelScore& into, const LabelScore& one);
+
 // The score as a Markdown table (per class, then precision, recall, F1).
 std::string label_score_table(const LabelScore& score, const std::string& title);
 

@@ -222,6 +222,23 @@ TEST(LabelScore, CountsByRoleAndLeavesOthersOut) {
   EXPECT_NE(table.find("| car (10) | obstacle | 2 | 1 | 0.500 | 1 |"), std::string::npos) << table;
 }
 
+// Several scans scored together: the counts add up, class by class.
+TEST(LabelScore, ScansScoredTogetherAddUp) {
+  const LabelScore a = score_labels(std::vector<std::int8_t>{1, 0, 1}, std::vector<std::uint32_t>{10, 40, 40});
+  const LabelScore b = score_labels(std::vector<std::int8_t>{0, 1}, std::vector<std::uint32_t>{10, 51});
+  LabelScore t = a;
+  merge_label_scores(t, b);
+  EXPECT_EQ(t.true_positives, 2u);   // car in a, fence in b
+  EXPECT_EQ(t.false_negatives, 1u);  // car in b
+  EXPECT_EQ(t.false_positives, 1u);  // road in a
+  EXPECT_EQ(t.true_negatives, 1u);
+  ASSERT_EQ(t.classes.size(), 3u);   // car, road, fence, by id
+  EXPECT_EQ(t.classes[0].id, 10);
+  EXPECT_EQ(t.classes[0].points, 2u);
+  EXPECT_EQ(t.classes[0].obstacle, 1u);
+  EXPECT_EQ(t.classes[2].id, 51);
+}
+
 TEST(LabelScore, ALabelFileOfTornLengthIsRefused) {
   const std::string path = (fs::temp_directory_path() / ("trailnav-torn-" + std::to_string(::getpid()) + ".label")).string();
   {
