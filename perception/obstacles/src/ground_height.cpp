@@ -40,7 +40,18 @@ float GroundGrid::ground_at(float x, float y) const noexcept {
 }
 
 void GroundGrid::build(const RevolutionCloud& cloud) noexcept {
-  std::fill(low_.begin(), low_.end(), Lowest{kInf, kInf});
+  // Only the rows the last revolution's points reached hold anything (the
+  // ground's up to `taps` rows beyond): back to nothing there.
+  const auto side_z = static_cast<std::size_t>(n_);
+  if (row_lo_ <= row_hi_) {
+    const auto lo = static_cast<std::size_t>(row_lo_) * side_z, hi = static_cast<std::size_t>(row_hi_ + 1) * side_z;
+    std::fill(low_.begin() + static_cast<std::ptrdiff_t>(lo), low_.begin() + static_cast<std::ptrdiff_t>(hi), Lowest{kInf, kInf});
+    std::fill(pass_.begin() + static_cast<std::ptrdiff_t>(lo), pass_.begin() + static_cast<std::ptrdiff_t>(hi), kInf);
+    const auto glo = static_cast<std::size_t>(std::max(row_lo_ - taps_, 0)) * side_z;
+    const auto ghi = static_cast<std::size_t>(std::min(row_hi_ + taps_, n_ - 1) + 1) * side_z;
+    std::fill(ground_.begin() + static_cast<std::ptrdiff_t>(glo), ground_.begin() + static_cast<std::ptrdiff_t>(ghi), kInf);
+  }
+  std::int32_t first_cell = std::numeric_limits<std::int32_t>::max(), last_cell = -1;
   // Each point's cell first (no branch: the compiler runs it several points
   // at a time), then the two lowest points of each cell.
   const auto n = static_cast<std::uint32_t>(n_);
@@ -68,6 +79,8 @@ void GroundGrid::build(const RevolutionCloud& cloud) noexcept {
     const float* z = cloud.z.data() + base;
     for (int j = 0; j < columns; ++j) {
       if (out[j] < 0) continue;
+      first_cell = std::min(first_cell, out[j]);
+      last_cell = std::max(last_cell, out[j]);
       Lowest& l = low_[static_cast<std::size_t>(out[j])];
       const float h = z[j];
       if (h < l.first) {
@@ -85,10 +98,22 @@ void GroundGrid::build(const RevolutionCloud& cloud) noexcept {
   const float step = params_.max_slope * params_.cell;
   const int t = taps_;
   const int side = n_;
-  for (std::size_t i = 0; i < low_.size(); ++i) ground_[i] = low_[i].second;
-  for (int y = 0; y < side; ++y) {
-    const float* in = ground_.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(side);
-    float* out = pass_.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(side);
+  if (last_cell < 0) {
+    row_lo_ = 0;
+    row_hi_ = -1;
+    return;
+  }
+  // The rows holding points; the ground reaches `taps` rows beyond. Every
+  // row outside [row_lo_, row_hi_] of low_ and pass_ is empty (nothing), so
+  // the passes need not look there.
+  row_lo_ = first_cell / side;
+  row_hi_ = last_cell / side;
+  const auto sz = static_cast<std::size_t>(side);
+  for (int y = row_lo_; y <= row_hi_; ++y) {
+    const Lowest* low = low_.data() + static_cast<std::size_t>(y) * sz;
+    float* in = ground_.data() + static_cast<std::size_t>(y) * sz;  // (ground_ as scratch for the row)
+    float* out = pass_.data() + static_cast<std::size_t>(y) * sz;
+    for (int x = 0; x < side; ++x) in[x] = low[x].second;
     for (int x = 0; x < side; ++x) out[x] = in[x];
     for (int d = 1; d <= t; ++d) {
       const float w = step * static_cast<float>(d);
@@ -96,12 +121,22 @@ void GroundGrid::build(const RevolutionCloud& cloud) noexcept {
       for (int x = 0; x + d < side; ++x) out[x] = std::min(out[x], in[x + d] + w);
     }
   }
-  std::copy(pass_.begin(), pass_.end(), ground_.begin());
-  for (int d = 1; d <= t; ++d) {
-    const float w = step * static_cast<float>(d);
-    const auto off = static_cast<std::size_t>(d) * static_cast<std::size_t>(side);
-    for (std::size_t i = off; i < ground_.size(); ++i) ground_[i] = std::min(ground_[i], pass_[i - off] + w);
-    for (std::size_t i = 0; i + off < ground_.size(); ++i) ground_[i] = std::min(ground_[i], pass_[i + off] + w);
+  const int g_lo = std::max(row_lo_ - t, 0), g_hi = std::min(row_hi_ + t, side - 1);
+  for (int y = g_lo; y <= g_hi; ++y) {
+    float* g = ground_.data() + static_cast<std::size_t>(y) * sz;
+    const float* p0 = pass_.data() + static_cast<std::size_t>(y) * sz;
+    for (int x = 0; x < side; ++x) g[x] = p0[x];
+    for (int d = 1; d <= t; ++d) {
+      const float w = step * static_cast<float>(d);
+      if (y - d >= row_lo_) {
+        const float* p = pass_.data() + static_cast<std::size_t>(y - d) * sz;
+        for (int x = 0; x < side; ++x) g[x] = std::min(g[x], p[x] + w);
+      }
+      if (y + d <= row_hi_) {
+        const float* p = pass_.data() + static_cast<std::size_t>(y + d) * sz;
+        for (int x = 0; x < side; ++x) g[x] = std::min(g[x], p[x] + w);
+      }
+    }
   }
 }
 

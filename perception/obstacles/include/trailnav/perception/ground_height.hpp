@@ -77,6 +77,7 @@ class GroundGrid {
   std::vector<Lowest> low_;
   std::vector<float> pass_, ground_;
   std::vector<std::int32_t> cell_;  // per point of the cloud built from: its cell, or -1
+  int row_lo_ = 0, row_hi_ = -1;     // the grid rows the last build's points reached (none: lo > hi)
   GroundCounters counters_;
 };
 
