@@ -155,7 +155,7 @@ RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& 
     copt.rings = cloud_options.rings.value_or(kitti ? cloud::RingSource::order : cloud::RingSource::automatic);
     im.imager.emplace(*layout, 2, copt);
     s.kind_ = kitti ? "kitti" : "cloud";
-    s.lidar_ = lidar.empty() ? layout->name : lidar;
+    s.lidar_ = lidar.empty() || ext == ".yaml" || ext == ".yml" ? layout->name : lidar;
     s.model_ = kitti ? "HDL-64E (KITTI)" : layout->name;
     s.shape_ = im.imager->shape();
     return {std::move(s), {}};
