@@ -449,11 +449,13 @@ int run(ObstaclesCliOptions& o) {
                 static_cast<unsigned long long>(p.invalid), static_cast<unsigned long long>(p.bad_ring));
   }
   if (per_point) {
-    std::printf("  per-point answers:");
+    std::printf("  per-point answers by code:");
+    const char* sep = " ";
     for (int k = 0; k < eval::kAnswerCodes; ++k) {
       if (answer_codes[k] == 0) continue;
-      std::printf(" %s%d %s %llu", k == 0 ? "" : ";", k, std::string(eval::answer_code_name(static_cast<eval::AnswerCode>(k))).c_str(),
+      std::printf("%s%d (%s) %llu", sep, k, std::string(eval::answer_code_name(static_cast<eval::AnswerCode>(k))).c_str(),
                   static_cast<unsigned long long>(answer_codes[k]));
+      sep = "; ";
     }
     std::printf("\n");
   }
