@@ -574,16 +574,19 @@ void add_obstacles_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "obstacles",
       "Run the obstacle detection (thesis §7.1, §7.3) offline and deterministically on a recording\n"
-      "directory, a pcap file or point-cloud files (KITTI .bin, PCD, PLY). Writes the obstacle maps as PNG (and the last one's\n"
-      "probabilities as float32) to --out. On a simulated recording (`trailnav sim`) it follows the true\n"
-      "trajectory, keeps PW, PS and PC maps side by side, scores them against the truth (obstacle recall,\n"
-      "fake obstacles per terrain class, path blocked) and prints their KL divergence (§7.4.4).\n"
+      "directory, a pcap file or point-cloud files (KITTI .bin, PCD, PLY). Writes the obstacle maps as\n"
+      "PNG (and the last one's probabilities as float32) to --out; for point-cloud files also every point's\n"
+      "answer (--labels-out, --labels-ply), scored against SemanticKITTI labels with --score-labels.\n"
+      "On a simulated recording (`trailnav sim`) it follows the true trajectory, keeps PW, PS and PC maps\n"
+      "side by side, scores them against the truth (obstacle recall, fake obstacles per terrain class, path\n"
+      "blocked) and prints their KL divergence (§7.4.4).\n"
       "Examples:\n"
       "  trailnav obstacles build/sim/meadow --terrain truth --out build/obstacles\n"
       "  trailnav obstacles build/sim/meadow --terrain street     # the basic approach with street parameters\n"
       "  trailnav obstacles build/sim/meadow --terrain estimated --terrain-model board/models/terrain-sim.tnrf\n"
       "  trailnav obstacles ../shared/data/kitti/*.bin --out build/kitti\n"
-      "  trailnav obstacles scan.bin --labels-out scan.answers --score-labels scan.label   # per point, scored\n"
+      "  trailnav obstacles scan.bin --config board/robots/kitti-car.yaml --labels-out scan.answers \\\n"
+      "      --score-labels scan.label           # every point answered and scored (docs/obstacles.md)\n"
       "  trailnav obstacles scan.pcd --lidar VLP-16 --labels-ply scan-answers.ply");
   static ObstaclesCliOptions o;
   cmd->add_option("inputs", o.run.inputs,
