@@ -159,6 +159,22 @@ struct Words {
   bool empty() const noexcept { return n == 0; }
   std::string_view operator[](std::size_t k) const noexcept { return w[k]; }
 };
+// A file's header, a line at a time; `pos` is then where the data begin.
+struct HeaderLines {
+  std::span<const std::uint8_t> bytes;
+  std::size_t pos = 0;
+  int number = 0;  // of the line last read, from 1
+  bool next(std::string_view& line) noexcept {
+    if (pos >= bytes.size()) return false;
+    std::size_t eol = pos;
+    while (eol < bytes.size() && bytes[eol] != '\n') ++eol;
+    line = std::string_view(reinterpret_cast<const char*>(bytes.data()) + pos, eol - pos);
+    pos = std::min(eol + 1, bytes.size());
+    ++number;
+    return true;
+  }
+};
+
 Words words(std::string_view line) noexcept {
   Words out;
   std::size_t i = 0;
@@ -279,16 +295,11 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
   std::size_t width = 0, height = 1, points = 0;
   bool have_points = false, have_width = false;
   std::string_view data;
-  std::size_t pos = 0;
-  int line_no = 0;
+  HeaderLines lines{b};
+  std::string_view line;
   // Errors only build their text.
-  auto at = [&](const std::string& what) { return fail(name, "header line " + std::to_string(line_no) + ": " + what); };
-  while (pos < b.size()) {
-    std::size_t eol = pos;
-    while (eol < b.size() && b[eol] != '\n') ++eol;
-    const std::string_view line(reinterpret_cast<const char*>(b.data()) + pos, eol - pos);
-    pos = std::min(eol + 1, b.size());
-    ++line_no;
+  auto at = [&](const std::string& what) { return fail(name, "header line " + std::to_string(lines.number) + ": " + what); };
+  while (lines.next(line)) {
     const Words w = words(line);
     if (w.overflow) return at("more than " + std::to_string(kMaxFields) + " fields");
     if (w.empty() || w[0][0] == '#') continue;
@@ -387,7 +398,7 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
   }
   if (const std::string e = missing_xyz(fields); !e.empty()) return fail(name, e);
   if (points > kMaxPoints) return fail(name, std::to_string(points) + " points; a cloud holds at most " + std::to_string(kMaxPoints));
-  const std::span<const std::uint8_t> body = b.subspan(pos);
+  const std::span<const std::uint8_t> body = b.subspan(lines.pos);
   begin_cloud(out, points, fields);
   if (same(data, "ascii")) {
     AsciiPoints a(body);
@@ -485,18 +496,15 @@ Status read_ply(std::span<const std::uint8_t> b, const std::string& name, PointC
   std::array<PlyElement, kMaxElements> elements_store{};
   std::size_t n_elements = 0;
   std::string_view format;
-  std::size_t pos = 0;
-  int line_no = 0;
+  HeaderLines lines{b};
+  std::string_view line;
   bool ended = false;
-  auto header_error = [&](const std::string& what) { return fail(name, "header line " + std::to_string(line_no) + ": " + what); };
-  while (pos < b.size()) {
-    std::size_t eol = pos;
-    while (eol < b.size() && b[eol] != '\n') ++eol;
-    const std::string_view line(reinterpret_cast<const char*>(b.data()) + pos, eol - pos);
-    pos = std::min(eol + 1, b.size());
-    ++line_no;
+  auto header_error = [&](const std::string& what) {
+    return fail(name, "header line " + std::to_string(lines.number) + ": " + what);
+  };
+  while (lines.next(line)) {
     const Words w = words(line);
-    if (line_no == 1) {
+    if (lines.number == 1) {
       if (w.size() != 1 || w[0] != "ply") return fail(name, "not a PLY file (its first line is not 'ply')");
       continue;
     }
@@ -560,7 +568,7 @@ Status read_ply(std::span<const std::uint8_t> b, const std::string& name, PointC
   if (vertex->count > kMaxPoints) {
     return fail(name, std::to_string(vertex->count) + " vertices; a cloud holds at most " + std::to_string(kMaxPoints));
   }
-  const std::span<const std::uint8_t> body = b.subspan(pos);
+  const std::span<const std::uint8_t> body = b.subspan(lines.pos);
   begin_cloud(out, vertex->count, vertex->properties);
   if (format == "ascii") {
     AsciiPoints a(body);
