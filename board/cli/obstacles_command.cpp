@@ -44,76 +44,12 @@ struct ObstaclesCliOptions {
   bool quiet = false;
 };
 
-// --labels-out: one line per input point, in input order: the answer (1, 0,
-// -1), the code (eval::AnswerCode) and P(obstacle) ("nan" when not evaluated).
-bool write_labels_text(const std::string& path, const eval::ScanAnswers& a) {
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
-  if (!f) {
-    std::fprintf(stderr, "trailnav obstacles: --labels-out %s: cannot write: %s\n", path.c_str(), std::strerror(errno));
-    return false;
-  }
-  for (const eval::ScanPointAnswer& p : a.answers) {
-    if (std::isnan(p.probability)) {
-      std::fprintf(f.get(), "%d %d nan\n", p.obstacle, static_cast<int>(p.code));
-    } else {
-      std::fprintf(f.get(), "%d %d %.4f\n", p.obstacle, static_cast<int>(p.code), static_cast<double>(p.probability));
-    }
-  }
-  const bool ok = std::ferror(f.get()) == 0;
-  if (std::fclose(f.release()) != 0 || !ok) {
-    std::fprintf(stderr, "trailnav obstacles: --labels-out %s: writing failed\n", path.c_str());
-    return false;
-  }
-  return true;
-}
-
-// --labels-ply: the points with their answers as fields (binary little-endian PLY).
-bool write_labels_ply(const std::string& path, const eval::ScanAnswers& a) {
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "wb"), &std::fclose);
-  if (!f) {
-    std::fprintf(stderr, "trailnav obstacles: --labels-ply %s: cannot write: %s\n", path.c_str(), std::strerror(errno));
-    return false;
-  }
-  std::fprintf(f.get(),
-               "ply\nformat binary_little_endian 1.0\ncomment trailnav obstacles: per-point answers for %s\n"
-               "comment obstacle: 1, 0, or -1 not evaluated (code says why: docs/obstacles.md)\n"
-               "element vertex %zu\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\n"
-               "property char obstacle\nproperty uchar code\nproperty float p_obstacle\nproperty float step_height\n"
-               "property float incline_deg\nproperty float height_above_ground\nend_header\n",
-               a.file.c_str(), a.answers.size());
-  std::vector<unsigned char> record(4 * 4 + 2 + 4 * 4);
-  auto put = [&](std::size_t at, float v) {
-    std::uint32_t u;
-    std::memcpy(&u, &v, 4);
-    for (int b = 0; b < 4; ++b) record[at + static_cast<std::size_t>(b)] = static_cast<unsigned char>(u >> (8 * b));
-  };
-  for (std::size_t i = 0; i < a.answers.size(); ++i) {
-    put(0, a.cloud.x[i]);
-    put(4, a.cloud.y[i]);
-    put(8, a.cloud.z[i]);
-    put(12, a.cloud.intensity[i]);
-    record[16] = static_cast<unsigned char>(a.answers[i].obstacle);
-    record[17] = static_cast<unsigned char>(a.answers[i].code);
-    put(18, a.answers[i].probability);
-    put(22, a.answers[i].step_height);
-    put(26, static_cast<float>(std::asin(std::clamp(static_cast<double>(a.answers[i].sin_incline), 0.0, 1.0)) * 180.0 / M_PI));
-    put(30, a.answers[i].height);
-    std::fwrite(record.data(), 1, record.size(), f.get());
-  }
-  const bool ok = std::ferror(f.get()) == 0;
-  if (std::fclose(f.release()) != 0 || !ok) {
-    std::fprintf(stderr, "trailnav obstacles: --labels-ply %s: writing failed\n", path.c_str());
-    return false;
-  }
-  return true;
-}
-
-// A CSV file a command option asked for (--misses, --blocked, --points): opened with
-// its header before the run, checked and closed after it. Errors name the
-// option and the file.
-class CsvOut {
+// A file a command option asked for (--misses, --blocked, --points: CSV;
+// --labels-out, --labels-ply): opened with its header, checked and closed
+// after its last line. Errors name the option and the file.
+class OptionFile {
  public:
-  CsvOut(const char* option, const std::string& path) : option_(option), path_(path) {}
+  OptionFile(const char* option, const std::string& path) : option_(option), path_(path) {}
   bool wanted() const noexcept { return !path_.empty(); }
   std::FILE* get() const noexcept { return file_.get(); }
   bool open(const char* header) {
@@ -141,6 +77,55 @@ class CsvOut {
   std::string path_;
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_{nullptr, &std::fclose};
 };
+
+// --labels-out: one line per input point, in input order: the answer (1, 0,
+// -1), the code (eval::AnswerCode) and P(obstacle) ("nan" when not evaluated).
+bool write_labels_text(const std::string& path, const eval::ScanAnswers& a) {
+  OptionFile f("--labels-out", path);
+  if (!f.open("")) return false;
+  for (const eval::ScanPointAnswer& p : a.answers) {
+    if (std::isnan(p.probability)) {
+      std::fprintf(f.get(), "%d %d nan\n", p.obstacle, static_cast<int>(p.code));
+    } else {
+      std::fprintf(f.get(), "%d %d %.4f\n", p.obstacle, static_cast<int>(p.code), static_cast<double>(p.probability));
+    }
+  }
+  return f.close();
+}
+
+// --labels-ply: the points with their answers as fields (binary little-endian PLY).
+bool write_labels_ply(const std::string& path, const eval::ScanAnswers& a) {
+  OptionFile f("--labels-ply", path);
+  char header[768];
+  std::snprintf(header, sizeof header,
+                "ply\nformat binary_little_endian 1.0\ncomment trailnav obstacles: per-point answers for %s\n"
+                "comment obstacle: 1, 0, or -1 not evaluated (code says why: docs/obstacles.md)\n"
+                "element vertex %zu\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\n"
+                "property char obstacle\nproperty uchar code\nproperty float p_obstacle\nproperty float step_height\n"
+                "property float incline_deg\nproperty float height_above_ground\nend_header\n",
+                a.file.substr(0, 256).c_str(), a.answers.size());
+  if (!f.open(header)) return false;
+  std::vector<unsigned char> record(4 * 4 + 2 + 4 * 4);
+  auto put = [&](std::size_t at, float v) {
+    std::uint32_t u;
+    std::memcpy(&u, &v, 4);
+    for (int b = 0; b < 4; ++b) record[at + static_cast<std::size_t>(b)] = static_cast<unsigned char>(u >> (8 * b));
+  };
+  for (std::size_t i = 0; i < a.answers.size(); ++i) {
+    put(0, a.cloud.x[i]);
+    put(4, a.cloud.y[i]);
+    put(8, a.cloud.z[i]);
+    put(12, a.cloud.intensity[i]);
+    record[16] = static_cast<unsigned char>(a.answers[i].obstacle);
+    record[17] = static_cast<unsigned char>(a.answers[i].code);
+    put(18, a.answers[i].probability);
+    put(22, a.answers[i].step_height);
+    put(26, static_cast<float>(std::asin(std::clamp(static_cast<double>(a.answers[i].sin_incline), 0.0, 1.0)) * 180.0 / M_PI));
+    put(30, a.answers[i].height);
+    std::fwrite(record.data(), 1, record.size(), f.get());
+  }
+  return f.close();
+}
 
 // A recall as text: "n/a" when no truth cell was observed (no obstacle of
 // that kind in range, or a recording without that truth), never a 1.0 that
@@ -250,7 +235,7 @@ int run(ObstaclesCliOptions& o) {
     }
   }
   // --misses: every face cell a map missed, one CSV line per scored snapshot.
-  CsvOut misses("--misses", o.misses_file);
+  OptionFile misses("--misses", o.misses_file);
   std::uint64_t miss_lines = 0;
   if (misses.wanted()) {
     if (!misses.open("model,time_s,robot_x,robot_y,x,y,distance_m,side_seen_s,obstacle,probability,found_before\n")) return 2;
@@ -267,7 +252,7 @@ int run(ObstaclesCliOptions& o) {
   }
   // --blocked: every scored snapshot whose path a map blocks, with the first
   // fake obstacle cell on the path.
-  CsvOut blocked("--blocked", o.blocked_file);
+  OptionFile blocked("--blocked", o.blocked_file);
   std::uint64_t blocked_lines = 0;
   if (blocked.wanted()) {
     if (!blocked.open("model,time_s,robot_x,robot_y,x,y,ahead_m,true_class,probability\n")) return 2;
@@ -281,7 +266,7 @@ int run(ObstaclesCliOptions& o) {
     };
   }
   // --points: every point inside --points-box, per revolution.
-  CsvOut points("--points", o.points_file);
+  OptionFile points("--points", o.points_file);
   std::uint64_t point_lines = 0;
   if (o.points_file.empty() != o.points_box.empty()) {
     std::fprintf(stderr, "trailnav obstacles: --points and --points-box go together\n");
