@@ -477,11 +477,6 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
   const auto stride = static_cast<std::size_t>(pipeline.cloud().stride());
   if (out.size() != c.size) out.resize(c.size);
   constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
-  // Without a terrain map every point takes one class: the models' answer
-  // straight from the features (the same as ObstaclePipeline::answer()).
-  const bool one_class = terrain.adaptive_map() == nullptr;
-  const int cls = static_cast<int>(terrain.fallback());
-  const perception::ObstacleModels& models = pipeline.models();
   const perception::RevolutionCloud& cloud = pipeline.cloud();
   const perception::PointState* state = cloud.state.data();
   const float* step = cloud.step_height.data();
@@ -493,23 +488,12 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
       const auto k = static_cast<std::size_t>(fate);
       const perception::PointState st = state[k];
       if (st == perception::PointState::measured || st == perception::PointState::flat) {
-        const bool measured = st == perception::PointState::measured;
-        const float h = measured ? step[k] : 0.0f, si = measured ? sine[k] : 0.0f;
-        bool is_dirac = false;
-        float smooth = 0.0f;
-        if (one_class) {
-          is_dirac = models.dirac(cls, h, si);
-          smooth = models.smooth(cls, h, si);
-        } else {
-          const auto ans = pipeline.answer(terrain, k);
-          is_dirac = ans.dirac;
-          smooth = ans.smooth;
-        }
-        a.probability = smooth;
+        const auto ans = pipeline.answer(terrain, k);
+        a.probability = ans.smooth;
         a.step_height = step[k];
         a.sin_incline = sine[k];
         if (height != nullptr) a.height = height[k];
-        a.obstacle = (dirac ? is_dirac : smooth > 0.5f) ? 1 : 0;
+        a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
         return;
       }
       a.code = AnswerCode::isolated;
@@ -529,17 +513,12 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
     a.probability = kNan;
     a.code = otherwise;
     if (ground == nullptr) return;
-    const float* t = pipeline.cloud().column_transforms.data() +
-                     static_cast<std::size_t>(p.column) * perception::RevolutionCloud::kTransformFloats;
-    const float px = c.x[i], py = c.y[i], pz = c.z[i];
-    const float x = t[0] * px + t[1] * py + t[2] * pz + t[9];
-    const float y = t[3] * px + t[4] * py + t[5] * pz + t[10];
-    const float z = t[6] * px + t[7] * py + t[8] * pz + t[11];
-    const float g = ground->ground_at(x, y);
+    const perception::RevolutionCloud::Point q = pipeline.cloud().to_reference(p.column, c.x[i], c.y[i], c.z[i]);
+    const float g = ground->ground_at(q.x, q.y);
     if (std::isnan(g)) return;
-    const float h = z - g;
+    const float h = q.z - g;
     const bool up = pipeline.config().ground.raise && h > pipeline.config().ground.height;
-    const auto ans = pipeline.answer_at(terrain, x, y, up ? h : 0.0f, up ? 1.0f : 0.0f);
+    const auto ans = pipeline.answer_at(terrain, q.x, q.y, up ? h : 0.0f, up ? 1.0f : 0.0f);
     a.code = AnswerCode::ground_only;
     a.height = h;
     a.probability = ans.smooth;

@@ -251,10 +251,11 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
         continue;
       }
       if (fate != nullptr && c < fate_stride_) fate[c] = static_cast<std::int32_t>(base + k);
-      const float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
-      ox[k] = t[0] * cell.x + t[1] * cell.y + t[2] * cell.z + t[9];
-      oy[k] = t[3] * cell.x + t[4] * cell.y + t[5] * cell.z + t[10];
-      oz[k] = t[6] * cell.x + t[7] * cell.y + t[8] * cell.z + t[11];
+      const RevolutionCloud::Point q = RevolutionCloud::transform(
+          xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats, cell.x, cell.y, cell.z);
+      ox[k] = q.x;
+      oy[k] = q.y;
+      oz[k] = q.z;
       orange[k] = cell.distance;
       ointensity[k] = cell.intensity;
       st[k] = PointState::valid;

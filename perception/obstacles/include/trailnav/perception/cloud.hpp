@@ -79,6 +79,18 @@ class RevolutionCloud {
   // row-major, then translation).
   static constexpr std::size_t kTransformFloats = 12;
   std::vector<float> column_transforms;
+  // A point of the sensor frame fired in column `c`, in this revolution's
+  // frame (what alignment makes of it).
+  struct Point {
+    float x, y, z;
+  };
+  static Point transform(const float* t, float px, float py, float pz) noexcept {
+    return {t[0] * px + t[1] * py + t[2] * pz + t[9], t[3] * px + t[4] * py + t[5] * pz + t[10],
+            t[6] * px + t[7] * py + t[8] * pz + t[11]};
+  }
+  Point to_reference(int c, float px, float py, float pz) const noexcept {
+    return transform(column_transforms.data() + static_cast<std::size_t>(c) * kTransformFloats, px, py, pz);
+  }
 
   // The revolution.
   double ref_x = 0.0;  // odometry-frame position of the reference point
