@@ -89,7 +89,6 @@ std::span<const cloud::PointPlace> RevolutionSource::scan_places() const noexcep
   return {impl_->places.data(), std::min(impl_->places.size(), impl_->cloud.size)};
 }
 const std::string& RevolutionSource::scan_file() const noexcept { return impl_->file; }
-const cloud::CloudImageStats& RevolutionSource::scan_stats() const noexcept { return impl_->stats; }
 const cloud::CloudImageStats& RevolutionSource::cloud_totals() const noexcept { return impl_->totals; }
 
 std::optional<std::array<float, 6>> RevolutionSource::self_box() const noexcept {
@@ -213,12 +212,7 @@ std::string RevolutionSource::run(const std::function<bool(const vel::RangeImage
       if (Status st = cloud::load_cloud(im.file, im.cloud, im.scratch); !st) return st.message();
       if (im.places.size() < im.cloud.size) im.places.resize(im.cloud.capacity());
       im.imager->fill(im.cloud, image, im.stats, im.places);
-      for (auto [total, one] : {std::pair{&im.totals.points, im.stats.points}, {&im.totals.placed, im.stats.placed},
-                                {&im.totals.second, im.stats.second}, {&im.totals.collisions, im.stats.collisions},
-                                {&im.totals.invalid, im.stats.invalid}, {&im.totals.bad_ring, im.stats.bad_ring},
-                                {&im.totals.inferred, im.stats.inferred}, {&im.totals.sweeps, im.stats.sweeps}}) {
-        *total += one;
-      }
+      im.totals += im.stats;
       if (!on_image(image)) break;
       if (progress) progress(static_cast<double>(i + 1) / static_cast<double>(im.inputs.size()));
     }

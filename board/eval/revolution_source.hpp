@@ -71,12 +71,11 @@ class RevolutionSource {
   std::uint64_t malformed_packets() const noexcept { return malformed_; }
 
   // Point-cloud inputs, inside on_image: the file the revolution came from,
-  // its points (in the file's order), where each went in the range image
-  // and the counts; null / empty for recordings.
+  // its points (in the file's order) and where each went in the range
+  // image; null / empty for recordings.
   const cloud::PointCloud* scan_cloud() const noexcept;
   std::span<const cloud::PointPlace> scan_places() const noexcept;
   const std::string& scan_file() const noexcept;
-  const cloud::CloudImageStats& scan_stats() const noexcept;
   // Every file's counts summed.
   const cloud::CloudImageStats& cloud_totals() const noexcept;
 

@@ -62,7 +62,6 @@ class GroundGrid {
   // The ground at (x, y) of the cloud's frame; NaN where none is known.
   float ground_at(float x, float y) const noexcept;
   const GroundCounters& counters() const noexcept { return counters_; }
-  int cells_per_side() const noexcept { return n_; }
 
  private:
   int cell_of(float x, float y) const noexcept;  // -1 outside

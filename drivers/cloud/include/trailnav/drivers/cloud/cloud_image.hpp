@@ -58,6 +58,18 @@ struct CloudImageStats {
   std::uint64_t bad_ring = 0;      // a ring field beyond the layout's rings
   std::uint64_t inferred = 0;      // rows found from the elevation
   std::uint64_t sweeps = 0;        // RingSource::order: the sweeps found (the layout's rings: every point placed)
+  // Several clouds' counts summed.
+  CloudImageStats& operator+=(const CloudImageStats& o) noexcept {
+    points += o.points;
+    placed += o.placed;
+    second += o.second;
+    collisions += o.collisions;
+    invalid += o.invalid;
+    bad_ring += o.bad_ring;
+    inferred += o.inferred;
+    sweeps += o.sweeps;
+    return *this;
+  }
 };
 
 // Where a point's ring comes from.
