@@ -6,6 +6,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <string>
 #include <map>
 #include <numbers>
 #include <tuple>
@@ -286,6 +288,95 @@ TEST(CloudImage, ALayoutFileGivesTheUnitsOwnBeams) {
   write("lidar_layout:\n  columns: 1024\n  elevations: [1.0]\n");
   EXPECT_THROW(load_ring_layout(path), ConfigError);
   std::remove(path.c_str());
+}
+
+// Every cell of both layers, bit for bit.
+bool same_cells(const velodyne::RangeImage& a, const velodyne::RangeImage& b, std::string& where) {
+  if (a.columns() != b.columns() || a.rings() != b.rings() || a.layers() != b.layers()) {
+    where = "shape";
+    return false;
+  }
+  for (int layer = 0; layer < a.layers(); ++layer) {
+    for (int r = 0; r < a.rings(); ++r) {
+      for (int col = 0; col < a.columns(); ++col) {
+        const velodyne::RangeCell &p = a.at(layer, r, col), &q = b.at(layer, r, col);
+        if (std::memcmp(&p.x, &q.x, 7 * sizeof(float)) != 0 || p.kind != q.kind) {
+          where = "layer " + std::to_string(layer) + " row " + std::to_string(r) + " column " + std::to_string(col);
+          return false;
+        }
+      }
+    }
+  }
+  return true;
+}
+
+// The imager clears only the cells its last fill of the same image wrote
+// and the next does not: the image must be the one a fresh image gets,
+// whatever the image held (another scan, the same scan, another imager's).
+TEST(CloudImage, AnImageIsTheSameWhateverItHeldBefore) {
+  std::vector<PointCloud> scans(3);
+  CloudScratch s;
+  const char* files[] = {"kitti/000000.bin", "kitti/000001.bin", "semantickitti/000000.bin"};
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(load_cloud(test::shared_data(files[k]), scans[static_cast<std::size_t>(k)], s));
+  for (RingSource rings : {RingSource::order, RingSource::elevation}) {
+    CloudImager imager(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, rings});
+    velodyne::RangeImage reused(imager.shape());
+    CloudImageStats st;
+    // Through the scans and back, each fill compared with a fresh image's.
+    for (int k : {0, 1, 2, 1, 1, 0, 2}) {
+      const PointCloud& c = scans[static_cast<std::size_t>(k)];
+      imager.fill(c, reused, st);
+      CloudImager other(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, rings});
+      velodyne::RangeImage fresh(other.shape());
+      CloudImageStats fresh_st;
+      other.fill(c, fresh, fresh_st);
+      std::string where;
+      EXPECT_TRUE(same_cells(reused, fresh, where)) << files[k] << ": differs at " << where;
+      EXPECT_EQ(st.placed, fresh_st.placed);
+      EXPECT_EQ(st.second, fresh_st.second);
+      EXPECT_EQ(reused.points, fresh.points);
+    }
+    // An image another imager wrote in between is cleared whole.
+    CloudImager other(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, rings});
+    other.fill(scans[1], reused, st);
+    imager.fill(scans[0], reused, st);
+    velodyne::RangeImage fresh(imager.shape());
+    CloudImager third(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, rings});
+    third.fill(scans[0], fresh, st);
+    std::string where;
+    EXPECT_TRUE(same_cells(reused, fresh, where)) << "after another imager: differs at " << where;
+  }
+}
+
+// Four points at a time where the CPU has the lanes, the rest one by one:
+// the same bits either way. The same scan with one point without a return
+// in front puts every point in another lane (and other points in the tail).
+TEST(CloudImage, LanesAndTheTailGiveTheSameCells) {
+  PointCloud c;
+  CloudScratch s;
+  ASSERT_TRUE(load_cloud(test::shared_data("kitti/000001.bin"), c, s));
+  for (std::size_t shift = 1; shift <= 3; ++shift) {
+    PointCloud d(c.size + shift);
+    d.size = c.size + shift;
+    d.has_intensity = c.has_intensity;
+    for (std::size_t k = 0; k < shift; ++k) d.x[k] = d.y[k] = d.z[k] = 0.0f;  // at the origin: invalid
+    for (std::size_t k = 0; k < c.size; ++k) {
+      d.x[k + shift] = c.x[k];
+      d.y[k + shift] = c.y[k];
+      d.z[k + shift] = c.z[k];
+      d.intensity[k + shift] = c.intensity[k];
+    }
+    CloudImager a(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, RingSource::elevation});
+    CloudImager b(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, RingSource::elevation});
+    velodyne::RangeImage ia(a.shape()), ib(b.shape());
+    CloudImageStats sa, sb;
+    a.fill(c, ia, sa);
+    b.fill(d, ib, sb);
+    std::string where;
+    EXPECT_TRUE(same_cells(ia, ib, where)) << "shifted by " << shift << ": differs at " << where;
+    EXPECT_EQ(sb.invalid, sa.invalid + shift);
+    EXPECT_EQ(sa.placed, sb.placed);
+  }
 }
 
 TEST(CloudImage, FillingTouchesNoHeap) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numbers>
 #include <iterator>
@@ -9,6 +10,10 @@
 
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/runtime/config.hpp"
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace trailnav::cloud {
 
@@ -37,6 +42,68 @@ inline float azimuth(float y, float x) noexcept {
   r = y < 0.0f ? r3 : r;
   return r >= 6.28318548f ? 0.0f : r;
 }
+
+// Per point: the distance, sin(elevation) (0 at the origin), the azimuth
+// and its column (at most `last`).
+struct PolarOut {
+  float* distance;
+  float* sine;
+  float* azimuth;
+  std::int32_t* column;
+};
+inline void polar_point(float x, float y, float z, float to_column, int last, const PolarOut& out, std::size_t i) noexcept {
+  const float d = std::sqrt(x * x + y * y + z * z);
+  out.distance[i] = d;
+  out.sine[i] = z / std::max(d, std::numeric_limits<float>::min());
+  const float az = azimuth(y, x);
+  out.azimuth[i] = az;
+  const float f = az * to_column;  // (NaN for a NaN point: column 0, and pass 3 skips it)
+  const int col = f > 0.0f ? static_cast<int>(f) : 0;
+  out.column[i] = col < last ? col : last;
+}
+
+#if defined(__SSE2__)
+// The same four points at a time: the same operations in the same order
+// (std::max(a, b) is a < b ? b : a, std::min(a, b) b < a ? b : a), so the
+// same bits as polar_point; a square root and two divisions a point were
+// most of the scalar loop's time.
+using F4 = float __attribute__((vector_size(16)));
+using I4 = std::int32_t __attribute__((vector_size(16)));
+inline void polar_four(const float* px, const float* py, const float* pz, float to_column, int last, const PolarOut& out,
+                       std::size_t i) noexcept {
+  F4 x, y, z;
+  std::memcpy(&x, px + i, sizeof x);
+  std::memcpy(&y, py + i, sizeof y);
+  std::memcpy(&z, pz + i, sizeof z);
+  const F4 d = reinterpret_cast<F4>(_mm_sqrt_ps(reinterpret_cast<__m128>(x * x + y * y + z * z)));
+  const F4 tiny = F4{} + std::numeric_limits<float>::min();
+  const F4 sine = z / (d < tiny ? tiny : d);
+  const I4 magnitude = I4{} + 0x7fffffff;
+  const F4 ax = reinterpret_cast<F4>(reinterpret_cast<I4>(x) & magnitude);
+  const F4 ay = reinterpret_cast<F4>(reinterpret_cast<I4>(y) & magnitude);
+  const F4 mx = ax < ay ? ay : ax;
+  const F4 mn = ay < ax ? ay : ax;
+  const F4 a = mn / (mx < tiny ? tiny : mx);
+  const F4 s = a * a;
+  F4 r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
+  r *= a;
+  const F4 r1 = 1.57079637f - r;
+  r = ay > ax ? r1 : r;
+  const F4 r2 = 3.14159274f - r;
+  r = x < 0.0f ? r2 : r;
+  const F4 r3 = 6.28318548f - r;
+  r = y < 0.0f ? r3 : r;
+  r = r >= 6.28318548f ? F4{} : r;
+  const I4 col = __builtin_convertvector(r * to_column, I4);
+  const I4 lastv = I4{} + last;
+  const I4 low = col < lastv ? col : lastv;
+  const I4 c = low < 0 ? I4{} : low;  // (a NaN converts to INT_MIN)
+  std::memcpy(out.distance + i, &d, sizeof d);
+  std::memcpy(out.sine + i, &sine, sizeof sine);
+  std::memcpy(out.azimuth + i, &r, sizeof r);
+  std::memcpy(out.column + i, &c, sizeof c);
+}
+#endif
 
 }  // namespace
 
@@ -169,7 +236,9 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
       sweep_sum_(layout.elevation_deg.size() + 1),
       sweep_count_(layout.elevation_deg.size() + 1),
       sweep_row_(layout.elevation_deg.size() + 1),
-      sweep_order_(layout.elevation_deg.size() + 1) {
+      sweep_order_(layout.elevation_deg.size() + 1),
+      held_(layout.elevation_deg.size() * static_cast<std::size_t>(std::max(layout.columns, 0))),
+      held_before_(held_.size()) {
   // Rows: the rings sorted by elevation (row 0 the lowest).
   std::vector<int> order(static_cast<std::size_t>(rings_));
   std::iota(order.begin(), order.end(), 0);
@@ -206,7 +275,8 @@ velodyne::RangeImageShape CloudImager::shape() const noexcept { return {rings_, 
 
 int CloudImager::row_of_sine(float sine) const noexcept {
   const float k = (sine - slope_lo_) * slope_scale_;
-  const int b = k <= 0.0f ? 0 : k >= static_cast<float>(kSlopeBins - 1) ? kSlopeBins - 1 : static_cast<int>(k);
+  // (A NaN, a point without a return, lands in bin 0: pass 3 skips it.)
+  const int b = !(k > 0.0f) ? 0 : k >= static_cast<float>(kSlopeBins - 1) ? kSlopeBins - 1 : static_cast<int>(k);
   return slope_rows_[static_cast<std::size_t>(b)];
 }
 
@@ -217,13 +287,22 @@ int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
 
 void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st,
                        std::span<PointPlace> places) noexcept {
-  const bool trace = places.size() >= c.size && c.size > 0;
-  auto note = [&](std::size_t i, PlaceOutcome o, int row, int col) {
-    if (trace) places[i] = PointPlace{static_cast<std::uint16_t>(row), static_cast<std::uint16_t>(col), o};
-  };
   st = CloudImageStats{};
   const std::uint64_t sequence = image.sequence;
-  image.reset(columns_);
+  // The image this imager filled last, untouched since (its sequence as
+  // left): only the cells that held a point then and hold none now are
+  // cleared, after pass 3 (the rest are overwritten whole); any other image
+  // is cleared whole. Sweeping the whole image (8.8 MB for KITTI's two
+  // layers) was a third of the fill.
+  const bool known = &image == last_image_ && sequence == last_sequence_ && image.columns() == columns_ &&
+                     image.layers() == layers_;
+  if (known) {
+    image.begin(columns_);
+  } else {
+    image.reset(columns_);
+    std::fill(held_.begin(), held_.end(), std::uint8_t{0});
+  }
+  held_.swap(held_before_);
   image.mark_received(0, columns_);
   image.sequence = sequence + 1;
   image.start_ns = 0;
@@ -231,58 +310,58 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   image.rpm = 60.0 / options_.period_s;
   const auto cols = static_cast<float>(columns_);
   const float to_column = cols / static_cast<float>(kTwoPi);
-  const auto period = static_cast<float>(options_.period_s);
-  st.points = c.size;
+  // A point without a time of its own: its azimuth's share of the revolution.
+  const auto seconds_per_rad = static_cast<float>(options_.period_s / kTwoPi);
+  const std::size_t n = c.size;
+  st.points = n;
   // Times relative to the cloud's first (a file may hold absolute ones).
   double t0 = 0.0;
   if (c.has_time) {
     t0 = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < c.size; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
+    for (std::size_t i = 0; i < n; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
     if (!std::isfinite(t0)) t0 = 0.0;
   }
   const bool use_field = options_.rings == RingSource::field || (options_.rings == RingSource::automatic && c.has_ring);
   const bool use_order = options_.rings == RingSource::order;
-  // Each point's distance, sin(elevation) and azimuth column, once, in a
-  // loop without branches; the passes below read them.
-  if (distance_.size() < c.size) {
+  if (distance_.size() < n) {
     distance_.resize(c.capacity());
     sine_.resize(c.capacity());
+    azimuth_.resize(c.capacity());
     column_.resize(c.capacity());
+    row_.resize(c.capacity());
   }
+  // Pass 1: each point's distance, sin(elevation), azimuth and column,
+  // four points at a time where the CPU has the lanes.
   {
-    const float* px = c.x.data();
-    const float* py = c.y.data();
-    const float* pz = c.z.data();
-    float* dist = distance_.data();
-    float* sine = sine_.data();
-    std::int32_t* column = column_.data();
+    const PolarOut out{distance_.data(), sine_.data(), azimuth_.data(), column_.data()};
     const int last = columns_ - 1;
-    for (std::size_t i = 0; i < c.size; ++i) {
-      const float x = px[i], y = py[i], z = pz[i];
-      const float d = std::sqrt(x * x + y * y + z * z);
-      dist[i] = d;
-      sine[i] = z / std::max(d, std::numeric_limits<float>::min());  // (0 at the origin, no branch)
-      const int col = static_cast<int>(azimuth(y, x) * to_column);
-      column[i] = col < last ? col : last;
-    }
+    std::size_t i = 0;
+#if defined(__SSE2__)
+    for (; i + 4 <= n; i += 4) polar_four(c.x.data(), c.y.data(), c.z.data(), to_column, last, out, i);
+#endif
+    for (; i < n; ++i) polar_point(c.x[i], c.y[i], c.z[i], to_column, last, out, i);
   }
-  std::size_t sweeps = 0;
+  // Pass 2: each point's row, or kBadRing.
+  constexpr std::int16_t kBadRing = -1;
+  std::int16_t* row = row_.data();
   if (use_order) {
-    // Pass 1: the sweeps (a new one where the azimuth passes 0 from below
-    // after more than 1.5 pi of travel: the column passes from the last
-    // half's to the first's after more than three quarters of the columns)
-    // and their mean sin(elevation); at most the layout's rings + 1 (the
-    // extra one's points are counted bad_ring).
+    // The sweeps: a new one where the azimuth passes 0 from below after
+    // more than 1.5 pi of travel (the column passes from the last half's to
+    // the first's after more than three quarters of the columns), and their
+    // mean sin(elevation); at most the layout's rings + 1 (the extra one's
+    // points are counted bad_ring).
     const auto max_sweeps = static_cast<std::size_t>(rings_) + 1;
     sweep_start_[0] = 0;
-    sweeps = 1;
+    std::size_t sweeps = 1;
     std::fill(sweep_sum_.begin(), sweep_sum_.end(), 0.0);
     std::fill(sweep_count_.begin(), sweep_count_.end(), 0);
     // Columns counted from the azimuth -pi (the column of +pi is half way).
     const int half = columns_ / 2;
     long travel = 0;
     int previous = 0;
-    for (std::size_t i = 0; i < c.size; ++i) {
+    double sum = 0.0;  // this sweep's (in registers: a sum kept in memory was a tenth of the fill)
+    std::uint64_t count = 0;
+    for (std::size_t i = 0; i < n; ++i) {
       const int col = column_[i];
       const int from_back = col >= half ? col - half : col + half;  // 0 at -pi
       if (i > 0) {
@@ -292,6 +371,10 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
         // The azimuth passes 0 from below: from the last half (negative) to the first.
         const bool passes_zero = previous < half && from_back >= half;
         if (passes_zero && 4 * travel > 3L * columns_ && sweeps < max_sweeps) {
+          sweep_sum_[sweeps - 1] = sum;
+          sweep_count_[sweeps - 1] = count;
+          sum = 0.0;
+          count = 0;
           sweep_start_[sweeps++] = i;
           travel = 0;
         } else {
@@ -300,12 +383,13 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       }
       previous = from_back;
       const float d = distance_[i];
-      if (d > 0.0f && std::isfinite(d)) {
-        sweep_sum_[sweeps - 1] += static_cast<double>(sine_[i]);
-        ++sweep_count_[sweeps - 1];
-      }
+      const bool ok = d > 0.0f && std::isfinite(d);
+      sum += ok ? static_cast<double>(sine_[i]) : 0.0;
+      count += ok ? 1 : 0;
     }
-    sweep_start_[sweeps] = c.size;
+    sweep_sum_[sweeps - 1] = sum;
+    sweep_count_[sweeps - 1] = count;
+    sweep_start_[sweeps] = n;
     st.sweeps = sweeps;
     // Rows: the first `rings_` sweeps by mean sin(elevation) (the elevation's order); a sweep beyond has none.
     const std::size_t ranked = std::min(sweeps, static_cast<std::size_t>(rings_));
@@ -319,70 +403,98 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     // (With fewer sweeps than rings, the rows above the last stay empty.)
     for (std::size_t r = 0; r < ranked; ++r) sweep_row_[static_cast<std::size_t>(sweep_order_[r])] = static_cast<int>(r);
     for (std::size_t k = ranked; k < sweeps; ++k) sweep_row_[k] = -1;
-  }
-  std::size_t sweep = 0;
-  for (std::size_t i = 0; i < c.size; ++i) {
-    if (use_order) {
-      while (sweep + 1 < sweeps && i >= sweep_start_[sweep + 1]) ++sweep;
+    for (std::size_t k = 0; k < sweeps; ++k) {
+      const auto r = static_cast<std::int16_t>(sweep_row_[k] < 0 ? kBadRing : sweep_row_[k]);
+      std::fill(row + sweep_start_[k], row + sweep_start_[k + 1], r);
     }
+  } else if (use_field) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint16_t ring = c.has_ring ? c.ring[i] : std::uint16_t{0xffff};
+      row[i] = ring < rings_ ? static_cast<std::int16_t>(row_of_ring_[ring]) : kBadRing;
+    }
+  } else {
+    for (std::size_t i = 0; i < n; ++i) row[i] = static_cast<std::int16_t>(row_of_sine(sine_[i]));
+  }
+  // Pass 3: into the image, in the cloud's order (the first point of a
+  // cell in layer 0, the second in layer 1, the rest counted).
+  const bool trace = places.size() >= n && n > 0;
+  const bool inferred = !use_order && !use_field;
+  std::uint64_t invalid = 0, bad_ring = 0, collisions = 0, second = 0, placed = 0;
+  std::fill(held_.begin(), held_.end(), std::uint8_t{0});
+  std::uint8_t* held = held_.data();
+  for (std::size_t i = 0; i < n; ++i) {
     const float d = distance_[i];
-    if (!std::isfinite(d) || d <= 0.0f) {
-      ++st.invalid;
-      note(i, PlaceOutcome::invalid, 0, 0);
-      continue;
-    }
-    int row = 0;
-    if (use_order) {
-      row = sweep_row_[sweep];
-      if (row < 0) {
-        ++st.bad_ring;
-        note(i, PlaceOutcome::bad_ring, 0, 0);
-        continue;
-      }
-    } else if (use_field) {
-      if (!c.has_ring) {
-        ++st.bad_ring;
-        note(i, PlaceOutcome::bad_ring, 0, 0);
-        continue;
-      }
-      const std::uint16_t ring = c.ring[i];
-      if (ring >= rings_) {
-        ++st.bad_ring;
-        note(i, PlaceOutcome::bad_ring, 0, 0);
-        continue;
-      }
-      row = row_of_ring_[ring];
-    } else {
-      row = row_of_sine(sine_[i]);
-      ++st.inferred;
-    }
+    const int r = row[i];
     const int col = column_[i];
-    velodyne::RangeCell* cell = &image.at(0, row, col);
-    if (cell->valid()) {
-      if (layers_ < 2 || image.at(1, row, col).valid()) {
-        ++st.collisions;
-        note(i, PlaceOutcome::collision, row, col);
-        continue;
-      }
-      cell = &image.at(1, row, col);
-      ++st.second;
-      note(i, PlaceOutcome::second, row, col);
+    PlaceOutcome outcome;
+    velodyne::RangeCell* cell = nullptr;
+    if (!std::isfinite(d) || d <= 0.0f) {
+      outcome = PlaceOutcome::invalid;
+      ++invalid;
+    } else if (r < 0) {
+      outcome = PlaceOutcome::bad_ring;
+      ++bad_ring;
     } else {
-      ++st.placed;
-      note(i, PlaceOutcome::placed, row, col);
+      // How many points the cell holds, from the small table (reading the
+      // cell itself waited on memory: the image is megabytes).
+      std::uint8_t& count = held[static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(col)];
+      if (count == 0) {
+        cell = &image.at(0, r, col);
+        outcome = PlaceOutcome::placed;
+        ++placed;
+        count = 1;
+      } else if (count < layers_) {
+        cell = &image.at(1, r, col);
+        outcome = PlaceOutcome::second;
+        ++second;
+        count = 2;
+      } else {
+        outcome = PlaceOutcome::collision;
+        ++collisions;
+      }
     }
-    const float x = c.x[i], y = c.y[i];
-    const float az = azimuth(y, x);
-    cell->x = x;
-    cell->y = y;
-    cell->z = c.z[i];
-    cell->distance = d;
-    cell->azimuth = az;
-    cell->time = c.has_time ? static_cast<float>(c.time[i] - t0) : az / static_cast<float>(kTwoPi) * period;
-    cell->intensity = std::clamp(c.intensity[i] * options_.intensity_scale, 0.0f, 255.0f);
+    if (trace) {
+      places[i] = outcome == PlaceOutcome::invalid || outcome == PlaceOutcome::bad_ring
+                      ? PointPlace{0, 0, outcome}
+                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome};
+    }
+    if (cell == nullptr) continue;
+    const float az = azimuth_[i];
+    *cell = velodyne::RangeCell{c.x[i],
+                                c.y[i],
+                                c.z[i],
+                                d,
+                                az,
+                                c.has_time ? static_cast<float>(c.time[i] - t0) : az * seconds_per_rad,
+                                std::clamp(c.intensity[i] * options_.intensity_scale, 0.0f, 255.0f),
+                                velodyne::ReturnKind::strongest};
   }
+  // The cells that held a point in the last fill and hold none now (all
+  // were cleared when this image was not the last one).
+  {
+    const std::uint8_t* before = held_before_.data();
+    for (int r = 0; r < rings_; ++r) {
+      const std::size_t base = static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_);
+      for (int col = 0; col < columns_; ++col) {
+        const std::uint8_t was = before[base + static_cast<std::size_t>(col)];
+        const std::uint8_t now = held[base + static_cast<std::size_t>(col)];
+        if (was <= now) continue;
+        if (now == 0) image.at(0, r, col) = velodyne::RangeCell{};
+        if (was == 2) image.at(1, r, col) = velodyne::RangeCell{};
+      }
+    }
+  }
+  last_image_ = &image;
+  st.invalid = invalid;
+  st.bad_ring = bad_ring;
+  st.collisions = collisions;
+  st.second = second;
+  st.placed = placed;
+  // Rows found from the elevation: every point with a return.
+  if (inferred) st.inferred = n - invalid;
   image.finish();
   image.points = static_cast<int>(st.placed + st.second);
+  last_sequence_ = image.sequence;
 }
 
 }  // namespace trailnav::cloud

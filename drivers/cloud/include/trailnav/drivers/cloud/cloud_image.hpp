@@ -138,8 +138,13 @@ class CloudImager {
   std::vector<std::uint64_t> sweep_count_;
   std::vector<int> sweep_row_, sweep_order_;
   // Per point of the cloud filled (grown to a larger cloud's size, once).
-  std::vector<float> distance_, sine_;
+  std::vector<float> distance_, sine_, azimuth_;
   std::vector<std::int32_t> column_;
+  std::vector<std::int16_t> row_;
+  // Points in each cell (row * columns + column) this fill and the last.
+  std::vector<std::uint8_t> held_, held_before_;
+  const velodyne::RangeImage* last_image_ = nullptr;  // the image the last fill wrote
+  std::uint64_t last_sequence_ = 0;                   // the sequence it left there
 };
 
 }  // namespace trailnav::cloud
