@@ -468,7 +468,7 @@ std::string_view answer_code_name(AnswerCode c) noexcept {
   return "?";
 }
 
-void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::PointPlace> places, const vel::RangeImage& image,
+void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::PointPlace> places,
                         const perception::ObstaclePipeline& pipeline, const perception::TerrainClassMap* classes,
                         std::vector<ScanPointAnswer>& out) {
   const std::vector<std::int32_t>& fates = pipeline.point_fates();
@@ -535,8 +535,7 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
         from_fate(fates[cell], a);
         break;
       case cloud::PlaceOutcome::second: {
-        const float gap = std::abs(image.at(1, p.row, p.column).distance - image.at(0, p.row, p.column).distance);
-        if (gap <= kSharedCellGap) {
+        if (p.apart <= kSharedCellGap) {
           a.code = AnswerCode::cell_shared;
           from_fate(fates[cell], a);
         } else {
@@ -689,7 +688,7 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     map_ms += ms_since(t0);
     if (options.on_processed) options.on_processed(pipeline);
     if (answers) {
-      answer_scan_points(*source.scan_cloud(), source.scan_places(), image, pipeline, classes, scan_answers);
+      answer_scan_points(*source.scan_cloud(), source.scan_places(), pipeline, classes, scan_answers);
       options.on_scan_answers(ScanAnswers{source.scan_file(), *source.scan_cloud(), scan_answers});
     }
     if (options.points_box && options.on_point) {

@@ -103,7 +103,7 @@ void BM_ScanToAnswers(benchmark::State& state) {
     made.pipeline->align(image, nullptr);
     made.pipeline->features();
     if (map) made.pipeline->update_maps(nullptr);
-    trailnav::eval::answer_scan_points(cloud, {places.data(), cloud.size}, image, *made.pipeline, nullptr, answers);
+    trailnav::eval::answer_scan_points(cloud, {places.data(), cloud.size}, *made.pipeline, nullptr, answers);
     benchmark::DoNotOptimize(answers.data());
   }
   state.SetLabel(map ? "kitti-car.yaml, with the map" : "kitti-car.yaml, per-point answers");

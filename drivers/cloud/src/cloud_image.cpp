@@ -428,6 +428,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     const int col = column_[i];
     PlaceOutcome outcome;
     velodyne::RangeCell* cell = nullptr;
+    float apart = 0.0f;
     if (!std::isfinite(d) || d <= 0.0f) {
       outcome = PlaceOutcome::invalid;
       ++invalid;
@@ -444,6 +445,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
         ++placed;
         count = 1;
       } else if (count < layers_) {
+        apart = std::fabs(d - image.at(0, r, col).distance);
         cell = &image.at(1, r, col);
         outcome = PlaceOutcome::second;
         ++second;
@@ -456,7 +458,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     if (trace) {
       places[i] = outcome == PlaceOutcome::invalid || outcome == PlaceOutcome::bad_ring
                       ? PointPlace{0, 0, outcome}
-                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome};
+                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome, apart};
     }
     if (cell == nullptr) continue;
     const float az = azimuth_[i];

@@ -98,6 +98,9 @@ struct PointPlace {
   std::uint16_t row = 0;
   std::uint16_t column = 0;
   PlaceOutcome outcome = PlaceOutcome::invalid;
+  // second: how far (m) its distance lies from its cell's first point's
+  // (known here at no cost; read back from the image later, each a miss).
+  float apart = 0.0f;
 };
 
 struct CloudImageOptions {
