@@ -61,6 +61,7 @@ void BM_CloudImage(benchmark::State& state) {
   CloudScratch scratch;
   if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
   CloudImageOptions o{255.0f, 0.1, state.range(1) != 0 ? RingSource::order : RingSource::elevation};
+  o.lanes = static_cast<int>(state.range(2));
   CloudImager imager(*ring_layout_preset("HDL-64E"), static_cast<int>(state.range(0)), o);
   trailnav::velodyne::RangeImage image(imager.shape());
   CloudImageStats stats;
@@ -70,8 +71,17 @@ void BM_CloudImage(benchmark::State& state) {
   }
   state.counters["points"] = static_cast<double>(stats.points);
 }
-// order 0: rows from the elevation; 1: from the sensor's order (KITTI's files).
-BENCHMARK(BM_CloudImage)->ArgNames({"layers", "order"})->Args({1, 0})->Args({2, 0})->Args({2, 1})->Unit(benchmark::kMillisecond);
+// order 0: rows from the elevation; 1: from the sensor's order (KITTI's
+// files); lanes: points at a time for the polar coordinates (8: AVX2 where
+// the CPU has it).
+BENCHMARK(BM_CloudImage)
+    ->ArgNames({"layers", "order", "lanes"})
+    ->Args({1, 0, 8})
+    ->Args({2, 0, 8})
+    ->Args({2, 1, 8})
+    ->Args({2, 1, 4})
+    ->Args({2, 1, 1})
+    ->Unit(benchmark::kMillisecond);
 
 // A scan to its per-point answers, as `trailnav obstacles SCAN.bin --config
 // board/robots/kitti-car.yaml --labels-out` makes them: the file's bytes

@@ -348,8 +348,8 @@ TEST(CloudImage, AnImageIsTheSameWhateverItHeldBefore) {
   }
 }
 
-// Four points at a time where the CPU has the lanes, the rest one by one:
-// the same bits either way. The same scan with one point without a return
+// Eight or four points at a time where the CPU has the lanes, the rest one
+// by one: the same bits either way. The same scan with one point without a return
 // in front puts every point in another lane (and other points in the tail).
 TEST(CloudImage, LanesAndTheTailGiveTheSameCells) {
   PointCloud c;
@@ -376,6 +376,20 @@ TEST(CloudImage, LanesAndTheTailGiveTheSameCells) {
     EXPECT_TRUE(same_cells(ia, ib, where)) << "shifted by " << shift << ": differs at " << where;
     EXPECT_EQ(sb.invalid, sa.invalid + shift);
     EXPECT_EQ(sa.placed, sb.placed);
+  }
+  // Eight lanes (AVX2, where this CPU has it), four and one: the same cells.
+  velodyne::RangeImage one_by_one(CloudImager(*ring_layout_preset("HDL-64E"), 2).shape());
+  CloudImageStats st;
+  CloudImageOptions o{255.0f, 0.1, RingSource::order};
+  o.lanes = 1;
+  CloudImager(*ring_layout_preset("HDL-64E"), 2, o).fill(c, one_by_one, st);
+  for (int lanes : {4, 8}) {
+    o.lanes = lanes;
+    CloudImager imager(*ring_layout_preset("HDL-64E"), 2, o);
+    velodyne::RangeImage image(imager.shape());
+    imager.fill(c, image, st);
+    std::string where;
+    EXPECT_TRUE(same_cells(one_by_one, image, where)) << lanes << " lanes: differs at " << where;
   }
 }
 

@@ -11,8 +11,8 @@
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/runtime/config.hpp"
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
+#if defined(__SSE2__) && defined(__x86_64__)
+#include <immintrin.h>
 #endif
 
 namespace trailnav::cloud {
@@ -62,46 +62,100 @@ inline void polar_point(float x, float y, float z, float to_column, int last, co
   out.column[i] = col < last ? col : last;
 }
 
-#if defined(__SSE2__)
-// The same four points at a time: the same operations in the same order
-// (std::max(a, b) is a < b ? b : a, std::min(a, b) b < a ? b : a), so the
-// same bits as polar_point; a square root and two divisions a point were
-// most of the scalar loop's time.
-using F4 = float __attribute__((vector_size(16)));
-using I4 = std::int32_t __attribute__((vector_size(16)));
-inline void polar_four(const float* px, const float* py, const float* pz, float to_column, int last, const PolarOut& out,
-                       std::size_t i) noexcept {
-  F4 x, y, z;
-  std::memcpy(&x, px + i, sizeof x);
-  std::memcpy(&y, py + i, sizeof y);
-  std::memcpy(&z, pz + i, sizeof z);
-  const F4 d = reinterpret_cast<F4>(_mm_sqrt_ps(reinterpret_cast<__m128>(x * x + y * y + z * z)));
-  const F4 tiny = F4{} + std::numeric_limits<float>::min();
-  const F4 sine = z / (d < tiny ? tiny : d);
-  const I4 magnitude = I4{} + 0x7fffffff;
-  const F4 ax = reinterpret_cast<F4>(reinterpret_cast<I4>(x) & magnitude);
-  const F4 ay = reinterpret_cast<F4>(reinterpret_cast<I4>(y) & magnitude);
-  const F4 mx = ax < ay ? ay : ax;
-  const F4 mn = ay < ax ? ay : ax;
-  const F4 a = mn / (mx < tiny ? tiny : mx);
-  const F4 s = a * a;
-  F4 r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
+#if defined(__SSE2__) && defined(__x86_64__)
+// The same W points at a time (four with SSE2, eight with AVX2 where the CPU
+// has it): the same operations in the same order (std::max(a, b) is
+// a < b ? b : a, std::min(a, b) b < a ? b : a, no fused multiply-add), so
+// the same bits as polar_point; a square root and two divisions a point
+// were most of the scalar loop's time. The square root is the caller's (an
+// intrinsic of its width, which inlines only into a function compiled for
+// it; this template is inlined into both).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // eight-wide vectors live only inside the AVX2 function
+template <int W>
+struct Lanes;
+template <>
+struct Lanes<4> {
+  using F = float __attribute__((vector_size(16)));
+  using I = std::int32_t __attribute__((vector_size(16)));
+};
+template <>
+struct Lanes<8> {
+  using F = float __attribute__((vector_size(32)));
+  using I = std::int32_t __attribute__((vector_size(32)));
+};
+
+template <int W>
+[[gnu::always_inline]] inline void polar_lanes(typename Lanes<W>::F x, typename Lanes<W>::F y, typename Lanes<W>::F z,
+                                               typename Lanes<W>::F d, float to_column, int last, const PolarOut& out,
+                                               std::size_t i) noexcept {
+  using F = typename Lanes<W>::F;
+  using I = typename Lanes<W>::I;
+  const F tiny = F{} + std::numeric_limits<float>::min();
+  const F sine = z / (d < tiny ? tiny : d);
+  const I magnitude = I{} + 0x7fffffff;
+  const F ax = reinterpret_cast<F>(reinterpret_cast<I>(x) & magnitude);
+  const F ay = reinterpret_cast<F>(reinterpret_cast<I>(y) & magnitude);
+  const F mx = ax < ay ? ay : ax;
+  const F mn = ay < ax ? ay : ax;
+  const F a = mn / (mx < tiny ? tiny : mx);
+  const F s = a * a;
+  F r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
   r *= a;
-  const F4 r1 = 1.57079637f - r;
+  const F r1 = 1.57079637f - r;
   r = ay > ax ? r1 : r;
-  const F4 r2 = 3.14159274f - r;
+  const F r2 = 3.14159274f - r;
   r = x < 0.0f ? r2 : r;
-  const F4 r3 = 6.28318548f - r;
+  const F r3 = 6.28318548f - r;
   r = y < 0.0f ? r3 : r;
-  r = r >= 6.28318548f ? F4{} : r;
-  const I4 col = __builtin_convertvector(r * to_column, I4);
-  const I4 lastv = I4{} + last;
-  const I4 low = col < lastv ? col : lastv;
-  const I4 c = low < 0 ? I4{} : low;  // (a NaN converts to INT_MIN)
+  r = r >= 6.28318548f ? F{} : r;
+  const I col = __builtin_convertvector(r * to_column, I);
+  const I lastv = I{} + last;
+  const I low = col < lastv ? col : lastv;
+  const I c = low < 0 ? I{} : low;  // (a NaN converts to INT_MIN)
   std::memcpy(out.distance + i, &d, sizeof d);
   std::memcpy(out.sine + i, &sine, sizeof sine);
   std::memcpy(out.azimuth + i, &r, sizeof r);
   std::memcpy(out.column + i, &c, sizeof c);
+}
+
+template <int W>
+[[gnu::always_inline]] inline void load_lanes(const float* p, std::size_t i, typename Lanes<W>::F& v) noexcept {
+  std::memcpy(&v, p + i, sizeof v);
+}
+
+// Points [i, n) four at a time; returns the first not done.
+std::size_t polar_four(const PointCloud& c, std::size_t i, std::size_t n, float to_column, int last,
+                       const PolarOut& out) noexcept {
+  for (; i + 4 <= n; i += 4) {
+    Lanes<4>::F x, y, z;
+    load_lanes<4>(c.x.data(), i, x);
+    load_lanes<4>(c.y.data(), i, y);
+    load_lanes<4>(c.z.data(), i, z);
+    const auto d = reinterpret_cast<Lanes<4>::F>(_mm_sqrt_ps(reinterpret_cast<__m128>(x * x + y * y + z * z)));
+    polar_lanes<4>(x, y, z, d, to_column, last, out, i);
+  }
+  return i;
+}
+
+// Eight at a time, compiled for AVX2 (called only where the CPU has it).
+__attribute__((target("avx2"))) std::size_t polar_eight(const PointCloud& c, std::size_t i, std::size_t n,
+                                                        float to_column, int last, const PolarOut& out) noexcept {
+  for (; i + 8 <= n; i += 8) {
+    Lanes<8>::F x, y, z;
+    load_lanes<8>(c.x.data(), i, x);
+    load_lanes<8>(c.y.data(), i, y);
+    load_lanes<8>(c.z.data(), i, z);
+    const auto d = reinterpret_cast<Lanes<8>::F>(_mm256_sqrt_ps(reinterpret_cast<__m256>(x * x + y * y + z * z)));
+    polar_lanes<8>(x, y, z, d, to_column, last, out, i);
+  }
+  return i;
+}
+#pragma GCC diagnostic pop
+
+bool cpu_has_avx2() noexcept {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
 }
 #endif
 
@@ -329,15 +383,17 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     azimuth_.resize(c.capacity());
     column_.resize(c.capacity());
     row_.resize(c.capacity());
+    pass_places_.resize(c.capacity());
   }
   // Pass 1: each point's distance, sin(elevation), azimuth and column,
-  // four points at a time where the CPU has the lanes.
+  // eight or four points at a time where the CPU has the lanes.
   {
     const PolarOut out{distance_.data(), sine_.data(), azimuth_.data(), column_.data()};
     const int last = columns_ - 1;
     std::size_t i = 0;
-#if defined(__SSE2__)
-    for (; i + 4 <= n; i += 4) polar_four(c.x.data(), c.y.data(), c.z.data(), to_column, last, out, i);
+#if defined(__SSE2__) && defined(__x86_64__)
+    if (options_.lanes >= 8 && cpu_has_avx2()) i = polar_eight(c, i, n, to_column, last, out);
+    if (options_.lanes >= 4) i = polar_four(c, i, n, to_column, last, out);
 #endif
     for (; i < n; ++i) polar_point(c.x[i], c.y[i], c.z[i], to_column, last, out, i);
   }
@@ -347,48 +403,92 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   if (use_order) {
     // The sweeps: a new one where the azimuth passes 0 from below after
     // more than 1.5 pi of travel (the column passes from the last half's to
-    // the first's after more than three quarters of the columns), and their
-    // mean sin(elevation); at most the layout's rings + 1 (the extra one's
-    // points are counted bad_ring).
+    // the first's after more than three quarters of the columns); at most
+    // the layout's rings + 1 (the extra one's points are counted bad_ring).
+    // First the places the azimuth passes 0 from below (a few hundred),
+    // each with the running sum u of the column steps (each wrapped to half
+    // a turn) before and after it; then the sweeps from those alone: at a
+    // place i, the travel since the sweep that began at s is u(i-1) - u(s).
+    // Between two events (a pass, or a step that wraps) the steps add up to
+    // the difference of the columns, so only the events are visited: four
+    // points are checked at once for one.
     const auto max_sweeps = static_cast<std::size_t>(rings_) + 1;
-    sweep_start_[0] = 0;
-    std::size_t sweeps = 1;
-    std::fill(sweep_sum_.begin(), sweep_sum_.end(), 0.0);
-    std::fill(sweep_count_.begin(), sweep_count_.end(), 0);
     // Columns counted from the azimuth -pi (the column of +pi is half way).
     const int half = columns_ / 2;
-    long travel = 0;
-    int previous = 0;
-    double sum = 0.0;  // this sweep's (in registers: a sum kept in memory was a tenth of the fill)
-    std::uint64_t count = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const int col = column_[i];
-      const int from_back = col >= half ? col - half : col + half;  // 0 at -pi
-      if (i > 0) {
-        int dc = from_back - previous;
+    const auto from_back = [half](int col) { return col >= half ? col - half : col + half; };  // 0 at -pi
+    std::size_t places_found = 0;
+    if (n > 0) {
+      const std::int32_t* column = column_.data();
+      std::int64_t u = 0;  // the running sum at point `at`
+      std::size_t at = 0;
+      int fb_at = from_back(column[0]);
+      // Point i (> 0): an event, handled in order.
+      const auto visit = [&](std::size_t i) {
+        const int previous = from_back(column[i - 1]), fb = from_back(column[i]);
+        int dc = fb - previous;
+        const bool wraps = dc > half || dc < -half;
+        const bool passes_zero = previous < half && fb >= half;
+        if (!wraps && !passes_zero) return;
+        const std::int64_t before = u + (previous - fb_at);  // no wrap since `at`
         if (dc > half) dc -= columns_;
         if (dc < -half) dc += columns_;
-        // The azimuth passes 0 from below: from the last half (negative) to the first.
-        const bool passes_zero = previous < half && from_back >= half;
-        if (passes_zero && 4 * travel > 3L * columns_ && sweeps < max_sweeps) {
-          sweep_sum_[sweeps - 1] = sum;
-          sweep_count_[sweeps - 1] = count;
-          sum = 0.0;
-          count = 0;
-          sweep_start_[sweeps++] = i;
-          travel = 0;
-        } else {
-          travel += dc;
+        if (passes_zero) pass_places_[places_found++] = PassPlace{i, before, before + dc};
+        u = before + dc;
+        at = i;
+        fb_at = fb;
+      };
+      std::size_t i = 1;
+      using V4 = std::int32_t __attribute__((vector_size(16)));
+      const V4 halfv = V4{} + half, neg_half = V4{} - half;
+      for (; i + 4 <= n; i += 4) {
+        V4 now, before;
+        std::memcpy(&now, column + i, sizeof now);
+        std::memcpy(&before, column + i - 1, sizeof before);
+        now = now >= halfv ? now - halfv : now + halfv;
+        before = before >= halfv ? before - halfv : before + halfv;
+        const V4 step = now - before;
+        const V4 event = (step > halfv) | (step < neg_half) | ((before < halfv) & (now >= halfv));
+        std::uint64_t any[2];
+        std::memcpy(any, &event, sizeof any);
+        if ((any[0] | any[1]) == 0) continue;
+        for (std::size_t k = i; k < i + 4; ++k) visit(k);
+      }
+      for (; i < n; ++i) visit(i);
+    }
+    sweep_start_[0] = 0;
+    std::size_t sweeps = 1;
+    std::int64_t u_start = 0;
+    for (std::size_t k = 0; k < places_found && sweeps < max_sweeps; ++k) {
+      const PassPlace& p = pass_places_[k];
+      if (4 * (p.u_before - u_start) > 3L * columns_) {
+        sweep_start_[sweeps++] = p.index;
+        u_start = p.u_after;
+      }
+    }
+    // Each sweep's mean sin(elevation) over its points with a return (four
+    // sums, so the additions need not wait on each other).
+    for (std::size_t k = 0; k < sweeps; ++k) {
+      const std::size_t end = k + 1 < sweeps ? sweep_start_[k + 1] : n;
+      double sum[4] = {0.0, 0.0, 0.0, 0.0};
+      std::uint64_t count = 0;
+      std::size_t i = sweep_start_[k];
+      for (; i + 4 <= end; i += 4) {
+        for (std::size_t l = 0; l < 4; ++l) {
+          const float d = distance_[i + l];
+          const bool ok = d > 0.0f && d <= std::numeric_limits<float>::max();
+          sum[l] += ok ? static_cast<double>(sine_[i + l]) : 0.0;
+          count += ok ? 1 : 0;
         }
       }
-      previous = from_back;
-      const float d = distance_[i];
-      const bool ok = d > 0.0f && std::isfinite(d);
-      sum += ok ? static_cast<double>(sine_[i]) : 0.0;
-      count += ok ? 1 : 0;
+      for (; i < end; ++i) {
+        const float d = distance_[i];
+        const bool ok = d > 0.0f && d <= std::numeric_limits<float>::max();
+        sum[0] += ok ? static_cast<double>(sine_[i]) : 0.0;
+        count += ok ? 1 : 0;
+      }
+      sweep_sum_[k] = (sum[0] + sum[1]) + (sum[2] + sum[3]);
+      sweep_count_[k] = count;
     }
-    sweep_sum_[sweeps - 1] = sum;
-    sweep_count_[sweeps - 1] = count;
     sweep_start_[sweeps] = n;
     st.sweeps = sweeps;
     // Rows: the first `rings_` sweeps by mean sin(elevation) (the elevation's order); a sweep beyond has none.

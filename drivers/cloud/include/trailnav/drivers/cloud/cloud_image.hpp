@@ -107,6 +107,9 @@ struct CloudImageOptions {
   float intensity_scale = 1.0f;    // the file's intensity to 0..255 (KITTI's 0..1: 255)
   double period_s = 0.1;           // a revolution, for points without a time of their own
   RingSource rings = RingSource::automatic;
+  // Points at a time for the polar coordinates: 8 (AVX2 where the CPU has
+  // it, else 4), 4 (SSE2) or 1; the same bits whichever (a test).
+  int lanes = 8;
 };
 
 class CloudImager {
@@ -144,6 +147,13 @@ class CloudImager {
   std::vector<float> distance_, sine_, azimuth_;
   std::vector<std::int32_t> column_;
   std::vector<std::int16_t> row_;
+  // RingSource::order: where the azimuth passes 0 from below, with the
+  // running sum of the column steps before and after that point.
+  struct PassPlace {
+    std::size_t index;
+    std::int64_t u_before, u_after;
+  };
+  std::vector<PassPlace> pass_places_;
   // Points in each cell (row * columns + column) this fill and the last.
   std::vector<std::uint8_t> held_, held_before_;
   const velodyne::RangeImage* last_image_ = nullptr;  // the image the last fill wrote
