@@ -19,7 +19,7 @@ GroundGrid::GroundGrid(const GroundParams& params, float max_range, std::size_t 
   const auto cells = static_cast<std::size_t>(n_) * static_cast<std::size_t>(n_);
   low_.assign(cells, Lowest{kInf, kInf});
   pass_.assign(cells, kInf);
-  ground_.assign(cells, kInf);
+  ground_.assign(cells + 1, kInf);  // + a last cell that stays nothing: where apply() looks for a point off the grid
   cell_.assign(points, -1);
 }
 
@@ -145,39 +145,37 @@ void GroundGrid::apply(RevolutionCloud& cloud, std::vector<float>& height) noexc
   const float above = params_.height;
   const bool raise = params_.raise, cut = params_.cut;
   std::uint64_t raised = 0, lowered = 0, none = 0;
+  // Selects instead of branches (which way a point goes is not
+  // predictable: the branches were most of the time here).
+  const auto nothing = static_cast<std::int32_t>(ground_.size() - 1);
   for (int i = 0; i < cloud.rings(); ++i) {
     const std::size_t base = cloud.index(i, 0);
     const std::int32_t* cells = cell_.data() + base;
+    const float* z = cloud.z.data() + base;
+    float* step = cloud.step_height.data() + base;
+    float* sine = cloud.sin_incline.data() + base;
+    PointState* state = cloud.state.data() + base;
+    float* out = height.data() + base;
     for (int j = 0; j < cloud.columns(); ++j) {
-      if (cells[j] < 0) {
-        // No point, or one outside the grid.
-        if (cloud.state[base + static_cast<std::size_t>(j)] != PointState::none) {
-          height[base + static_cast<std::size_t>(j)] = nan;
-          ++none;
-        }
-        continue;
-      }
-      const std::size_t k = base + static_cast<std::size_t>(j);
-      const float g = ground_[static_cast<std::size_t>(cells[j])];
-      if (!(g < kInf)) {
-        height[k] = nan;
-        ++none;
-        continue;
-      }
-      const float h = cloud.z[k] - g;
-      height[k] = h;
-      const PointState st = cloud.state[k];
-      if (st == PointState::isolated) continue;
-      const float s = st == PointState::measured ? cloud.step_height[k] : 0.0f;
-      if (raise && h > above) {
-        cloud.step_height[k] = std::max(s, h);
-        cloud.sin_incline[k] = 1.0f;
-        cloud.state[k] = PointState::measured;
-        ++raised;
-      } else if (cut && st == PointState::measured && s > std::max(h, 0.0f)) {
-        cloud.step_height[k] = std::max(h, 0.0f);
-        ++lowered;
-      }
+      const std::int32_t c = cells[j];
+      const PointState st = state[j];
+      // No point, or one outside the grid (c < 0): the cell of nothing.
+      const float g = ground_[static_cast<std::size_t>(c < 0 ? nothing : c)];
+      const bool known = g < kInf;
+      const bool point = c >= 0 || st != PointState::none;
+      const float h = known ? z[j] - g : nan;
+      out[j] = point ? h : out[j];
+      none += point && !known ? 1 : 0;
+      const bool measured = st == PointState::measured;
+      const float s = measured ? step[j] : 0.0f;
+      const bool up = known && st != PointState::isolated && raise && h > above;
+      const float floor = std::max(h, 0.0f);
+      const bool down = known && !up && cut && measured && s > floor;
+      step[j] = up ? std::max(s, h) : down ? floor : step[j];
+      sine[j] = up ? 1.0f : sine[j];
+      state[j] = up ? PointState::measured : st;
+      raised += up ? 1 : 0;
+      lowered += down ? 1 : 0;
     }
   }
   counters_.raised += raised;
