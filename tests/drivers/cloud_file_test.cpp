@@ -276,6 +276,136 @@ TEST(CloudFile, MalformedFilesAreRefusedWithWhereAndWhat) {
 
 // Sized for the sensor up front, reading touches no heap: the real scan, and
 // the compressed PCD (its inflation into the scratch included).
+// The sample as a sensor_msgs/PointCloud2: `rows` rows, each padded to
+// row_step with `row_pad` bytes; fields x y z intensity (float32), a
+// two-byte gap, ring (uint16), a field no role knows, time as float64
+// seconds or (ns) as Ouster's uint32 `t`.
+struct Pc2 {
+  std::vector<PointFieldView> fields;
+  std::vector<std::uint8_t> data;
+  PointCloud2View view;
+};
+Pc2 pointcloud2(const Sample& s, std::uint32_t rows, bool big, std::uint32_t row_pad, bool ns) {
+  Pc2 m;
+  m.fields = {{"x", 0, 7, 1}, {"y", 4, 7, 1}, {"z", 8, 7, 1}, {"intensity", 12, 7, 1}, {"ring", 18, 4, 1},
+              {"ambient", 20, 4, 1}, {ns ? "t" : "time", 24, static_cast<std::uint8_t>(ns ? 6 : 8), 1}};
+  const std::uint32_t step = 32;
+  const auto width = static_cast<std::uint32_t>(s.x.size() / rows);
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    for (std::uint32_t c = 0; c < width; ++c) {
+      const std::size_t k = static_cast<std::size_t>(r) * width + c;
+      const std::uint16_t gap = 0xabcd, ambient = 7;
+      put(m.data, &s.x[k], 4, big), put(m.data, &s.y[k], 4, big), put(m.data, &s.z[k], 4, big);
+      put(m.data, &s.i[k], 4, big), put(m.data, &gap, 2, big), put(m.data, &s.ring[k], 2, big);
+      put(m.data, &ambient, 2, big);
+      m.data.insert(m.data.end(), 2, 0);
+      if (ns) {
+        const auto t = static_cast<std::uint32_t>(std::llround(s.t[k] * 1e9));
+        put(m.data, &t, 4, big);
+        m.data.insert(m.data.end(), 4, 0);
+      } else {
+        put(m.data, &s.t[k], 8, big);
+      }
+    }
+    m.data.insert(m.data.end(), row_pad, 0xee);
+  }
+  m.view.height = rows;
+  m.view.width = width;
+  m.view.fields = m.fields;
+  m.view.is_bigendian = big;
+  m.view.point_step = step;
+  m.view.row_step = width * step + row_pad;
+  m.view.data = m.data;
+  return m;
+}
+
+// ROS 2's point cloud message, as a lidar's ROS driver publishes it: the
+// same points as the files, organised or not, either byte order, rows
+// padded, times in seconds or nanoseconds.
+TEST(CloudFile, PointCloud2MessagesReadAsTheFiles) {
+  Sample s = sample(2048);
+  PointCloud c;
+  for (const bool big : {false, true}) {
+    for (const std::uint32_t rows : {1u, 64u}) {
+      const Pc2 m = pointcloud2(s, rows, big, rows == 1 ? 0 : 12, false);
+      const Status st = read_pointcloud2(m.view, "/points", c);
+      ASSERT_TRUE(st) << st.message();
+      expect_same(c, s, big ? "big-endian PointCloud2" : "PointCloud2");
+    }
+  }
+  // Ouster's `t`: uint32 nanoseconds.
+  const Pc2 m = pointcloud2(s, 16, false, 0, true);
+  ASSERT_TRUE(read_pointcloud2(m.view, "/ouster/points", c));
+  for (std::size_t k = 0; k < c.size; ++k) {
+    ASSERT_NEAR(c.time[k], s.t[k], 1e-9) << "point " << k;
+  }
+  // The real scan whole, as a PointCloud2 of x y z intensity.
+  PointCloud file;
+  CloudScratch scratch;
+  ASSERT_TRUE(load_cloud(test::shared_data("semantickitti/000000.bin"), file, scratch));
+  const std::vector<PointFieldView> kitti{{"x", 0, 7, 1}, {"y", 4, 7, 1}, {"z", 8, 7, 1}, {"intensity", 12, 7, 1}};
+  PointCloud2View v;
+  v.width = static_cast<std::uint32_t>(file.size);
+  v.fields = kitti;
+  v.point_step = 16;
+  v.row_step = 16 * v.width;
+  v.data = std::span<const std::uint8_t>(scratch.bytes.data(), file.size * 16);
+  ASSERT_TRUE(read_pointcloud2(v, "/kitti", c));
+  ASSERT_EQ(c.size, file.size);
+  EXPECT_EQ(std::memcmp(c.x.data(), file.x.data(), c.size * 4), 0);
+  EXPECT_EQ(std::memcmp(c.z.data(), file.z.data(), c.size * 4), 0);
+  EXPECT_EQ(std::memcmp(c.intensity.data(), file.intensity.data(), c.size * 4), 0);
+  EXPECT_FALSE(c.has_ring || c.has_time);
+}
+
+TEST(CloudFile, MalformedPointCloud2MessagesAreRefusedWithWhat) {
+  const Sample s = sample(64);
+  PointCloud c;
+  auto refused = [&](const PointCloud2View& v, const std::string& words) {
+    c.size = 7;
+    const Status st = read_pointcloud2(v, "/points", c);
+    EXPECT_FALSE(st) << words;
+    EXPECT_NE(st.message().find(words), std::string::npos) << st.message();
+    EXPECT_EQ(st.message().rfind("/points: ", 0), 0u) << st.message();
+    EXPECT_EQ(c.size, 0u);
+  };
+  Pc2 m = pointcloud2(s, 1, false, 0, false);
+  ASSERT_TRUE(read_pointcloud2(m.view, "/points", c));
+  auto with_field = [&](std::size_t k, PointFieldView f) {
+    std::vector<PointFieldView> fields = m.fields;
+    fields[k] = f;
+    return fields;
+  };
+  std::vector<PointFieldView> f = with_field(0, {"x", 0, 9, 1});
+  PointCloud2View v = m.view;
+  v.fields = f;
+  refused(v, "field 'x': datatype 9 is not one of PointField's");
+  f = with_field(2, {"z", 8, 7, 0});
+  v.fields = f;
+  refused(v, "field 'z': count 0");
+  f = with_field(3, {"intensity", 30, 7, 1});
+  v.fields = f;
+  refused(v, "field 'intensity' at offset 30 (4 bytes) reaches past the point's 32 bytes");
+  f = with_field(2, {"height", 8, 7, 1});
+  v.fields = f;
+  refused(v, "no field x, y and z");
+  v = m.view;
+  v.row_step = 31 * v.width;
+  refused(v, "row_step 1984 is less than 64 points of 32 bytes");
+  v = m.view;
+  v.data = v.data.first(v.data.size() - 1);
+  refused(v, "data holds 2047 bytes; 1 rows of 2048 bytes need 2048");
+  v = m.view;
+  v.height = 1u << 13;
+  v.width = 1u << 12;
+  refused(v, "8192 x 4096 points; a cloud holds at most 16777216");
+  // A ring that is no laser index.
+  f = with_field(4, {"ring", 0, 7, 1});  // x's float bytes (a real point's, metres) as the ring
+  v = m.view;
+  v.fields = f;
+  refused(v, "point 1: a ring that is not a whole number from 0 to 65535");
+}
+
 TEST(CloudFile, SizedUpFrontReadingTouchesNoHeap) {
   const Sample s = sample(5000);
   const auto compressed = pcd(s, "binary_compressed");
@@ -284,15 +414,18 @@ TEST(CloudFile, SizedUpFrontReadingTouchesNoHeap) {
   CloudScratch scratch;
   scratch.bytes.resize(130000 * 16);
   scratch.inflated.resize(130000 * 30);
+  const Pc2 message = pointcloud2(s, 50, true, 4, true);
   alloc_guard::set_fatal(false);
   alloc_guard::mark_realtime_thread("cloud");
   ASSERT_TRUE(alloc_guard::arm());
   const Status a = read_cloud(compressed, CloudFormat::pcd, "c.pcd", c, scratch);
   const Status b = read_cloud(binary_ply, CloudFormat::ply, "b.ply", c, scratch);
+  const Status p = read_pointcloud2(message.view, "/points", c);
   alloc_guard::disarm();
   alloc_guard::unmark_current_thread();
   EXPECT_TRUE(a) << a.message();
   EXPECT_TRUE(b) << b.message();
+  EXPECT_TRUE(p) << p.message();
   EXPECT_EQ(alloc_guard::total_allocations(), 0u);
 }
 

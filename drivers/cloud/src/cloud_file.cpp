@@ -4,12 +4,14 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <optional>
 
 namespace trailnav::cloud {
 
@@ -117,9 +119,14 @@ void begin_cloud(PointCloud& c, std::size_t n, const List& fields) {
   if (!c.has_intensity) std::fill(c.intensity.begin(), c.intensity.begin() + static_cast<std::ptrdiff_t>(n), 0.0f);
 }
 
-// Stores one value; an error text for a ring that is no laser index.
-const char* store(PointCloud& c, std::size_t i, Role r, double v) noexcept {
-  switch (r) {
+// A time field's unit: seconds in a floating-point field, nanoseconds in an
+// integer one (Ouster's `t` and Livox's `offset_time`: uint32 ns after the
+// scan's start; Velodyne's and Hesai's drivers write float seconds).
+double time_scale(Scalar s) noexcept { return s == Scalar::f32 || s == Scalar::f64 ? 1.0 : 1e-9; }
+
+// Stores one value of field `f`; an error text for a ring that is no laser index.
+const char* store(PointCloud& c, std::size_t i, const Field& f, double v) noexcept {
+  switch (f.role) {
     case Role::none: break;
     case Role::x: c.x[i] = static_cast<float>(v); break;
     case Role::y: c.y[i] = static_cast<float>(v); break;
@@ -129,7 +136,7 @@ const char* store(PointCloud& c, std::size_t i, Role r, double v) noexcept {
       if (!(v >= 0.0 && v <= 65535.0) || std::floor(v) != v) return "a ring that is not a whole number from 0 to 65535";
       c.ring[i] = static_cast<std::uint16_t>(v);
       break;
-    case Role::time: c.time[i] = v; break;
+    case Role::time: c.time[i] = v * time_scale(f.type); break;
   }
   return nullptr;
 }
@@ -411,7 +418,7 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
                                   (a.bad() ? "a value that is not a number" : "fewer values than the fields need"));
           }
           if (e == 0) {
-            if (const char* why = store(out, i, f.role, v)) return fail(name, "point " + std::to_string(i + 1) + ": " + why);
+            if (const char* why = store(out, i, f, v)) return fail(name, "point " + std::to_string(i + 1) + ": " + why);
           }
         }
       }
@@ -461,7 +468,7 @@ Status read_pcd(std::span<const std::uint8_t> b, const std::string& name, PointC
     if (f.role != Role::none) {
       for (std::size_t i = 0; i < points; ++i) {
         const std::uint8_t* p = columns ? base + column_start * points + i * fsize : base + i * record + f.offset;
-        if (const char* why = store(out, i, f.role, read_scalar(p, f.type, false))) {
+        if (const char* why = store(out, i, f, read_scalar(p, f.type, false))) {
           return fail(name, "point " + std::to_string(i + 1) + ": " + why);
         }
       }
@@ -587,7 +594,7 @@ Status read_ply(std::span<const std::uint8_t> b, const std::string& name, PointC
               if (!a.next(item)) return where("a list shorter than its count");
             }
           } else if (&e == vertex) {
-            if (const char* why = store(out, i, f.role, v)) return where(why);
+            if (const char* why = store(out, i, f, v)) return where(why);
           }
         }
         if (!a.next_line() && !(&e == &elements.back() && i + 1 == e.count)) {
@@ -620,7 +627,7 @@ Status read_ply(std::span<const std::uint8_t> b, const std::string& name, PointC
                                 std::to_string(e.count));
         }
         if (&e == vertex && f.role != Role::none) {
-          if (const char* why = store(out, i, f.role, read_scalar(body.data() + at, f.type, big))) {
+          if (const char* why = store(out, i, f, read_scalar(body.data() + at, f.type, big))) {
             return fail(name, std::string(e.name) + " " + std::to_string(i + 1) + ": " + why);
           }
         }
@@ -632,6 +639,113 @@ Status read_ply(std::span<const std::uint8_t> b, const std::string& name, PointC
 }
 
 }  // namespace
+
+// --- sensor_msgs/PointCloud2 ---
+
+namespace {
+
+std::optional<Scalar> ros_type(std::uint8_t datatype) noexcept {
+  switch (datatype) {
+    case 1: return Scalar::i8;
+    case 2: return Scalar::u8;
+    case 3: return Scalar::i16;
+    case 4: return Scalar::u16;
+    case 5: return Scalar::i32;
+    case 6: return Scalar::u32;
+    case 7: return Scalar::f32;
+    case 8: return Scalar::f64;
+    default: return std::nullopt;
+  }
+}
+
+// One field's first element of every point into the cloud, its type's
+// load chosen once, not per point.
+template <typename T>
+const char* copy_field(const PointCloud2View& m, const Field& f, PointCloud& out, std::size_t& at) noexcept {
+  const bool swap = m.is_bigendian != (std::endian::native == std::endian::big);
+  std::size_t i = 0;
+  for (std::uint32_t r = 0; r < m.height; ++r) {
+    const std::uint8_t* row = m.data.data() + static_cast<std::size_t>(r) * m.row_step + f.offset;
+    for (std::uint32_t c = 0; c < m.width; ++c, ++i) {
+      std::array<std::uint8_t, sizeof(T)> b;
+      std::memcpy(b.data(), row + static_cast<std::size_t>(c) * m.point_step, sizeof(T));
+      if (swap) std::reverse(b.begin(), b.end());
+      T v;
+      std::memcpy(&v, b.data(), sizeof(T));
+      if (const char* why = store(out, i, f, static_cast<double>(v))) {
+        at = i;
+        return why;
+      }
+    }
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+Status read_pointcloud2(const PointCloud2View& m, const std::string& name, PointCloud& out) {
+  out.size = 0;
+  const std::uint64_t points = static_cast<std::uint64_t>(m.height) * m.width;
+  if (points > kMaxPoints) {
+    return fail(name, std::to_string(m.height) + " x " + std::to_string(m.width) + " points; a cloud holds at most " +
+                          std::to_string(kMaxPoints));
+  }
+  // One field a role (the last of a name given twice); the rest are skipped.
+  std::array<Field, 7> roles{};
+  for (const PointFieldView& v : m.fields) {
+    const Role role = role_of(v.name);
+    if (role == Role::none) continue;
+    const auto what = [&v] { return "field '" + std::string(v.name) + "'"; };  // (built for an error only)
+    const auto type = ros_type(v.datatype);
+    if (!type) {
+      return fail(name, what() + ": datatype " + std::to_string(v.datatype) +
+                            " is not one of PointField's (1 INT8, 2 UINT8, 3 INT16, 4 UINT16, 5 INT32, 6 UINT32, 7 FLOAT32, "
+                            "8 FLOAT64)");
+    }
+    if (v.count == 0) return fail(name, what() + ": count 0 (a field holds at least one value)");
+    const std::uint64_t end = static_cast<std::uint64_t>(v.offset) + scalar_size(*type);
+    if (end > m.point_step) {
+      return fail(name, what() + " at offset " + std::to_string(v.offset) + " (" + std::to_string(scalar_size(*type)) +
+                            " bytes) reaches past the point's " + std::to_string(m.point_step) + " bytes (point_step)");
+    }
+    Field& f = roles[static_cast<std::size_t>(role)];
+    f.role = role;
+    f.type = *type;
+    f.offset = v.offset;
+    f.bytes = scalar_size(*type);
+  }
+  if (const std::string e = missing_xyz(roles); !e.empty()) return fail(name, e);
+  if (static_cast<std::uint64_t>(m.width) * m.point_step > m.row_step) {
+    return fail(name, "row_step " + std::to_string(m.row_step) + " is less than " + std::to_string(m.width) +
+                          " points of " + std::to_string(m.point_step) + " bytes (width x point_step)");
+  }
+  const std::uint64_t need = static_cast<std::uint64_t>(m.height) * m.row_step;
+  if (m.data.size() < need) {
+    return fail(name, "data holds " + std::to_string(m.data.size()) + " bytes; " + std::to_string(m.height) + " rows of " +
+                          std::to_string(m.row_step) + " bytes need " + std::to_string(need));
+  }
+  begin_cloud(out, static_cast<std::size_t>(points), roles);
+  for (const Field& f : roles) {
+    if (f.role == Role::none) continue;
+    std::size_t at = 0;
+    const char* why = nullptr;
+    switch (f.type) {
+      case Scalar::i8: why = copy_field<std::int8_t>(m, f, out, at); break;
+      case Scalar::u8: why = copy_field<std::uint8_t>(m, f, out, at); break;
+      case Scalar::i16: why = copy_field<std::int16_t>(m, f, out, at); break;
+      case Scalar::u16: why = copy_field<std::uint16_t>(m, f, out, at); break;
+      case Scalar::i32: why = copy_field<std::int32_t>(m, f, out, at); break;
+      case Scalar::u32: why = copy_field<std::uint32_t>(m, f, out, at); break;
+      case Scalar::f32: why = copy_field<float>(m, f, out, at); break;
+      case Scalar::f64: why = copy_field<double>(m, f, out, at); break;
+    }
+    if (why != nullptr) {
+      out.size = 0;
+      return fail(name, "point " + std::to_string(at + 1) + ": " + why);
+    }
+  }
+  return Status::ok();
+}
 
 std::string_view cloud_format_name(CloudFormat f) noexcept {
   switch (f) {

@@ -8,8 +8,10 @@
 //
 // Fields are found by name, as lidar drivers write them: x, y, z;
 // intensity / reflectance / reflectivity / remission / i; ring / laser_id /
-// channel / line; time / t / timestamp / offset_time. Any scalar type is
-// taken (int8 .. uint32, float32, float64) and converted. Every error names
+// channel / line; time / t / timestamp / offset_time (seconds in a float
+// field, nanoseconds in an integer one: Ouster's `t`, Livox's
+// `offset_time`). Any scalar type is taken (int8 .. uint32, float32,
+// float64) and converted. Every error names
 // the file, where in it (header line or point), and what is wrong; a
 // file is read whole or not at all. Reading allocates nothing once the
 // cloud and the scratch are large enough (they grow for a larger file; a
@@ -43,6 +45,32 @@ struct CloudScratch {
   std::vector<std::uint8_t> bytes;     // the file
   std::vector<std::uint8_t> inflated;  // a binary_compressed PCD's data
 };
+
+// A sensor_msgs/PointCloud2 (ROS 2's point cloud message) as plain values,
+// whatever carried it (trailnavd takes it from DDS): each field's name,
+// byte offset in a point, datatype as ROS numbers them (1 INT8, 2 UINT8,
+// 3 INT16, 4 UINT16, 5 INT32, 6 UINT32, 7 FLOAT32, 8 FLOAT64) and count.
+struct PointFieldView {
+  std::string_view name;
+  std::uint32_t offset = 0;
+  std::uint8_t datatype = 0;
+  std::uint32_t count = 1;
+};
+struct PointCloud2View {
+  std::uint32_t height = 1;  // rows (1: an unorganised cloud)
+  std::uint32_t width = 0;   // points a row
+  std::span<const PointFieldView> fields;
+  bool is_bigendian = false;
+  std::uint32_t point_step = 0;  // bytes a point
+  std::uint32_t row_step = 0;    // bytes a row
+  std::span<const std::uint8_t> data;
+};
+// Reads a PointCloud2's points, row after row, by the same field names as
+// the files (a name given twice: the last). Every error says which field
+// or which size is wrong (`name` for the message, e.g. its topic); the
+// cloud is read whole or not at all; nothing is allocated once the cloud
+// holds height x width points.
+Status read_pointcloud2(const PointCloud2View& message, const std::string& name, PointCloud& out);
 
 // Parses a file's bytes (`name` for errors).
 Status read_cloud(std::span<const std::uint8_t> bytes, CloudFormat format, const std::string& name, PointCloud& out,
