@@ -340,7 +340,7 @@ int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
 }
 
 void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st,
-                       std::span<PointPlace> places) noexcept {
+                       std::span<PointPlace> places, std::int64_t start_ns) noexcept {
   st = CloudImageStats{};
   const std::uint64_t sequence = image.sequence;
   // The image this imager filled last, untouched since (its sequence as
@@ -359,8 +359,8 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   held_.swap(held_before_);
   image.mark_received(0, columns_);
   image.sequence = sequence + 1;
-  image.start_ns = 0;
-  image.end_ns = static_cast<std::int64_t>(options_.period_s * 1e9);
+  image.start_ns = start_ns;
+  image.end_ns = start_ns + static_cast<std::int64_t>(options_.period_s * 1e9);
   image.rpm = 60.0 / options_.period_s;
   const auto cols = static_cast<float>(columns_);
   const float to_column = cols / static_cast<float>(kTwoPi);

@@ -122,9 +122,10 @@ class CloudImager {
     fill(cloud, image, stats, {});
   }
   // The same, and where each point went: `places` empty, or at least
-  // cloud.size long (places[i] for the cloud's point i).
+  // cloud.size long (places[i] for the cloud's point i); the revolution
+  // starting at `start_ns` (its columns' times from there; a file's: 0).
   void fill(const PointCloud& cloud, velodyne::RangeImage& image, CloudImageStats& stats,
-            std::span<PointPlace> places) noexcept;
+            std::span<PointPlace> places, std::int64_t start_ns = 0) noexcept;
   // The row (0 = the lowest ring) of a point by its elevation alone.
   int row_of_elevation(float z, float horizontal) const noexcept;
 
