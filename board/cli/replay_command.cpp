@@ -1,13 +1,20 @@
 // `trailnav replay`: re-send a bench recording (or a bare capture) with its
 // original timing, to loopback.
+#include <algorithm>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "cloud_sender.hpp"
 #include "commands.hpp"
+#include "dds.hpp"
 #include "replayer.hpp"
 #include "terminal.hpp"
+#include "trailnav/drivers/cloud/cloud_file.hpp"
 
 namespace trailnav::cli {
 namespace {
@@ -30,6 +37,12 @@ struct ReplayCliOptions {
   bool quiet = false;
   std::vector<std::string> faults;
   std::uint64_t fault_seed = 1;
+  // --clouds: point-cloud files as sensor_msgs/PointCloud2 over DDS.
+  bool clouds = false;
+  std::string topic = "points";
+  std::uint32_t domain = 0;
+  std::string cyclone_config;
+  std::string frame = "lidar";
 };
 
 std::atomic<bool> g_stop{false};
@@ -46,7 +59,93 @@ bool split_assignment(const std::string& text, std::string& name, std::string& v
 
 double us(Nanos ns) { return static_cast<double>(ns) / 1000.0; }
 
+// Point-cloud files (a file, or every .bin, .pcd and .ply of a directory in
+// name order) sent as sensor_msgs/PointCloud2, one every 0.1 s / rate.
+int run_cloud_replay(const ReplayCliOptions& o) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> files;
+  std::error_code ec;
+  if (fs::is_directory(o.input, ec)) {
+    for (const auto& e : fs::directory_iterator(o.input, ec)) {
+      if (e.is_regular_file() && cloud::cloud_format_of(e.path().string())) files.push_back(e.path().string());
+    }
+    std::sort(files.begin(), files.end());
+  } else if (cloud::cloud_format_of(o.input)) {
+    files.push_back(o.input);
+  }
+  if (files.empty()) {
+    std::fprintf(stderr, "trailnav replay: %s: no point-cloud file (.bin KITTI, .pcd, .ply) to send\n", o.input.c_str());
+    return 2;
+  }
+  std::string xml = dds::loopback_config();
+  if (!o.cyclone_config.empty()) {
+    const dds::ConfigText c = dds::read_cyclone_config(o.cyclone_config);
+    if (!c.error.empty()) {
+      std::fprintf(stderr, "trailnav replay: %s\n", c.error.c_str());
+      return 2;
+    }
+    xml = c.xml;
+  }
+  auto domain = dds::Domain::create(o.domain, xml);
+  if (!domain.domain) {
+    std::fprintf(stderr, "trailnav replay: %s\n", domain.error.c_str());
+    return 2;
+  }
+  auto sender = dds::CloudSender::create(*domain.domain, o.topic, o.frame);
+  if (!sender.sender) {
+    std::fprintf(stderr, "trailnav replay: %s\n", sender.error.c_str());
+    return 2;
+  }
+  std::fprintf(stderr, "trailnav replay: %zu point-cloud file%s to %s on DDS domain %u at %s%s\n", files.size(),
+               files.size() == 1 ? "" : "s", sender.sender->topic().c_str(), o.domain,
+               o.max_rate ? "maximum rate" : (std::to_string(10.0 * o.rate) + " Hz").c_str(),
+               o.forever ? ", looping until stopped" : "");
+  if (!sender.sender->wait_for_reader(5.0)) {
+    std::fprintf(stderr, "trailnav replay: no reader of %s after 5 s; sending anyway\n", sender.sender->topic().c_str());
+  }
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  cloud::PointCloud c;
+  cloud::CloudScratch scratch;
+  const auto period = std::chrono::duration<double>(0.1 / o.rate);
+  const int loops = o.forever ? 0 : o.loops;
+  const double total = static_cast<double>(files.size()) * (loops == 0 ? 1 : loops);
+  ProgressBar progress("clouds", total, "");
+  std::uint64_t sent = 0, refused = 0, points = 0;
+  auto next = std::chrono::steady_clock::now();
+  for (int loop = 0; (loops == 0 || loop < loops) && !g_stop.load(); ++loop) {
+    for (const std::string& f : files) {
+      if (g_stop.load()) break;
+      if (Status st = cloud::load_cloud(f, c, scratch); !st) {
+        std::fprintf(stderr, "trailnav replay: %s\n", st.message().c_str());
+        ++refused;
+        continue;
+      }
+      if (!o.max_rate) std::this_thread::sleep_until(next);
+      next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+      const auto stamp = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                             std::chrono::system_clock::now().time_since_epoch()).count();
+      if (Status st = sender.sender->send(c, stamp); !st) {
+        std::fprintf(stderr, "trailnav replay: %s\n", st.message().c_str());
+        ++refused;
+        continue;
+      }
+      ++sent;
+      points += c.size;
+      if (!o.quiet) progress.update(static_cast<double>(sent + refused));
+    }
+  }
+  if (!o.quiet) progress.finish();
+  // Let the reliable writer deliver the last cloud before the domain goes.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  std::fprintf(stderr, "trailnav replay: %llu clouds sent (%llu points), %llu files not sent%s\n",
+               static_cast<unsigned long long>(sent), static_cast<unsigned long long>(points),
+               static_cast<unsigned long long>(refused), g_stop.load() ? ", stopped" : "");
+  return refused > 0 ? 1 : 0;
+}
+
 int run_replay(const ReplayCliOptions& o) {
+  if (o.clouds) return run_cloud_replay(o);
   replay::ReplayOptions options;
   options.rate = o.rate;
   options.max_rate = o.max_rate;
@@ -211,6 +310,15 @@ void add_replay_command(CLI::App& app) {
   cmd->add_option("--fault-seed", o.fault_seed, "Seed of the random faults: the same seed, the same faults")
       ->capture_default_str();
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
+  cmd->add_flag("--clouds", o.clouds,
+                "The input is a point-cloud file or a directory of them (.bin KITTI, .pcd, .ply, in name order):\n"
+                "send each as a sensor_msgs/PointCloud2 over DDS, 10 per second times --rate, to a trailnavd\n"
+                "whose lidar section says `input: pointcloud2` (docs/pointcloud.md)");
+  cmd->add_option("--topic", o.topic, "With --clouds: the topic (DDS rt/<topic>)")->capture_default_str();
+  cmd->add_option("--domain", o.domain, "With --clouds: the DDS domain")->capture_default_str();
+  cmd->add_option("--cyclone-config", o.cyclone_config,
+                  "With --clouds: a Cyclone DDS XML file (default: loopback only, no multicast)");
+  cmd->add_option("--frame", o.frame, "With --clouds: the clouds' header.frame_id")->capture_default_str();
   cmd->callback([] {
     const int code = run_replay(o);
     if (code != 0) throw CLI::RuntimeError(code);

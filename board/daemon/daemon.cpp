@@ -72,7 +72,17 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   };
   d->scheduler_ = std::make_unique<Scheduler>(d->clock_, config.runtime.scheduler);
 
-  if (config.lidar) {
+  if (config.lidar && config.lidar->cloud) {
+    // Point clouds over DDS: the domain first, then its reader.
+    auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
+    if (!domain.domain) {
+      return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
+    }
+    d->domain_ = std::move(domain.domain);
+    auto reader = dds::CloudReader::create(*d->domain_, *config.lidar->cloud);
+    if (!reader.reader) return fail("lidar: " + reader.error);
+    d->cloud_reader_ = std::move(reader.reader);
+  } else if (config.lidar) {
     const LidarSection& l = *config.lidar;
     std::optional<velodyne::Calibration> calibration;
     if (l.calibration.empty()) {
@@ -145,7 +155,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     }
   }
   if (config.obstacles) {
-    const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
+    const velodyne::RangeImageShape shape = d->lidar_shape();
     auto made = perception::ObstaclePipeline::create(*config.obstacles, shape);
     if (!made.pipeline) return fail("obstacles: " + made.error);
     d->pipeline_ = std::move(made.pipeline);
@@ -171,7 +181,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     d->forest_ = std::move(model.forest);
     const perception::MountParams mount = config.obstacles ? config.obstacles->mount : perception::MountParams{};
     const perception::FeatureParams alignment = config.obstacles ? config.obstacles->features : perception::FeatureParams{};
-    const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
+    const velodyne::RangeImageShape shape = d->lidar_shape();
     auto made = perception::TerrainMapper::create(*config.terrain, mount, shape, &*d->forest_, alignment);
     if (!made.mapper) return fail("terrain: " + made.error);
     d->terrain_mapper_ = std::move(made.mapper);
@@ -186,7 +196,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
         d->pose_->add_pose_output(d->terrain_pose_queue_.get());
       }
       d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_,
-                                                             d->lidar_->revolutions(config.obstacles ? 1 : 0),
+                                                             d->lidar_revolutions(config.obstacles ? 1 : 0),
                                                              d->terrain_pose_queue_.get(), *d->terrain_out_, 512,
                                                              config.pose_wait);
     }
@@ -230,11 +240,12 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   }
   if (config.obstacles) {
     d->obstacles_ = std::make_unique<perception::ObstacleTask>(
-        *d->pipeline_, d->lidar_->revolutions(0), d->pose_queue_.get(),
+        *d->pipeline_, d->lidar_revolutions(0), d->pose_queue_.get(),
         d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_, 512, config.pose_wait);
     d->obstacles_->set_aligned(d->aligned_.get());
     d->obstacles_->set_streaming(config.obstacles->streaming);
-    d->lidar_->set_revolution_event(&d->revolution_event_);
+    if (d->lidar_) d->lidar_->set_revolution_event(&d->revolution_event_);
+    if (d->cloud_reader_) d->cloud_reader_->set_revolution_event(&d->revolution_event_);
   }
 
   if (d->navigator_) {
@@ -243,11 +254,13 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                            *d->navigation_out_);
   }
 
-  auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
-  if (!domain.domain) {
-    return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
+  if (!d->domain_) {
+    auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
+    if (!domain.domain) {
+      return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
+    }
+    d->domain_ = std::move(domain.domain);
   }
-  d->domain_ = std::move(domain.domain);
   dds::PublisherInputs inputs;
   inputs.obstacles = d->obstacle_out_.get();
   inputs.poses = d->pose_ ? &d->pose_->poses() : nullptr;
@@ -261,7 +274,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   inputs.mapping = d->mapping_out_.get();
   if (d->obstacles_ && config.dds.publisher.points_rate_hz > 0.0) {
     // Viewers' points: every point a revolution can have, allocated now.
-    const velodyne::RangeImageShape shape = d->lidar_->revolution_shape();
+    const velodyne::RangeImageShape shape = d->lidar_shape();
     const auto capacity = static_cast<std::size_t>(shape.rings) * static_cast<std::size_t>(shape.max_columns);
     d->points_out_ = std::make_unique<Mailbox<perception::PointsSnapshot>>(capacity);
     d->obstacles_->set_points(d->points_out_.get(), static_cast<std::int64_t>(1e9 / config.dds.publisher.points_rate_hz));
@@ -341,6 +354,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
 Status Daemon::start() {
   publisher_->start();
   if (command_reader_) command_reader_->start();
+  if (cloud_reader_) cloud_reader_->start();
   if (Status st = scheduler_->start(); !st) {
     publisher_->stop();
     return st;
@@ -355,6 +369,7 @@ Status Daemon::start() {
 void Daemon::stop() {
   if (gpio_) gpio_->set_ready(false);
   if (command_reader_) command_reader_->stop();
+  if (cloud_reader_) cloud_reader_->stop();
   const bool was_running = scheduler_ && scheduler_->running();
   if (was_running) scheduler_->stop();
   if (was_running && trav_trainer_) {
@@ -510,6 +525,33 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("clock_max_spread_ms", static_cast<double>(c.reference.max_spread_ns) * 1e-6, 3);
     m.value("clock_settled", c.reference.settled ? std::string_view("true") : std::string_view("false"));
     m.value("clock_steps", c.reference.steps);
+  }
+  if (cloud_reader_) {
+    const dds::CloudReaderStats c = cloud_reader_->stats();
+    const double silent = c.last_receive_ns > 0 ? static_cast<double>(utc - c.last_receive_ns) * 1e-9 : -1.0;
+    const bool stale = silent < 0.0 || silent > stale_after;
+    char msg[160];
+    if (silent < 0.0) {
+      std::snprintf(msg, sizeof msg, "no point cloud yet on %s", dds::ros_topic(cloud_reader_->options().topic).c_str());
+    } else if (stale) {
+      std::snprintf(msg, sizeof msg, "silent for %.1f s: obstacle map stale", silent);
+    } else if (c.refused > 0 && c.published == 0) {
+      std::snprintf(msg, sizeof msg, "every point cloud refused");
+    } else {
+      std::snprintf(msg, sizeof msg, "receiving point clouds");
+    }
+    const bool bad = stale || (c.refused > 0 && c.published == 0);
+    m.begin(bad ? L::error : L::ok, "trailnavd: lidar", msg, cloud_reader_->options().layout.name);
+    m.value("stale", stale ? std::string_view("true") : std::string_view("false"));
+    m.value("input", std::string_view("pointcloud2"));
+    m.value("clouds", c.messages);
+    m.value("revolutions", c.published);
+    m.value("refused", c.refused);
+    m.value("last_error", c.last_error);
+    m.value("points", c.points);
+    m.value("second_points", c.image.second);
+    m.value("points_not_placed", c.image.collisions + c.image.bad_ring);
+    m.value("points_without_return", c.image.invalid);
   }
   if (gps_) {
     const gps::GpsDriverStatus s = gps_->status();

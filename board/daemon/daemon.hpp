@@ -25,6 +25,7 @@
 #include <optional>
 #include <string>
 
+#include "cloud_reader.hpp"
 #include "commands.hpp"
 #include "dds.hpp"
 #include "publisher.hpp"
@@ -91,6 +92,13 @@ class Daemon {
   MonotonicClock clock_;
   std::unique_ptr<Scheduler> scheduler_;
   std::unique_ptr<velodyne::VelodyneDriver> lidar_;
+  std::unique_ptr<dds::CloudReader> cloud_reader_;  // lidar.input: pointcloud2 (else lidar_)
+  velodyne::RangeImageShape lidar_shape() const noexcept {
+    return lidar_ ? lidar_->revolution_shape() : cloud_reader_->revolution_shape();
+  }
+  Broadcast<velodyne::RangeImage>::Reader& lidar_revolutions(std::size_t reader) noexcept {
+    return lidar_ ? lidar_->revolutions(reader) : cloud_reader_->revolutions(reader);
+  }
   TaskEvent revolution_event_;
   std::unique_ptr<gps::GpsDriver> gps_;
   std::unique_ptr<imu::ImuDriver> imu_;

@@ -55,7 +55,58 @@ std::array<double, 3> vec3(const ConfigNode& node, std::string_view key, std::ar
   return {v[0], v[1], v[2]};
 }
 
+// `input: pointcloud2`: the topic, the sensor's ring layout and how rows are found.
+LidarSection parse_cloud_input(const ConfigNode& n) {
+  LidarSection s;
+  dds::CloudReaderOptions o;
+  o.topic = n.string("topic", "points");
+  if (o.topic.empty()) n.fail("topic", "an empty topic name");
+  std::string presets;
+  for (const std::string& p : cloud::ring_layout_presets()) presets += (presets.empty() ? "" : ", ") + p;
+  const std::string layout = n.string("layout");
+  const std::string ext = fs::path(layout).extension().string();
+  if (ext == ".yaml" || ext == ".yml") {
+    const std::string path = resolve(n, layout);
+    if (!fs::exists(path)) n.fail("layout", "no such file: " + path);
+    o.layout = cloud::load_ring_layout(path);
+  } else {
+    auto l = cloud::ring_layout_preset(layout);
+    if (!l) n.fail("layout", "unknown lidar '" + layout + "': a preset (" + presets + ") or a layout file (.yaml)");
+    o.layout = *l;
+  }
+  if (n.has("columns")) o.layout.columns = static_cast<int>(n.integer("columns", 16, 65535));
+  const std::string rings = n.string("rings", "automatic");
+  if (rings == "automatic") o.image.rings = cloud::RingSource::automatic;
+  else if (rings == "field") o.image.rings = cloud::RingSource::field;
+  else if (rings == "elevation") o.image.rings = cloud::RingSource::elevation;
+  else if (rings == "order") o.image.rings = cloud::RingSource::order;
+  else n.fail("rings", "'" + rings + "' is not one of automatic, field, elevation, order");
+  o.image.intensity_scale = static_cast<float>(n.number("intensity_scale", 0.001, 1000.0, 1.0));
+  o.image.period_s = n.number("period_s", 0.02, 1.0, 0.1);
+  o.layers = static_cast<int>(n.integer("layers", 1, 2, 2));
+  const std::size_t full = o.layout.elevation_deg.size() * static_cast<std::size_t>(o.layout.columns) *
+                           static_cast<std::size_t>(o.layers);
+  o.max_points = static_cast<std::size_t>(n.integer("max_points", 1, static_cast<std::int64_t>(cloud::kMaxPoints),
+                                                    static_cast<std::int64_t>(full)));
+  const std::size_t rings_count = o.layout.elevation_deg.size();
+  if (n.has("model")) {
+    const std::string model = n.string("model");
+    const auto m = velodyne::parse_model(model);
+    if (!m) n.fail("model", "unknown lidar model '" + model + "' (VLP-16, VLP-32C, HDL-32E, HDL-64E)");
+    s.model = *m;
+  } else {
+    s.model = rings_count <= 16 ? velodyne::Model::vlp16 : rings_count <= 32 ? velodyne::Model::vlp32c : velodyne::Model::hdl64e;
+  }
+  s.driver.name = "lidar";
+  s.cloud = std::move(o);
+  n.reject_unknown_keys();
+  return s;
+}
+
 LidarSection parse_lidar(const ConfigNode& n) {
+  const std::string input = n.string("input", "velodyne");
+  if (input == "pointcloud2") return parse_cloud_input(n);
+  if (input != "velodyne") n.fail("input", "'" + input + "' is not one of velodyne (UDP packets), pointcloud2 (DDS)");
   LidarSection s;
   const std::string model = n.string("model");
   const auto m = velodyne::parse_model(model);
@@ -355,6 +406,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     // it spreads (docs/performance.md), and what counts for the latency is
     // how little is left at the end.
     c.lidar->driver.progress_signals = c.obstacles && c.obstacles->streaming ? 4 : 0;
+    if (c.lidar->cloud) c.lidar->cloud->readers = static_cast<std::size_t>(c.lidar->driver.revolution_readers);
   }
   if (c.pose && !c.imu && !c.can) root.fail("pose", "the pose needs wheel odometry ('can') or an IMU ('imu')");
   c.dds = parse_dds(root.map("dds"));
@@ -366,7 +418,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     bool configured;
     TaskKind kind;
   };
-  const Part parts[] = {{"lidar", c.lidar.has_value(), TaskKind::periodic},
+  // (A point-cloud input reads DDS on a plain thread: no task of its own.)
+  const Part parts[] = {{"lidar", c.lidar.has_value() && !c.lidar->cloud, TaskKind::periodic},
                         {"gps", c.gps.has_value(), TaskKind::periodic},
                         {"imu", c.imu.has_value(), TaskKind::periodic},
                         {"can", c.can.has_value(), TaskKind::periodic},

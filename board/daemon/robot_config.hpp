@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "cloud_reader.hpp"
 #include "commands.hpp"
 #include "publisher.hpp"
 #include "trailnav/drivers/can/can_driver.hpp"
@@ -33,6 +34,12 @@ struct LidarSection {
   velodyne::Model model = velodyne::Model::vlp16;
   std::string calibration;  // a file, or empty: the model's built-in one
   velodyne::DriverOptions driver;
+  // `input: pointcloud2`: the points come as sensor_msgs/PointCloud2 over
+  // DDS (any lidar's ROS 2 driver, or `trailnav replay --clouds`) instead of
+  // Velodyne packets; `model` is then the Velodyne model whose task preset
+  // and budget checks stand for it (given, or the first with at least as
+  // many rings).
+  std::optional<dds::CloudReaderOptions> cloud;
 };
 
 struct CanSection {
