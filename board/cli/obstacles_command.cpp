@@ -298,11 +298,8 @@ int run(ObstaclesCliOptions& o) {
     };
   }
   if (!o.rings.empty()) {
-    if (o.rings == "automatic") o.run.cloud.rings = cloud::RingSource::automatic;
-    else if (o.rings == "field") o.run.cloud.rings = cloud::RingSource::field;
-    else if (o.rings == "elevation") o.run.cloud.rings = cloud::RingSource::elevation;
-    else if (o.rings == "order") o.run.cloud.rings = cloud::RingSource::order;
-    else {
+    o.run.cloud.rings = cloud::ring_source_named(o.rings);
+    if (!o.run.cloud.rings) {
       std::fprintf(stderr, "trailnav obstacles: --rings %s: allowed are automatic, field, elevation and order\n",
                    o.rings.c_str());
       return 2;

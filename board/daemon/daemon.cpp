@@ -496,15 +496,28 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("host_clock_steps", steps);
     m.value("host_clock_step_s", step_s, 3);
   }
+  // The lidar's silence: seconds since `last_ns` (-1: nothing yet), stale
+  // past dds.stale_after_s, and the message for either.
+  struct Silence {
+    double seconds;
+    bool stale;
+  };
+  const auto silence = [&](std::int64_t last_ns) {
+    const double silent = last_ns > 0 ? static_cast<double>(utc - last_ns) * 1e-9 : -1.0;
+    return Silence{silent, silent < 0.0 || silent > stale_after};
+  };
+  const auto stale_text = [](const Silence& q, char* msg, std::size_t size) {
+    std::snprintf(msg, size, "silent for %.1f s: obstacle map stale", q.seconds);
+  };
   if (lidar_) {
     const velodyne::DriverCounters c = lidar_->counters();
-    const double silent = c.last_packet_ns > 0 ? static_cast<double>(utc - c.last_packet_ns) * 1e-9 : -1.0;
-    const bool stale = silent < 0.0 || silent > stale_after;
+    const Silence q = silence(c.last_packet_ns);
+    const bool stale = q.stale;
     char msg[96];
-    if (silent < 0.0) {
+    if (q.seconds < 0.0) {
       std::snprintf(msg, sizeof msg, "no data packet yet");
     } else if (stale) {
-      std::snprintf(msg, sizeof msg, "silent for %.1f s: obstacle map stale", silent);
+      stale_text(q, msg, sizeof msg);
     } else {
       std::snprintf(msg, sizeof msg, "receiving");
     }
@@ -528,13 +541,13 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
   }
   if (cloud_reader_) {
     const dds::CloudReaderStats c = cloud_reader_->stats();
-    const double silent = c.last_receive_ns > 0 ? static_cast<double>(utc - c.last_receive_ns) * 1e-9 : -1.0;
-    const bool stale = silent < 0.0 || silent > stale_after;
+    const Silence q = silence(c.last_receive_ns);
+    const bool stale = q.stale;
     char msg[160];
-    if (silent < 0.0) {
+    if (q.seconds < 0.0) {
       std::snprintf(msg, sizeof msg, "no point cloud yet on %s", dds::ros_topic(cloud_reader_->options().topic).c_str());
     } else if (stale) {
-      std::snprintf(msg, sizeof msg, "silent for %.1f s: obstacle map stale", silent);
+      stale_text(q, msg, sizeof msg);
     } else if (c.refused > 0 && c.published == 0) {
       std::snprintf(msg, sizeof msg, "every point cloud refused");
     } else {

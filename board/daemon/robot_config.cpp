@@ -61,26 +61,18 @@ LidarSection parse_cloud_input(const ConfigNode& n) {
   dds::CloudReaderOptions o;
   o.topic = n.string("topic", "points");
   if (o.topic.empty()) n.fail("topic", "an empty topic name");
-  std::string presets;
-  for (const std::string& p : cloud::ring_layout_presets()) presets += (presets.empty() ? "" : ", ") + p;
   const std::string layout = n.string("layout");
   const std::string ext = fs::path(layout).extension().string();
-  if (ext == ".yaml" || ext == ".yml") {
-    const std::string path = resolve(n, layout);
-    if (!fs::exists(path)) n.fail("layout", "no such file: " + path);
-    o.layout = cloud::load_ring_layout(path);
-  } else {
-    auto l = cloud::ring_layout_preset(layout);
-    if (!l) n.fail("layout", "unknown lidar '" + layout + "': a preset (" + presets + ") or a layout file (.yaml)");
-    o.layout = *l;
-  }
+  const std::string named = ext == ".yaml" || ext == ".yml" ? resolve(n, layout) : layout;
+  std::string error;
+  auto l = cloud::ring_layout_named(named, error);
+  if (!l) n.fail("layout", error);
+  o.layout = std::move(*l);
   if (n.has("columns")) o.layout.columns = static_cast<int>(n.integer("columns", 16, 65535));
   const std::string rings = n.string("rings", "automatic");
-  if (rings == "automatic") o.image.rings = cloud::RingSource::automatic;
-  else if (rings == "field") o.image.rings = cloud::RingSource::field;
-  else if (rings == "elevation") o.image.rings = cloud::RingSource::elevation;
-  else if (rings == "order") o.image.rings = cloud::RingSource::order;
-  else n.fail("rings", "'" + rings + "' is not one of automatic, field, elevation, order");
+  const auto source = cloud::ring_source_named(rings);
+  if (!source) n.fail("rings", "'" + rings + "' is not one of automatic, field, elevation, order");
+  o.image.rings = *source;
   o.image.intensity_scale = static_cast<float>(n.number("intensity_scale", 0.001, 1000.0, 1.0));
   o.image.period_s = n.number("period_s", 0.02, 1.0, 0.1);
   o.layers = static_cast<int>(n.integer("layers", 1, 2, 2));

@@ -11,41 +11,23 @@ namespace trailnav::dds {
 
 CloudSender::Created CloudSender::create(const Domain& domain, const std::string& topic, const std::string& frame_id) {
   Created result;
+  auto w = Writer::create(domain, sensor_msgs_msg_dds__PointCloud2__desc, topic, EndpointQos{true, 2, Durability::volatile_});
+  if (!w.writer) {
+    result.error = w.error;
+    return result;
+  }
   std::unique_ptr<CloudSender> s(new CloudSender());
-  s->topic_ = ros_topic(topic);
   s->frame_ = frame_id;
-  s->topic_entity_ =
-      dds_create_topic(domain.participant(), &sensor_msgs_msg_dds__PointCloud2__desc, s->topic_.c_str(), nullptr, nullptr);
-  if (s->topic_entity_ < 0) {
-    result.error = "topic " + s->topic_ + ": " + dds_strretcode(s->topic_entity_);
-    s->topic_entity_ = 0;
-    return result;
-  }
-  dds_qos_t* q = dds_create_qos();
-  dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
-  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 2);
-  s->writer_ = dds_create_writer(domain.participant(), s->topic_entity_, q, nullptr);
-  dds_delete_qos(q);
-  if (s->writer_ < 0) {
-    result.error = "writer on " + s->topic_ + ": " + dds_strretcode(s->writer_);
-    s->writer_ = 0;
-    return result;
-  }
+  s->writer_ = std::move(w.writer);
   result.sender = std::move(s);
   return result;
-}
-
-CloudSender::~CloudSender() {
-  for (dds_entity_t e : {writer_, topic_entity_}) {
-    if (e > 0) dds_delete(e);
-  }
 }
 
 bool CloudSender::wait_for_reader(double timeout_s) const {
   const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   for (;;) {
     dds_publication_matched_status_t m{};
-    dds_get_publication_matched_status(writer_, &m);
+    dds_get_publication_matched_status(writer_->handle(), &m);
     if (m.current_count > 0) return true;
     if (std::chrono::steady_clock::now() >= until) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -70,7 +52,7 @@ Status CloudSender::send(const cloud::PointCloud& c, std::int64_t stamp_ns) {
     step += size;
   }
   step = (step + 7) / 8 * 8;
-  if (c.size > std::numeric_limits<std::uint32_t>::max() / step) return Status::error(topic_ + ": too many points");
+  if (c.size > std::numeric_limits<std::uint32_t>::max() / step) return Status::error(topic() + ": too many points");
   data_.assign(c.size * step, 0);
   double t0 = 0.0;
   if (c.has_time) {
@@ -105,8 +87,8 @@ Status CloudSender::send(const cloud::PointCloud& c, std::int64_t stamp_ns) {
   m.data._buffer = data_.data();
   m.data._length = m.data._maximum = static_cast<std::uint32_t>(data_.size());
   m.is_dense = false;
-  const dds_return_t r = dds_write(writer_, &m);
-  if (r != DDS_RETCODE_OK) return Status::error(topic_ + ": " + dds_strretcode(r));
+  // (The stamp is the header's; the source timestamp is the time of writing.)
+  if (!writer_->write(&m)) return Status::error(topic() + ": the write failed");
   return Status::ok();
 }
 

@@ -23,7 +23,6 @@ class CloudSender {
  public:
   struct Created;
   static Created create(const Domain& domain, const std::string& topic, const std::string& frame_id);
-  ~CloudSender();
   CloudSender(const CloudSender&) = delete;
   CloudSender& operator=(const CloudSender&) = delete;
 
@@ -31,12 +30,12 @@ class CloudSender {
   bool wait_for_reader(double timeout_s) const;
   // One cloud, stamped `stamp_ns` (CLOCK_REALTIME).
   Status send(const cloud::PointCloud& cloud, std::int64_t stamp_ns);
-  const std::string& topic() const noexcept { return topic_; }
+  const std::string& topic() const noexcept { return writer_->topic(); }
 
  private:
   CloudSender() = default;
-  std::string topic_, frame_;
-  dds_entity_t topic_entity_ = 0, writer_ = 0;
+  std::string frame_;
+  std::unique_ptr<Writer> writer_;
   std::vector<std::string> names_;
   std::vector<sensor_msgs_msg_dds__PointField_> fields_;
   std::vector<std::uint8_t> data_;

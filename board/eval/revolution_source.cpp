@@ -130,15 +130,10 @@ RevolutionSource::Opened RevolutionSource::open(const std::vector<std::string>& 
     }
     std::optional<cloud::RingLayout> layout;
     const std::string ext = fs::path(lidar).extension().string();
-    if (ext == ".yaml" || ext == ".yml") {
-      try {
-        layout = cloud::load_ring_layout(lidar);
-      } catch (const ConfigError& e) {
-        return {std::nullopt, e.what()};
-      }
-    } else if (!lidar.empty()) {
-      layout = cloud::ring_layout_preset(lidar);
-      if (!layout) return {std::nullopt, "unknown lidar '" + lidar + "': give a preset (" + presets + ") or a layout file (.yaml)"};
+    if (!lidar.empty()) {
+      std::string error;
+      layout = cloud::ring_layout_named(lidar, error);
+      if (!layout) return {std::nullopt, error};
     }
     if (!calibration.empty() && calibration != "builtin") {
       auto c = vel::load_calibration(calibration);

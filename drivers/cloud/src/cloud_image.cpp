@@ -10,6 +10,7 @@
 
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/runtime/config.hpp"
+#include "trailnav/runtime/simd_lanes.hpp"
 
 #if defined(__SSE2__) && defined(__x86_64__)
 #include <immintrin.h>
@@ -22,27 +23,6 @@ namespace {
 constexpr int kSlopeBins = 16384;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
-// atan2 in [0, 2 pi) to about 1e-5 rad: a polynomial for atan on [0, 1]
-// and the octant's symmetry (the column bins are 3e-3 rad wide at 2,048).
-inline float azimuth(float y, float x) noexcept {
-  const float ax = std::fabs(x), ay = std::fabs(y);
-  const float mx = std::max(ax, ay), mn = std::min(ax, ay);
-  // (No branch: mn is 0 where mx is.)
-  const float a = mn / std::max(mx, std::numeric_limits<float>::min());
-  const float s = a * a;
-  // Minimax coefficients for atan(a), a in [0, 1].
-  float r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
-  r *= a;
-  // Each case computed, then chosen: selects, not branches.
-  const float r1 = 1.57079637f - r;
-  r = ay > ax ? r1 : r;
-  const float r2 = 3.14159274f - r;
-  r = x < 0.0f ? r2 : r;
-  const float r3 = 6.28318548f - r;
-  r = y < 0.0f ? r3 : r;
-  return r >= 6.28318548f ? 0.0f : r;
-}
-
 // Per point: the distance, sin(elevation) (0 at the origin), the azimuth
 // and its column (at most `last`).
 struct PolarOut {
@@ -51,39 +31,16 @@ struct PolarOut {
   float* azimuth;
   std::int32_t* column;
 };
-inline void polar_point(float x, float y, float z, float to_column, int last, const PolarOut& out, std::size_t i) noexcept {
-  const float d = std::sqrt(x * x + y * y + z * z);
-  out.distance[i] = d;
-  out.sine[i] = z / std::max(d, std::numeric_limits<float>::min());
-  const float az = azimuth(y, x);
-  out.azimuth[i] = az;
-  const float f = az * to_column;  // (NaN for a NaN point: column 0, and pass 3 skips it)
-  const int col = f > 0.0f ? static_cast<int>(f) : 0;
-  out.column[i] = col < last ? col : last;
-}
 
-#if defined(__SSE2__) && defined(__x86_64__)
-// The same W points at a time (four with SSE2, eight with AVX2 where the CPU
-// has it): the same operations in the same order (std::max(a, b) is
-// a < b ? b : a, std::min(a, b) b < a ? b : a, no fused multiply-add), so
-// the same bits as polar_point; a square root and two divisions a point
-// were most of the scalar loop's time. The square root is the caller's (an
-// intrinsic of its width, which inlines only into a function compiled for
-// it; this template is inlined into both).
+// W points at a time (eight with AVX2 where the CPU has it, four with SSE2,
+// one for the rest): the same operations in the same order whatever W, so
+// the same bits. atan2 in [0, 2 pi) to about 1e-5 rad (the column bins are
+// 3e-3 rad wide at 2,048): a polynomial for atan on [0, 1] and the octant's
+// symmetry, each case computed, then chosen (selects, not branches). The
+// square root is the caller's (an intrinsic of its width, which inlines only
+// into a function compiled for it; this template is inlined into each).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // eight-wide vectors live only inside the AVX2 function
-template <int W>
-struct Lanes;
-template <>
-struct Lanes<4> {
-  using F = float __attribute__((vector_size(16)));
-  using I = std::int32_t __attribute__((vector_size(16)));
-};
-template <>
-struct Lanes<8> {
-  using F = float __attribute__((vector_size(32)));
-  using I = std::int32_t __attribute__((vector_size(32)));
-};
 
 template <int W>
 [[gnu::always_inline]] inline void polar_lanes(typename Lanes<W>::F x, typename Lanes<W>::F y, typename Lanes<W>::F z,
@@ -98,8 +55,9 @@ template <int W>
   const F ay = reinterpret_cast<F>(reinterpret_cast<I>(y) & magnitude);
   const F mx = ax < ay ? ay : ax;
   const F mn = ay < ax ? ay : ax;
-  const F a = mn / (mx < tiny ? tiny : mx);
+  const F a = mn / (mx < tiny ? tiny : mx);  // (no branch: mn is 0 where mx is)
   const F s = a * a;
+  // Minimax coefficients for atan(a), a in [0, 1].
   F r = ((((-0.0117212f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s + 0.99997726f;
   r *= a;
   const F r1 = 1.57079637f - r;
@@ -123,6 +81,18 @@ template <int W>
 [[gnu::always_inline]] inline void load_lanes(const float* p, std::size_t i, typename Lanes<W>::F& v) noexcept {
   std::memcpy(&v, p + i, sizeof v);
 }
+
+// One point (the tail of a loop, or every point without the lanes).
+void polar_one(const PointCloud& c, std::size_t i, float to_column, int last, const PolarOut& out) noexcept {
+  Lanes<1>::F x, y, z;
+  load_lanes<1>(c.x.data(), i, x);
+  load_lanes<1>(c.y.data(), i, y);
+  load_lanes<1>(c.z.data(), i, z);
+  const Lanes<1>::F d{std::sqrt(x[0] * x[0] + y[0] * y[0] + z[0] * z[0])};
+  polar_lanes<1>(x, y, z, d, to_column, last, out, i);
+}
+
+#if defined(__SSE2__) && defined(__x86_64__)
 
 // Points [i, n) four at a time; returns the first not done.
 std::size_t polar_four(const PointCloud& c, std::size_t i, std::size_t n, float to_column, int last,
@@ -151,13 +121,13 @@ __attribute__((target("avx2"))) std::size_t polar_eight(const PointCloud& c, std
   }
   return i;
 }
-#pragma GCC diagnostic pop
 
 bool cpu_has_avx2() noexcept {
   static const bool has = __builtin_cpu_supports("avx2");
   return has;
 }
 #endif
+#pragma GCC diagnostic pop
 
 }  // namespace
 
@@ -183,6 +153,32 @@ RingLayout load_ring_layout(const std::string& path) {
   for (double v : e) layout.elevation_deg.push_back(static_cast<float>(v));
   l.reject_unknown_keys();
   return layout;
+}
+
+std::optional<RingLayout> ring_layout_named(const std::string& name, std::string& error) {
+  const std::size_t dot = name.rfind('.');
+  const std::string ext = dot == std::string::npos ? std::string() : name.substr(dot);
+  if (ext == ".yaml" || ext == ".yml") {
+    try {
+      return load_ring_layout(name);
+    } catch (const ConfigError& e) {
+      error = e.what();
+      return std::nullopt;
+    }
+  }
+  if (auto l = ring_layout_preset(name)) return l;
+  std::string presets;
+  for (const std::string& n : ring_layout_presets()) presets += (presets.empty() ? "" : ", ") + n;
+  error = "unknown lidar '" + name + "': a preset (" + presets + ") or a layout file (.yaml)";
+  return std::nullopt;
+}
+
+std::optional<RingSource> ring_source_named(std::string_view word) noexcept {
+  if (word == "automatic") return RingSource::automatic;
+  if (word == "field") return RingSource::field;
+  if (word == "elevation") return RingSource::elevation;
+  if (word == "order") return RingSource::order;
+  return std::nullopt;
 }
 
 RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration, std::string name, int columns) {
@@ -395,7 +391,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     if (options_.lanes >= 8 && cpu_has_avx2()) i = polar_eight(c, i, n, to_column, last, out);
     if (options_.lanes >= 4) i = polar_four(c, i, n, to_column, last, out);
 #endif
-    for (; i < n; ++i) polar_point(c.x[i], c.y[i], c.z[i], to_column, last, out, i);
+    for (; i < n; ++i) polar_one(c, i, to_column, last, out);
   }
   // Pass 2: each point's row, or kBadRing.
   constexpr std::int16_t kBadRing = -1;

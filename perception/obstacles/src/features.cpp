@@ -11,6 +11,7 @@
 #endif
 
 
+#include "trailnav/runtime/simd_lanes.hpp"
 #include "trailnav/perception/cloud.hpp"
 
 namespace trailnav::perception {
@@ -194,21 +195,6 @@ void along_ring_portable(const View& v, std::size_t row, int j, int columns, int
 // multiply-add: the same bits as one point at a time.
 #if defined(__GNUC__)
 constexpr bool kSimd = true;
-
-// (GCC ignores a vector_size that depends on a template parameter: one
-// specialisation per width.)
-template <int W>
-struct Lanes;
-template <>
-struct Lanes<4> {
-  using F = float __attribute__((vector_size(16)));
-  using I = std::int32_t __attribute__((vector_size(16)));
-};
-template <>
-struct Lanes<8> {
-  using F = float __attribute__((vector_size(32)));
-  using I = std::int32_t __attribute__((vector_size(32)));
-};
 
 // The best farther neighbour of W points so far (as Best).
 template <int W>

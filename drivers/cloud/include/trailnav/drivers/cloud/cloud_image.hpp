@@ -45,6 +45,9 @@ std::vector<std::string> ring_layout_presets();  // every name ring_layout_prese
 // [one per ring, by the ring number the files use]}`. ConfigError (file,
 // line, key) on anything wrong.
 RingLayout load_ring_layout(const std::string& path);
+// A preset's name or a layout file (.yaml, .yml); nothing and `error`
+// (naming the presets, or the file's line and key) otherwise.
+std::optional<RingLayout> ring_layout_named(const std::string& preset_or_file, std::string& error);
 RingLayout ring_layout_from_calibration(const velodyne::Calibration& calibration, std::string name, int columns);
 // Evenly spaced rings from `lowest_deg` to `highest_deg` (ring 0 the lowest).
 RingLayout uniform_ring_layout(std::string name, int rings, double lowest_deg, double highest_deg, int columns);
@@ -102,6 +105,9 @@ struct PointPlace {
   // (known here at no cost; read back from the image later, each a miss).
   float apart = 0.0f;
 };
+
+// "automatic", "field", "elevation", "order"; nothing for another word.
+std::optional<RingSource> ring_source_named(std::string_view word) noexcept;
 
 struct CloudImageOptions {
   float intensity_scale = 1.0f;    // the file's intensity to 0..255 (KITTI's 0..1: 255)
