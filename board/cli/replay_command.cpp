@@ -96,9 +96,10 @@ int run_cloud_replay(const ReplayCliOptions& o) {
     std::fprintf(stderr, "trailnav replay: %s\n", sender.error.c_str());
     return 2;
   }
+  char rate[32];
+  std::snprintf(rate, sizeof rate, "%g Hz", 10.0 * o.rate);
   std::fprintf(stderr, "trailnav replay: %zu point-cloud file%s to %s on DDS domain %u at %s%s\n", files.size(),
-               files.size() == 1 ? "" : "s", sender.sender->topic().c_str(), o.domain,
-               o.max_rate ? "maximum rate" : (std::to_string(10.0 * o.rate) + " Hz").c_str(),
+               files.size() == 1 ? "" : "s", sender.sender->topic().c_str(), o.domain, o.max_rate ? "maximum rate" : rate,
                o.forever ? ", looping until stopped" : "");
   if (!sender.sender->wait_for_reader(5.0)) {
     std::fprintf(stderr, "trailnav replay: no reader of %s after 5 s; sending anyway\n", sender.sender->topic().c_str());
@@ -279,7 +280,7 @@ void add_replay_command(CLI::App& app) {
       "are named by port: 2368 lidar, 8308 lidar-position, others udp-<port>.\n"
       "Destinations must be loopback addresses (127.0.0.0/8).");
   static ReplayCliOptions o;
-  cmd->add_option("input", o.input, "Recording directory, or pcap/pcapng/raw file")->required();
+  cmd->add_option("input", o.input, "Recording directory, or pcap/pcapng/raw file; with --clouds point-cloud files")->required();
   auto* rate = cmd->add_option("--rate", o.rate, "Speed-up over the recorded timing")->capture_default_str()->check(
       CLI::PositiveNumber);
   cmd->add_flag("--max-rate", o.max_rate, "Send as fast as possible (no timing)")->excludes(rate);
