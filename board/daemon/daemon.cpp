@@ -72,13 +72,14 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   };
   d->scheduler_ = std::make_unique<Scheduler>(d->clock_, config.runtime.scheduler);
 
+  // The DDS domain first: a point-cloud lidar's input comes through it.
+  auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
+  if (!domain.domain) {
+    return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
+  }
+  d->domain_ = std::move(domain.domain);
+
   if (config.lidar && config.lidar->cloud) {
-    // Point clouds over DDS: the domain first, then its reader.
-    auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
-    if (!domain.domain) {
-      return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
-    }
-    d->domain_ = std::move(domain.domain);
     auto reader = dds::CloudReader::create(*d->domain_, *config.lidar->cloud);
     if (!reader.reader) return fail("lidar: " + reader.error);
     d->cloud_reader_ = std::move(reader.reader);
@@ -245,7 +246,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     d->obstacles_->set_aligned(d->aligned_.get());
     d->obstacles_->set_streaming(config.obstacles->streaming);
     if (d->lidar_) d->lidar_->set_revolution_event(&d->revolution_event_);
-    if (d->cloud_reader_) d->cloud_reader_->set_revolution_event(&d->revolution_event_);
+    if (d->cloud_reader_) d->cloud_reader_->set_revolution_event(&d->revolution_event_, d->clock_);
   }
 
   if (d->navigator_) {
@@ -254,13 +255,6 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                            *d->navigation_out_);
   }
 
-  if (!d->domain_) {
-    auto domain = dds::Domain::create(config.dds.domain, dds::with_small_receive_buffer(config.dds.cyclone_xml));
-    if (!domain.domain) {
-      return fail(domain.error + (config.dds.cyclone_config.empty() ? "" : " (" + config.dds.cyclone_config + ")"));
-    }
-    d->domain_ = std::move(domain.domain);
-  }
   dds::PublisherInputs inputs;
   inputs.obstacles = d->obstacle_out_.get();
   inputs.poses = d->pose_ ? &d->pose_->poses() : nullptr;

@@ -92,7 +92,6 @@ class Daemon {
   MonotonicClock clock_;
   std::unique_ptr<Scheduler> scheduler_;
   std::unique_ptr<velodyne::VelodyneDriver> lidar_;
-  std::unique_ptr<dds::CloudReader> cloud_reader_;  // lidar.input: pointcloud2 (else lidar_)
   velodyne::RangeImageShape lidar_shape() const noexcept {
     return lidar_ ? lidar_->revolution_shape() : cloud_reader_->revolution_shape();
   }
@@ -140,6 +139,8 @@ class Daemon {
   std::unique_ptr<nav::NavCommandQueue> commands_;
   std::unique_ptr<nav::NavStatusQueue> answers_;
   std::unique_ptr<dds::CommandReader> command_reader_;
+  // lidar.input: pointcloud2 (else lidar_). After domain_: its readers go before the domain does.
+  std::unique_ptr<dds::CloudReader> cloud_reader_;
   std::vector<std::uint64_t> last_runs_;
   // Set on the main thread after the publisher has started; its health reads it.
   std::atomic<bool> armed_{false};

@@ -131,7 +131,7 @@ void CloudReader::handle(const sensor_msgs_msg_dds__PointCloud2_& m, std::int64_
     // The stamp is on the sender's CLOCK_REALTIME: to the reference (host) clock.
     image.clock_offset_ns = host_from_realtime(stamp) - stamp;
     revolutions_.publish();
-    if (event_ != nullptr) event_->signal(receive_ns);
+    if (event_ != nullptr) event_->signal(event_clock_->now());
   }
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.messages;

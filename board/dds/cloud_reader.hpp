@@ -30,6 +30,7 @@
 #include "trailnav/drivers/cloud/cloud_image.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
 #include "trailnav/runtime/broadcast.hpp"
+#include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 
 namespace trailnav::dds {
@@ -66,8 +67,13 @@ class CloudReader {
     return revolutions_.reader(reader);
   }
   velodyne::RangeImageShape revolution_shape() const noexcept { return shape_; }
-  // Signalled after each image is published. Before start().
-  void set_revolution_event(TaskEvent* event) noexcept { event_ = event; }
+  // Signalled after each image is published, at `clock`'s now: the
+  // scheduler's clock, on which an event-driven task's latency is counted
+  // from the signal. Before start().
+  void set_revolution_event(TaskEvent* event, const Clock& clock) noexcept {
+    event_ = event;
+    event_clock_ = &clock;
+  }
   void start();
   void stop();
   CloudReaderStats stats() const;
@@ -87,6 +93,7 @@ class CloudReader {
   std::vector<cloud::PointFieldView> fields_;  // room for 64
   Broadcast<velodyne::RangeImage> revolutions_;
   TaskEvent* event_ = nullptr;
+  const Clock* event_clock_ = nullptr;
   std::string name_;  // the topic, for errors
   dds_entity_t topic_ = 0, reader_ = 0, waitset_ = 0;
   sensor_msgs_msg_dds__PointCloud2_ sample_{};

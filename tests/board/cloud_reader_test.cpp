@@ -163,9 +163,17 @@ TEST(CloudReader, UnreadableMessagesAreRefusedWithTheirReason) {
   st = reader.stats();
   EXPECT_EQ(st.refused, 2u);
   EXPECT_NE(st.last_error.find("1001 points; the input takes at most 1000"), std::string::npos) << st.last_error;
-  // A good one after them is published.
+  // A good one after them is published, and the event signalled on the
+  // clock it was given (the scheduler's: an event task's latency counts from it).
+  TaskEvent event;
+  MonotonicClock clock;
+  reader.set_revolution_event(&event, clock);
   Message good(bytes);
+  const Nanos before = clock.now();
   reader.handle(good.m, 3);
+  const Nanos after = clock.now();
+  EXPECT_GE(event.last_signal(), before);
+  EXPECT_LE(event.last_signal(), after);
   st = reader.stats();
   EXPECT_EQ(st.published, 1u);
   EXPECT_EQ(st.image.invalid, 500u);  // every point at the origin
