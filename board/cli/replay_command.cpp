@@ -137,8 +137,10 @@ int run_cloud_replay(const ReplayCliOptions& o) {
     }
   }
   if (!o.quiet) progress.finish();
-  // Let the reliable writer deliver the last cloud before the domain goes.
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  // The last clouds delivered (acknowledged) before the domain goes.
+  if (sent > 0 && !sender.sender->wait_for_acks(2.0)) {
+    std::fprintf(stderr, "trailnav replay: the last clouds were not acknowledged within 2 s\n");
+  }
   std::fprintf(stderr, "trailnav replay: %llu clouds sent (%llu points), %llu files not sent%s\n",
                static_cast<unsigned long long>(sent), static_cast<unsigned long long>(points),
                static_cast<unsigned long long>(refused), g_stop.load() ? ", stopped" : "");

@@ -76,10 +76,10 @@ LidarSection parse_cloud_input(const ConfigNode& n) {
   o.image.intensity_scale = static_cast<float>(n.number("intensity_scale", 0.001, 1000.0, 1.0));
   o.image.period_s = n.number("period_s", 0.02, 1.0, 0.1);
   o.layers = static_cast<int>(n.integer("layers", 1, 2, 2));
-  const std::size_t full = o.layout.elevation_deg.size() * static_cast<std::size_t>(o.layout.columns) *
-                           static_cast<std::size_t>(o.layers);
-  o.max_points = static_cast<std::size_t>(n.integer("max_points", 1, static_cast<std::int64_t>(cloud::kMaxPoints),
-                                                    static_cast<std::int64_t>(full)));
+  // (Not given: the reader's default, rings x columns x layers.)
+  if (n.has("max_points")) {
+    o.max_points = static_cast<std::size_t>(n.integer("max_points", 1, static_cast<std::int64_t>(cloud::kMaxPoints)));
+  }
   const std::size_t rings_count = o.layout.elevation_deg.size();
   if (n.has("model")) {
     const std::string model = n.string("model");

@@ -34,6 +34,10 @@ bool CloudSender::wait_for_reader(double timeout_s) const {
   }
 }
 
+bool CloudSender::wait_for_acks(double timeout_s) const {
+  return dds_wait_for_acks(writer_->handle(), static_cast<dds_duration_t>(timeout_s * 1e9)) == DDS_RETCODE_OK;
+}
+
 Status CloudSender::send(const cloud::PointCloud& c, std::int64_t stamp_ns) {
   // The fields this cloud has.
   names_ = {"x", "y", "z", "intensity"};
@@ -54,12 +58,7 @@ Status CloudSender::send(const cloud::PointCloud& c, std::int64_t stamp_ns) {
   step = (step + 7) / 8 * 8;
   if (c.size > std::numeric_limits<std::uint32_t>::max() / step) return Status::error(topic() + ": too many points");
   data_.assign(c.size * step, 0);
-  double t0 = 0.0;
-  if (c.has_time) {
-    t0 = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < c.size; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
-    if (!std::isfinite(t0)) t0 = 0.0;
-  }
+  const double t0 = cloud::first_time(c);
   for (std::size_t i = 0; i < c.size; ++i) {
     std::uint8_t* p = data_.data() + i * step;
     std::memcpy(p + fields_[0].offset, &c.x[i], 4);

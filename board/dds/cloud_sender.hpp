@@ -28,6 +28,9 @@ class CloudSender {
 
   // Waits up to `timeout_s` for a reader to match; whether one did.
   bool wait_for_reader(double timeout_s) const;
+  // Waits up to `timeout_s` until every matched reader has acknowledged
+  // what was sent; whether they had.
+  bool wait_for_acks(double timeout_s) const;
   // One cloud, stamped `stamp_ns` (CLOCK_REALTIME).
   Status send(const cloud::PointCloud& cloud, std::int64_t stamp_ns);
   const std::string& topic() const noexcept { return writer_->topic(); }

@@ -116,7 +116,8 @@ struct ScanAnswers {
 // its fates: keep_point_fates()) and the answer of the point it became.
 // `out` is sized once; nothing else is allocated.
 void answer_scan_points(const cloud::PointCloud& cloud, std::span<const cloud::PointPlace> places,
-                        const perception::ObstaclePipeline& pipeline, const perception::TerrainClassMap* classes, std::vector<ScanPointAnswer>& out);
+                        const perception::ObstaclePipeline& pipeline, const perception::TerrainClassMap* classes,
+                        std::vector<ScanPointAnswer>& out);
 
 struct ObstacleRunOptions {
   std::vector<std::string> inputs;  // one recording directory or capture file, or point-cloud files

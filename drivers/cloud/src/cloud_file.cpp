@@ -11,12 +11,20 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <optional>
 
 namespace trailnav::cloud {
 
 PointCloud::PointCloud(std::size_t capacity)
     : x(capacity), y(capacity), z(capacity), intensity(capacity), ring(capacity), time(capacity) {}
+
+double first_time(const PointCloud& c) noexcept {
+  if (!c.has_time) return 0.0;
+  double t0 = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < c.size; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
+  return std::isfinite(t0) ? t0 : 0.0;
+}
 
 namespace {
 
@@ -662,7 +670,9 @@ std::optional<Scalar> ros_type(std::uint8_t datatype) noexcept {
 }
 
 // One field's first element of every point into the cloud, its type's
-// load chosen once, not per point.
+// load chosen once, not per point (read_scalar's switch and byte loop per
+// value: the KITTI scan as a message in 3.76 ms instead of 1.14,
+// BM_ReadPointCloud2, both in one session).
 template <typename T>
 const char* copy_field(const PointCloud2View& m, const Field& f, PointCloud& out, std::size_t& at) noexcept {
   const bool swap = m.is_bigendian != (std::endian::native == std::endian::big);

@@ -23,6 +23,9 @@ namespace {
 constexpr int kSlopeBins = 16384;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
+// A point with a return: a finite distance above 0 (false for NaN).
+inline bool has_return(float d) noexcept { return d > 0.0f && d <= std::numeric_limits<float>::max(); }
+
 // Per point: the distance, sin(elevation) (0 at the origin), the azimuth
 // and its column (at most `last`).
 struct PolarOut {
@@ -120,11 +123,6 @@ __attribute__((target("avx2"))) std::size_t polar_eight(const PointCloud& c, std
     polar_lanes<8>(x, y, z, d, to_column, last, out, i);
   }
   return i;
-}
-
-bool cpu_has_avx2() noexcept {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
 }
 #endif
 #pragma GCC diagnostic pop
@@ -365,12 +363,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   const std::size_t n = c.size;
   st.points = n;
   // Times relative to the cloud's first (a file may hold absolute ones).
-  double t0 = 0.0;
-  if (c.has_time) {
-    t0 = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < n; ++i) t0 = std::isfinite(c.time[i]) ? std::min(t0, c.time[i]) : t0;
-    if (!std::isfinite(t0)) t0 = 0.0;
-  }
+  const double t0 = first_time(c);
   const bool use_field = options_.rings == RingSource::field || (options_.rings == RingSource::automatic && c.has_ring);
   const bool use_order = options_.rings == RingSource::order;
   if (distance_.size() < n) {
@@ -415,9 +408,8 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     std::size_t places_found = 0;
     if (n > 0) {
       const std::int32_t* column = column_.data();
-      std::int64_t u = 0;  // the running sum at point `at`
-      std::size_t at = 0;
-      int fb_at = from_back(column[0]);
+      std::int64_t u = 0;  // the running sum at the last event (the first point before any)
+      int fb_at = from_back(column[0]);  // that point's column from -pi
       // Point i (> 0): an event, handled in order.
       const auto visit = [&](std::size_t i) {
         const int previous = from_back(column[i - 1]), fb = from_back(column[i]);
@@ -425,12 +417,11 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
         const bool wraps = dc > half || dc < -half;
         const bool passes_zero = previous < half && fb >= half;
         if (!wraps && !passes_zero) return;
-        const std::int64_t before = u + (previous - fb_at);  // no wrap since `at`
+        const std::int64_t before = u + (previous - fb_at);  // no wrap since the last event
         if (dc > half) dc -= columns_;
         if (dc < -half) dc += columns_;
         if (passes_zero) pass_places_[places_found++] = PassPlace{i, before, before + dc};
         u = before + dc;
-        at = i;
         fb_at = fb;
       };
       std::size_t i = 1;
@@ -470,15 +461,13 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
       std::size_t i = sweep_start_[k];
       for (; i + 4 <= end; i += 4) {
         for (std::size_t l = 0; l < 4; ++l) {
-          const float d = distance_[i + l];
-          const bool ok = d > 0.0f && d <= std::numeric_limits<float>::max();
+          const bool ok = has_return(distance_[i + l]);
           sum[l] += ok ? static_cast<double>(sine_[i + l]) : 0.0;
           count += ok ? 1 : 0;
         }
       }
       for (; i < end; ++i) {
-        const float d = distance_[i];
-        const bool ok = d > 0.0f && d <= std::numeric_limits<float>::max();
+        const bool ok = has_return(distance_[i]);
         sum[0] += ok ? static_cast<double>(sine_[i]) : 0.0;
         count += ok ? 1 : 0;
       }
@@ -525,7 +514,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     PlaceOutcome outcome;
     velodyne::RangeCell* cell = nullptr;
     float apart = 0.0f;
-    if (!std::isfinite(d) || d <= 0.0f) {
+    if (!has_return(d)) {
       outcome = PlaceOutcome::invalid;
       ++invalid;
     } else if (r < 0) {

@@ -367,13 +367,8 @@ __attribute__((target("avx2"))) int search_row8(const View& v, const RowSearch& 
   return j;
 }
 #pragma GCC diagnostic pop
-bool cpu_has_avx2() noexcept {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
 #else
 int search_row8(const View&, const RowSearch&, int j, int, FeatureSink&) noexcept { return j; }
-bool cpu_has_avx2() noexcept { return false; }
 #endif
 
 }  // namespace

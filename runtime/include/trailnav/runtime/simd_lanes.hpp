@@ -29,4 +29,15 @@ struct Lanes<8> {
   using I = std::int32_t __attribute__((vector_size(32)));
 };
 
+// Whether this CPU runs AVX2 (asked once): the eight-wide functions are
+// called only where it does.
+inline bool cpu_has_avx2() noexcept {
+#if defined(__GNUC__) && defined(__x86_64__)
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+#else
+  return false;
+#endif
+}
+
 }  // namespace trailnav

@@ -28,4 +28,8 @@ struct PointCloud {
   bool has_time = false;
 };
 
+// The earliest finite time of the cloud's points (their times' origin when
+// they are made relative); 0 without times or without a finite one.
+double first_time(const PointCloud& cloud) noexcept;
+
 }  // namespace trailnav::cloud
