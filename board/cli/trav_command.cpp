@@ -37,7 +37,7 @@ struct TrainOptions {
   bool quiet = false;
 };
 
-// "--bins 0.1:6,16:10,8:4,0.03:3,15:3,0.4:5": width and count per dimension.
+// "--bins 0.1:6,16:10,8:4,0.03:3,15:3,0.4:5,0.1:3": width and count per dimension.
 bool parse_bins(const std::string& text, trav::VocabularyConfig& v, const char* who) {
   if (text.empty()) return true;
   std::size_t pos = 0;
@@ -328,8 +328,8 @@ void add_trav_commands(CLI::App& app) {
   tr->add_option("--prior", t.prior, "P(trav) for PNB (0: Elkan-Noto's estimate per terrain model)")->capture_default_str();
   tr->add_option("--bins", t.bins,
                  "Vocabulary: WIDTH:COUNT for max |dz| (m), remission mean, remission standard deviation, RMS distance "
-                 "from the cell's plane (m), slope (degrees), height above the ground (m); default\n"
-                 "0.1:6,16:10,8:4,0.03:3,15:3,0.4:5");
+                 "from the cell's plane (m), slope (degrees), height above the ground (m), depth below it (m: a ditch); "
+                 "default\n0.1:6,16:10,8:4,0.03:3,15:3,0.4:5,0.1:3");
   tr->add_flag("--verbose", t.verbose, "Also list each local map: its terrain model, the test's p-value, its words");
   tr->add_flag("--quiet", t.quiet, "No progress bars");
   tr->callback([&] { std::exit(train(t)); });

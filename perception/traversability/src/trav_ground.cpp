@@ -1,7 +1,9 @@
 #include "trailnav/perception/trav_ground.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace trailnav::perception::trav {
@@ -11,26 +13,84 @@ constexpr float kNone = std::numeric_limits<float>::infinity();  // a block noth
 }  // namespace
 
 GroundReference::GroundReference(double extent_x, double extent_y, double block, int radius)
-    : blocks_(static_cast<std::int32_t>(std::ceil(extent_x / block)) + 2 * radius + 1,
-              static_cast<std::int32_t>(std::ceil(extent_y / block)) + 2 * radius + 1, block, kNone),
-      radius_(radius) {}
+    : lows_(static_cast<std::int32_t>(std::ceil(extent_x / block)) + 2 * radius + 2 * kValleyRadius + 1,
+            static_cast<std::int32_t>(std::ceil(extent_y / block)) + 2 * radius + 2 * kValleyRadius + 1, block, kNone),
+      marks_(lows_.size_x(), lows_.size_y(), block, Mark{State::unknown, 0.0f}),
+      radius_(std::clamp(radius, 0, kMaxRadius)) {}
 
-void GroundReference::move_to(double x, double y) noexcept { blocks_.move_to(x, y); }
+void GroundReference::move_to(double x, double y) noexcept {
+  lows_.move_to(x, y);
+  marks_.move_to(x, y);
+}
+
+bool GroundReference::valley(CellIndex c) noexcept {
+  Mark& m = marks_.at(c);
+  if (m.state != State::unknown) return m.state == State::valley;
+  // Across the block in four directions (the axes and the diagonals), on
+  // each side the highest lowest point of the next block and of the two
+  // next; the lower side of the two is the bank. A valley's bank stands
+  // kValleyDepth above its bottom in some direction, right beside it on one
+  // side at least (a ditch is one or two blocks wide; the middle of a track
+  // three blocks wide between undergrowth is no valley).
+  constexpr std::int32_t kDirections[4][2] = {{1, 0}, {0, 1}, {1, 1}, {1, -1}};
+  auto low_at = [&](std::int32_t dx, std::int32_t dy) {
+    const CellIndex n{c.x + dx, c.y + dy};
+    if (!lows_.contains(n)) return -kNone;
+    const float v = lows_.at(n);
+    return v == kNone ? -kNone : v;
+  };
+  const float rim = lows_.at(c) + kValleyDepth;
+  float bank = -kNone;
+  for (const auto& d : kDirections) {
+    const float a1 = low_at(d[0], d[1]), b1 = low_at(-d[0], -d[1]);
+    if (std::max(a1, b1) < rim) continue;  // the usual case on open ground: no bank beside it
+    const float a2 = std::max(a1, low_at(2 * d[0], 2 * d[1])), b2 = std::max(b1, low_at(-2 * d[0], -2 * d[1]));
+    if (std::min(a2, b2) >= rim) bank = std::max(bank, std::min(a2, b2));
+  }
+  const bool is_valley = bank >= rim;
+  m.state = is_valley ? State::valley : State::open;
+  m.bank = bank;
+  return is_valley;
+}
 
 float GroundReference::height(double x, double y, const CellStats& s) noexcept {
   const float low = s.z0 + s.min_dz;
-  const CellIndex c = blocks_.world_to_index(x, y);
-  if (!blocks_.contains(c)) return 0.0f;
-  float& own = blocks_.at(c);
-  own = std::min(own, low);
-  float ground = own;
-  for (std::int32_t dy = -radius_; dy <= radius_; ++dy) {
-    for (std::int32_t dx = -radius_; dx <= radius_; ++dx) {
-      const CellIndex n{c.x + dx, c.y + dy};
-      if (blocks_.contains(n)) ground = std::min(ground, blocks_.at(n));
+  const CellIndex c = lows_.world_to_index(x, y);
+  if (!lows_.contains(c)) return 0.0f;
+  float& own = lows_.at(c);
+  if (low < own) {
+    own = low;
+    // Every block whose test reads this one must look again.
+    for (std::int32_t dy = -kValleyRadius; dy <= kValleyRadius; ++dy) {
+      for (std::int32_t dx = -kValleyRadius; dx <= kValleyRadius; ++dx) {
+        const CellIndex k{c.x + dx, c.y + dy};
+        if (marks_.contains(k)) marks_.at(k).state = State::unknown;
+      }
     }
   }
-  return std::max(0.0f, low - ground);
+  // A cell in a valley below its bank: its depth there (negative).
+  if (valley(c) && low < marks_.at(c).bank) return low - marks_.at(c).bank;
+  // The lowest block within the radius that is not a valley (asked only of
+  // a block lower than the lowest found so far).
+  // The window clipped to the grid, its rows and columns as storage
+  // offsets (the grid's torus wraps them), so that the 49 reads are loads.
+  const CellIndex o = lows_.origin();
+  const std::int32_t x0 = std::max(c.x - radius_, o.x), x1 = std::min(c.x + radius_, o.x + lows_.size_x() - 1);
+  const std::int32_t y0 = std::max(c.y - radius_, o.y), y1 = std::min(c.y + radius_, o.y + lows_.size_y() - 1);
+  const auto w = static_cast<std::size_t>(lows_.size_x());
+  std::array<std::size_t, kMaxWindow> columns{};
+  for (std::int32_t bx = x0; bx <= x1; ++bx) {
+    columns[static_cast<std::size_t>(bx - x0)] = lows_.offset_from_origin(bx - o.x, 0) % w;
+  }
+  float ground = kNone;
+  for (std::int32_t by = y0; by <= y1; ++by) {
+    const std::size_t row = lows_.offset_from_origin(0, by - o.y) / w * w;
+    for (std::int32_t bx = x0; bx <= x1; ++bx) {
+      const float v = lows_.at_offset(row + columns[static_cast<std::size_t>(bx - x0)]);
+      if (v < ground && !valley({bx, by})) ground = v;
+    }
+  }
+  return ground == kNone ? 0.0f : low - ground;  // only valleys around: the cell is its own ground
 }
 
 }  // namespace trailnav::perception::trav

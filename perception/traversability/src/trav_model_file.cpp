@@ -181,6 +181,10 @@ LoadedTravModel parse_trav_model(std::span<const std::uint8_t> data, const std::
     return fail("model format version 1: its words are the thesis' five feature dimensions, without the height "
                 "above the ground this build adds (docs/traversability.md): train it again with trailnav trav-train");
   }
+  if (version == 2) {
+    return fail("model format version 2: its words have six feature dimensions, without the depth below the ground "
+                "this build adds (docs/traversability.md): train it again with trailnav trav-train");
+  }
   if (version != kModelFileVersion) {
     return fail("model format version " + std::to_string(version) + "; this build reads version " +
                 std::to_string(kModelFileVersion));

@@ -21,9 +21,10 @@
 
 namespace trailnav::perception::trav {
 
-// Version 2: six feature dimensions (the height above the ground added);
-// version 1 files (the thesis' five) are refused with what to do.
-inline constexpr std::uint32_t kModelFileVersion = 2;
+// Version 3: seven feature dimensions (the height above the ground, then the
+// depth below it, added); version 1 files (the thesis' five) and version 2
+// (six) are refused with what to do.
+inline constexpr std::uint32_t kModelFileVersion = 3;
 inline constexpr std::size_t kMaxProfileName = 64;
 
 struct TravModelSet {
