@@ -11,6 +11,8 @@ packages=(
   clang clang-format clang-tidy libclang-rt-14-dev
   # libraries
   libeigen3-dev
+  # the registration's k-d tree (perception/registration)
+  libnanoflann-dev
   # Boost.Math, header-only: the χ² test of the traversability terrain models
   libboost-dev
   libsuitesparse-dev libmetis-dev
