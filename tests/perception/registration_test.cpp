@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -16,6 +17,7 @@
 
 #include "trailnav/perception/registration/cloud.hpp"
 #include "trailnav/perception/registration/gicp.hpp"
+#include "trailnav/perception/registration/multi_body.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 
 namespace trailnav::perception::registration {
@@ -230,6 +232,124 @@ TEST(Gicp, FilterCovariancesAndRegistrationTouchNoHeap) {
   alloc_guard::unmark_current_thread();
   EXPECT_EQ(alloc_guard::total_allocations(), 0u);
   EXPECT_TRUE(r.converged);
+}
+
+// --- several rigid bodies (thesis §4.1.1) ---
+
+// The labelled SemanticKITTI scan: its largest car (class 10, the instance
+// with most points) is the object, everything else the static world. The
+// query is the same scan seen from a robot that moved (T_r: 0.3 m, 2°) after
+// the car was pushed by one of the thesis' sets (M: 0.1 m and 5°). No
+// occlusion is re-cast (the car's old place stays seen): what is tested here
+// is the solver. The truth: body 0 (the world) T_0 = T_r, body 1 (the car)
+// T_1 = M⁻¹·T_r. The multi-body solver finds both; a single GICP over the
+// whole reference answers T_r for everything and misses the car by M.
+struct CarScene {
+  std::vector<Point> world, car;
+};
+CarScene car_scene() {
+  std::ifstream fb("../shared/data/semantickitti/000000.bin", std::ios::binary);
+  std::ifstream fl("../shared/data/semantickitti/000000.label", std::ios::binary);
+  std::vector<Point> points;
+  std::vector<std::uint32_t> labels;
+  float x[4];
+  while (fb.read(reinterpret_cast<char*>(x), sizeof x)) points.emplace_back(x[0], x[1], x[2]);
+  std::uint32_t l = 0;
+  while (fl.read(reinterpret_cast<char*>(&l), sizeof l)) labels.push_back(l);
+  CarScene s;
+  if (points.size() != labels.size()) return s;
+  std::map<std::uint32_t, std::size_t> cars;
+  for (std::uint32_t v : labels) {
+    if ((v & 0xFFFFu) == 10u) ++cars[v >> 16];
+  }
+  std::uint32_t biggest = 0;
+  std::size_t most = 0;
+  for (const auto& [id, count] : cars) {
+    if (count > most) {
+      most = count;
+      biggest = id;
+    }
+  }
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const bool is_car = (labels[i] & 0xFFFFu) == 10u && (labels[i] >> 16) == biggest;
+    (is_car ? s.car : s.world).push_back(points[i]);
+  }
+  return s;
+}
+
+TEST(MultiBodyGicp, APushedCarAndTheWorldEachGetTheirTransform) {
+  const CarScene scene = car_scene();
+  ASSERT_GT(scene.car.size(), 250u) << "the labelled scan's largest car";
+  // The car's centre: the push turns it about itself, as a person moving it.
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const Point& p : scene.car) centre += p.cast<double>();
+  centre /= static_cast<double>(scene.car.size());
+  std::printf("[ multi-body ] the car: %zu points around (%.1f, %.1f, %.1f) m\n", scene.car.size(), centre.x(), centre.y(),
+              centre.z());
+  const Eigen::Isometry3d robot = motion(2.0, 0.0, {0.3, -0.1, 0.0});
+  const Eigen::Isometry3d push = Eigen::Translation3d(centre + Eigen::Vector3d(0.08, 0.06, 0.0)) *
+                                 Eigen::AngleAxisd(5.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()) * Eigen::Translation3d(-centre);
+  // The reference: the world and the car as taught; the query: both as the
+  // moved robot sees them after the push, voxel-filtered after the motion.
+  Target world, car, whole;
+  world.cloud = downsampled(scene.world, 0.2f);
+  car.cloud = downsampled(scene.car, 0.05f);
+  std::vector<Point> all = scene.world;
+  all.insert(all.end(), scene.car.begin(), scene.car.end());
+  whole.cloud = downsampled(all, 0.2f);
+  CovarianceEstimator est(20);
+  prepare_target(world, est);
+  prepare_target(car, est);
+  prepare_target(whole, est);
+  std::vector<Point> seen;
+  for (const Point& p : scene.world) seen.push_back((robot.inverse() * p.cast<double>()).cast<float>());
+  const std::size_t car_from = seen.size();
+  for (const Point& p : scene.car) seen.push_back((robot.inverse() * push * p.cast<double>()).cast<float>());
+  // The car's points at a finer voxel than the world's, as a station's
+  // object is modelled: the query keeps both at their own resolution.
+  Cloud query = downsampled(std::vector<Point>(seen.begin(), seen.begin() + static_cast<std::ptrdiff_t>(car_from)), 0.2f);
+  const Cloud car_query = downsampled(std::vector<Point>(seen.begin() + static_cast<std::ptrdiff_t>(car_from), seen.end()), 0.05f);
+  query.points.insert(query.points.end(), car_query.points.begin(), car_query.points.end());
+  KdTree scratch;
+  std::vector<Point> normals;
+  prepare_source(query, est, scratch, normals);
+
+  const Eigen::Isometry3d truth_world = robot;
+  const Eigen::Isometry3d truth_car = push.inverse() * robot;
+  for (Metric m : {Metric::point_to_plane, Metric::plane_to_plane}) {
+    GicpConfig config;
+    config.metric = m;
+    config.max_iterations = 100;
+    MultiBodyGicp solver(config, query.size(), 2);
+    const Target* bodies[] = {&world, &car};
+    const Eigen::Isometry3d initial[] = {Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity()};
+    BodyResult out[2];
+    const int iterations = solver.align(query, bodies, initial, out);
+    const double world_t = (out[0].transform.translation() - truth_world.translation()).norm();
+    const double world_r = rotation_error_deg(out[0].transform, truth_world);
+    // The car's error where it stands: its centre under the two transforms.
+    const double car_t = (out[1].transform * (truth_car.inverse() * centre) - centre).norm();
+    const double car_r = rotation_error_deg(out[1].transform, truth_car);
+    std::printf("[ multi-body ] metric %d: %d iterations; world %.2f mm %.4f deg (%zu pairs), car %.2f mm %.4f deg (%zu pairs)\n",
+                static_cast<int>(m), iterations, 1000.0 * world_t, world_r, out[0].correspondences, 1000.0 * car_t, car_r,
+                out[1].correspondences);
+    EXPECT_TRUE(out[0].converged && out[1].converged);
+    EXPECT_LT(world_t, 0.005);
+    EXPECT_LT(world_r, 0.05);
+    EXPECT_LT(car_t, 0.01);
+    EXPECT_LT(car_r, 0.2);
+  }
+  // One GICP over the whole reference: the world's motion for everything,
+  // the car missed by the push (the reason chapter 4 exists).
+  GicpConfig config;
+  config.max_iterations = 100;
+  Gicp single(config, query.size());
+  const GicpResult r = single.align(query, whole);
+  const double car_t = (r.transform * (truth_car.inverse() * centre) - centre).norm();
+  const double car_r = rotation_error_deg(r.transform, truth_car);
+  std::printf("[ multi-body ] one body: car %.1f mm %.2f deg off\n", 1000.0 * car_t, car_r);
+  EXPECT_GT(car_t, 0.05);
+  EXPECT_GT(car_r, 4.0);
 }
 
 }  // namespace

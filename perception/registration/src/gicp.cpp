@@ -6,6 +6,8 @@
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
 
+#include "gicp_terms.hpp"
+
 namespace trailnav::perception::registration {
 
 const char* check_gicp_config(const GicpConfig& c) noexcept {
@@ -18,7 +20,7 @@ const char* check_gicp_config(const GicpConfig& c) noexcept {
   return "";
 }
 
-Gicp::Gicp(const GicpConfig& config, std::size_t capacity) : config_(config) { pairs_.reserve(capacity); }
+namespace detail {
 
 namespace {
 Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
@@ -28,15 +30,86 @@ Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
 }
 }  // namespace
 
+bool usable(const GicpConfig& config, const Cloud& source, std::size_t n, const Target& target) noexcept {
+  if (target.tree.size() == 0 || n == 0) return false;
+  if (config.metric == Metric::plane_to_plane) {
+    return source.covariances.size() >= n && target.cloud.covariances.size() >= target.cloud.size();
+  }
+  if (config.metric == Metric::point_to_plane) return target.normals.size() >= target.cloud.size();
+  return true;
+}
+
+double accumulate(const GicpConfig& config, const Cloud& source, std::size_t i, const Target& target, std::size_t j,
+                  const Eigen::Matrix3d& rot, const Eigen::Vector3d& tr, Eigen::Matrix<double, 6, 6>& h,
+                  Eigen::Matrix<double, 6, 1>& b) noexcept {
+  const Eigen::Vector3d x = rot * source.points[i].cast<double>() + tr;
+  const Eigen::Vector3d d = target.cloud.points[j].cast<double>() - x;
+  Eigen::Matrix3d m = Eigen::Matrix3d::Identity();  // point to point
+  switch (config.metric) {
+    case Metric::plane_to_plane: {
+      // (Σ^S + R Σ^A Rᵀ)⁻¹ (Eq. 2.8).
+      const Eigen::Matrix3d c =
+          target.cloud.covariances[j].cast<double>() + rot * source.covariances[i].cast<double>() * rot.transpose();
+      m = c.inverse();
+      break;
+    }
+    case Metric::point_to_plane: {
+      const Eigen::Vector3d nrm = target.normals[j].cast<double>();
+      m = nrm * nrm.transpose();
+      break;
+    }
+    case Metric::point_to_point: break;
+  }
+  const double q = d.dot(m * d);
+  double w = 1.0;
+  if (config.huber_delta > 0.0) {
+    const double s = std::sqrt(q);
+    if (s > config.huber_delta) w = config.huber_delta / s;
+  }
+  // d = s − x(δ): ∂d/∂δ = −∂x/∂δ = −[−[x]×, I] = [[x]×, −I].
+  Eigen::Matrix<double, 3, 6> jac;
+  jac.leftCols<3>() = skew(x);
+  jac.rightCols<3>() = -Eigen::Matrix3d::Identity();
+  const Eigen::Matrix<double, 6, 3> jtm = jac.transpose() * (w * m);
+  h.noalias() += jtm * jac;
+  b.noalias() += jtm * d;
+  return w * q;
+}
+
+bool step(const GicpConfig& config, const Eigen::Matrix<double, 6, 6>& h, const Eigen::Matrix<double, 6, 1>& b,
+          Eigen::Isometry3d& transform, bool& converged) noexcept {
+  // A tiny damping keeps a degenerate direction (a corridor, a plane) from
+  // blowing up.
+  Eigen::Matrix<double, 6, 6> hd = h;
+  hd.diagonal().array() += 1e-9 * std::max(1.0, h.diagonal().maxCoeff());
+  const Eigen::Matrix<double, 6, 1> delta = -hd.ldlt().solve(b);
+  if (!delta.allFinite()) return false;
+  const Eigen::Vector3d omega = delta.head<3>();
+  const double angle = omega.norm();
+  Eigen::Isometry3d s = Eigen::Isometry3d::Identity();
+  if (angle > 0.0) s.linear() = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
+  s.translation() = delta.tail<3>();
+  transform = s * transform;
+  transform.linear() = Eigen::Quaterniond(transform.linear()).normalized().toRotationMatrix();
+  converged = angle < config.rotation_epsilon && delta.tail<3>().norm() < config.translation_epsilon;
+  return true;
+}
+
+Eigen::Matrix<double, 6, 6> covariance_of(const Eigen::Matrix<double, 6, 6>& h) noexcept {
+  const Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(h);
+  return lu.isInvertible() ? Eigen::Matrix<double, 6, 6>(lu.inverse()) : Eigen::Matrix<double, 6, 6>::Identity();
+}
+
+}  // namespace detail
+
+Gicp::Gicp(const GicpConfig& config, std::size_t capacity) : config_(config) { pairs_.reserve(capacity); }
+
 GicpResult Gicp::align(const Cloud& source, const Target& target, const Eigen::Isometry3d& initial) noexcept {
   GicpResult r;
   r.transform = initial;
-  const bool plane = config_.metric == Metric::plane_to_plane;
-  const bool to_plane = config_.metric == Metric::point_to_plane;
   const std::size_t n = std::min(source.size(), pairs_.capacity());
-  if (target.tree.size() == 0 || n == 0) return r;
-  if (plane && (source.covariances.size() < n || target.cloud.covariances.size() < target.cloud.size())) return r;
-  if (to_plane && target.normals.size() < target.cloud.size()) return r;
+  if (!detail::usable(config_, source, n, target)) return r;
+  const bool to_plane = config_.metric == Metric::point_to_plane;
   const float gate2 = config_.max_correspondence_distance * config_.max_correspondence_distance;
 
   Eigen::Matrix<double, 6, 6> h = Eigen::Matrix<double, 6, 6>::Identity();
@@ -61,63 +134,20 @@ GicpResult Gicp::align(const Cloud& source, const Target& target, const Eigen::I
       return r;
     }
     r.fitness = squared_sum / static_cast<double>(pairs_.size());
-    // Eq. 2.10 linearised: H δ = −b with J = [−[x]×, I] for d = s − T(a).
     h.setZero();
     Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
     double error = 0.0;
-    for (const Pair& p : pairs_) {
-      const Eigen::Vector3d a = source.points[p.source].cast<double>();
-      const Eigen::Vector3d x = rot * a + tr;
-      const Eigen::Vector3d d = target.cloud.points[p.target].cast<double>() - x;
-      Eigen::Matrix3d m;
-      if (plane) {
-        // (Σ^S + R Σ^A Rᵀ)⁻¹ (Eq. 2.8).
-        const Eigen::Matrix3d c =
-            target.cloud.covariances[p.target].cast<double>() + rot * source.covariances[p.source].cast<double>() * rot.transpose();
-        m = c.inverse();
-      } else if (to_plane) {
-        const Eigen::Vector3d nrm = target.normals[p.target].cast<double>();
-        m = nrm * nrm.transpose();
-      } else {
-        m = Eigen::Matrix3d::Identity();
-      }
-      const double q = d.dot(m * d);
-      double w = 1.0;
-      if (config_.huber_delta > 0.0) {
-        const double s = std::sqrt(q);
-        if (s > config_.huber_delta) w = config_.huber_delta / s;
-      }
-      error += w * q;
-      // d = s − x(δ): ∂d/∂δ = −∂x/∂δ = −[−[x]×, I] = [[x]×, −I].
-      Eigen::Matrix<double, 3, 6> j;
-      j.leftCols<3>() = skew(x);
-      j.rightCols<3>() = -Eigen::Matrix3d::Identity();
-      const Eigen::Matrix<double, 6, 3> jtm = j.transpose() * (w * m);
-      h.noalias() += jtm * j;
-      b.noalias() += jtm * d;
-    }
+    for (const Pair& p : pairs_) error += detail::accumulate(config_, source, p.source, target, p.target, rot, tr, h, b);
     r.error = error;
-    // Gauss–Newton step; a tiny damping keeps a degenerate direction (a
-    // corridor, a plane) from blowing up.
-    Eigen::Matrix<double, 6, 6> hd = h;
-    hd.diagonal().array() += 1e-9 * std::max(1.0, h.diagonal().maxCoeff());
-    const Eigen::Matrix<double, 6, 1> delta = -hd.ldlt().solve(b);
-    if (!delta.allFinite()) return r;
-    const Eigen::Vector3d omega = delta.head<3>();
-    const double angle = omega.norm();
-    Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
-    if (angle > 0.0) step.linear() = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
-    step.translation() = delta.tail<3>();
-    r.transform = step * r.transform;
-    r.transform.linear() = Eigen::Quaterniond(r.transform.linear()).normalized().toRotationMatrix();
+    bool converged = false;
+    if (!detail::step(config_, h, b, r.transform, converged)) return r;
     r.iterations = it + 1;
-    if (angle < config_.rotation_epsilon && delta.tail<3>().norm() < config_.translation_epsilon) {
+    if (converged) {
       r.converged = true;
       break;
     }
   }
-  const Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(h);
-  if (lu.isInvertible()) r.covariance = lu.inverse();
+  r.covariance = detail::covariance_of(h);
   return r;
 }
 

@@ -1,0 +1,60 @@
+// Generalized ICP for several rigid bodies at once (thesis §4.1.1,
+// Eq. 4.1–4.4): a reference made of objects j = 1..n (a station's table,
+// shelf, box, and the static surroundings), each with its own transform
+// T_j that maps the local point set Q into the object's reference frame.
+// Each query point q_i is associated with the nearest reference point over
+// all objects, each under its own current transform (Eq. 4.2: the Dirac
+// weight ω_ij = 1 for that object, 0 for the others), and all transforms are
+// solved for jointly (Eq. 4.1 / 4.4). With Dirac weights the objective is a
+// sum over objects of single-body GICP terms, so given the associations the
+// joint Gauss–Newton system is block diagonal: each object's 6 × 6 block is
+// solved on its own, the association couples them. The metric is a choice of
+// covariances as in gicp.hpp (the thesis used point-to-plane).
+//
+// Iterated until every object's update is below the convergence thresholds
+// or `max_iterations`. An object with fewer than 6 associations in an
+// iteration keeps its transform (it is out of view) and is reported so.
+// Preallocated for `capacity` query points and `max_bodies` objects.
+#pragma once
+
+#include <cstddef>
+#include <span>
+#include <vector>
+
+#include "trailnav/perception/registration/gicp.hpp"
+
+namespace trailnav::perception::registration {
+
+struct BodyResult {
+  Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();  // query -> object's reference frame
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  std::size_t correspondences = 0;  // query points associated with it in the last iteration
+  bool converged = false;           // its last update below the thresholds
+  bool observed = false;            // at least 6 associations in the last iteration
+};
+
+class MultiBodyGicp {
+ public:
+  MultiBodyGicp(const GicpConfig& config, std::size_t capacity, std::size_t max_bodies);
+
+  // Aligns `query` to every body at once from `initial` (one transform per
+  // body); writes one result per body into `out` (its size: the bodies').
+  // Returns the iterations run. At most max_bodies bodies and `capacity`
+  // query points are used.
+  int align(const Cloud& query, std::span<const Target* const> bodies, std::span<const Eigen::Isometry3d> initial,
+            std::span<BodyResult> out) noexcept;
+
+ private:
+  struct Pair {
+    std::uint32_t query;
+    std::uint32_t target;
+    std::uint32_t body;
+  };
+  GicpConfig config_;
+  std::size_t max_bodies_;
+  std::vector<Pair> pairs_;
+  std::vector<Eigen::Matrix<double, 6, 6>> h_;
+  std::vector<Eigen::Matrix<double, 6, 1>> b_;
+};
+
+}  // namespace trailnav::perception::registration
