@@ -1,7 +1,8 @@
 // Fuzzes the text and datagram formats of bench recordings and sensors:
 // candump log lines, serial and GPIO log lines, NMEA sentences and RMC times, CAN
 // and GPIO tunnel datagrams, DBC databases, the recording manifest and the
-// obstacle and terrain sections of a robot config. Round trips are checked
+// obstacle and terrain sections of a robot config, and CARMEN laser lines
+// (FLASER). Round trips are checked
 // where a format has one.
 #include <algorithm>
 #include <cmath>
@@ -23,6 +24,7 @@
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/velodyne/sensor_clock.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/registration/carmen.hpp"
 #include "trailnav/perception/terrain_config.hpp"
 #include "trailnav/runtime/config.hpp"
 
@@ -37,6 +39,20 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     std::size_t end = text.find('\n', start);
     if (end == std::string_view::npos) end = text.size();
     const std::string_view line = text.substr(start, end - start);
+    {
+      // A CARMEN laser line: a scan or a message, never a crash; its points
+      // finite and within the range limit.
+      perception::registration::LaserScan2 scan;
+      const std::string why = perception::registration::parse_flaser(line, scan, 1081);
+      if (why.empty()) {
+        check(line.substr(0, 6) == "FLASER" && scan.ranges.size() >= 2 && scan.ranges.size() <= 1081);
+        std::vector<perception::registration::Point> points;
+        points.reserve(scan.ranges.size());
+        perception::registration::scan_points(scan, 81.0f, 0.0f, points);
+        check(points.size() <= scan.ranges.size());
+        for (const auto& p : points) check(p.allFinite() && p.norm() < 81.1f);
+      }
+    }
     recording::CanFrame frame;
     if (recording::parse_candump_line(line, frame, interface, error)) {
       check(frame.length <= (frame.fd ? 64 : 8));

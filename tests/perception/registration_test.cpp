@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <zlib.h>
 #include <cstdio>
 #include <map>
 #include <fstream>
@@ -18,6 +19,8 @@
 #include "trailnav/perception/registration/cloud.hpp"
 #include "trailnav/perception/registration/gicp.hpp"
 #include "trailnav/perception/registration/multi_body.hpp"
+#include "trailnav/perception/registration/carmen.hpp"
+#include "trailnav/perception/registration/odometry.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 
 namespace trailnav::perception::registration {
@@ -350,6 +353,107 @@ TEST(MultiBodyGicp, APushedCarAndTheWorldEachGetTheirTransform) {
   std::printf("[ multi-body ] one body: car %.1f mm %.2f deg off\n", 1000.0 * car_t, car_r);
   EXPECT_GT(car_t, 0.05);
   EXPECT_GT(car_r, 4.0);
+}
+
+// --- CARMEN logs and lidar odometry ---
+
+TEST(Carmen, FlaserLinesParseAndBadOnesAreNamed) {
+  LaserScan2 s;
+  EXPECT_EQ(parse_flaser("FLASER 4 1.5 2 81.91 3 0.5 -0.25 1.57 0.5 -0.25 1.57 12.5 robot 12.51", s), "");
+  ASSERT_EQ(s.ranges.size(), 4u);
+  EXPECT_FLOAT_EQ(s.ranges[2], 81.91f);
+  EXPECT_DOUBLE_EQ(s.pose.theta, 1.57);
+  EXPECT_DOUBLE_EQ(s.timestamp, 12.5);
+  std::vector<Point> p;
+  p.reserve(8);
+  scan_points(s, 81.0f, 0.05f, p);
+  ASSERT_EQ(p.size(), 3u);  // 81.91: no return
+  EXPECT_NEAR(p[0].x(), 0.0f, 1e-6f);  // the first beam at −90°
+  EXPECT_NEAR(p[0].y(), -1.5f, 1e-6f);
+  EXPECT_EQ(parse_flaser("ODOM 1 2 3", s), "not FLASER");
+  EXPECT_NE(parse_flaser("FLASER 4 1 2 3", s).find("range 4 of 4"), std::string::npos);
+  EXPECT_NE(parse_flaser("FLASER 4 1 2 -3 4 0 0 0 0 0 0 1", s).find("range 3 is negative"), std::string::npos);
+  EXPECT_NE(parse_flaser("FLASER 2.5 1 2", s).find("whole number"), std::string::npos);
+  EXPECT_NE(parse_flaser("FLASER 5000 1 2", s, 1081).find("at most 1081"), std::string::npos);
+  EXPECT_NE(parse_flaser("FLASER 2 1 2 0 0", s).find("theta"), std::string::npos);
+  EXPECT_NE(parse_flaser("FLASER 2 1 nan 0 0 0 0 0 0 0", s).find("range 2"), std::string::npos);
+}
+
+// The measure itself: an estimate on the reference's straight 30 m whose
+// heading drifts by 1° per 10 m.
+TEST(RelativePoseError, AKnownDriftIsMeasured) {
+  std::vector<Eigen::Isometry3d> ref, est;
+  for (int i = 0; i <= 300; ++i) {
+    const double x = 0.1 * i;  // 30 m straight, a pose every 0.1 m
+    Eigen::Isometry3d r = Eigen::Isometry3d::Identity();
+    r.translation() = Eigen::Vector3d(x, 0.0, 0.0);
+    ref.push_back(r);
+    // The estimate turns 1° per 10 m and goes straight along its heading.
+    Eigen::Isometry3d e = Eigen::Isometry3d::Identity();
+    const double yaw = (x / 10.0) * M_PI / 180.0;
+    e.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    e.translation() = Eigen::Vector3d(x, 0.0, 0.0);
+    est.push_back(e);
+  }
+  const RelativePoseError e = relative_pose_error(ref, est, 10.0);
+  EXPECT_EQ(e.segments, 201u);
+  EXPECT_NEAR(e.rotation_deg_per_100m, 10.0, 0.01);
+  // The estimate's step from pose i is seen turned by pose i's yaw error:
+  // |R(−yaw_i) d − d| / |d| = 2 sin(yaw_i / 2), averaged over the segments.
+  double expected = 0.0;
+  for (int i = 0; i <= 200; ++i) expected += 2.0 * std::sin((0.1 * i / 10.0) * M_PI / 180.0 / 2.0) * 100.0;
+  EXPECT_NEAR(e.translation_percent, expected / 201.0, 1e-6);
+  EXPECT_EQ(relative_pose_error(std::span<const Eigen::Isometry3d>(ref).first(1), est).segments, 0u);
+}
+
+// The Freiburg building 079 log (../shared/data/carmen, SLAM-corrected
+// poses): the first 1,000 scans (about 90 m of corridors and turns) by
+// scan-to-local-map GICP against the log's poses. Bounds from the figures
+// measured (docs/registration.md), with margin for other machines.
+TEST(LidarOdometry, TheFreiburgLogsFirstThousandScansAgainstItsPoses) {
+  gzFile f = gzopen("../shared/data/carmen/freiburg-079-corrected.log.gz", "rb");
+  ASSERT_NE(f, nullptr);
+  std::vector<LaserScan2> scans;
+  std::vector<char> line(1 << 16);
+  while (scans.size() < 1000 && gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
+    LaserScan2 s;
+    if (parse_flaser(line.data(), s).empty()) scans.push_back(std::move(s));
+  }
+  gzclose(f);
+  ASSERT_EQ(scans.size(), 1000u);
+  OdometryConfig config;
+  config.planar = true;
+  config.voxel = 0.05f;
+  config.local_scans = 20;
+  config.keyframe_distance = 0.3;
+  config.gicp.max_correspondence_distance = 0.5f;
+  config.gicp.max_iterations = 100;
+  config.max_points = 4096;
+  LidarOdometry odometry(config);
+  std::vector<Eigen::Isometry3d> ref, est;
+  std::vector<Point> points;
+  points.reserve(config.max_points);
+  auto pose_of = [](const Pose2& p) {
+    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+    t.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    t.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
+    return t;
+  };
+  for (const LaserScan2& s : scans) {
+    points.clear();
+    scan_points(s, 40.0f, 0.05f, points);
+    est.push_back(pose_of(scans.front().pose) * odometry.add(points));
+    ref.push_back(pose_of(s.pose));
+  }
+  const RelativePoseError e = relative_pose_error(ref, est, 10.0);
+  std::printf("[ odometry ] 1000 scans: %zu segments, %.3f %% and %.3f deg/100 m; %llu keyframes, %llu not converged\n",
+              e.segments, e.translation_percent, e.rotation_deg_per_100m,
+              static_cast<unsigned long long>(odometry.counters().keyframes),
+              static_cast<unsigned long long>(odometry.counters().not_converged));
+  EXPECT_GT(e.segments, 500u);
+  EXPECT_LT(e.translation_percent, 5.0);
+  EXPECT_LT(e.rotation_deg_per_100m, 40.0);
+  EXPECT_EQ(odometry.counters().rejected, 0u);
 }
 
 }  // namespace

@@ -107,8 +107,8 @@ bool KdTree::nearest(const Point& q, std::uint32_t& index, float& squared) const
 
 // --- covariances ---
 
-CovarianceEstimator::CovarianceEstimator(int k, float epsilon)
-    : k_(std::max(k, 3)), epsilon_(epsilon), indices_(static_cast<std::size_t>(k_)), squared_(static_cast<std::size_t>(k_)) {}
+CovarianceEstimator::CovarianceEstimator(int k, float epsilon, bool planar)
+    : k_(std::max(k, 3)), epsilon_(epsilon), planar_(planar), indices_(static_cast<std::size_t>(k_)), squared_(static_cast<std::size_t>(k_)) {}
 
 void CovarianceEstimator::compute(Cloud& cloud, const KdTree& tree, std::vector<Point>& normals) noexcept {
   const std::size_t n = cloud.points.size();
@@ -130,12 +130,29 @@ void CovarianceEstimator::compute(Cloud& cloud, const KdTree& tree, std::vector<
       c += d * d.transpose();
     }
     c /= static_cast<double>(found);
+    if (planar_) {
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es2;
+      es2.computeDirect(c.topLeftCorner<2, 2>());
+      const Eigen::Matrix2d v2 = es2.eigenvectors();
+      const Eigen::Vector2d line(static_cast<double>(epsilon_), 1.0);
+      Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
+      cov.topLeftCorner<2, 2>() = (v2 * line.asDiagonal() * v2.transpose()).cast<float>();
+      cov(2, 2) = 1.0f;
+      const Point normal(static_cast<float>(v2(0, 0)), static_cast<float>(v2(1, 0)), 0.0f);
+      const bool ok = cov.allFinite() && normal.allFinite();
+      cloud.covariances[i] = ok ? cov : Eigen::Matrix3f::Identity();
+      normals[i] = ok ? normal : Point::Zero();
+      continue;
+    }
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
     es.computeDirect(c);  // closed form for 3 x 3; eigenvalues ascending
     const Eigen::Matrix3d v = es.eigenvectors();
     const Eigen::Vector3d plane(static_cast<double>(epsilon_), 1.0, 1.0);
-    cloud.covariances[i] = (v * plane.asDiagonal() * v.transpose()).cast<float>();
-    normals[i] = v.col(0).cast<float>();
+    const Eigen::Matrix3f cov = (v * plane.asDiagonal() * v.transpose()).cast<float>();
+    const Point normal = v.col(0).cast<float>();
+    const bool ok = cov.allFinite() && normal.allFinite();  // degenerate neighbourhoods: no plane
+    cloud.covariances[i] = ok ? cov : Eigen::Matrix3f::Identity();
+    normals[i] = ok ? normal : Point::Zero();
   }
 }
 

@@ -82,8 +82,13 @@ bool step(const GicpConfig& config, const Eigen::Matrix<double, 6, 6>& h, const 
   // blowing up.
   Eigen::Matrix<double, 6, 6> hd = h;
   hd.diagonal().array() += 1e-9 * std::max(1.0, h.diagonal().maxCoeff());
-  const Eigen::Matrix<double, 6, 1> delta = -hd.ldlt().solve(b);
+  Eigen::Matrix<double, 6, 1> delta = -hd.ldlt().solve(b);
   if (!delta.allFinite()) return false;
+  // A step longer than kMaxStepRotation or kMaxStepTranslation is shortened
+  // (a trust region): along a direction the points hardly constrain — a
+  // corridor's axis — Gauss–Newton's step can be metres long.
+  const double scale = std::max({1.0, delta.head<3>().norm() / kMaxStepRotation, delta.tail<3>().norm() / kMaxStepTranslation});
+  delta /= scale;
   const Eigen::Vector3d omega = delta.head<3>();
   const double angle = omega.norm();
   Eigen::Isometry3d s = Eigen::Isometry3d::Identity();

@@ -10,6 +10,10 @@
 
 namespace trailnav::perception::registration::detail {
 
+// The longest step of one iteration (see step()).
+inline constexpr double kMaxStepRotation = 0.2;     // rad
+inline constexpr double kMaxStepTranslation = 0.5;  // m
+
 // Adds source point i's association with target point j to H and b (Eq. 2.10
 // linearised for d = s − T(a), J = [[x]×, −I]); returns its weighted
 // Mahalanobis term.

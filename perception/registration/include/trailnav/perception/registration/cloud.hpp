@@ -84,7 +84,10 @@ class KdTree {
 // three neighbours gets the identity (no plane) and a zero normal.
 class CovarianceEstimator {
  public:
-  explicit CovarianceEstimator(int k = 20, float epsilon = 1e-3f);
+  // `planar`: points of a 2D scan (z = 0): the covariance of their x and y
+  // only, a line with its normal in the plane, and variance 1 along z (the
+  // 2D registration leaves z, roll and pitch at their initial values).
+  explicit CovarianceEstimator(int k = 20, float epsilon = 1e-3f, bool planar = false);
   // Fills cloud.covariances and `normals` (unit, same order), resized to the
   // points' count: no heap when the caller reserved that capacity.
   void compute(Cloud& cloud, const KdTree& tree, std::vector<Point>& normals) noexcept;
@@ -93,6 +96,7 @@ class CovarianceEstimator {
  private:
   int k_;
   float epsilon_;
+  bool planar_;
   std::vector<std::uint32_t> indices_;
   std::vector<float> squared_;
 };

@@ -1,0 +1,195 @@
+// `trailnav lidar-odometry INPUT [--report json]`: lidar odometry by
+// scan-to-local-map GICP (perception/registration/odometry.hpp) over a
+// CARMEN log's 2D laser scans (FLASER lines, plain or gzip), scored against
+// the log's own poses (SLAM-corrected in ../shared/data/carmen) by the
+// relative pose error per 10 m of travel. docs/registration.md.
+#include <zlib.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "commands.hpp"
+#include "terminal.hpp"
+#include "trailnav/perception/registration/carmen.hpp"
+#include "trailnav/perception/registration/odometry.hpp"
+
+namespace trailnav::cli {
+namespace {
+
+namespace reg = trailnav::perception::registration;
+
+struct Options {
+  std::string input;
+  std::string report;
+  std::string poses_out;
+  float voxel = 0.05f;
+  int local_scans = 20;
+  double keyframe_distance = 0.3;
+  double max_correspondence = 0.5;
+  float max_range = 40.0f;
+  long max_scans = 0;
+  int max_iterations = 100;
+  bool quiet = false;
+  bool no_prediction = false;
+};
+
+Eigen::Isometry3d pose_of(const reg::Pose2& p) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  t.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
+  return t;
+}
+
+int run(const Options& o) {
+  const char* who = "trailnav lidar-odometry";
+  if (o.report != "" && o.report != "json") {
+    std::fprintf(stderr, "%s: --report takes json, not '%s'\n", who, o.report.c_str());
+    return 2;
+  }
+  if (!(o.voxel > 0.0f) || o.local_scans < 1 || !(o.max_correspondence > 0.0) || !(o.keyframe_distance >= 0.0) ||
+      o.max_iterations < 1 || o.max_iterations > 1000) {
+    std::fprintf(stderr, "%s: --voxel, --max-correspondence must be positive, --local-scans at least 1, --max-iterations 1 to 1000\n", who);
+    return 2;
+  }
+  // The scans first (the progress bar needs their count).
+  gzFile f = gzopen(o.input.c_str(), "rb");
+  if (f == nullptr) {
+    std::fprintf(stderr, "%s: cannot open %s\n", who, o.input.c_str());
+    return 1;
+  }
+  std::vector<reg::LaserScan2> scans;
+  std::vector<char> line(1 << 16);
+  long number = 0, refused = 0;
+  std::string first_error;
+  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
+    ++number;
+    const std::string_view text(line.data());
+    if (text.rfind("FLASER", 0) != 0) continue;
+    reg::LaserScan2 s;
+    const std::string error = reg::parse_flaser(text, s);
+    if (!error.empty()) {
+      if (first_error.empty()) first_error = "line " + std::to_string(number) + ": " + error;
+      ++refused;
+      continue;
+    }
+    scans.push_back(std::move(s));
+    if (o.max_scans > 0 && static_cast<long>(scans.size()) >= o.max_scans) break;
+  }
+  gzclose(f);
+  if (scans.size() < 2) {
+    std::fprintf(stderr, "%s: %s holds %zu FLASER scans; at least 2 are needed%s%s\n", who, o.input.c_str(), scans.size(),
+                 first_error.empty() ? "" : "; ", first_error.c_str());
+    return 1;
+  }
+
+  reg::OdometryConfig config;
+  config.planar = true;
+  config.voxel = o.voxel;
+  config.local_scans = o.local_scans;
+  config.keyframe_distance = o.keyframe_distance;
+  config.gicp.max_correspondence_distance = static_cast<float>(o.max_correspondence);
+  config.max_points = 4096;
+  config.gicp.max_iterations = o.max_iterations;
+  config.constant_velocity = !o.no_prediction;
+  reg::LidarOdometry odometry(config);
+  std::vector<Eigen::Isometry3d> reference, estimate;
+  std::vector<reg::Point> points;
+  points.reserve(config.max_points);
+  std::unique_ptr<ProgressBar> bar;
+  if (!o.quiet) bar = std::make_unique<ProgressBar>("lidar odometry", static_cast<double>(scans.size()), "scans");
+  const auto t0 = std::chrono::steady_clock::now();
+  const Eigen::Isometry3d start = pose_of(scans.front().pose);
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    points.clear();
+    reg::scan_points(scans[i], o.max_range, 0.05f, points);
+    estimate.push_back(start * odometry.add(points));
+    reference.push_back(pose_of(scans[i].pose));
+    if (bar) bar->update(static_cast<double>(i + 1));
+  }
+  if (bar) bar->finish();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const reg::RelativePoseError rpe = reg::relative_pose_error(reference, estimate, 10.0);
+  if (!o.poses_out.empty()) {
+    std::FILE* out = std::fopen(o.poses_out.c_str(), "w");
+    if (out == nullptr) {
+      std::fprintf(stderr, "%s: cannot write %s\n", who, o.poses_out.c_str());
+      return 1;
+    }
+    std::fprintf(out, "timestamp,x,y,theta,ref_x,ref_y,ref_theta\n");
+    for (std::size_t i = 0; i < estimate.size(); ++i) {
+      const Eigen::Isometry3d& e = estimate[i];
+      const Eigen::Isometry3d& r = reference[i];
+      std::fprintf(out, "%.6f,%.4f,%.4f,%.5f,%.4f,%.4f,%.5f\n", scans[i].timestamp, e.translation().x(), e.translation().y(),
+                   std::atan2(e.linear()(1, 0), e.linear()(0, 0)), r.translation().x(), r.translation().y(),
+                   std::atan2(r.linear()(1, 0), r.linear()(0, 0)));
+    }
+    std::fclose(out);
+  }
+  double path = 0.0;
+  for (std::size_t i = 1; i < reference.size(); ++i) path += (reference[i].translation() - reference[i - 1].translation()).norm();
+  const double end_error = (estimate.back().translation() - reference.back().translation()).norm();
+  const auto& c = odometry.counters();
+  if (o.report == "json") {
+    // A number, or null when it is not finite (JSON has no NaN).
+    auto num = [](double v, int digits) {
+      if (!std::isfinite(v)) return std::string("null");
+      char b[64];
+      std::snprintf(b, sizeof b, "%.*f", digits, v);
+      return std::string(b);
+    };
+    std::printf(
+        "{\"input\": \"%s\", \"scans\": %zu, \"refused_lines\": %ld, \"path_m\": %s, \"keyframes\": %llu, "
+        "\"not_converged\": %llu, \"rejected\": %llu, \"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, "
+        "\"segments\": %zu, \"end_error_m\": %s, \"ms_per_scan\": %s}\n",
+        o.input.c_str(), scans.size(), refused, num(path, 3).c_str(), static_cast<unsigned long long>(c.keyframes),
+        static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.rejected),
+        num(rpe.translation_percent, 4).c_str(), num(rpe.rotation_deg_per_100m, 4).c_str(), rpe.segments,
+        num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str());
+    return 0;
+  }
+  std::printf("lidar odometry (scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n", o.local_scans,
+              static_cast<double>(o.voxel), o.input.c_str());
+  std::printf("  %zu scans, %.1f m of the log's path, %llu keyframes, %llu registrations not converged, %llu rejected\n",
+              scans.size(), path, static_cast<unsigned long long>(c.keyframes),
+              static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.rejected));
+  if (refused > 0) std::printf("  %ld FLASER lines refused, the first: %s\n", refused, first_error.c_str());
+  std::printf("  relative pose error per 10 m against the log's poses (%zu segments): %.3f %% translation, %.3f deg/100 m\n",
+              rpe.segments, rpe.translation_percent, rpe.rotation_deg_per_100m);
+  std::printf("  end point %.2f m from the log's; %.2f ms a scan\n", end_error, 1000.0 * seconds / static_cast<double>(scans.size()));
+  return 0;
+}
+
+}  // namespace
+
+void add_lidar_odometry_command(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "lidar-odometry",
+      "Lidar odometry by scan-to-local-map Generalized ICP (thesis section 2.5) over a CARMEN log's 2D laser\n"
+      "scans (FLASER lines; plain or gzip), scored against the log's own poses: the relative pose error per\n"
+      "10 m of travel (translation in percent, rotation in degrees per 100 m), as KITTI's benchmark defines it.\n"
+      "Example:\n"
+      "  trailnav lidar-odometry ../shared/data/carmen/freiburg-079-corrected.log.gz --report json");
+  static Options o;
+  cmd->add_option("input", o.input, "CARMEN log (.log or .log.gz)")->required();
+  cmd->add_option("--report", o.report, "json: one JSON object (rpe_translation_percent, rpe_rotation_deg_per_100m, ...)");
+  cmd->add_option("--voxel", o.voxel, "Voxel size of the scans and the local map (m)")->capture_default_str();
+  cmd->add_option("--local-scans", o.local_scans, "Keyframes in the local map")->capture_default_str();
+  cmd->add_option("--keyframe-distance", o.keyframe_distance, "Travel between keyframes (m)")->capture_default_str();
+  cmd->add_option("--max-correspondence", o.max_correspondence, "Associations farther are dropped (m)")->capture_default_str();
+  cmd->add_option("--max-range", o.max_range, "Ranges at or beyond are no return (m; the SICK's 81.91 m is none)")->capture_default_str();
+  cmd->add_option("--max-iterations", o.max_iterations, "GICP iterations per scan at most")->capture_default_str();
+  cmd->add_option("--max-scans", o.max_scans, "Use only the first N scans (0: all)")->capture_default_str();
+  cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (timestamp,x,y,theta,ref_x,ref_y,ref_theta)");
+  cmd->add_flag("--no-prediction", o.no_prediction, "Start each registration at the last pose instead of the last motion repeated");
+  cmd->add_flag("--quiet", o.quiet, "No progress bar");
+  cmd->callback([] { std::exit(run(o)); });
+}
+
+}  // namespace trailnav::cli

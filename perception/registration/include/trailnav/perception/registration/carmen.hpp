@@ -1,0 +1,38 @@
+// CARMEN log lines with 2D laser scans (`FLASER`), as the Freiburg building
+// 079 log of ../shared/data/carmen: `FLASER n r_1 .. r_n x y θ odom_x odom_y
+// odom_θ ipc_timestamp hostname logger_timestamp`. The beams span 180° from
+// −90° (a SICK LMS: n = 180, 181, 360 or 361); a range at or beyond
+// `max_range` is no return. The poses are the log's (here SLAM-corrected:
+// the reference of the lidar odometry). Other lines are not scans.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "trailnav/perception/registration/cloud.hpp"
+
+namespace trailnav::perception::registration {
+
+struct Pose2 {
+  double x = 0.0, y = 0.0, theta = 0.0;
+};
+
+struct LaserScan2 {
+  std::vector<float> ranges;  // metres, beam i at −90° + i·180°/(n − 1) (n − 1 steps) or 180°/n
+  Pose2 pose;                 // the log's pose of the laser
+  Pose2 odometry;             // the log's odometry fields
+  double timestamp = 0.0;     // ipc timestamp, s
+};
+
+// Parses one line: "" on success; else what is wrong with it ("not FLASER"
+// for other message types). At most `max_beams` ranges.
+std::string parse_flaser(std::string_view line, LaserScan2& out, std::size_t max_beams = 1081);
+
+// The scan's returns as points in the laser's frame (z = 0); ranges at or
+// beyond `max_range` or below `min_range` dropped. Appends to `out` within
+// its capacity.
+void scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept;
+
+}  // namespace trailnav::perception::registration

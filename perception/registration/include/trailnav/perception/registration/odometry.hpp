@@ -1,0 +1,83 @@
+// Lidar odometry by scan-to-local-map GICP (issue 40): each scan, voxel
+// filtered, is registered onto a local map made of the last `local_scans`
+// keyframes (in the odometry frame), starting from a constant-velocity
+// prediction; a scan becomes a keyframe when the robot has moved
+// `keyframe_distance` or turned `keyframe_angle` since the last one, and the
+// local map is rebuilt then (its k-d tree allocates: this runs off the
+// real-time threads). `planar`: 2D scans (z = 0), covariances of lines.
+//
+// And the evaluation's measure: the relative pose error per segment of
+// travel (10 m by default), as KITTI's odometry benchmark defines it: for
+// every pose i, the first pose j at least `segment` metres of reference
+// path further, E = (T_i⁻¹ T_j)_ref⁻¹ (T_i⁻¹ T_j)_est; its translation as a
+// percentage of the segment, its rotation in degrees per 100 m, averaged.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "trailnav/perception/registration/gicp.hpp"
+
+namespace trailnav::perception::registration {
+
+struct OdometryConfig {
+  GicpConfig gicp;
+  float voxel = 0.1f;              // m, the scans' and the local map's
+  int local_scans = 10;            // keyframes in the local map
+  double keyframe_distance = 0.5;  // m
+  double keyframe_angle = 0.17;    // rad (about 10°)
+  bool planar = false;
+  bool constant_velocity = true;  // predict the last motion again; false: the last pose
+  std::size_t max_points = 200'000;  // per scan before filtering
+};
+
+struct OdometryCounters {
+  std::uint64_t scans = 0;
+  std::uint64_t keyframes = 0;
+  std::uint64_t not_converged = 0;  // registrations that hit max_iterations or lost their associations
+  std::uint64_t iterations = 0;
+  std::uint64_t rejected = 0;  // results 1 m or 0.5 rad from the prediction, or without associations: the last pose kept
+};
+
+class LidarOdometry {
+ public:
+  explicit LidarOdometry(const OdometryConfig& config);
+
+  // One scan in the sensor's frame; returns its pose in the odometry frame
+  // (the first scan's pose is the identity).
+  Eigen::Isometry3d add(std::span<const Point> scan);
+  const OdometryCounters& counters() const noexcept { return counters_; }
+
+ private:
+  void rebuild_map();
+
+  OdometryConfig config_;
+  VoxelFilter filter_;
+  CovarianceEstimator covariances_;
+  Gicp gicp_;
+  Cloud scan_;
+  KdTree scan_tree_;
+  std::vector<Point> scan_normals_;
+  std::vector<std::vector<Point>> keyframes_;  // ring, odometry frame
+  std::size_t next_keyframe_ = 0;
+  std::vector<Point> merged_;
+  VoxelFilter map_filter_;
+  Target map_;
+  bool have_map_ = false;
+  Eigen::Isometry3d last_ = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d previous_ = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity();
+  OdometryCounters counters_;
+};
+
+struct RelativePoseError {
+  double translation_percent = 0.0;
+  double rotation_deg_per_100m = 0.0;
+  std::size_t segments = 0;
+};
+RelativePoseError relative_pose_error(std::span<const Eigen::Isometry3d> reference,
+                                      std::span<const Eigen::Isometry3d> estimate, double segment = 10.0);
+
+}  // namespace trailnav::perception::registration

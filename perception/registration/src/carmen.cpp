@@ -1,0 +1,65 @@
+#include "trailnav/perception/registration/carmen.hpp"
+
+#include <charconv>
+#include <cmath>
+
+namespace trailnav::perception::registration {
+
+namespace {
+// The next space-separated field; empty at the end.
+std::string_view next(std::string_view& s) {
+  std::size_t i = 0;
+  while (i < s.size() && (s[i] == ' ' || s[i] == '\t' || s[i] == '\r' || s[i] == '\n')) ++i;
+  std::size_t j = i;
+  while (j < s.size() && s[j] != ' ' && s[j] != '\t' && s[j] != '\r' && s[j] != '\n') ++j;
+  const std::string_view f = s.substr(i, j - i);
+  s.remove_prefix(j);
+  return f;
+}
+bool number(std::string_view f, double& v) {
+  if (f.empty()) return false;
+  const auto r = std::from_chars(f.data(), f.data() + f.size(), v);
+  return r.ec == std::errc() && r.ptr == f.data() + f.size() && std::isfinite(v);
+}
+}  // namespace
+
+std::string parse_flaser(std::string_view line, LaserScan2& out, std::size_t max_beams) {
+  std::string_view s = line;
+  if (next(s) != "FLASER") return "not FLASER";
+  double n = 0.0;
+  if (!number(next(s), n) || n < 2.0 || n != std::floor(n)) return "FLASER: the beam count is not a whole number of 2 or more";
+  if (n > static_cast<double>(max_beams)) return "FLASER: " + std::to_string(static_cast<long long>(n)) + " beams, at most " + std::to_string(max_beams);
+  const auto count = static_cast<std::size_t>(n);
+  out.ranges.clear();
+  for (std::size_t i = 0; i < count; ++i) {
+    double r = 0.0;
+    if (!number(next(s), r)) return "FLASER: range " + std::to_string(i + 1) + " of " + std::to_string(count) + " is missing or not a number";
+    if (r < 0.0) return "FLASER: range " + std::to_string(i + 1) + " is negative";
+    out.ranges.push_back(static_cast<float>(r));
+  }
+  double v[7];
+  const char* names[7] = {"x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ipc_timestamp"};
+  for (int k = 0; k < 7; ++k) {
+    if (!number(next(s), v[k])) return std::string("FLASER: ") + names[k] + " is missing or not a number";
+  }
+  out.pose = {v[0], v[1], v[2]};
+  out.odometry = {v[3], v[4], v[5]};
+  out.timestamp = v[6];
+  return "";
+}
+
+void scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept {
+  const std::size_t n = scan.ranges.size();
+  if (n < 2) return;
+  // 181 and 361 beams: both ends included (n − 1 steps over 180°); 180 and
+  // 360: 180°/n steps from −90°.
+  const double step = (n % 2 == 1 ? M_PI / static_cast<double>(n - 1) : M_PI / static_cast<double>(n));
+  for (std::size_t i = 0; i < n && out.size() < out.capacity(); ++i) {
+    const float r = scan.ranges[i];
+    if (!(r < max_range) || r < min_range) continue;
+    const double a = -M_PI / 2.0 + static_cast<double>(i) * step;
+    out.emplace_back(static_cast<float>(static_cast<double>(r) * std::cos(a)), static_cast<float>(static_cast<double>(r) * std::sin(a)), 0.0f);
+  }
+}
+
+}  // namespace trailnav::perception::registration

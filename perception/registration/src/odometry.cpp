@@ -1,0 +1,105 @@
+#include "trailnav/perception/registration/odometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace trailnav::perception::registration {
+
+namespace {
+constexpr double kMaxJump = 1.0;  // m from the prediction
+constexpr double kMaxTurn = 0.5;  // rad from the prediction
+}  // namespace
+
+LidarOdometry::LidarOdometry(const OdometryConfig& config)
+    : config_(config),
+      filter_(config.max_points),
+      covariances_(20, 1e-3f, config.planar),
+      gicp_(config.gicp, config.max_points),
+      keyframes_(static_cast<std::size_t>(std::max(config.local_scans, 1))),
+      map_filter_(config.max_points * static_cast<std::size_t>(std::max(config.local_scans, 1))) {
+  scan_.points.reserve(config.max_points);
+  scan_.covariances.reserve(config.max_points);
+  scan_normals_.reserve(config.max_points);
+  for (auto& k : keyframes_) k.reserve(config.max_points);
+  merged_.reserve(config.max_points * keyframes_.size());
+  map_.cloud.points.reserve(config.max_points * keyframes_.size());
+}
+
+void LidarOdometry::rebuild_map() {
+  merged_.clear();
+  for (const auto& k : keyframes_) merged_.insert(merged_.end(), k.begin(), k.end());
+  map_filter_.filter(merged_, config_.voxel, map_.cloud);
+  prepare_target(map_, covariances_);
+  have_map_ = map_.cloud.size() >= 6;
+}
+
+Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan) {
+  ++counters_.scans;
+  filter_.filter(scan.first(std::min(scan.size(), config_.max_points)), config_.voxel, scan_);
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  if (counters_.scans > 1 && have_map_) {
+    // Constant velocity: the last motion again.
+    const Eigen::Isometry3d predicted = config_.constant_velocity ? last_ * (previous_.inverse() * last_) : last_;
+    prepare_source(scan_, covariances_, scan_tree_, scan_normals_);
+    const GicpResult r = gicp_.align(scan_, map_, predicted);
+    counters_.iterations += static_cast<std::uint64_t>(r.iterations);
+    if (!r.converged) ++counters_.not_converged;
+    // A registration that lost its associations or ran away from the
+    // prediction is not taken.
+    const Eigen::Isometry3d jump = predicted.inverse() * r.transform;
+    const bool plausible = r.transform.matrix().allFinite() && r.correspondences >= 6 &&
+                           jump.translation().norm() < kMaxJump && Eigen::AngleAxisd(jump.linear()).angle() < kMaxTurn;
+    if (!plausible) ++counters_.rejected;
+    // Rejected: the last pose stands (no motion extrapolated from a scan
+    // that could not be placed).
+    pose = plausible ? r.transform : last_;
+  }
+  previous_ = counters_.scans > 1 ? last_ : pose;
+  last_ = pose;
+  // A keyframe: the first scan, or far enough from the last keyframe.
+  const Eigen::Isometry3d since = last_keyframe_.inverse() * pose;
+  const bool keyframe = counters_.keyframes == 0 || since.translation().norm() >= config_.keyframe_distance ||
+                        Eigen::AngleAxisd(since.linear()).angle() >= config_.keyframe_angle;
+  if (keyframe) {
+    std::vector<Point>& k = keyframes_[next_keyframe_];
+    next_keyframe_ = (next_keyframe_ + 1) % keyframes_.size();
+    k.clear();
+    for (const Point& p : scan_.points) k.push_back((pose * p.cast<double>()).cast<float>());
+    last_keyframe_ = pose;
+    ++counters_.keyframes;
+    rebuild_map();
+  }
+  return pose;
+}
+
+RelativePoseError relative_pose_error(std::span<const Eigen::Isometry3d> reference,
+                                      std::span<const Eigen::Isometry3d> estimate, double segment) {
+  RelativePoseError e;
+  const std::size_t n = std::min(reference.size(), estimate.size());
+  if (n < 2) return e;
+  std::vector<double> along(n, 0.0);
+  for (std::size_t i = 1; i < n; ++i) {
+    along[i] = along[i - 1] + (reference[i].translation() - reference[i - 1].translation()).norm();
+  }
+  double t_sum = 0.0, r_sum = 0.0;
+  std::size_t j = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    j = std::max(j, i + 1);
+    while (j < n && along[j] - along[i] < segment) ++j;
+    if (j >= n) break;
+    const double length = along[j] - along[i];
+    const Eigen::Isometry3d ref = reference[i].inverse() * reference[j];
+    const Eigen::Isometry3d est = estimate[i].inverse() * estimate[j];
+    const Eigen::Isometry3d err = ref.inverse() * est;
+    t_sum += err.translation().norm() / length * 100.0;
+    r_sum += Eigen::AngleAxisd(err.linear()).angle() * 180.0 / M_PI / length * 100.0;
+    ++e.segments;
+  }
+  if (e.segments > 0) {
+    e.translation_percent = t_sum / static_cast<double>(e.segments);
+    e.rotation_deg_per_100m = r_sum / static_cast<double>(e.segments);
+  }
+  return e;
+}
+
+}  // namespace trailnav::perception::registration
