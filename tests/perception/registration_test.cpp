@@ -21,6 +21,7 @@
 #include "trailnav/perception/registration/multi_body.hpp"
 #include "trailnav/perception/registration/carmen.hpp"
 #include "trailnav/perception/registration/odometry.hpp"
+#include "car_scene.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
 
 namespace trailnav::perception::registration {
@@ -247,39 +248,6 @@ TEST(Gicp, FilterCovariancesAndRegistrationTouchNoHeap) {
 // is the solver. The truth: body 0 (the world) T_0 = T_r, body 1 (the car)
 // T_1 = M⁻¹·T_r. The multi-body solver finds both; a single GICP over the
 // whole reference answers T_r for everything and misses the car by M.
-struct CarScene {
-  std::vector<Point> world, car;
-};
-CarScene car_scene() {
-  std::ifstream fb("../shared/data/semantickitti/000000.bin", std::ios::binary);
-  std::ifstream fl("../shared/data/semantickitti/000000.label", std::ios::binary);
-  std::vector<Point> points;
-  std::vector<std::uint32_t> labels;
-  float x[4];
-  while (fb.read(reinterpret_cast<char*>(x), sizeof x)) points.emplace_back(x[0], x[1], x[2]);
-  std::uint32_t l = 0;
-  while (fl.read(reinterpret_cast<char*>(&l), sizeof l)) labels.push_back(l);
-  CarScene s;
-  if (points.size() != labels.size()) return s;
-  std::map<std::uint32_t, std::size_t> cars;
-  for (std::uint32_t v : labels) {
-    if ((v & 0xFFFFu) == 10u) ++cars[v >> 16];
-  }
-  std::uint32_t biggest = 0;
-  std::size_t most = 0;
-  for (const auto& [id, count] : cars) {
-    if (count > most) {
-      most = count;
-      biggest = id;
-    }
-  }
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const bool is_car = (labels[i] & 0xFFFFu) == 10u && (labels[i] >> 16) == biggest;
-    (is_car ? s.car : s.world).push_back(points[i]);
-  }
-  return s;
-}
-
 TEST(MultiBodyGicp, APushedCarAndTheWorldEachGetTheirTransform) {
   const CarScene scene = car_scene();
   ASSERT_GT(scene.car.size(), 250u) << "the labelled scan's largest car";
