@@ -77,6 +77,12 @@ TEST(VoxelFilter, OneCentroidPerVoxelWhateverTheOrderAndNonFiniteCounted) {
   f.filter(reversed, 0.5f, again);
   ASSERT_EQ(again.size(), 3u);
   for (std::size_t i = 0; i < 3; ++i) EXPECT_TRUE(again.points[i].isApprox(out.points[i]));
+  // An output with room for two voxels: the third is dropped and counted.
+  Cloud small;
+  small.points.reserve(2);
+  f.filter(in, 0.5f, small);
+  EXPECT_EQ(small.size(), 2u);
+  EXPECT_EQ(f.counters().voxels_dropped, 1u);
   // The real scan at 0.25 m.
   const std::vector<Point> scan = kitti(0);
   ASSERT_GT(scan.size(), 100000u);

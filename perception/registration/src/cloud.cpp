@@ -55,7 +55,10 @@ void VoxelFilter::filter(std::span<const Point> in, float voxel, Cloud& out) noe
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     std::size_t n = 0;
     for (; k < keyed_.size() && keyed_[k].key == key; ++k, ++n) sum += in[keyed_[k].index].cast<double>();
-    if (out.points.size() == out.points.capacity()) break;  // the caller's capacity: never reallocate
+    if (out.points.size() == out.points.capacity()) {  // the caller's capacity: never reallocate
+      ++counters_.voxels_dropped;
+      continue;
+    }
     out.points.push_back((sum / static_cast<double>(n)).cast<float>());
     ++counters_.voxels;
   }

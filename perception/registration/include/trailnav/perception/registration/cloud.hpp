@@ -38,9 +38,11 @@ class VoxelFilter {
     std::uint64_t non_finite = 0;
     std::uint64_t over_capacity = 0;  // input points beyond the capacity, dropped
     std::uint64_t voxels = 0;
+    std::uint64_t voxels_dropped = 0;  // beyond the output's reserved capacity (it is never reallocated)
   };
-  // Replaces `out.points` (cleared; its capacity must hold the voxels: at most
-  // the input's size) and leaves `out.covariances` empty.
+  // Replaces `out.points` (cleared; its reserved capacity must hold the
+  // voxels — at most the input's size — or the rest are dropped and counted)
+  // and leaves `out.covariances` empty.
   void filter(std::span<const Point> in, float voxel, Cloud& out) noexcept;
   const Counters& counters() const noexcept { return counters_; }
 
