@@ -14,6 +14,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -24,6 +25,13 @@
 
 #include "trailnav/perception/registration/cloud.hpp"
 #include "trailnav/perception/registration/gicp.hpp"
+
+#ifdef TRAILNAV_SMALL_GICP
+#include <small_gicp/ann/kdtree.hpp>
+#include <small_gicp/points/point_cloud.hpp>
+#include <small_gicp/registration/registration_helper.hpp>
+#include <small_gicp/util/normal_estimation_omp.hpp>
+#endif
 
 namespace {
 
@@ -164,6 +172,52 @@ void BM_Pcl(benchmark::State& state) {
   state.counters["converged"] = gicp.hasConverged() ? 1 : 0;
 }
 BENCHMARK(BM_Pcl)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+#ifdef TRAILNAV_SMALL_GICP
+// small_gicp (Koide, fetched and built outside the repository by
+// toolchain/registration-side-by-side.sh --small-gicp DIR): its GICP on one
+// thread with the same k, gate, iteration cap and convergence thresholds as
+// trailnav's; timed like trailnav's from the voxel-filtered source (its
+// covariances) to the answer.
+std::vector<Eigen::Vector4d> homogeneous(const Cloud& c) {
+  std::vector<Eigen::Vector4d> v;
+  for (const Point& p : c.points) v.emplace_back(p.x(), p.y(), p.z(), 1.0);
+  return v;
+}
+
+void BM_SmallGicp(benchmark::State& state) {
+  const Case c = make_case(static_cast<int>(state.range(0)));
+  small_gicp::RegistrationSetting setting;
+  setting.type = small_gicp::RegistrationSetting::GICP;
+  setting.num_threads = 1;
+  setting.max_correspondence_distance = 1.0;
+  setting.max_iterations = 100;
+  setting.rotation_eps = GicpConfig{}.rotation_epsilon;
+  setting.translation_eps = GicpConfig{}.translation_epsilon;
+  auto prepare = [](const Cloud& cloud) {
+    auto pc = std::make_shared<small_gicp::PointCloud>(homogeneous(cloud));
+    auto tree = std::make_shared<small_gicp::KdTree<small_gicp::PointCloud>>(pc);
+    small_gicp::estimate_covariances_omp(*pc, *tree, 20, 1);
+    return std::make_pair(pc, tree);
+  };
+  const auto [target, target_tree] = prepare(c.target);
+  const std::vector<Eigen::Vector4d> source_points = homogeneous(c.source);
+  small_gicp::RegistrationResult r;
+  for (auto _ : state) {
+    small_gicp::PointCloud source(source_points);
+    small_gicp::estimate_covariances_omp(source, 20, 1);
+    r = small_gicp::align(*target, source, *target_tree, Eigen::Isometry3d::Identity(), setting);
+    benchmark::DoNotOptimize(r.T_target_source.data());
+  }
+  const auto [back_target, back_tree] = prepare(c.source);
+  const small_gicp::RegistrationResult b =
+      small_gicp::align(*back_target, *target, *back_tree, Eigen::Isometry3d::Identity(), setting);
+  report(state, c, r.T_target_source, b.T_target_source);
+  state.counters["iterations"] = static_cast<double>(r.iterations);
+  state.counters["converged"] = r.converged ? 1 : 0;
+}
+BENCHMARK(BM_SmallGicp)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+#endif
 
 }  // namespace
 
