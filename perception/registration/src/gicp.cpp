@@ -66,13 +66,20 @@ double accumulate(const GicpConfig& config, const Cloud& source, std::size_t i, 
     const double s = std::sqrt(q);
     if (s > config.huber_delta) w = config.huber_delta / s;
   }
-  // d = s − x(δ): ∂d/∂δ = −∂x/∂δ = −[−[x]×, I] = [[x]×, −I].
-  Eigen::Matrix<double, 3, 6> jac;
-  jac.leftCols<3>() = skew(x);
-  jac.rightCols<3>() = -Eigen::Matrix3d::Identity();
-  const Eigen::Matrix<double, 6, 3> jtm = jac.transpose() * (w * m);
-  h.noalias() += jtm * jac;
-  b.noalias() += jtm * d;
+  // d = s − x(δ): ∂d/∂δ = −∂x/∂δ = −[−[x]×, I] = J = [S, −I], S = [x]×.
+  // With W = w M: JᵀWJ = [[−S W S, S W], [−W S, W]], JᵀWd = [−S W d, −W d]
+  // (Sᵀ = −S), by 3 × 3 blocks.
+  const Eigen::Matrix3d wm = w * m;
+  const Eigen::Matrix3d sk = skew(x);
+  const Eigen::Matrix3d ws = wm * sk;
+  const Eigen::Matrix3d sw = sk * wm;
+  h.topLeftCorner<3, 3>().noalias() -= sk * ws;
+  h.topRightCorner<3, 3>() += sw;
+  h.bottomLeftCorner<3, 3>() -= ws;
+  h.bottomRightCorner<3, 3>() += wm;
+  const Eigen::Vector3d wd = wm * d;
+  b.head<3>().noalias() -= sk * wd;
+  b.tail<3>() -= wd;
   return w * q;
 }
 
