@@ -45,7 +45,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       perception::registration::LaserScan2 scan;
       const std::string why = perception::registration::parse_flaser(line, scan, 1081);
       if (why.empty()) {
-        check(line.substr(0, 6) == "FLASER" && scan.ranges.size() >= 2 && scan.ranges.size() <= 1081);
+        // Its first field is FLASER (blanks before it are allowed).
+        const std::size_t first = line.find_first_not_of(" \t\r");
+        check(first != std::string_view::npos && line.substr(first, 6) == "FLASER");
+        check(scan.ranges.size() >= 2 && scan.ranges.size() <= 1081);
         std::vector<perception::registration::Point> points;
         points.reserve(scan.ranges.size());
         perception::registration::scan_points(scan, 81.0f, 0.0f, points);
