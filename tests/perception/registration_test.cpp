@@ -349,6 +349,8 @@ TEST(Carmen, FlaserLinesParseAndBadOnesAreNamed) {
   EXPECT_NE(parse_flaser("FLASER 4 1 2 -3 4 0 0 0 0 0 0 1", s).find("range 3 is negative"), std::string::npos);
   EXPECT_NE(parse_flaser("FLASER 2.5 1 2", s).find("whole number"), std::string::npos);
   EXPECT_NE(parse_flaser("FLASER 5000 1 2", s, 1081).find("at most 1081"), std::string::npos);
+  EXPECT_NE(parse_flaser("FLASER 8e60 1 2", s, 1081).find("8e60 beams"), std::string::npos);  // found by the fuzzer
+  EXPECT_NE(parse_flaser("FLASER 2 1 1e300 0 0 0 0 0 0 0", s).find("range 2 is beyond"), std::string::npos);
   EXPECT_NE(parse_flaser("FLASER 2 1 2 0 0", s).find("theta"), std::string::npos);
   EXPECT_NE(parse_flaser("FLASER 2 1 nan 0 0 0 0 0 0 0", s).find("range 2"), std::string::npos);
 }

@@ -6,6 +6,8 @@
 namespace trailnav::perception::registration {
 
 namespace {
+constexpr double kMaxRange = 1e5;  // m: beyond it a range is not a laser's (and not a float's to hold safely)
+
 // The next space-separated field; empty at the end.
 std::string_view next(std::string_view& s) {
   std::size_t i = 0;
@@ -27,14 +29,18 @@ std::string parse_flaser(std::string_view line, LaserScan2& out, std::size_t max
   std::string_view s = line;
   if (next(s) != "FLASER") return "not FLASER";
   double n = 0.0;
-  if (!number(next(s), n) || n < 2.0 || n != std::floor(n)) return "FLASER: the beam count is not a whole number of 2 or more";
-  if (n > static_cast<double>(max_beams)) return "FLASER: " + std::to_string(static_cast<long long>(n)) + " beams, at most " + std::to_string(max_beams);
+  const std::string_view count_field = next(s);
+  if (!number(count_field, n) || n < 2.0 || n != std::floor(n)) return "FLASER: the beam count is not a whole number of 2 or more";
+  if (n > static_cast<double>(max_beams)) {
+    return "FLASER: " + std::string(count_field) + " beams, at most " + std::to_string(max_beams);
+  }
   const auto count = static_cast<std::size_t>(n);
   out.ranges.clear();
   for (std::size_t i = 0; i < count; ++i) {
     double r = 0.0;
     if (!number(next(s), r)) return "FLASER: range " + std::to_string(i + 1) + " of " + std::to_string(count) + " is missing or not a number";
     if (r < 0.0) return "FLASER: range " + std::to_string(i + 1) + " is negative";
+    if (r > kMaxRange) return "FLASER: range " + std::to_string(i + 1) + " is beyond 100 km";
     out.ranges.push_back(static_cast<float>(r));
   }
   double v[7];
