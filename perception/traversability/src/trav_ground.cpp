@@ -1,7 +1,6 @@
 #include "trailnav/perception/trav_ground.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -16,7 +15,7 @@ GroundReference::GroundReference(double extent_x, double extent_y, double block,
     : lows_(static_cast<std::int32_t>(std::ceil(extent_x / block)) + 2 * radius + 2 * kValleyRadius + 1,
             static_cast<std::int32_t>(std::ceil(extent_y / block)) + 2 * radius + 2 * kValleyRadius + 1, block, kNone),
       marks_(lows_.size_x(), lows_.size_y(), block, Mark{State::unknown, 0.0f}),
-      radius_(std::clamp(radius, 0, kMaxRadius)) {}
+      radius_(radius) {}
 
 void GroundReference::move_to(double x, double y) noexcept {
   lows_.move_to(x, y);
@@ -72,22 +71,13 @@ float GroundReference::height(double x, double y, const CellStats& s) noexcept {
   if (valley(c) && low < marks_.at(c).bank) return low - marks_.at(c).bank;
   // The lowest block within the radius that is not a valley (asked only of
   // a block lower than the lowest found so far).
-  // The window clipped to the grid, its rows and columns as storage
-  // offsets (the grid's torus wraps them), so that the 49 reads are loads.
-  const CellIndex o = lows_.origin();
-  const std::int32_t x0 = std::max(c.x - radius_, o.x), x1 = std::min(c.x + radius_, o.x + lows_.size_x() - 1);
-  const std::int32_t y0 = std::max(c.y - radius_, o.y), y1 = std::min(c.y + radius_, o.y + lows_.size_y() - 1);
-  const auto w = static_cast<std::size_t>(lows_.size_x());
-  std::array<std::size_t, kMaxWindow> columns{};
-  for (std::int32_t bx = x0; bx <= x1; ++bx) {
-    columns[static_cast<std::size_t>(bx - x0)] = lows_.offset_from_origin(bx - o.x, 0) % w;
-  }
   float ground = kNone;
-  for (std::int32_t by = y0; by <= y1; ++by) {
-    const std::size_t row = lows_.offset_from_origin(0, by - o.y) / w * w;
-    for (std::int32_t bx = x0; bx <= x1; ++bx) {
-      const float v = lows_.at_offset(row + columns[static_cast<std::size_t>(bx - x0)]);
-      if (v < ground && !valley({bx, by})) ground = v;
+  for (std::int32_t dy = -radius_; dy <= radius_; ++dy) {
+    for (std::int32_t dx = -radius_; dx <= radius_; ++dx) {
+      const CellIndex n{c.x + dx, c.y + dy};
+      if (!lows_.contains(n)) continue;
+      const float v = lows_.at(n);
+      if (v < ground && !valley(n)) ground = v;
     }
   }
   return ground == kNone ? 0.0f : low - ground;  // only valleys around: the cell is its own ground

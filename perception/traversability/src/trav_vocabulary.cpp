@@ -1,6 +1,5 @@
 #include "trailnav/perception/trav_vocabulary.hpp"
 
-#include <array>
 #include <cmath>
 
 namespace trailnav::perception::trav {
@@ -85,15 +84,9 @@ std::uint32_t Vocabulary::bin(Dim d, float value) const noexcept {
 }
 
 std::uint32_t Vocabulary::word(const Feature& f) const noexcept {
-  // The depth and the height first, the most significant digits: nearly
-  // every cell has depth 0 and most height 0, so their words lie together
-  // at the start of the count tables (the layer's lookups for eight models
-  // touch fewer cache lines: BM_TravWords/classify:1).
-  constexpr std::array<Dim, kDims> kOrder{Dim::depth,         Dim::height,        Dim::max_dz, Dim::remission_mean,
-                                          Dim::remission_var, Dim::roughness, Dim::slope};
   std::uint32_t w = 0;
-  for (const Dim dim : kOrder) {
-    const auto d = static_cast<int>(dim);
+  for (int d = 0; d < kDims; ++d) {
+    const auto dim = static_cast<Dim>(d);
     if (!uses(config_.set, dim)) continue;
     w = w * config_.bins[static_cast<std::size_t>(d)].bins + bin(dim, f[dim]);
   }

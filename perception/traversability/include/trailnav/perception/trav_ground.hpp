@@ -10,9 +10,12 @@
 // more above its lowest point on both sides within 2 m, the bottom of a
 // ditch — is never that ground: a track beside a ditch is not raised above
 // it. A cell in a valley gets its depth below the lower bank instead, the
-// seventh dimension: a ditch's flat bottom otherwise looks like a road. The recorder and the
-// layer each keep one and feed it the cells in the order the terrain step
-// hands them over, so that training and the robot make the same words.
+// seventh dimension: a ditch's flat bottom otherwise looks like a road. The
+// recorder and the layer each keep one and feed it the cells in the order
+// the terrain step hands them over, so that training and the robot make the
+// same words. Whether a block is a valley is kept beside its lowest point
+// and worked out again only after a block within kValleyRadius of it got a
+// lower point.
 // Allocated at construction; no heap afterwards.
 #pragma once
 
@@ -27,9 +30,7 @@ namespace trailnav::perception::trav {
 class GroundReference {
  public:
   // Covers `extent_x` x `extent_y` metres around the robot (the terrain grid's).
-  // `radius` at most kMaxRadius.
   GroundReference(double extent_x, double extent_y, double block = 1.0, int radius = 3);
-  static constexpr int kMaxRadius = 8;
 
   void move_to(double x, double y) noexcept;
   // Registers the lowest point of the cell at (x, y) in its block and gives
@@ -48,7 +49,6 @@ class GroundReference {
   static constexpr float kValleyDepth = 0.2f;
 
  private:
-  static constexpr std::size_t kMaxWindow = 2 * kMaxRadius + 1;
   enum class State : std::uint8_t { unknown, open, valley };
   struct Mark {
     State state;  // whether the block is a valley, unknown until asked after a change around it

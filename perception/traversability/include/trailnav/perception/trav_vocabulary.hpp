@@ -30,7 +30,8 @@
 //   height above the ground 0.4 m x 5, depth below it 0.1 m x 3; the last
 //   bin of each dimension is open-ended. |V| = 32 400 for the full vector,
 //   2 160 for the thesis' five, 810 without remission (NoRe), 3 600 without
-//   roughness and slope (NoRS): the ablations of §6.4 drop those dimensions from the word. Chosen
+//   roughness and slope (NoRS): the ablations of §6.4 drop those
+//   dimensions from the word. Chosen
 //   by measurement (docs/traversability.md): finer geometry bins left most of
 //   a meadow's words unseen in a demonstration, coarser remission bins let
 //   grass and dirt share words, max |Δz| must reach past half a metre to
@@ -119,8 +120,7 @@ class Vocabulary {
   // roughness, see above).
   std::uint32_t bin(Dim d, float value) const noexcept;
   // The word of a feature vector: the bins of the used dimensions in mixed
-  // radix, the depth the most significant, then the height, then max |Δz|
-  // to the slope.
+  // radix, max |Δz| the most significant.
   std::uint32_t word(const Feature& f) const noexcept;
 
  private:
