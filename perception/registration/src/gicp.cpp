@@ -7,6 +7,7 @@
 #include <Eigen/LU>
 
 #include "gicp_terms.hpp"
+#include "trailnav/perception/registration/multi_body.hpp"
 
 namespace trailnav::perception::registration {
 
@@ -114,52 +115,21 @@ Eigen::Matrix<double, 6, 6> covariance_of(const Eigen::Matrix<double, 6, 6>& h) 
 
 }  // namespace detail
 
-Gicp::Gicp(const GicpConfig& config, std::size_t capacity) : config_(config) { pairs_.reserve(capacity); }
+Gicp::Gicp(const GicpConfig& config, std::size_t capacity)
+    : config_(config), solver_(std::make_unique<MultiBodyGicp>(config, capacity, 1)) {}
+Gicp::~Gicp() = default;
 
 GicpResult Gicp::align(const Cloud& source, const Target& target, const Eigen::Isometry3d& initial) noexcept {
+  const Target* bodies[] = {&target};
+  BodyResult out[1];
   GicpResult r;
-  r.transform = initial;
-  const std::size_t n = std::min(source.size(), pairs_.capacity());
-  if (!detail::usable(config_, source, n, target)) return r;
-  const bool to_plane = config_.metric == Metric::point_to_plane;
-  const float gate2 = config_.max_correspondence_distance * config_.max_correspondence_distance;
-
-  Eigen::Matrix<double, 6, 6> h = Eigen::Matrix<double, 6, 6>::Identity();
-  for (int it = 0; it < config_.max_iterations; ++it) {
-    const Eigen::Matrix3d rot = r.transform.linear();
-    const Eigen::Vector3d tr = r.transform.translation();
-    // Eq. 2.11: each source point's nearest target point under T.
-    pairs_.clear();
-    double squared_sum = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Vector3d x = rot * source.points[i].cast<double>() + tr;
-      std::uint32_t j = 0;
-      float d2 = 0.0f;
-      if (!target.tree.nearest(x.cast<float>(), j, d2) || d2 > gate2) continue;
-      if (to_plane && target.normals[j].isZero()) continue;
-      pairs_.push_back({static_cast<std::uint32_t>(i), j});
-      squared_sum += static_cast<double>(d2);
-    }
-    r.correspondences = pairs_.size();
-    if (pairs_.size() < 6) {
-      r.converged = false;
-      return r;
-    }
-    r.fitness = squared_sum / static_cast<double>(pairs_.size());
-    h.setZero();
-    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-    double error = 0.0;
-    for (const Pair& p : pairs_) error += detail::accumulate(config_, source, p.source, target, p.target, rot, tr, h, b);
-    r.error = error;
-    bool converged = false;
-    if (!detail::step(config_, h, b, r.transform, converged)) return r;
-    r.iterations = it + 1;
-    if (converged) {
-      r.converged = true;
-      break;
-    }
-  }
-  r.covariance = detail::covariance_of(h);
+  r.iterations = solver_->align(source, bodies, std::span<const Eigen::Isometry3d>(&initial, 1), out);
+  r.transform = out[0].transform;
+  r.covariance = out[0].covariance;
+  r.converged = out[0].converged;
+  r.correspondences = out[0].correspondences;
+  r.fitness = out[0].fitness;
+  r.error = out[0].error;
   return r;
 }
 

@@ -43,7 +43,7 @@ int MultiBodyGicp::align(const Cloud& query, std::span<const Target* const> bodi
         best_j = j;
         best_body = static_cast<std::uint32_t>(k);
       }
-      if (best <= gate2) pairs_.push_back({static_cast<std::uint32_t>(i), best_j, best_body});
+      if (best <= gate2) pairs_.push_back({static_cast<std::uint32_t>(i), best_j, best_body, best});
     }
     // Eq. 4.1 / 4.4: with Dirac weights the normal equations are block
     // diagonal, one 6 × 6 block per body.
@@ -51,21 +51,26 @@ int MultiBodyGicp::align(const Cloud& query, std::span<const Target* const> bodi
       h_[k].setZero();
       b_[k].setZero();
       out[k].correspondences = 0;
+      out[k].fitness = 0.0;
+      out[k].error = 0.0;
     }
     for (const Pair& p : pairs_) {
       BodyResult& r = out[p.body];
-      detail::accumulate(config_, query, p.query, *bodies[p.body], p.target, r.transform.linear(), r.transform.translation(),
-                         h_[p.body], b_[p.body]);
+      r.error += detail::accumulate(config_, query, p.query, *bodies[p.body], p.target, r.transform.linear(),
+                                    r.transform.translation(), h_[p.body], b_[p.body]);
+      r.fitness += static_cast<double>(p.squared);
       ++r.correspondences;
     }
-    bool all_converged = true;
+    bool all_converged = true, any_observed = false;
     for (std::size_t k = 0; k < nb; ++k) {
       BodyResult& r = out[k];
       r.observed = r.correspondences >= 6;
+      if (r.correspondences > 0) r.fitness /= static_cast<double>(r.correspondences);
       if (!r.observed) {
         r.converged = false;
         continue;  // out of view: keeps its transform
       }
+      any_observed = true;
       bool converged = false;
       if (!detail::step(config_, h_[k], b_[k], r.transform, converged)) {
         r.converged = false;
@@ -74,6 +79,7 @@ int MultiBodyGicp::align(const Cloud& query, std::span<const Target* const> bodi
       r.converged = converged;
       all_converged = all_converged && converged;
     }
+    if (!any_observed) break;  // nothing in view: no step was made
     iterations = it + 1;
     if (all_converged) break;
   }

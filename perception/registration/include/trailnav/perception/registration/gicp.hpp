@@ -27,6 +27,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
@@ -67,9 +68,15 @@ struct Target {
   KdTree tree;
 };
 
+class MultiBodyGicp;
+
+// The single-body case of MultiBodyGicp (multi_body.hpp): one solver loop.
 class Gicp {
  public:
   Gicp(const GicpConfig& config, std::size_t capacity);
+  ~Gicp();
+  Gicp(const Gicp&) = delete;
+  Gicp& operator=(const Gicp&) = delete;
 
   const GicpConfig& config() const noexcept { return config_; }
   // Registers `source` (its covariances computed unless the metric is point
@@ -79,12 +86,8 @@ class Gicp {
                    const Eigen::Isometry3d& initial = Eigen::Isometry3d::Identity()) noexcept;
 
  private:
-  struct Pair {
-    std::uint32_t source;
-    std::uint32_t target;
-  };
   GicpConfig config_;
-  std::vector<Pair> pairs_;
+  std::unique_ptr<MultiBodyGicp> solver_;
 };
 
 // The target's covariances, normals and tree from its points (allocates:

@@ -13,7 +13,9 @@
 //
 // Iterated until every object's update is below the convergence thresholds
 // or `max_iterations`. An object with fewer than 6 associations in an
-// iteration keeps its transform (it is out of view) and is reported so.
+// iteration keeps its transform (it is out of view) and is reported so; when
+// no object has them, the iterations stop. Gicp (gicp.hpp) is this solver
+// with one body.
 // Preallocated for `capacity` query points and `max_bodies` objects.
 #pragma once
 
@@ -31,6 +33,8 @@ struct BodyResult {
   std::size_t correspondences = 0;  // query points associated with it in the last iteration
   bool converged = false;           // its last update below the thresholds
   bool observed = false;            // at least 6 associations in the last iteration
+  double fitness = 0.0;             // mean squared Euclidean distance of its last associations, m²
+  double error = 0.0;               // its share of the objective (Eq. 4.1) at the last associations
 };
 
 class MultiBodyGicp {
@@ -49,6 +53,7 @@ class MultiBodyGicp {
     std::uint32_t query;
     std::uint32_t target;
     std::uint32_t body;
+    float squared;  // the association's squared distance
   };
   GicpConfig config_;
   std::size_t max_bodies_;
