@@ -40,13 +40,6 @@ struct Options {
   bool no_prediction = false;
 };
 
-Eigen::Isometry3d pose_of(const reg::Pose2& p) {
-  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  t.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
-  return t;
-}
-
 int run(const Options& o) {
   const char* who = "trailnav lidar-odometry";
   if (o.report != "" && o.report != "json") {
@@ -105,12 +98,13 @@ int run(const Options& o) {
   std::unique_ptr<ProgressBar> bar;
   if (!o.quiet) bar = std::make_unique<ProgressBar>("lidar odometry", static_cast<double>(scans.size()), "scans");
   const auto t0 = std::chrono::steady_clock::now();
-  const Eigen::Isometry3d start = pose_of(scans.front().pose);
+  const Eigen::Isometry3d start = reg::to_isometry(scans.front().pose);
+  std::size_t no_room = 0;  // returns beyond a scan's point buffer (none while scans have at most 4096 beams)
   for (std::size_t i = 0; i < scans.size(); ++i) {
     points.clear();
-    reg::scan_points(scans[i], o.max_range, 0.05f, points);
+    no_room += reg::scan_points(scans[i], o.max_range, 0.05f, points);
     estimate.push_back(start * odometry.add(points));
-    reference.push_back(pose_of(scans[i].pose));
+    reference.push_back(reg::to_isometry(scans[i].pose));
     if (bar) bar->update(static_cast<double>(i + 1));
   }
   if (bar) bar->finish();
@@ -145,10 +139,10 @@ int run(const Options& o) {
       return std::string(b);
     };
     std::printf(
-        "{\"input\": \"%s\", \"scans\": %zu, \"refused_lines\": %ld, \"path_m\": %s, \"keyframes\": %llu, "
+        "{\"input\": \"%s\", \"scans\": %zu, \"refused_lines\": %ld, \"returns_dropped\": %zu, \"path_m\": %s, \"keyframes\": %llu, "
         "\"not_converged\": %llu, \"rejected\": %llu, \"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, "
         "\"segments\": %zu, \"end_error_m\": %s, \"ms_per_scan\": %s}\n",
-        o.input.c_str(), scans.size(), refused, num(path, 3).c_str(), static_cast<unsigned long long>(c.keyframes),
+        o.input.c_str(), scans.size(), refused, no_room, num(path, 3).c_str(), static_cast<unsigned long long>(c.keyframes),
         static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.rejected),
         num(rpe.translation_percent, 4).c_str(), num(rpe.rotation_deg_per_100m, 4).c_str(), rpe.segments,
         num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str());
@@ -160,6 +154,7 @@ int run(const Options& o) {
               scans.size(), path, static_cast<unsigned long long>(c.keyframes),
               static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.rejected));
   if (refused > 0) std::printf("  %ld FLASER lines refused, the first: %s\n", refused, first_error.c_str());
+  if (no_room > 0) std::printf("  %zu returns dropped: more beams than a scan's buffer holds\n", no_room);
   std::printf("  relative pose error per 10 m against the log's poses (%zu segments): %.3f %% translation, %.3f deg/100 m\n",
               rpe.segments, rpe.translation_percent, rpe.rotation_deg_per_100m);
   std::printf("  end point %.2f m from the log's; %.2f ms a scan\n", end_error, 1000.0 * seconds / static_cast<double>(scans.size()));

@@ -10,7 +10,6 @@
 #include <benchmark/benchmark.h>
 
 #include <cmath>
-#include <fstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -18,29 +17,13 @@
 #include "trailnav/perception/registration/cloud.hpp"
 #include "trailnav/perception/registration/gicp.hpp"
 #include "trailnav/perception/registration/multi_body.hpp"
-#include "car_scene.hpp"
+
+#include "registration_data.hpp"
 
 namespace {
 
 using namespace trailnav::perception::registration;
 
-std::vector<Point> kitti(int i) {
-  const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error("cannot read " + path);
-  std::vector<Point> p;
-  float x[4];
-  while (f.read(reinterpret_cast<char*>(x), sizeof x)) p.emplace_back(x[0], x[1], x[2]);
-  return p;
-}
-
-Cloud downsampled(const std::vector<Point>& points, float voxel) {
-  VoxelFilter filter(points.size());
-  Cloud c;
-  c.points.reserve(points.size());
-  filter.filter(points, voxel, c);
-  return c;
-}
 
 void BM_VoxelFilter(benchmark::State& state) {
   const std::vector<Point> raw = kitti(0);

@@ -13,7 +13,6 @@
 #include <benchmark/benchmark.h>
 
 #include <cmath>
-#include <fstream>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -33,27 +32,12 @@
 #include <small_gicp/util/normal_estimation_omp.hpp>
 #endif
 
+#include "registration_data.hpp"
+
 namespace {
 
 using namespace trailnav::perception::registration;
 
-std::vector<Point> kitti(int i) {
-  const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error("cannot read " + path);
-  std::vector<Point> p;
-  float x[4];
-  while (f.read(reinterpret_cast<char*>(x), sizeof x)) p.emplace_back(x[0], x[1], x[2]);
-  return p;
-}
-
-Cloud downsampled(const std::vector<Point>& points, float voxel) {
-  VoxelFilter filter(points.size());
-  Cloud c;
-  c.points.reserve(points.size());
-  filter.filter(points, voxel, c);
-  return c;
-}
 
 Eigen::Isometry3d truth_motion() {
   Eigen::Isometry3d m = Eigen::Isometry3d::Identity();

@@ -51,8 +51,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         check(scan.ranges.size() >= 2 && scan.ranges.size() <= 1081);
         std::vector<perception::registration::Point> points;
         points.reserve(scan.ranges.size());
-        perception::registration::scan_points(scan, 81.0f, 0.0f, points);
-        check(points.size() <= scan.ranges.size());
+        const std::size_t no_room = perception::registration::scan_points(scan, 81.0f, 0.0f, points);
+        check(no_room == 0 && points.size() <= scan.ranges.size());
         for (const auto& p : points) check(p.allFinite() && p.norm() < 81.1f);
       }
     }

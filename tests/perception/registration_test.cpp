@@ -6,11 +6,10 @@
 // heap during a registration.
 #include <gtest/gtest.h>
 
-#include <cmath>
 #include <zlib.h>
+
+#include <cmath>
 #include <cstdio>
-#include <map>
-#include <fstream>
 #include <string>
 #include <vector>
 
@@ -21,30 +20,12 @@
 #include "trailnav/perception/registration/multi_body.hpp"
 #include "trailnav/perception/registration/carmen.hpp"
 #include "trailnav/perception/registration/odometry.hpp"
-#include "car_scene.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "registration_data.hpp"
 
 namespace trailnav::perception::registration {
 namespace {
 
-std::vector<Point> kitti(int i) {
-  const std::string path = "../shared/data/kitti/00000" + std::to_string(i) + ".bin";
-  std::ifstream f(path, std::ios::binary);
-  std::vector<float> v;
-  float x[4];
-  while (f.read(reinterpret_cast<char*>(x), sizeof x)) v.insert(v.end(), x, x + 4);
-  std::vector<Point> p;
-  for (std::size_t k = 0; k + 3 < v.size(); k += 4) p.emplace_back(v[k], v[k + 1], v[k + 2]);
-  return p;
-}
-
-Cloud downsampled(const std::vector<Point>& points, float voxel) {
-  VoxelFilter filter(points.size());
-  Cloud c;
-  c.points.reserve(points.size());
-  filter.filter(points, voxel, c);
-  return c;
-}
 
 double rotation_error_deg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
   return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
@@ -340,10 +321,17 @@ TEST(Carmen, FlaserLinesParseAndBadOnesAreNamed) {
   EXPECT_DOUBLE_EQ(s.timestamp, 12.5);
   std::vector<Point> p;
   p.reserve(8);
-  scan_points(s, 81.0f, 0.05f, p);
+  EXPECT_EQ(scan_points(s, 81.0f, 0.05f, p), 0u);
   ASSERT_EQ(p.size(), 3u);  // 81.91: no return
   EXPECT_NEAR(p[0].x(), 0.0f, 1e-6f);  // the first beam at −90°
   EXPECT_NEAR(p[0].y(), -1.5f, 1e-6f);
+  std::vector<Point> two;
+  two.reserve(2);
+  EXPECT_EQ(scan_points(s, 81.0f, 0.05f, two), 1u);  // no room for the third return: counted
+  EXPECT_EQ(two.size(), 2u);
+  const Eigen::Isometry3d t = to_isometry(s.pose);
+  EXPECT_NEAR(t.translation().x(), 0.5, 1e-12);
+  EXPECT_NEAR(std::atan2(t.linear()(1, 0), t.linear()(0, 0)), 1.57, 1e-12);
   EXPECT_EQ(parse_flaser("ODOM 1 2 3", s), "not FLASER");
   EXPECT_NE(parse_flaser("FLASER 4 1 2 3", s).find("range 4 of 4"), std::string::npos);
   EXPECT_NE(parse_flaser("FLASER 4 1 2 -3 4 0 0 0 0 0 0 1", s).find("range 3 is negative"), std::string::npos);
@@ -409,17 +397,11 @@ TEST(LidarOdometry, TheFreiburgLogsFirstThousandScansAgainstItsPoses) {
   std::vector<Eigen::Isometry3d> ref, est;
   std::vector<Point> points;
   points.reserve(config.max_points);
-  auto pose_of = [](const Pose2& p) {
-    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-    t.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-    t.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
-    return t;
-  };
   for (const LaserScan2& s : scans) {
     points.clear();
     scan_points(s, 40.0f, 0.05f, points);
-    est.push_back(pose_of(scans.front().pose) * odometry.add(points));
-    ref.push_back(pose_of(s.pose));
+    est.push_back(to_isometry(scans.front().pose) * odometry.add(points));
+    ref.push_back(to_isometry(s.pose));
   }
   const RelativePoseError e = relative_pose_error(ref, est, 10.0);
   std::printf("[ odometry ] 1000 scans: %zu segments, %.3f %% and %.3f deg/100 m; %llu keyframes, %llu not converged\n",

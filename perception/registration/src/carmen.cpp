@@ -54,18 +54,32 @@ std::string parse_flaser(std::string_view line, LaserScan2& out, std::size_t max
   return "";
 }
 
-void scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept {
+std::size_t scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept {
   const std::size_t n = scan.ranges.size();
-  if (n < 2) return;
+  if (n < 2) return 0;
   // 181 and 361 beams: both ends included (n − 1 steps over 180°); 180 and
   // 360: 180°/n steps from −90°.
   const double step = (n % 2 == 1 ? M_PI / static_cast<double>(n - 1) : M_PI / static_cast<double>(n));
-  for (std::size_t i = 0; i < n && out.size() < out.capacity(); ++i) {
+  std::size_t no_room = 0;
+  for (std::size_t i = 0; i < n; ++i) {
     const float r = scan.ranges[i];
     if (!(r < max_range) || r < min_range) continue;
+    if (out.size() == out.capacity()) {
+      ++no_room;
+      continue;
+    }
     const double a = -M_PI / 2.0 + static_cast<double>(i) * step;
-    out.emplace_back(static_cast<float>(static_cast<double>(r) * std::cos(a)), static_cast<float>(static_cast<double>(r) * std::sin(a)), 0.0f);
+    out.emplace_back(static_cast<float>(static_cast<double>(r) * std::cos(a)),
+                     static_cast<float>(static_cast<double>(r) * std::sin(a)), 0.0f);
   }
+  return no_room;
+}
+
+Eigen::Isometry3d to_isometry(const Pose2& p) noexcept {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  t.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
+  return t;
 }
 
 }  // namespace trailnav::perception::registration

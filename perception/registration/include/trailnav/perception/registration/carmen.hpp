@@ -11,6 +11,8 @@
 #include <string_view>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "trailnav/perception/registration/cloud.hpp"
 
 namespace trailnav::perception::registration {
@@ -31,8 +33,11 @@ struct LaserScan2 {
 std::string parse_flaser(std::string_view line, LaserScan2& out, std::size_t max_beams = 1081);
 
 // The scan's returns as points in the laser's frame (z = 0); ranges at or
-// beyond `max_range` or below `min_range` dropped. Appends to `out` within
-// its capacity.
-void scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept;
+// beyond `max_range` or below `min_range` are no return. Appends to `out`
+// within its reserved capacity; returns how many returns found no room.
+std::size_t scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept;
+
+// A planar pose as a 3D transform (z = 0, yaw θ).
+Eigen::Isometry3d to_isometry(const Pose2& p) noexcept;
 
 }  // namespace trailnav::perception::registration
