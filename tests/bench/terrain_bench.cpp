@@ -19,6 +19,7 @@
 #include "trailnav/perception/terrain_mapper.hpp"
 #include "trailnav/perception/trav_layer.hpp"
 #include "trailnav/perception/trav_model_file.hpp"
+#include "trailnav/perception/trav_online.hpp"
 #include "trailnav/perception/trav_recorder.hpp"
 #include "trailnav/runtime/atomic_file.hpp"
 
@@ -131,8 +132,8 @@ BENCHMARK(BM_TravStep)->Unit(benchmark::kMillisecond);
 // (whose time this noisy machine varies by more than the difference): the
 // cells a real step over four KITTI revolutions handed over (their sums and
 // terrain features, captured once), given to the recorder (feature, word,
-// entry) and, with `classify`, to the layer (each word into its cell's
-// evidence for eight terrain models and POS), as the terrain thread does.
+// entry), to the layer (feature, word, the word into its cell's evidence
+// for eight terrain models and POS) or to both, as the terrain thread does.
 void BM_TravWords(benchmark::State& state) {
   TerrainConfig config;
   auto mapper = filled_mapper(config, 4);
@@ -168,14 +169,18 @@ void BM_TravWords(benchmark::State& state) {
                                        config.map.resolution);
   if (!layer.layer) throw std::runtime_error(layer.error);
   layer.layer->move_to(0.0, 0.0);
-  const bool classify = state.range(0) != 0;
+  // mode 0: the recorder alone; 1: trailnavd's demonstration mode, recorder
+  // and layer behind TravOnline (one ground and word per cell for both);
+  // 2: the layer alone (the robot classifying, no demonstration).
+  const auto mode = state.range(0);
   trav::WordCounts scratch(vocabulary.size());
+  Mailbox<trav::LocalMapWords> local_maps(vocabulary.size());
+  trav::TravOnline online(*layer.layer, &recorder, &local_maps);
+  CellSumsSink* sink = mode == 0 ? static_cast<CellSumsSink*>(&recorder)
+                       : mode == 1 ? static_cast<CellSumsSink*>(&online)
+                                   : static_cast<CellSumsSink*>(layer.layer.get());
   for (auto _ : state) {
-    for (const Handed& h : capture.cells) {
-      const FeatureVector* f = h.has_feature ? &h.feature : nullptr;
-      recorder.cell_sums(h.cell, h.sums, f, h.x, h.y);
-      if (classify) layer.layer->cell_sums(h.cell, h.sums, f, h.x, h.y);
-    }
+    for (const Handed& h : capture.cells) sink->cell_sums(h.cell, h.sums, h.has_feature ? &h.feature : nullptr, h.x, h.y);
     state.PauseTiming();
     recorder.finish_local_map(scratch);
     state.ResumeTiming();
@@ -183,7 +188,7 @@ void BM_TravWords(benchmark::State& state) {
   state.counters["cells"] = static_cast<double>(capture.cells.size());
   state.counters["models"] = static_cast<double>(models.models());
 }
-BENCHMARK(BM_TravWords)->ArgName("classify")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_TravWords)->ArgName("mode")->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
 // The demonstration task's work per local map (trailnavd's `demonstration`
 // task, docs/traversability.md "On the robot"): a local map of 60 000 words

@@ -975,6 +975,67 @@ TEST(TravDemonstration, RealRevolutionsTrainOnlineSaveAtomicallyAndFillTheClassM
   std::filesystem::remove_all(dir);
 }
 
+// TravOnline works out each cell's ground and word once, in the layer, and
+// hands the word to the recorder: over real KITTI revolutions the recorder
+// behind it records exactly what a recorder of its own, fed the same cells
+// beside it, records — the same words, cell by cell, in the same order.
+TEST(TravDemonstration, TheRecorderTakesTheLayersWordsAsItsOwnWouldBe) {
+  KittiDrive drive;
+  ASSERT_TRUE(drive.mapper);
+  const TerrainConfig& tc = drive.config;
+  TrainedLayer t;
+  auto made = TravLayer::create(t.models, Method::pnb, 100.0, 20.0, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  ASSERT_TRUE(made.layer) << made.error;
+  RecorderConfig rc;
+  rc.local_map_distance = 100.0;  // one local map throughout
+  TravRecorder shared(rc, t.vocabulary, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  TravRecorder own(rc, t.vocabulary, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+  Mailbox<LocalMapWords> local_maps(t.vocabulary.size());
+  TravOnline online(*made.layer, &shared, &local_maps);
+  struct Both final : CellSumsSink {
+    TravOnline* online;
+    TravRecorder* own;
+    void cell_sums(CellIndex c, const CellStats& s, const FeatureVector* f, double x, double y) noexcept override {
+      online->cell_sums(c, s, f, x, y);
+      own->cell_sums(c, s, f, x, y);
+    }
+    void robot_pose(double x, double y, double yaw, std::int64_t ns) noexcept override {
+      online->robot_pose(x, y, yaw, ns);
+      own->drive(x, y, yaw);
+    }
+    void step_begins(double x, double y, std::int64_t ns, TerrainClassMap& map) noexcept override {
+      online->step_begins(x, y, ns, map);
+    }
+  } both;
+  both.online = &online;
+  both.own = &own;
+  drive.mapper->set_sums_sink(&both);
+  for (int n = 1; n <= 40; ++n) drive.revolution(n);  // 12 m
+
+  ASSERT_GT(shared.counters().words, 10'000u);
+  EXPECT_EQ(shared.counters().words, own.counters().words);
+  // The layer turns the distant cells away for both (TravOnline's counters
+  // give its count as the recorder's).
+  EXPECT_EQ(made.layer->counters().too_far, own.counters().too_far);
+  EXPECT_EQ(made.layer->counters().words, shared.counters().words);
+  std::vector<std::pair<CellIndex, std::vector<std::uint32_t>>> a, b;
+  WordCounts ca(t.vocabulary.size()), cb(t.vocabulary.size());
+  shared.finish_local_map(ca, [&](const TravRecorder::CellWords& c) {
+    a.emplace_back(c.cell, std::vector<std::uint32_t>(c.words.begin(), c.words.end()));
+  });
+  own.finish_local_map(cb, [&](const TravRecorder::CellWords& c) {
+    b.emplace_back(c.cell, std::vector<std::uint32_t>(c.words.begin(), c.words.end()));
+  });
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    ASSERT_EQ(a[k].first.x, b[k].first.x);
+    ASSERT_EQ(a[k].first.y, b[k].first.y);
+    ASSERT_EQ(a[k].second, b[k].second) << "cell " << a[k].first.x << "," << a[k].first.y;
+  }
+  EXPECT_EQ(ca.total_positive(), cb.total_positive());
+  EXPECT_EQ(ca.total_unlabelled(), cb.total_unlabelled());
+}
+
 // A save that cannot happen (its directory is gone) is counted with its
 // errno and leaves nothing behind; the models stay in memory for the next.
 TEST(TravDemonstration, AFailedSaveIsCountedAndTheNextOneWrites) {

@@ -42,19 +42,20 @@ void TravLayer::move_to(double x, double y) noexcept {
   }
 }
 
-void TravLayer::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x, double y) noexcept {
+bool TravLayer::classify(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x, double y,
+                         std::uint32_t& word) noexcept {
   if (have_pose_ && std::hypot(x - x_, y - y_) > max_range_) {
     ++counters_.too_far;
-    return;
+    return false;
   }
   if (!grid_.contains(cell)) {
     ++counters_.outside;
-    return;
+    return false;
   }
   const float height = ground_.height(x, y, sums);
   Feature f;
-  if (!cell_feature(sums, f, feature, height)) return;
-  const std::uint32_t word = models_->vocabulary().word(f);
+  if (!cell_feature(sums, f, feature, height)) return false;
+  word = models_->vocabulary().word(f);
   TravCell& c = grid_.at(cell);
   if (c.words > 0 && (c.local_map != local_map_ || c.models != models_epoch_)) {
     c = TravCell{};
@@ -70,6 +71,7 @@ void TravLayer::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVe
   if (map_ != nullptr) {
     if (TerrainCell* t = map_->grid().find(x, y)) t->traversable = probability(c);
   }
+  return true;
 }
 
 void TravLayer::step_begins(double robot_x, double robot_y, std::int64_t, TerrainClassMap& map) noexcept {

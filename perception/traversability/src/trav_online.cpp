@@ -14,12 +14,21 @@ TravOnline::TravOnline(TravLayer& layer, TravRecorder* recorder, Mailbox<LocalMa
     recorder_ = nullptr;
     local_maps_ = nullptr;
   }
+  // The layer works out each cell's ground and word once for both halves
+  // when the recorder's vocabulary is its models' (trailnavd's is: the
+  // demonstration trains the model the layer classifies with).
+  shared_words_ = recorder_ != nullptr && recorder_->vocabulary().config() == layer_.models().vocabulary().config();
   counters_.models = layer_.models().models();
   shared_.post(counters_);
 }
 
 void TravOnline::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
                            double y) noexcept {
+  if (shared_words_) {
+    std::uint32_t word = 0;
+    if (layer_.classify(cell, sums, feature, x, y, word)) recorder_->record(cell, x, y, word);
+    return;
+  }
   layer_.cell_sums(cell, sums, feature, x, y);
   if (recorder_ != nullptr) recorder_->cell_sums(cell, sums, feature, x, y);
 }
@@ -49,6 +58,8 @@ void TravOnline::step_begins(double robot_x, double robot_y, std::int64_t now_ns
   // The counters of the step before (this one's cells follow): posted once a step.
   counters_.layer = layer_.counters();
   if (recorder_ != nullptr) counters_.recorder = recorder_->counters();
+  // With shared words the layer turned the distant cells away for both.
+  if (shared_words_) counters_.recorder.too_far = counters_.layer.too_far;
   counters_.models = std::min(layer_.models().models(), kLayerModels);
   shared_.post(counters_);
 }
@@ -58,6 +69,7 @@ bool TravOnline::finish_partial() noexcept {
   const std::uint64_t before = counters_.handed;
   hand_over(true);
   counters_.recorder = recorder_->counters();
+  if (shared_words_) counters_.recorder.too_far = counters_.layer.too_far;
   shared_.post(counters_);
   return counters_.handed > before;
 }

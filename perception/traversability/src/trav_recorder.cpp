@@ -76,22 +76,35 @@ bool TravRecorder::footprint(CellIndex cell) const noexcept {
   return marks_.contains(cell) && marks_.at(cell) == local_map_;
 }
 
-void TravRecorder::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
-                             double y) noexcept {
+bool TravRecorder::too_far(double x, double y) noexcept {
   if (have_pose_ && std::hypot(x - last_x_, y - last_y_) > config_.max_range) {
     ++counters_.too_far;
-    return;
+    return true;
   }
-  const float height = ground_.height(x, y, sums);
-  Feature f;
-  if (!cell_feature(sums, f, feature, height)) return;
+  return false;
+}
+
+void TravRecorder::store(CellIndex cell, std::uint32_t word) noexcept {
   if (used_ == entries_.size()) {
     ++counters_.dropped;
     return;
   }
-  entries_[used_] = {cell, vocabulary_.word(f), static_cast<std::uint32_t>(used_)};
+  entries_[used_] = {cell, word, static_cast<std::uint32_t>(used_)};
   ++used_;
   ++counters_.words;
+}
+
+void TravRecorder::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
+                             double y) noexcept {
+  if (too_far(x, y)) return;
+  const float height = ground_.height(x, y, sums);
+  Feature f;
+  if (!cell_feature(sums, f, feature, height)) return;
+  store(cell, vocabulary_.word(f));
+}
+
+void TravRecorder::record(CellIndex cell, double x, double y, std::uint32_t word) noexcept {
+  if (!too_far(x, y)) store(cell, word);
 }
 
 void TravRecorder::finish_local_map(WordCounts& counts, const std::function<void(const CellWords&)>& each_cell) noexcept {

@@ -13,7 +13,8 @@
 // seventh dimension: a ditch's flat bottom otherwise looks like a road. The
 // recorder and the layer each keep one and feed it the cells in the order
 // the terrain step hands them over, so that training and the robot make the
-// same words. Whether a block is a valley is kept beside its lowest point
+// same words; in trailnavd's demonstration mode the layer's serves both
+// (TravOnline). Whether a block is a valley is kept beside its lowest point
 // and worked out again only after a block within kValleyRadius of it got a
 // lower point.
 // Allocated at construction; no heap afterwards.

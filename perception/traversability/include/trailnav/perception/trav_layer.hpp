@@ -54,7 +54,15 @@ class TravLayer final : public CellSumsSink {
   // The robot's position (odometry frame): the grid follows it, the local
   // map counts its travel.
   void move_to(double x, double y) noexcept;
-  void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x, double y) noexcept override;
+  void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x, double y) noexcept override {
+    std::uint32_t word = 0;
+    classify(cell, sums, feature, x, y, word);
+  }
+  // The same, and the cell's word in `word` when it made one (true): a
+  // demonstration's recorder over the same vocabulary takes it as it is
+  // (TravOnline), instead of working out the ground and the word again.
+  bool classify(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x, double y,
+                std::uint32_t& word) noexcept;
   // The step's robot position (move_to) and the class map whose cells'
   // `traversable` the following cell_sums() write.
   void step_begins(double robot_x, double robot_y, std::int64_t now_ns, TerrainClassMap& map) noexcept override;

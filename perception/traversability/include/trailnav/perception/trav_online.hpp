@@ -48,6 +48,8 @@ struct OnlineCounters {
 class TravOnline final : public CellSumsSink {
  public:
   // Without a recorder (and its two mailboxes) the layer only classifies.
+  // With one over the layer's vocabulary, each cell's ground and word are
+  // worked out once, by the layer, and recorded as they are.
   explicit TravOnline(TravLayer& layer, TravRecorder* recorder = nullptr, Mailbox<LocalMapWords>* local_maps = nullptr,
                       Mailbox<TravModels>* models_in = nullptr) noexcept;
 
@@ -71,6 +73,7 @@ class TravOnline final : public CellSumsSink {
   TravRecorder* recorder_;
   Mailbox<LocalMapWords>* local_maps_;
   Mailbox<TravModels>* models_in_;
+  bool shared_words_ = false;  // the recorder takes the layer's words (same vocabulary)
   OnlineCounters counters_;
   StatusBoard<OnlineCounters> shared_;
 };

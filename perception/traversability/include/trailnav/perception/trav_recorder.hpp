@@ -61,6 +61,9 @@ class TravRecorder final : public CellSumsSink {
   void drive(double x, double y, double yaw) noexcept;
   void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
                  double y) noexcept override;
+  // A cell's word made elsewhere over the same vocabulary and ground (the
+  // layer's, TravOnline): recorded as cell_sums() would have made it.
+  void record(CellIndex cell, double x, double y, std::uint32_t word) noexcept;
 
   bool local_map_complete() const noexcept { return travelled_ >= config_.local_map_distance; }
   double travelled() const noexcept { return travelled_; }
@@ -91,6 +94,8 @@ class TravRecorder final : public CellSumsSink {
     std::uint32_t order;  // when recorded
   };
   void mark(double x, double y, double yaw) noexcept;
+  bool too_far(double x, double y) noexcept;
+  void store(CellIndex cell, std::uint32_t word) noexcept;
 
   RecorderConfig config_;
   Vocabulary vocabulary_;

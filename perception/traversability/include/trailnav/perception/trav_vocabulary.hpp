@@ -99,11 +99,13 @@ bool uses(FeatureSet s, Dim d) noexcept;
 struct Binning {
   float width = 1.0f;
   std::uint32_t bins = 1;
+  bool operator==(const Binning&) const = default;
 };
 
 struct VocabularyConfig {
   std::array<Binning, kDims> bins{{{0.1f, 6}, {16.0f, 10}, {8.0f, 4}, {0.03f, 3}, {15.0f, 3}, {0.4f, 5}, {0.1f, 3}}};
   FeatureSet set = FeatureSet::full;
+  bool operator==(const VocabularyConfig&) const = default;  // the same words
 };
 // "" if usable, else what is wrong (bins 1..64 per dimension, finite positive
 // widths, |V| at most kMaxVocabulary).
