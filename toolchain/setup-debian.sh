@@ -7,6 +7,9 @@ set -euo pipefail
 packages=(
   # compilers and build
   g++ cmake ninja-build pkg-config git
+  # a compiler cache outside the checkout (~/.cache/ccache): a clean clone
+  # compiles only what changed since the last build anywhere on the machine
+  ccache
   # analysis and fuzzing (clang's libFuzzer runtime)
   clang clang-format clang-tidy libclang-rt-14-dev
   # libraries

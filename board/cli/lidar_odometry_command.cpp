@@ -38,6 +38,7 @@ struct Options {
   int max_iterations = 100;
   bool quiet = false;
   bool no_prediction = false;
+  bool one_start = false;
 };
 
 int run(const Options& o) {
@@ -91,6 +92,7 @@ int run(const Options& o) {
   config.max_points = 4096;
   config.gicp.max_iterations = o.max_iterations;
   config.constant_velocity = !o.no_prediction;
+  config.two_starts = !o.one_start;
   reg::LidarOdometry odometry(config);
   std::vector<Eigen::Isometry3d> reference, estimate;
   std::vector<reg::Point> points;
@@ -140,19 +142,21 @@ int run(const Options& o) {
     };
     std::printf(
         "{\"input\": \"%s\", \"scans\": %zu, \"refused_lines\": %ld, \"returns_dropped\": %zu, \"path_m\": %s, \"keyframes\": %llu, "
-        "\"not_converged\": %llu, \"rejected\": %llu, \"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, "
+        "\"not_converged\": %llu, \"second_start\": %llu, \"rejected\": %llu, \"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, "
         "\"segments\": %zu, \"end_error_m\": %s, \"ms_per_scan\": %s}\n",
         o.input.c_str(), scans.size(), refused, no_room, num(path, 3).c_str(), static_cast<unsigned long long>(c.keyframes),
-        static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.rejected),
-        num(rpe.translation_percent, 4).c_str(), num(rpe.rotation_deg_per_100m, 4).c_str(), rpe.segments,
+        static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.second_start),
+        static_cast<unsigned long long>(c.rejected), num(rpe.translation_percent, 4).c_str(), num(rpe.rotation_deg_per_100m, 4).c_str(), rpe.segments,
         num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str());
     return 0;
   }
   std::printf("lidar odometry (scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n", o.local_scans,
               static_cast<double>(o.voxel), o.input.c_str());
-  std::printf("  %zu scans, %.1f m of the log's path, %llu keyframes, %llu registrations not converged, %llu rejected\n",
+  std::printf("  %zu scans, %.1f m of the log's path, %llu keyframes, %llu registrations not converged, %llu answers "
+              "from the second start (the last pose), %llu rejected\n",
               scans.size(), path, static_cast<unsigned long long>(c.keyframes),
-              static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.rejected));
+              static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.second_start),
+              static_cast<unsigned long long>(c.rejected));
   if (refused > 0) std::printf("  %ld FLASER lines refused, the first: %s\n", refused, first_error.c_str());
   if (no_room > 0) std::printf("  %zu returns dropped: more beams than a scan's buffer holds\n", no_room);
   std::printf("  relative pose error per 10 m against the log's poses (%zu segments): %.3f %% translation, %.3f deg/100 m\n",
@@ -183,6 +187,9 @@ void add_lidar_odometry_command(CLI::App& app) {
   cmd->add_option("--max-scans", o.max_scans, "Use only the first N scans (0: all)")->capture_default_str();
   cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (timestamp,x,y,theta,ref_x,ref_y,ref_theta)");
   cmd->add_flag("--no-prediction", o.no_prediction, "Start each registration at the last pose instead of the last motion repeated");
+  cmd->add_flag("--one-start", o.one_start,
+                "Register from the prediction only (by default a second registration starts at the last pose when the "
+                "prediction moved away from it, and the answer with the smaller truncated cost is kept)");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([] { std::exit(run(o)); });
 }

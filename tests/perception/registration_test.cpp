@@ -393,25 +393,43 @@ TEST(LidarOdometry, TheFreiburgLogsFirstThousandScansAgainstItsPoses) {
   config.gicp.max_correspondence_distance = 0.5f;
   config.gicp.max_iterations = 100;
   config.max_points = 4096;
-  LidarOdometry odometry(config);
-  std::vector<Eigen::Isometry3d> ref, est;
-  std::vector<Point> points;
-  points.reserve(config.max_points);
-  for (const LaserScan2& s : scans) {
-    points.clear();
-    scan_points(s, 40.0f, 0.05f, points);
-    est.push_back(to_isometry(scans.front().pose) * odometry.add(points));
-    ref.push_back(to_isometry(s.pose));
-  }
-  const RelativePoseError e = relative_pose_error(ref, est, 10.0);
-  std::printf("[ odometry ] 1000 scans: %zu segments, %.3f %% and %.3f deg/100 m; %llu keyframes, %llu not converged\n",
-              e.segments, e.translation_percent, e.rotation_deg_per_100m,
-              static_cast<unsigned long long>(odometry.counters().keyframes),
-              static_cast<unsigned long long>(odometry.counters().not_converged));
-  EXPECT_GT(e.segments, 500u);
-  EXPECT_LT(e.translation_percent, 5.0);
-  EXPECT_LT(e.rotation_deg_per_100m, 40.0);
-  EXPECT_EQ(odometry.counters().rejected, 0u);
+  // Each configuration over the same scans: one start (the prediction) and
+  // two (the prediction and the last pose, the better answer kept).
+  auto run = [&](bool two_starts, OdometryCounters& counters) {
+    config.two_starts = two_starts;
+    LidarOdometry odometry(config);
+    std::vector<Eigen::Isometry3d> ref, est;
+    std::vector<Point> points;
+    points.reserve(config.max_points);
+    for (const LaserScan2& s : scans) {
+      points.clear();
+      scan_points(s, 40.0f, 0.05f, points);
+      est.push_back(to_isometry(scans.front().pose) * odometry.add(points));
+      ref.push_back(to_isometry(s.pose));
+    }
+    counters = odometry.counters();
+    const RelativePoseError e = relative_pose_error(ref, est, 10.0);
+    std::printf("[ odometry ] 1000 scans, %s: %zu segments, %.3f %% and %.3f deg/100 m; %llu keyframes, %llu not "
+                "converged, %llu from the second start\n",
+                two_starts ? "two starts" : "one start", e.segments, e.translation_percent, e.rotation_deg_per_100m,
+                static_cast<unsigned long long>(counters.keyframes),
+                static_cast<unsigned long long>(counters.not_converged),
+                static_cast<unsigned long long>(counters.second_start));
+    return e;
+  };
+  OdometryCounters one_counters, two_counters;
+  const RelativePoseError one = run(false, one_counters);
+  const RelativePoseError two = run(true, two_counters);
+  EXPECT_GT(two.segments, 500u);
+  EXPECT_LT(two.translation_percent, 5.0);
+  EXPECT_LT(two.rotation_deg_per_100m, 40.0);
+  EXPECT_EQ(two_counters.rejected, 0u);
+  // Measured: one start 1.96 % and 19.2 deg/100 m, two 1.78 % and 14.9 (the
+  // run is deterministic: one thread, the same scans).
+  EXPECT_EQ(one_counters.second_start, 0u);
+  EXPECT_GT(two_counters.second_start, 0u);
+  EXPECT_LT(two.rotation_deg_per_100m, one.rotation_deg_per_100m);
+  EXPECT_LT(two.translation_percent, one.translation_percent);
 }
 
 }  // namespace

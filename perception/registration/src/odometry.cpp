@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace trailnav::perception::registration {
 
@@ -9,6 +10,13 @@ namespace {
 constexpr double kMaxJump = 1.0;  // m from the prediction
 constexpr double kMaxTurn = 0.5;  // rad from the prediction
 }  // namespace
+
+double LidarOdometry::truncated_cost(const GicpResult& r, std::size_t points) const noexcept {
+  if (points == 0 || !r.transform.matrix().allFinite()) return std::numeric_limits<double>::infinity();
+  const double gate = config_.gicp.max_correspondence_distance;
+  const auto n = static_cast<double>(points), c = static_cast<double>(r.correspondences);
+  return (r.fitness * c + (n - c) * gate * gate) / n;
+}
 
 LidarOdometry::LidarOdometry(const OdometryConfig& config)
     : config_(config),
@@ -41,8 +49,22 @@ Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan) {
     // Constant velocity: the last motion again.
     const Eigen::Isometry3d predicted = config_.constant_velocity ? last_ * (previous_.inverse() * last_) : last_;
     prepare_source(scan_, covariances_, scan_tree_, scan_normals_);
-    const GicpResult r = gicp_.align(scan_, map_, predicted);
+    GicpResult r = gicp_.align(scan_, map_, predicted);
     counters_.iterations += static_cast<std::uint64_t>(r.iterations);
+    // A second start from the last pose when the prediction moved away from
+    // it: a turn that stops makes the constant-velocity prediction overshoot,
+    // and GICP can settle in a wrong minimum beside it. The answer with the
+    // smaller truncated cost (unassociated points at the gate) is taken.
+    const Eigen::Isometry3d extrapolated = last_.inverse() * predicted;
+    if (config_.two_starts && (extrapolated.translation().norm() > 0.02 ||
+                               Eigen::AngleAxisd(extrapolated.linear()).angle() > 0.01)) {
+      const GicpResult s = gicp_.align(scan_, map_, last_);
+      counters_.iterations += static_cast<std::uint64_t>(s.iterations);
+      if (truncated_cost(s, scan_.size()) < truncated_cost(r, scan_.size())) {
+        r = s;
+        ++counters_.second_start;
+      }
+    }
     if (!r.converged) ++counters_.not_converged;
     // A registration that lost its associations or ran away from the
     // prediction is not taken.

@@ -30,6 +30,7 @@ struct OdometryConfig {
   double keyframe_angle = 0.17;    // rad (about 10°)
   bool planar = false;
   bool constant_velocity = true;  // predict the last motion again; false: the last pose
+  bool two_starts = true;         // also start from the last pose; keep the better answer
   std::size_t max_points = 200'000;  // per scan before filtering
 };
 
@@ -38,6 +39,7 @@ struct OdometryCounters {
   std::uint64_t keyframes = 0;
   std::uint64_t not_converged = 0;  // registrations that hit max_iterations or lost their associations
   std::uint64_t iterations = 0;
+  std::uint64_t second_start = 0;  // scans whose answer came from the start at the last pose
   std::uint64_t rejected = 0;  // results 1 m or 0.5 rad from the prediction, or without associations: the last pose kept
 };
 
@@ -52,6 +54,8 @@ class LidarOdometry {
 
  private:
   void rebuild_map();
+  // The mean squared distance over all points, unassociated ones at the gate.
+  double truncated_cost(const GicpResult& r, std::size_t points) const noexcept;
 
   OdometryConfig config_;
   VoxelFilter filter_;
