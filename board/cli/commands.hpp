@@ -13,6 +13,7 @@ void add_demo_command(CLI::App& app);
 void add_bench_demo_command(CLI::App& app);
 void add_jitter_command(CLI::App& app);
 void add_lidar_odometry_command(CLI::App& app);
+void add_station_commands(CLI::App& app);
 void add_decode_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
 void add_sim_command(CLI::App& app);

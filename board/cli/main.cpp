@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_terrain_commands(app);
   trailnav::cli::add_trav_commands(app);
   trailnav::cli::add_lidar_odometry_command(app);
+  trailnav::cli::add_station_commands(app);
   trailnav::cli::add_route_command(app);
   trailnav::cli::add_subgoal_eval_command(app);
   trailnav::cli::add_pose_graph_command(app);

@@ -110,8 +110,13 @@ bool KdTree::nearest(const Point& q, std::uint32_t& index, float& squared) const
 
 // --- covariances ---
 
-CovarianceEstimator::CovarianceEstimator(int k, float epsilon, bool planar)
-    : k_(std::max(k, 3)), epsilon_(epsilon), planar_(planar), indices_(static_cast<std::size_t>(k_)), squared_(static_cast<std::size_t>(k_)) {}
+CovarianceEstimator::CovarianceEstimator(int k, float epsilon, bool planar, float max_thickness)
+    : k_(std::max(k, 3)),
+      epsilon_(epsilon),
+      planar_(planar),
+      max_thickness_(max_thickness),
+      indices_(static_cast<std::size_t>(k_)),
+      squared_(static_cast<std::size_t>(k_)) {}
 
 void CovarianceEstimator::compute(Cloud& cloud, const KdTree& tree, std::vector<Point>& normals) noexcept {
   const std::size_t n = cloud.points.size();
@@ -142,7 +147,10 @@ void CovarianceEstimator::compute(Cloud& cloud, const KdTree& tree, std::vector<
       cov.topLeftCorner<2, 2>() = (v2 * line.asDiagonal() * v2.transpose()).cast<float>();
       cov(2, 2) = 1.0f;
       const Point normal(static_cast<float>(v2(0, 0)), static_cast<float>(v2(1, 0)), 0.0f);
-      const bool ok = cov.allFinite() && normal.allFinite();
+      // Eigenvalues ascending: across the line, then along it.
+      const bool thin = max_thickness_ <= 0.0f ||
+                        es2.eigenvalues()(0) <= static_cast<double>(max_thickness_ * max_thickness_) * es2.eigenvalues()(1);
+      const bool ok = cov.allFinite() && normal.allFinite() && thin;
       cloud.covariances[i] = ok ? cov : Eigen::Matrix3f::Identity();
       normals[i] = ok ? normal : Point::Zero();
       continue;
@@ -153,7 +161,10 @@ void CovarianceEstimator::compute(Cloud& cloud, const KdTree& tree, std::vector<
     const Eigen::Vector3d plane(static_cast<double>(epsilon_), 1.0, 1.0);
     const Eigen::Matrix3f cov = (v * plane.asDiagonal() * v.transpose()).cast<float>();
     const Point normal = v.col(0).cast<float>();
-    const bool ok = cov.allFinite() && normal.allFinite();  // degenerate neighbourhoods: no plane
+    // Across the plane against its narrower direction within it.
+    const bool thin = max_thickness_ <= 0.0f ||
+                      es.eigenvalues()(0) <= static_cast<double>(max_thickness_ * max_thickness_) * es.eigenvalues()(1);
+    const bool ok = cov.allFinite() && normal.allFinite() && thin;  // degenerate neighbourhoods: no plane
     cloud.covariances[i] = ok ? cov : Eigen::Matrix3f::Identity();
     normals[i] = ok ? normal : Point::Zero();
   }

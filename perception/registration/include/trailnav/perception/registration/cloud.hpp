@@ -89,7 +89,13 @@ class CovarianceEstimator {
   // `planar`: points of a 2D scan (z = 0): the covariance of their x and y
   // only, a line with its normal in the plane, and variance 1 along z (the
   // 2D registration leaves z, roll and pitch at their initial values).
-  explicit CovarianceEstimator(int k = 20, float epsilon = 1e-3f, bool planar = false);
+  // `max_thickness` (0: off): a neighbourhood whose spread across its
+  // plane (line) is more than this share of its spread along it — a corner,
+  // an edge, a post seen as a blob — has no usable plane: its point gets
+  // the identity covariance and a zero normal, so point-to-plane
+  // associations skip it (a corner's fitted normal points diagonally and
+  // pulls the registration off by millimetres).
+  explicit CovarianceEstimator(int k = 20, float epsilon = 1e-3f, bool planar = false, float max_thickness = 0.0f);
   // Fills cloud.covariances and `normals` (unit, same order), resized to the
   // points' count: no heap when the caller reserved that capacity.
   void compute(Cloud& cloud, const KdTree& tree, std::vector<Point>& normals) noexcept;
@@ -99,6 +105,7 @@ class CovarianceEstimator {
   int k_;
   float epsilon_;
   bool planar_;
+  float max_thickness_;
   std::vector<std::uint32_t> indices_;
   std::vector<float> squared_;
 };

@@ -1,0 +1,165 @@
+// `trailnav station eval --sim [--runs N] [--seed S] [--report json]`:
+// localisation relative to objects that move (thesis chapter 4) on the
+// thesis' simulated floor (board/eval/station_eval.hpp): per object and
+// move set, the translation and rotation error of the robot's pose
+// relative to the object (mean, std, max) for the multi-body registration
+// and for one GICP over the whole reference. docs/registration.md.
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "commands.hpp"
+#include "station_eval.hpp"
+#include "terminal.hpp"
+
+namespace trailnav::cli {
+namespace {
+
+struct Options {
+  bool sim = false;
+  std::string report;
+  int runs = 10;
+  std::uint64_t seed = 1;
+  int local_scans = 10;
+  int teach_scans = 16;
+  std::string metric = "point-to-plane";
+  float voxel = 0.0f;  // 0: the default
+  int neighbours = 0;
+  int teach_rounds = 0;
+  double gate = 0.0;
+  double noise = 1.0;
+  bool quiet = false;
+};
+
+void stats_json(const char* name, const eval::ErrorStats& s, const char* tail) {
+  std::printf("\"%s\": {\"mean\": %.4f, \"std\": %.4f, \"max\": %.4f}%s", name, s.mean, s.std, s.max, tail);
+}
+
+int run(const Options& o) {
+  const char* who = "trailnav station eval";
+  if (!o.sim) {
+    std::fprintf(stderr,
+                 "%s: give --sim (the thesis' simulated floor); recorded teach-ins and visits are not read yet\n", who);
+    return 2;
+  }
+  if (o.report != "" && o.report != "json") {
+    std::fprintf(stderr, "%s: --report takes json, not '%s'\n", who, o.report.c_str());
+    return 2;
+  }
+  eval::StationEvalOptions opt;
+  opt.runs = o.runs;
+  opt.seed = o.seed;
+  opt.teach_scans = o.teach_scans;
+  opt.station.local_scans = o.local_scans;
+  opt.visit_scans = o.local_scans;
+  opt.noise = o.noise;
+  if (o.voxel > 0.0f) opt.station.voxel = o.voxel;
+  if (o.neighbours > 0) opt.station.neighbours = o.neighbours;
+  if (o.teach_rounds > 0) opt.station.teach_rounds = o.teach_rounds;
+  if (o.gate > 0.0) opt.station.gicp.max_correspondence_distance = static_cast<float>(o.gate);
+  if (o.metric == "point-to-plane") {
+    opt.station.gicp.metric = perception::registration::Metric::point_to_plane;
+  } else if (o.metric == "plane-to-plane") {
+    opt.station.gicp.metric = perception::registration::Metric::plane_to_plane;
+  } else {
+    std::fprintf(stderr, "%s: --metric takes point-to-plane or plane-to-plane, not '%s'\n", who, o.metric.c_str());
+    return 2;
+  }
+  std::unique_ptr<ProgressBar> bar;
+  if (!o.quiet) {
+    bar = std::make_unique<ProgressBar>("station visits", 1.0, "");
+    opt.progress = [&](double f) { bar->update(f); };
+  }
+  const eval::StationEvalResult r = eval::evaluate_station_sim(opt);
+  if (bar) bar->finish();
+  if (!r.error.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
+    return 1;
+  }
+  if (o.report == "json") {
+    std::printf("{\"truth\": \"simulated\", \"runs\": %d, \"seed\": %llu, \"objects\": [", o.runs,
+                static_cast<unsigned long long>(o.seed));
+    for (std::size_t k = 0; k < r.objects.size(); ++k) {
+      const eval::StationObjectResult& ob = r.objects[k];
+      std::printf("%s{\"name\": \"%s\", \"teach_rounds\": %d, \"teach_converged\": %s, \"teach_largest_correction_m\": %.4f, "
+                  "\"teach_error_mm\": %.3f, \"teach_error_deg\": %.4f, \"object_points\": %zu, \"surroundings_points\": %zu, \"sets\": [",
+                  k ? ", " : "", ob.name.c_str(), ob.teach_rounds, ob.teach_converged ? "true" : "false",
+                  ob.teach_largest_correction, ob.teach_error_mm, ob.teach_error_deg, ob.object_points,
+                  ob.surroundings_points);
+      for (std::size_t s = 0; s < ob.sets.size(); ++s) {
+        const eval::StationSetResult& x = ob.sets[s];
+        std::printf("%s{\"set\": %d, \"moved_m\": %.3f, \"turned_deg\": %.1f, \"runs\": %d, \"unobserved\": %d, ", s ? ", " : "",
+                    x.set, x.translation, x.rotation * 180.0 / 3.14159265358979323846, x.runs, x.unobserved);
+        stats_json("translation_mm", x.translation_mm, ", ");
+        stats_json("rotation_deg", x.rotation_deg, ", ");
+        std::printf("\"single_body\": {");
+        stats_json("translation_mm", x.single_translation_mm, ", ");
+        stats_json("rotation_deg", x.single_rotation_deg, "}}");
+      }
+      std::printf("]}");
+    }
+    std::printf("]}\n");
+    return 0;
+  }
+  std::printf("station localisation on the thesis' simulated floor (simulated truth), %d runs per object and set, seed %llu\n",
+              o.runs, static_cast<unsigned long long>(o.seed));
+  std::printf("error of the robot's pose relative to the object: translation mm and rotation deg, mean / std / max\n\n");
+  std::printf("%-6s %-3s %-14s | %-24s %-24s | %-24s\n", "object", "set", "moved", "multi-body translation",
+              "multi-body rotation", "one body (transl., rot.)");
+  for (const eval::StationObjectResult& ob : r.objects) {
+    for (const eval::StationSetResult& x : ob.sets) {
+      char moved[32];
+      std::snprintf(moved, sizeof moved, "%.2f m %4.1f deg", x.translation, x.rotation * 180.0 / 3.14159265358979323846);
+      std::printf("%-6s %-3d %-14s | %6.2f %6.2f %6.2f mm     %6.3f %6.3f %6.3f deg  | %7.1f mm %6.2f deg%s\n", ob.name.c_str(),
+                  x.set, moved, x.translation_mm.mean, x.translation_mm.std, x.translation_mm.max, x.rotation_deg.mean,
+                  x.rotation_deg.std, x.rotation_deg.max, x.single_translation_mm.mean, x.single_rotation_deg.mean,
+                  x.unobserved > 0 ? "  (object unobserved in some runs)" : "");
+    }
+    std::printf("%-6s teach-in: %d rounds%s, poses corrected by up to %.1f mm, then %.2f mm and %.3f deg from the truth at "
+                "most; %zu object points, %zu of the surroundings\n",
+                ob.name.c_str(), ob.teach_rounds, ob.teach_converged ? "" : " (not converged)",
+                1000.0 * ob.teach_largest_correction, ob.teach_error_mm, ob.teach_error_deg, ob.object_points,
+                ob.surroundings_points);
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_station_commands(CLI::App& app) {
+  auto* station = app.add_subcommand(
+      "station",
+      "Localisation relative to objects that move (thesis chapter 4): a station (a table, a shelf, a box that\n"
+      "people push around) taught once and localised against at every visit, relative to each object at once\n"
+      "by Generalized ICP for multiple rigid bodies.");
+  station->require_subcommand(1);
+  static Options o;
+  auto* ev = station->add_subcommand(
+      "eval",
+      "The thesis' simulation experiment (section 4.3.1) on its 8 m x 6 m floor: a box, a U-shaped shelf and a\n"
+      "four-legged table, each taught from an arc of 2D laser scans (180 deg, 0.5 deg steps, 1 cm noise) with\n"
+      "noisy odometry, then visited --runs times per move set (0.05 m, 0.1 m, 5 deg, 10 deg, and both twice).\n"
+      "Prints the error of the robot's pose relative to each object (mean, std, max) for the multi-body\n"
+      "registration and for one GICP over the whole reference. Truth is simulated.");
+  ev->add_flag("--sim", o.sim, "Run on the simulated floor (required for now)");
+  ev->add_option("--report", o.report, "json: one JSON object (objects[].sets[].translation_mm, rotation_deg, single_body)");
+  ev->add_option("--runs", o.runs, "Visits per object and move set")->capture_default_str()->check(CLI::Range(1, 1000));
+  ev->add_option("--seed", o.seed, "Seed of the simulation (moves, drives, noise)")->capture_default_str();
+  ev->add_option("--local-scans", o.local_scans, "N: scans of a visit's local model")->capture_default_str()->check(CLI::Range(1, 100));
+  ev->add_option("--teach-scans", o.teach_scans, "Scans of each teach-in")->capture_default_str()->check(CLI::Range(2, 256));
+  ev->add_option("--metric", o.metric, "point-to-plane (the thesis') or plane-to-plane")->capture_default_str();
+  const perception::registration::StationConfig d;
+  ev->add_option("--voxel", o.voxel, "Voxel size of the reference and the local model (m; default " + std::to_string(d.voxel) + ")");
+  ev->add_option("--neighbours", o.neighbours, "k for the covariances and normals (default " + std::to_string(d.neighbours) + ")");
+  ev->add_option("--teach-rounds", o.teach_rounds, "Joint-registration rounds of the teach-in at most (default " + std::to_string(d.teach_rounds) + ")");
+  ev->add_option("--max-correspondence", o.gate, "Associations farther are dropped (m; default " + std::to_string(d.gicp.max_correspondence_distance) + ")");
+  ev->add_option("--noise", o.noise, "Scales every simulated noise: the laser's 1 cm, the odometry's 0.1 m/s and 0.1 rad/s, the start's 3 cm and 1.1 deg (0: none)")
+      ->capture_default_str()->check(CLI::Range(0.0, 10.0));
+  ev->add_flag("--quiet", o.quiet, "No progress bar");
+  ev->callback([] { std::exit(run(o)); });
+}
+
+}  // namespace trailnav::cli

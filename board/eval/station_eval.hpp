@@ -1,0 +1,65 @@
+// The thesis' chapter 4 simulation experiment (§4.3.1), run end to end on
+// trailnav's registration: for each object of the simulated floor
+// (sim/station_world.hpp) a teach-in (an arc of scans around it, poses from
+// noisy odometry refined by joint registration), the user's polygon around
+// it, then `runs` visits per move set: the object moved by the set, the
+// robot starting about 2 m away from a pose with the regular localisation's
+// error, `visit_scans` scans registered into a local model, and the
+// multi-body registration against the surroundings and the object. Scored:
+// the robot's pose relative to the object against the simulated truth
+// (translation and rotation error), and the same for one GICP over the whole
+// reference (the single rigid body that chapter 4 replaces).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "trailnav/perception/registration/station.hpp"
+
+namespace trailnav::eval {
+
+struct StationEvalOptions {
+  int runs = 10;
+  std::uint64_t seed = 1;
+  int teach_scans = 16;
+  int visit_scans = 10;
+  double start_sigma_xy = 0.03;     // m, the regular localisation's error at a visit's start
+  double start_sigma_theta = 0.02;  // rad
+  double noise = 1.0;  // scales every noise: the laser's, the odometry's, the start's (0: none)
+  perception::registration::StationConfig station;
+  std::function<void(double fraction)> progress;
+};
+
+struct ErrorStats {
+  double mean = 0.0, std = 0.0, max = 0.0;
+};
+
+struct StationSetResult {
+  int set = 0;  // 1..6, the thesis' numbering
+  double translation = 0.0, rotation = 0.0;  // the set's motion: m, rad
+  int runs = 0;
+  int unobserved = 0;                  // runs in which the object had too few associations
+  ErrorStats translation_mm, rotation_deg;  // multi-body
+  ErrorStats single_translation_mm, single_rotation_deg;  // one rigid body
+};
+
+struct StationObjectResult {
+  std::string name;
+  int teach_rounds = 0;
+  bool teach_converged = false;
+  double teach_largest_correction = 0.0;  // m
+  double teach_error_mm = 0.0, teach_error_deg = 0.0;  // the refined poses' largest error against the truth
+  std::size_t object_points = 0, surroundings_points = 0;  // taught, before the voxel filter
+  std::vector<StationSetResult> sets;
+};
+
+struct StationEvalResult {
+  std::vector<StationObjectResult> objects;
+  std::string error;
+};
+
+StationEvalResult evaluate_station_sim(const StationEvalOptions& options);
+
+}  // namespace trailnav::eval

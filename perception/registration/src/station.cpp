@@ -1,0 +1,268 @@
+#include "trailnav/perception/registration/station.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace trailnav::perception::registration {
+
+std::string check_station_config(const StationConfig& c) {
+  if (const char* e = check_gicp_config(c.gicp); *e != '\0') return std::string("gicp: ") + e;
+  if (!(c.voxel > 0.0f) || !std::isfinite(c.voxel)) return "voxel: a positive number of metres";
+  if (c.neighbours < 3 || c.neighbours > 64) return "neighbours: 3 to 64";
+  if (c.teach_rounds < 1 || c.teach_rounds > 100) return "teach_rounds: 1 to 100";
+  if (c.local_scans < 1 || c.local_scans > 100) return "local_scans: 1 to 100";
+  if (c.max_points < 16) return "max_points: at least 16";
+  if (c.max_scans < 2) return "max_scans: at least 2";
+  if (!(c.fine_gate > 0.0f) || !(c.fine_gate <= c.gicp.max_correspondence_distance)) {
+    return "fine_gate: positive, at most gicp's max_correspondence_distance";
+  }
+  if (!(c.max_thickness >= 0.0f) || !(c.max_thickness <= 1.0f)) return "max_thickness: 0 (off) to 1";
+  return "";
+}
+
+GicpConfig fine_config(const StationConfig& c) noexcept {
+  GicpConfig f = c.gicp;
+  f.max_correspondence_distance = c.fine_gate;
+  return f;
+}
+
+GicpResult StationLocaliser::align_twice(Gicp& coarse, Gicp& fine, const Cloud& source, const Target& target,
+                                         const Eigen::Isometry3d& initial) noexcept {
+  const GicpResult r = coarse.align(source, target, initial);
+  if (!r.transform.matrix().allFinite() || r.correspondences < 6) return r;
+  const GicpResult f = fine.align(source, target, r.transform);
+  return f.transform.matrix().allFinite() && f.correspondences >= 6 ? f : r;
+}
+
+namespace {
+
+void transform_into(std::span<const Point> in, const Eigen::Isometry3d& t, std::vector<Point>& out) {
+  const Eigen::Isometry3f tf = t.cast<float>();
+  for (const Point& p : in) out.push_back(tf * p);
+}
+
+double angle_of(const Eigen::Isometry3d& t) { return Eigen::AngleAxisd(t.linear()).angle(); }
+
+}  // namespace
+
+TeachResult teach(std::span<StationScan> scans, const StationConfig& config) {
+  TeachResult result;
+  const std::size_t n = std::min(scans.size(), config.max_scans);
+  if (n < 2) {
+    result.converged = true;
+    return result;
+  }
+  std::size_t total = 0;
+  for (std::size_t k = 0; k < n; ++k) total += std::min(scans[k].points.size(), config.max_points);
+  VoxelFilter filter(std::max(total, config.max_points));
+  CovarianceEstimator covariances(config.neighbours, 1e-3f, config.planar, config.max_thickness);
+  Gicp gicp(config.gicp, config.max_points), fine(fine_config(config), config.max_points);
+  std::vector<Eigen::Isometry3d> first(n);
+  for (std::size_t k = 0; k < n; ++k) first[k] = scans[k].pose;
+  std::vector<Point> merged;
+  merged.reserve(total);
+  Target target;
+  target.cloud.points.reserve(total);
+  Cloud source;
+  source.points.reserve(config.max_points);
+  KdTree scratch;
+  std::vector<Point> normals;
+  for (int round = 0; round < config.teach_rounds; ++round) {
+    double largest_step = 0.0, largest_turn = 0.0;
+    for (std::size_t k = 1; k < n; ++k) {
+      // The first round: scan k against the scans before it (x_{k-1} .. x_1,
+      // Fig. 4.5); later rounds: against all the others.
+      merged.clear();
+      const std::size_t others = round == 0 ? k : n;
+      for (std::size_t j = 0; j < others; ++j) {
+        if (j == k) continue;
+        const std::span<const Point> pts(scans[j].points.data(), std::min(scans[j].points.size(), config.max_points));
+        transform_into(pts, scans[j].pose, merged);
+      }
+      filter.filter(merged, config.voxel, target.cloud);
+      if (target.cloud.size() < 6) continue;
+      prepare_target(target, covariances);
+      const std::span<const Point> own(scans[k].points.data(), std::min(scans[k].points.size(), config.max_points));
+      filter.filter(own, config.voxel, source);
+      if (config.gicp.metric == Metric::plane_to_plane) prepare_source(source, covariances, scratch, normals);
+      const GicpResult r = StationLocaliser::align_twice(gicp, fine, source, target, scans[k].pose);
+      if (!r.transform.matrix().allFinite() || r.correspondences < 6) continue;
+      const Eigen::Isometry3d step = scans[k].pose.inverse() * r.transform;
+      largest_step = std::max(largest_step, step.translation().norm());
+      largest_turn = std::max(largest_turn, angle_of(step));
+      scans[k].pose = r.transform;
+    }
+    result.rounds = round + 1;
+    // Converged when a whole round moved no pose by more than ten times the
+    // registration's own thresholds.
+    if (round > 0 && largest_step < 10.0 * config.gicp.translation_epsilon &&
+        largest_turn < 10.0 * config.gicp.rotation_epsilon) {
+      result.converged = true;
+      break;
+    }
+  }
+  for (std::size_t k = 0; k < n; ++k) {
+    result.largest_correction = std::max(result.largest_correction, (first[k].inverse() * scans[k].pose).translation().norm());
+  }
+  return result;
+}
+
+bool inside(const std::vector<Eigen::Vector2d>& polygon, const Eigen::Vector2d& p) noexcept {
+  // Even-odd rule: a ray towards +x crosses the edges an odd number of times.
+  bool in = false;
+  const std::size_t n = polygon.size();
+  for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
+    const Eigen::Vector2d& a = polygon[i];
+    const Eigen::Vector2d& b = polygon[j];
+    if ((a.y() > p.y()) != (b.y() > p.y()) && p.x() < (b.x() - a.x()) * (p.y() - a.y()) / (b.y() - a.y()) + a.x()) in = !in;
+  }
+  return in;
+}
+
+BuiltStation build_station(std::span<const StationScan> scans, std::span<const StationObject> objects,
+                           const StationConfig& config) {
+  BuiltStation built;
+  Station& s = built.station;
+  for (const StationObject& o : objects) {
+    if (o.polygon.size() < 3) {
+      built.error = "object '" + o.name + "': a polygon needs at least 3 corners";
+      return built;
+    }
+  }
+  const std::size_t nb = objects.size() + 1;
+  std::vector<std::vector<Point>> points(nb);
+  for (const StationScan& scan : scans) {
+    const Eigen::Isometry3f t = scan.pose.cast<float>();
+    const std::size_t m = std::min(scan.points.size(), config.max_points);
+    for (std::size_t i = 0; i < m; ++i) {
+      const Point p = t * scan.points[i];
+      if (!p.allFinite()) continue;
+      std::size_t body = 0;
+      for (std::size_t k = 0; k < objects.size(); ++k) {
+        if (inside(objects[k].polygon, p.head<2>().cast<double>())) {
+          body = k + 1;
+          break;
+        }
+      }
+      points[body].push_back(p);
+    }
+  }
+  s.names.push_back("surroundings");
+  for (const StationObject& o : objects) s.names.push_back(o.name);
+  s.bodies = std::vector<Target>(nb);
+  CovarianceEstimator covariances(config.neighbours, 1e-3f, config.planar, config.max_thickness);
+  for (std::size_t k = 0; k < nb; ++k) {
+    s.taught_points.push_back(points[k].size());
+    if (points[k].size() < 6) {
+      built.error = k == 0 ? std::string("the teach-in's scans hold no surroundings outside the objects")
+                           : "object '" + s.names[k] + "': the teach-in saw " + std::to_string(points[k].size()) +
+                                 " points inside its polygon (at least 6 are needed): is it marked where the object stood?";
+      return built;
+    }
+    VoxelFilter filter(points[k].size());
+    s.bodies[k].cloud.points.reserve(points[k].size());
+    filter.filter(points[k], config.voxel, s.bodies[k].cloud);
+    prepare_target(s.bodies[k], covariances);
+  }
+  return built;
+}
+
+StationLocaliser::StationLocaliser(const Station& station, const StationConfig& config)
+    : station_(station),
+      config_(config),
+      filter_(config.max_points * static_cast<std::size_t>(config.local_scans)),
+      covariances_(config.neighbours, 1e-3f, config.planar, config.max_thickness),
+      gicp_(config.gicp, config.max_points * static_cast<std::size_t>(config.local_scans)),
+      fine_(fine_config(config), config.max_points * static_cast<std::size_t>(config.local_scans)),
+      multi_(config.gicp, config.max_points * static_cast<std::size_t>(config.local_scans), station.bodies.size()),
+      multi_fine_(fine_config(config), config.max_points * static_cast<std::size_t>(config.local_scans),
+                  station.bodies.size()),
+      ring_(static_cast<std::size_t>(config.local_scans)) {
+  const std::size_t local = config.max_points * static_cast<std::size_t>(config.local_scans);
+  for (auto& r : ring_) r.reserve(config.max_points);
+  scan_.points.reserve(config.max_points);
+  merged_.reserve(local);
+  local_.cloud.points.reserve(local);
+  query_.points.reserve(local);
+  std::size_t all = 0;
+  for (const Target& b : station.bodies) all += b.cloud.size();
+  whole_.cloud.points.reserve(all);
+  for (const Target& b : station.bodies) {
+    whole_.cloud.points.insert(whole_.cloud.points.end(), b.cloud.points.begin(), b.cloud.points.end());
+  }
+  CovarianceEstimator whole_cov(config.neighbours, 1e-3f, config.planar, config.max_thickness);
+  prepare_target(whole_, whole_cov);
+}
+
+void StationLocaliser::begin(const Eigen::Isometry3d& pose) {
+  pose_ = pose;
+  count_ = 0;
+  next_ = 0;
+  for (auto& r : ring_) r.clear();
+}
+
+Eigen::Isometry3d StationLocaliser::add(std::span<const Point> scan, const Eigen::Isometry3d& odometry) {
+  const std::span<const Point> own = scan.first(std::min(scan.size(), config_.max_points));
+  if (count_ > 0) {
+    // The local model of the previous scans (station frame) as the target;
+    // only the current pose is free (Fig. 4.6).
+    const Eigen::Isometry3d predicted = pose_ * odometry;
+    merged_.clear();
+    const std::size_t held = std::min(count_, ring_.size());
+    for (std::size_t j = 0; j < held; ++j) merged_.insert(merged_.end(), ring_[j].begin(), ring_[j].end());
+    filter_.filter(merged_, config_.voxel, local_.cloud);
+    pose_ = predicted;
+    if (local_.cloud.size() >= 6) {
+      prepare_target(local_, covariances_);
+      filter_.filter(own, config_.voxel, scan_);
+      if (config_.gicp.metric == Metric::plane_to_plane) prepare_source(scan_, covariances_, scratch_, normals_);
+      const GicpResult r = align_twice(gicp_, fine_, scan_, local_, predicted);
+      if (r.transform.matrix().allFinite() && r.correspondences >= 6) pose_ = r.transform;
+    }
+  }
+  std::vector<Point>& slot = ring_[next_];
+  next_ = (next_ + 1) % ring_.size();
+  slot.clear();
+  transform_into(own, pose_, slot);
+  ++count_;
+  return pose_;
+}
+
+void StationLocaliser::local_model(Cloud& out) {
+  merged_.clear();
+  const Eigen::Isometry3f to_robot = pose_.inverse().cast<float>();
+  const std::size_t held = std::min(count_, ring_.size());
+  for (std::size_t j = 0; j < held; ++j) {
+    for (const Point& p : ring_[j]) merged_.push_back(to_robot * p);
+  }
+  filter_.filter(merged_, config_.voxel, out);
+  prepare_source(out, covariances_, scratch_, normals_);
+}
+
+StationFix StationLocaliser::localise() {
+  StationFix fix;
+  local_model(query_);
+  fix.local_points = query_.size();
+  const std::size_t nb = station_.bodies.size();
+  fix.bodies.resize(nb);
+  std::vector<const Target*> bodies(nb);
+  for (std::size_t k = 0; k < nb; ++k) bodies[k] = &station_.bodies[k];
+  const std::vector<Eigen::Isometry3d> initial(nb, pose_);
+  fix.iterations = multi_.align(query_, bodies, initial, fix.bodies);
+  // From there with the fine gate; a body it loses keeps the coarse answer.
+  std::vector<Eigen::Isometry3d> coarse(nb);
+  for (std::size_t k = 0; k < nb; ++k) coarse[k] = fix.bodies[k].transform;
+  std::vector<BodyResult> fine(nb);
+  fix.iterations += multi_fine_.align(query_, bodies, coarse, fine);
+  for (std::size_t k = 0; k < nb; ++k) {
+    if (fine[k].observed && fine[k].transform.matrix().allFinite()) fix.bodies[k] = fine[k];
+  }
+  return fix;
+}
+
+GicpResult StationLocaliser::localise_single() {
+  local_model(query_);
+  return align_twice(gicp_, fine_, query_, whole_, pose_);
+}
+
+}  // namespace trailnav::perception::registration
