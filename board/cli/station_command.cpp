@@ -31,6 +31,7 @@ struct Options {
   int teach_rounds = 0;
   double gate = 0.0;
   double noise = 1.0;
+  bool teach_truth = false;
   bool quiet = false;
 };
 
@@ -56,6 +57,7 @@ int run(const Options& o) {
   opt.station.local_scans = o.local_scans;
   opt.visit_scans = o.local_scans;
   opt.noise = o.noise;
+  opt.teach_truth = o.teach_truth;
   if (o.voxel > 0.0f) opt.station.voxel = o.voxel;
   if (o.neighbours > 0) opt.station.neighbours = o.neighbours;
   if (o.teach_rounds > 0) opt.station.teach_rounds = o.teach_rounds;
@@ -158,6 +160,7 @@ void add_station_commands(CLI::App& app) {
   ev->add_option("--max-correspondence", o.gate, "Associations farther are dropped (m; default " + std::to_string(d.gicp.max_correspondence_distance) + ")");
   ev->add_option("--noise", o.noise, "Scales every simulated noise: the laser's 1 cm, the odometry's 0.1 m/s and 0.1 rad/s, the start's 3 cm and 1.1 deg (0: none)")
       ->capture_default_str()->check(CLI::Range(0.0, 10.0));
+  ev->add_flag("--teach-truth", o.teach_truth, "Take the teach-in's poses from the simulated truth (the visits' own error alone)");
   ev->add_flag("--quiet", o.quiet, "No progress bar");
   ev->callback([] { std::exit(run(o)); });
 }

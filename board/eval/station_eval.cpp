@@ -38,6 +38,38 @@ void error_of(const Eigen::Isometry3d& truth, const Eigen::Isometry3d& estimate,
   deg = Eigen::AngleAxisd((truth.inverse() * estimate).linear()).angle() * 180.0 / std::numbers::pi;
 }
 
+// The rigid motion D (world -> taught frame) that best lays the true teach
+// poses onto the refined ones (least squares over their positions, 2D):
+// the taught station frame is the teach-in's own, anchored by its first
+// scan, and may sit a few millimetres from the world's as a whole. Truth
+// is compared in the taught frame, as trajectories are aligned before an
+// absolute trajectory error is taken.
+Eigen::Isometry3d taught_frame(const std::vector<st::Pose2>& truth, const std::vector<reg::StationScan>& scans) {
+  const std::size_t n = std::min(truth.size(), scans.size());
+  Eigen::Vector2d tq = Eigen::Vector2d::Zero(), tp = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    tq += Eigen::Vector2d(truth[i].x, truth[i].y);
+    tp += scans[i].pose.translation().head<2>();
+  }
+  tq /= static_cast<double>(n);
+  tp /= static_cast<double>(n);
+  double sxx = 0.0, sxy = 0.0, syx = 0.0, syy = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d q = Eigen::Vector2d(truth[i].x, truth[i].y) - tq;
+    const Eigen::Vector2d p = scans[i].pose.translation().head<2>() - tp;
+    sxx += q.x() * p.x();
+    sxy += q.x() * p.y();
+    syx += q.y() * p.x();
+    syy += q.y() * p.y();
+  }
+  const double angle = std::atan2(sxy - syx, sxx + syy);
+  Eigen::Isometry3d d = Eigen::Isometry3d::Identity();
+  d.linear() = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Vector2d t = tp - d.linear().topLeftCorner<2, 2>() * tq;
+  d.translation() = Eigen::Vector3d(t.x(), t.y(), 0.0);
+  return d;
+}
+
 }  // namespace
 
 StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
@@ -77,13 +109,19 @@ StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
       scans[i].points = st::cast(segments, teach.truth[i], laser, sim::hash(object_key, 2, i));
       scans[i].pose = st::to_isometry(guess);
     }
-    const reg::TeachResult t = reg::teach(scans, options.station);
+    reg::TeachResult t;
+    if (options.teach_truth) {
+      for (std::size_t i = 0; i < scans.size(); ++i) scans[i].pose = st::to_isometry(teach.truth[i]);
+    } else {
+      t = reg::teach(scans, options.station);
+    }
     obj.teach_rounds = t.rounds;
     obj.teach_converged = t.converged;
     obj.teach_largest_correction = t.largest_correction;
+    const Eigen::Isometry3d frame = taught_frame(teach.truth, scans);
     for (std::size_t i = 0; i < scans.size(); ++i) {
       double mm = 0.0, deg = 0.0;
-      error_of(st::to_isometry(teach.truth[i]).inverse(), scans[i].pose.inverse(), mm, deg);
+      error_of((frame * st::to_isometry(teach.truth[i])).inverse(), scans[i].pose.inverse(), mm, deg);
       obj.teach_error_mm = std::max(obj.teach_error_mm, mm);
       obj.teach_error_deg = std::max(obj.teach_error_deg, deg);
     }
@@ -124,11 +162,11 @@ StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
         }
         // Truth: the object's reference frame is the station's as taught;
         // it moved by M, so the robot's pose in it is M⁻¹ · R.
-        const Eigen::Isometry3d truth = st::to_isometry(st::inverse(move)) * st::to_isometry(visit.truth.back());
+        const Eigen::Isometry3d truth = frame * st::to_isometry(st::inverse(move)) * st::to_isometry(visit.truth.back());
         const reg::StationFix fix = localiser.localise();
         if (!fix.bodies[1].observed) ++sr.unobserved;
         double mm = 0.0, deg = 0.0;
-        const Eigen::Vector3d centre(object.pose.x, object.pose.y, 0.0);  // in the object's reference frame
+        const Eigen::Vector3d centre = frame * Eigen::Vector3d(object.pose.x, object.pose.y, 0.0);  // taught frame
         error_of(truth, fix.bodies[1].transform, mm, deg, centre);
         tm.push_back(mm);
         rd.push_back(deg);

@@ -27,6 +27,7 @@ struct StationEvalOptions {
   int visit_scans = 10;
   double start_sigma_xy = 0.03;     // m, the regular localisation's error at a visit's start
   double start_sigma_theta = 0.02;  // rad
+  bool teach_truth = false;  // the teach-in's poses from the truth: the visits' own error alone
   double noise = 1.0;  // scales every noise: the laser's, the odometry's, the start's (0: none)
   perception::registration::StationConfig station;
   std::function<void(double fraction)> progress;

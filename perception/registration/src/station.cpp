@@ -82,6 +82,10 @@ TeachResult teach(std::span<StationScan> scans, const StationConfig& config) {
       filter.filter(merged, config.voxel, target.cloud);
       if (target.cloud.size() < 6) continue;
       prepare_target(target, covariances);
+      // In the first round scan k starts from scan k − 1's refined pose and
+      // the odometry's step between them, not from the odometry's whole
+      // chain (whose error grows with every step).
+      if (round == 0) scans[k].pose = scans[k - 1].pose * first[k - 1].inverse() * first[k];
       const std::span<const Point> own(scans[k].points.data(), std::min(scans[k].points.size(), config.max_points));
       filter.filter(own, config.voxel, source);
       if (config.gicp.metric == Metric::plane_to_plane) prepare_source(source, covariances, scratch, normals);
