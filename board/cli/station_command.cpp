@@ -20,6 +20,8 @@ namespace {
 
 struct Options {
   bool sim = false;
+  std::string carmen;
+  int places = 6;
   std::string report;
   int runs = 10;
   std::uint64_t seed = 1;
@@ -41,9 +43,9 @@ void stats_json(const char* name, const eval::ErrorStats& s, const char* tail) {
 
 int run(const Options& o) {
   const char* who = "trailnav station eval";
-  if (!o.sim) {
-    std::fprintf(stderr,
-                 "%s: give --sim (the thesis' simulated floor); recorded teach-ins and visits are not read yet\n", who);
+  if (o.sim == !o.carmen.empty()) {
+    std::fprintf(stderr, "%s: give either --sim (the thesis' simulated floor) or --carmen LOG (cases constructed from a "
+                 "real CARMEN log)\n", who);
     return 2;
   }
   if (o.report != "" && o.report != "json") {
@@ -75,20 +77,35 @@ int run(const Options& o) {
     bar = std::make_unique<ProgressBar>("station visits", 1.0, "");
     opt.progress = [&](double f) { bar->update(f); };
   }
-  const eval::StationEvalResult r = eval::evaluate_station_sim(opt);
+  eval::StationEvalResult r;
+  if (o.sim) {
+    r = eval::evaluate_station_sim(opt);
+  } else {
+    eval::StationCarmenOptions c;
+    c.log = o.carmen;
+    c.runs = o.runs;
+    c.seed = o.seed;
+    c.places = o.places;
+    c.teach_scans = o.teach_scans;
+    c.visit_scans = o.local_scans;
+    c.station = opt.station;
+    c.progress = opt.progress;
+    r = eval::evaluate_station_carmen(c);
+  }
   if (bar) bar->finish();
   if (!r.error.empty()) {
     std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
     return 1;
   }
   if (o.report == "json") {
-    std::printf("{\"truth\": \"simulated\", \"runs\": %d, \"seed\": %llu, \"objects\": [", o.runs,
+    std::printf("{\"truth\": \"%s\", \"runs\": %d, \"seed\": %llu, \"objects\": [",
+                o.sim ? "simulated" : "constructed from a real log (applied motions)", o.runs,
                 static_cast<unsigned long long>(o.seed));
     for (std::size_t k = 0; k < r.objects.size(); ++k) {
       const eval::StationObjectResult& ob = r.objects[k];
-      std::printf("%s{\"name\": \"%s\", \"teach_rounds\": %d, \"teach_converged\": %s, \"teach_largest_correction_m\": %.4f, "
+      std::printf("%s{\"name\": \"%s\", \"where\": \"%s\", \"teach_rounds\": %d, \"teach_converged\": %s, \"teach_largest_correction_m\": %.4f, "
                   "\"teach_error_mm\": %.3f, \"teach_error_deg\": %.4f, \"object_points\": %zu, \"surroundings_points\": %zu, \"sets\": [",
-                  k ? ", " : "", ob.name.c_str(), ob.teach_rounds, ob.teach_converged ? "true" : "false",
+                  k ? ", " : "", ob.name.c_str(), ob.where.c_str(), ob.teach_rounds, ob.teach_converged ? "true" : "false",
                   ob.teach_largest_correction, ob.teach_error_mm, ob.teach_error_deg, ob.object_points,
                   ob.surroundings_points);
       for (std::size_t s = 0; s < ob.sets.size(); ++s) {
@@ -103,28 +120,37 @@ int run(const Options& o) {
       }
       std::printf("]}");
     }
-    std::printf("]}\n");
+    std::printf("], \"places_changed\": %d}\n", r.places_changed);
     return 0;
   }
-  std::printf("station localisation on the thesis' simulated floor (simulated truth), %d runs per object and set, seed %llu\n",
-              o.runs, static_cast<unsigned long long>(o.seed));
-  std::printf("error of the robot's pose relative to the object: translation mm and rotation deg, mean / std / max\n\n");
-  std::printf("%-6s %-3s %-14s | %-24s %-24s | %-24s\n", "object", "set", "moved", "multi-body translation",
+  if (o.sim) {
+    std::printf("station localisation on the thesis' simulated floor (simulated truth), %d runs per object and set, seed %llu\n",
+                o.runs, static_cast<unsigned long long>(o.seed));
+    std::printf("error of the object's pose in the robot frame: translation (at its centre) mm and rotation deg, mean / std / max\n\n");
+  } else {
+    std::printf("station localisation on cases constructed from %s (real scans, applied motions), %d runs per place and set\n",
+                o.carmen.c_str(), o.runs);
+    std::printf("error of the object's estimated motion: translation (at its centre) mm and rotation deg, mean / std / max\n");
+    std::printf("(%d place(s) left out: their object had moved between the two passes by itself)\n\n", r.places_changed);
+  }
+  std::printf("%-8s %-3s %-14s | %-24s %-24s | %-24s\n", "object", "set", "moved", "multi-body translation",
               "multi-body rotation", "one body (transl., rot.)");
   for (const eval::StationObjectResult& ob : r.objects) {
+    if (!ob.where.empty()) std::printf("%s: %s\n", ob.name.c_str(), ob.where.c_str());
     for (const eval::StationSetResult& x : ob.sets) {
       char moved[32];
       std::snprintf(moved, sizeof moved, "%.2f m %4.1f deg", x.translation, x.rotation * 180.0 / 3.14159265358979323846);
-      std::printf("%-6s %-3d %-14s | %6.2f %6.2f %6.2f mm     %6.3f %6.3f %6.3f deg  | %7.1f mm %6.2f deg%s\n", ob.name.c_str(),
+      std::printf("%-8s %-3d %-14s | %6.2f %6.2f %6.2f mm     %6.3f %6.3f %6.3f deg  | %7.1f mm %6.2f deg%s\n", ob.name.c_str(),
                   x.set, moved, x.translation_mm.mean, x.translation_mm.std, x.translation_mm.max, x.rotation_deg.mean,
                   x.rotation_deg.std, x.rotation_deg.max, x.single_translation_mm.mean, x.single_rotation_deg.mean,
                   x.unobserved > 0 ? "  (object unobserved in some runs)" : "");
     }
-    std::printf("%-6s teach-in: %d rounds%s, poses corrected by up to %.1f mm, then %.2f mm and %.3f deg from the truth at "
-                "most; %zu object points, %zu of the surroundings\n",
-                ob.name.c_str(), ob.teach_rounds, ob.teach_converged ? "" : " (not converged)",
-                1000.0 * ob.teach_largest_correction, ob.teach_error_mm, ob.teach_error_deg, ob.object_points,
-                ob.surroundings_points);
+    std::printf("%-8s teach-in: %d rounds%s, poses corrected by up to %.1f mm", ob.name.c_str(), ob.teach_rounds,
+                ob.teach_converged ? "" : " (not converged)", 1000.0 * ob.teach_largest_correction);
+    if (ob.teach_error_mm >= 0.0) {
+      std::printf(", then %.2f mm and %.3f deg from the truth at most", ob.teach_error_mm, ob.teach_error_deg);
+    }
+    std::printf("; %zu object points, %zu of the surroundings\n", ob.object_points, ob.surroundings_points);
   }
   return 0;
 }
@@ -146,7 +172,12 @@ void add_station_commands(CLI::App& app) {
       "noisy odometry, then visited --runs times per move set (0.05 m, 0.1 m, 5 deg, 10 deg, and both twice).\n"
       "Prints the error of the robot's pose relative to each object (mean, std, max) for the multi-body\n"
       "registration and for one GICP over the whole reference. Truth is simulated.");
-  ev->add_flag("--sim", o.sim, "Run on the simulated floor (required for now)");
+  ev->add_flag("--sim", o.sim, "Run on the thesis' simulated floor");
+  ev->add_option("--carmen", o.carmen,
+                 "Cases constructed from a real CARMEN log (FLASER lines; plain or gzip): places passed twice, an object\n"
+                 "picked in the first pass and moved in the second by the thesis' real sets (0.1 m, 10 deg, both), the\n"
+                 "occlusion cast again beam by beam");
+  ev->add_option("--places", o.places, "Places of the CARMEN log to use at most")->capture_default_str()->check(CLI::Range(1, 64));
   ev->add_option("--report", o.report, "json: one JSON object (objects[].sets[].translation_mm, rotation_deg, single_body)");
   ev->add_option("--runs", o.runs, "Visits per object and move set")->capture_default_str()->check(CLI::Range(1, 1000));
   ev->add_option("--seed", o.seed, "Seed of the simulation (moves, drives, noise)")->capture_default_str();

@@ -1,11 +1,17 @@
 #include "station_eval.hpp"
 
+#include <zlib.h>
+
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
+#include <map>
 #include <numbers>
 
 #include "random.hpp"
 #include "station_world.hpp"
+#include "trailnav/perception/registration/carmen.hpp"
 
 namespace trailnav::eval {
 
@@ -186,6 +192,337 @@ StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
     }
     result.objects.push_back(std::move(obj));
   }
+  return result;
+}
+
+}  // namespace trailnav::eval
+
+// --- cases constructed from a real CARMEN log ---
+
+namespace trailnav::eval {
+
+namespace {
+
+// The real experiment's sets (§4.3.2): 0.1 m, 10°, both.
+constexpr st::MoveSet kRealSets[] = {{0.10, 0.0}, {0.0, 10.0 * std::numbers::pi / 180.0}, {0.10, 10.0 * std::numbers::pi / 180.0}};
+
+Eigen::Isometry3d planar(double x, double y, double theta) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  t.translation() = Eigen::Vector3d(x, y, 0.0);
+  return t;
+}
+
+double yaw_of(const Eigen::Isometry3d& t) { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
+
+struct Cluster {
+  Eigen::Vector2d lo{1e9, 1e9}, hi{-1e9, -1e9};
+  std::size_t points = 0;
+};
+
+// Connected groups of returns on a 5 cm grid (8-neighbourhood): walls are
+// long groups, free-standing things short ones.
+std::vector<Cluster> clusters_of(const std::vector<reg::Point>& points) {
+  constexpr double kCell = 0.05;
+  std::map<std::pair<long, long>, std::vector<std::size_t>> cells;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    cells[{std::lround(std::floor(static_cast<double>(points[i].x()) / kCell)),
+           std::lround(std::floor(static_cast<double>(points[i].y()) / kCell))}]
+        .push_back(i);
+  }
+  std::map<std::pair<long, long>, int> label;
+  std::vector<Cluster> out;
+  for (const auto& [key, idx] : cells) {
+    if (label.count(key) != 0) continue;
+    const int id = static_cast<int>(out.size());
+    out.emplace_back();
+    std::vector<std::pair<long, long>> todo{key};
+    label[key] = id;
+    while (!todo.empty()) {
+      const auto c = todo.back();
+      todo.pop_back();
+      for (std::size_t i : cells[c]) {
+        const Eigen::Vector2d p = points[i].head<2>().cast<double>();
+        out[static_cast<std::size_t>(id)].lo = out[static_cast<std::size_t>(id)].lo.cwiseMin(p);
+        out[static_cast<std::size_t>(id)].hi = out[static_cast<std::size_t>(id)].hi.cwiseMax(p);
+        ++out[static_cast<std::size_t>(id)].points;
+      }
+      for (long dx = -1; dx <= 1; ++dx) {
+        for (long dy = -1; dy <= 1; ++dy) {
+          const std::pair<long, long> n{c.first + dx, c.second + dy};
+          if (cells.count(n) != 0 && label.count(n) == 0) {
+            label[n] = id;
+            todo.push_back(n);
+          }
+        }
+      }
+    }
+  }
+  return out;
+}
+
+// One visit scan with the object's returns moved by `move` (log frame) and
+// the occlusion cast again beam by beam.
+std::vector<reg::Point> moved_scan(const reg::LaserScan2& scan, const Eigen::Isometry3d& pose, float max_range,
+                                   const std::vector<Eigen::Vector2d>& polygon, const Eigen::Isometry3d& move) {
+  const std::size_t n = scan.ranges.size();
+  const double step = (n % 2 == 1 ? std::numbers::pi / static_cast<double>(n - 1) : std::numbers::pi / static_cast<double>(n));
+  std::vector<reg::Point> all;
+  all.reserve(n);
+  reg::scan_points(scan, max_range, 0.05f, all);
+  auto beam_of = [&](const reg::Point& p) {
+    return std::lround((std::atan2(static_cast<double>(p.y()), static_cast<double>(p.x())) + 0.5 * std::numbers::pi) / step);
+  };
+  std::vector<float> background(n, std::numeric_limits<float>::infinity());
+  std::vector<reg::Point> kept, object;
+  const Eigen::Isometry3d back = pose.inverse() * move * pose;  // laser frame -> moved -> laser frame
+  for (const reg::Point& p : all) {
+    const Eigen::Vector3d w = pose * p.cast<double>();
+    if (reg::inside(polygon, w.head<2>())) {
+      object.push_back((back * p.cast<double>()).cast<float>());
+    } else {
+      kept.push_back(p);
+      const long b = beam_of(p);
+      if (b >= 0 && b < static_cast<long>(n)) background[static_cast<std::size_t>(b)] = p.head<2>().norm();
+    }
+  }
+  constexpr float kMargin = 0.02f;
+  std::vector<float> nearest_object(n, std::numeric_limits<float>::infinity());
+  std::vector<reg::Point> out;
+  out.reserve(all.size());
+  for (const reg::Point& p : object) {
+    const long b = beam_of(p);
+    if (b < 0 || b >= static_cast<long>(n)) continue;  // moved out of the field of view
+    const float r = p.head<2>().norm();
+    if (background[static_cast<std::size_t>(b)] < r - kMargin) continue;  // behind what the beam hit
+    nearest_object[static_cast<std::size_t>(b)] = std::min(nearest_object[static_cast<std::size_t>(b)], r);
+    out.push_back(p);
+  }
+  for (const reg::Point& p : kept) {
+    const long b = beam_of(p);
+    if (b >= 0 && b < static_cast<long>(n) && nearest_object[static_cast<std::size_t>(b)] < p.head<2>().norm() - kMargin) {
+      continue;  // now hidden by the moved object
+    }
+    out.push_back(p);
+  }
+  return out;
+}
+
+}  // namespace
+
+StationEvalResult evaluate_station_carmen(const StationCarmenOptions& options) {
+  StationEvalResult result;
+  if (const std::string e = reg::check_station_config(options.station); !e.empty()) {
+    result.error = "station: " + e;
+    return result;
+  }
+  gzFile f = gzopen(options.log.c_str(), "rb");
+  if (f == nullptr) {
+    result.error = "cannot open " + options.log;
+    return result;
+  }
+  std::vector<reg::LaserScan2> scans;
+  std::vector<char> line(1 << 16);
+  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
+    reg::LaserScan2 s;
+    if (reg::parse_flaser(line.data(), s).empty()) scans.push_back(std::move(s));
+  }
+  gzclose(f);
+  const int teach_n = options.teach_scans, visit_n = options.visit_scans;
+  if (scans.size() < static_cast<std::size_t>(teach_n + visit_n) * 2) {
+    result.error = options.log + " holds " + std::to_string(scans.size()) + " FLASER scans: too few for a teach-in and a visit";
+    return result;
+  }
+  auto pose_of = [&](std::size_t i) { return planar(scans[i].pose.x, scans[i].pose.y, scans[i].pose.theta); };
+
+  // Places passed twice: a teach-in block and, a minute or more later, a
+  // scan within 0.4 m and 20° of its middle.
+  struct Place {
+    std::size_t teach, visit;
+  };
+  std::vector<Place> places;
+  for (std::size_t i = 0; i + static_cast<std::size_t>(teach_n) < scans.size() && places.size() < 64; i += 40) {
+    const reg::LaserScan2& mid = scans[i + static_cast<std::size_t>(teach_n / 2)];
+    double best = 0.4;
+    std::size_t at = 0;
+    for (std::size_t j = static_cast<std::size_t>(visit_n); j + static_cast<std::size_t>(visit_n) < scans.size(); ++j) {
+      if (std::abs(scans[j].timestamp - mid.timestamp) < 60.0) continue;
+      const double d = std::hypot(scans[j].pose.x - mid.pose.x, scans[j].pose.y - mid.pose.y);
+      const double a = std::abs(std::remainder(scans[j].pose.theta - mid.pose.theta, 2.0 * std::numbers::pi));
+      if (d < best && a < 0.35) {
+        best = d;
+        at = j;
+      }
+    }
+    if (at != 0) places.push_back({i, at + 1 - static_cast<std::size_t>(visit_n)});
+  }
+  const double total = static_cast<double>(std::min<std::size_t>(places.size(), static_cast<std::size_t>(options.places))) *
+                       std::size(kRealSets) * options.runs;
+  double done = 0.0;
+  for (const Place& place : places) {
+    if (result.objects.size() >= static_cast<std::size_t>(options.places)) break;
+    const std::uint64_t key = sim::hash(options.seed, 0xCA73, place.teach);
+    // The teach-in: the log's steps with odometry noise, refined.
+    std::vector<reg::StationScan> teach(static_cast<std::size_t>(teach_n));
+    std::vector<Eigen::Isometry3d> logged(teach.size());
+    sim::Rng rng(key, 1);
+    for (std::size_t k = 0; k < teach.size(); ++k) {
+      const std::size_t i = place.teach + k;
+      logged[k] = pose_of(i);
+      teach[k].points.reserve(scans[i].ranges.size());
+      reg::scan_points(scans[i], options.max_range, 0.05f, teach[k].points);
+      teach[k].pose = k == 0 ? logged[0]
+                             : Eigen::Isometry3d(teach[k - 1].pose * logged[k - 1].inverse() * logged[k] *
+                                                 planar(options.odometry_sigma_xy * rng.normal(),
+                                                        options.odometry_sigma_xy * rng.normal(),
+                                                        options.odometry_sigma_theta * rng.normal()));
+    }
+    const reg::TeachResult taught = reg::teach(teach, options.station);
+    // The taught frame against the log's: D (log -> taught), as in the simulation.
+    std::vector<st::Pose2> log_poses;
+    for (const auto& l : logged) log_poses.push_back({l.translation().x(), l.translation().y(), yaw_of(l)});
+    const Eigen::Isometry3d frame = taught_frame(log_poses, teach);
+    // The object: the free-standing cluster with the most returns.
+    std::vector<reg::Point> merged;
+    for (const auto& s : teach) {
+      for (const reg::Point& p : s.points) merged.push_back((s.pose * p.cast<double>()).cast<float>());
+    }
+    const Eigen::Vector2d middle = teach[teach.size() / 2].pose.translation().head<2>();
+    const Cluster* chosen = nullptr;
+    const std::vector<Cluster> groups = clusters_of(merged);
+    for (const Cluster& c : groups) {
+      const double extent = (c.hi - c.lo).maxCoeff(), width = (c.hi - c.lo).minCoeff();
+      const double distance = (0.5 * (c.lo + c.hi) - middle).norm();
+      // Not a line (a wall's piece slides along itself): at least 0.2 m
+      // across both ways, as the thesis' box, shelf and table.
+      if (width < 0.2 || extent > 1.5 || c.points < 60 || distance < 0.7 || distance > 4.0) continue;
+      if (chosen == nullptr || c.points > chosen->points) chosen = &c;
+    }
+    if (chosen == nullptr) continue;  // no free-standing object at this place
+    constexpr double kPad = 0.04;
+    const std::vector<Eigen::Vector2d> polygon_taught{{chosen->lo.x() - kPad, chosen->lo.y() - kPad},
+                                                      {chosen->hi.x() + kPad, chosen->lo.y() - kPad},
+                                                      {chosen->hi.x() + kPad, chosen->hi.y() + kPad},
+                                                      {chosen->lo.x() - kPad, chosen->hi.y() + kPad}};
+    std::vector<Eigen::Vector2d> polygon_log;
+    for (const auto& c : polygon_taught) polygon_log.push_back((frame.inverse() * Eigen::Vector3d(c.x(), c.y(), 0.0)).head<2>());
+    const reg::StationObject object{"object", polygon_taught};
+    const reg::BuiltStation built = reg::build_station(teach, std::span<const reg::StationObject>(&object, 1), options.station);
+    if (!built.error.empty()) continue;
+    // Seen again in the visit?
+    std::size_t seen_again = 0;
+    for (int k = 0; k < visit_n; ++k) {
+      const std::size_t j = place.visit + static_cast<std::size_t>(k);
+      std::vector<reg::Point> pts;
+      pts.reserve(scans[j].ranges.size());
+      reg::scan_points(scans[j], options.max_range, 0.05f, pts);
+      for (const reg::Point& p : pts) seen_again += reg::inside(polygon_log, (pose_of(j) * p.cast<double>()).head<2>()) ? 1u : 0u;
+    }
+    if (seen_again < 60) continue;
+
+    StationObjectResult obj;
+    const Eigen::Vector2d centre_t = 0.5 * (chosen->lo + chosen->hi);
+    const Eigen::Vector3d centre_taught(centre_t.x(), centre_t.y(), 0.0);
+    const Eigen::Vector3d centre_log = frame.inverse() * centre_taught;
+    char where[200];
+    std::snprintf(where, sizeof where, "scans %zu-%zu (%.0f s) and %zu-%zu (%.0f s); object at (%.2f, %.2f) m, %.2f x %.2f m",
+                  place.teach, place.teach + teach.size() - 1, scans[place.teach].timestamp, place.visit,
+                  place.visit + static_cast<std::size_t>(visit_n) - 1, scans[place.visit].timestamp, centre_log.x(),
+                  centre_log.y(), chosen->hi.x() - chosen->lo.x(), chosen->hi.y() - chosen->lo.y());
+    obj.name = "place " + std::to_string(result.objects.size() + 1);
+    obj.where = where;
+    obj.teach_rounds = taught.rounds;
+    obj.teach_converged = taught.converged;
+    obj.teach_largest_correction = taught.largest_correction;
+    obj.teach_error_mm = obj.teach_error_deg = -1.0;  // no truth for the poses of a real log
+    obj.surroundings_points = built.station.taught_points[0];
+    obj.object_points = built.station.taught_points[1];
+    reg::StationLocaliser localiser(built.station, options.station);
+    // A visit as it was (nothing moved by us): a real object may have been
+    // moved by people between the two passes, minutes apart, and then the
+    // applied motion is not the truth. Such a place is left out.
+    auto visit = [&](const Eigen::Isometry3d& move, std::uint64_t rk) {
+      sim::Rng noise(rk, 3);
+      const Eigen::Isometry3d start = frame * pose_of(place.visit) *
+                                      planar(options.start_sigma_xy * noise.normal(), options.start_sigma_xy * noise.normal(),
+                                             options.start_sigma_theta * noise.normal());
+      localiser.begin(start);
+      for (int k = 0; k < visit_n; ++k) {
+        const std::size_t j = place.visit + static_cast<std::size_t>(k);
+        const std::vector<reg::Point> pts = moved_scan(scans[j], pose_of(j), options.max_range, polygon_log, move);
+        const Eigen::Isometry3d odometry =
+            k == 0 ? Eigen::Isometry3d::Identity()
+                   : Eigen::Isometry3d(pose_of(j - 1).inverse() * pose_of(j) *
+                                       planar(options.odometry_sigma_xy * noise.normal(), options.odometry_sigma_xy * noise.normal(),
+                                              options.odometry_sigma_theta * noise.normal()));
+        localiser.add(pts, odometry);
+      }
+      return localiser.localise();
+    };
+    {
+      // Judged by the log's own poses, not by the registration under test:
+      // the object's returns of the second pass must lie within 5 cm of the
+      // taught object's, nine in ten of them.
+      std::size_t near = 0, all = 0;
+      for (int k = 0; k < visit_n; ++k) {
+        const std::size_t j = place.visit + static_cast<std::size_t>(k);
+        std::vector<reg::Point> pts;
+        pts.reserve(scans[j].ranges.size());
+        reg::scan_points(scans[j], options.max_range, 0.05f, pts);
+        for (const reg::Point& p : pts) {
+          const Eigen::Vector3d w = pose_of(j) * p.cast<double>();
+          if (!reg::inside(polygon_log, w.head<2>())) continue;
+          std::uint32_t at = 0;
+          float d2 = 0.0f;
+          ++all;
+          if (built.station.bodies[1].tree.nearest((frame * w).cast<float>(), at, d2) && d2 < 0.05f * 0.05f) ++near;
+        }
+      }
+      if (10 * near < 9 * all) {
+        ++result.places_changed;
+        continue;
+      }
+    }
+    for (std::size_t s = 0; s < std::size(kRealSets); ++s) {
+      const st::MoveSet& set = kRealSets[s];
+      StationSetResult sr;
+      sr.set = static_cast<int>(s + 1);
+      sr.translation = set.translation;
+      sr.rotation = set.rotation;
+      std::vector<double> tm, rd, stm, srd;
+      for (int run = 0; run < options.runs; ++run) {
+        const std::uint64_t rk = sim::hash(key, 100 + s, static_cast<std::uint64_t>(run));
+        // The motion about the object's centre (log frame), direction and sign drawn.
+        const double direction = 2.0 * std::numbers::pi * sim::unit(sim::hash(rk, 1));
+        const double phi = (sim::unit(sim::hash(rk, 2)) < 0.5 ? -1.0 : 1.0) * set.rotation;
+        const Eigen::Isometry3d move = Eigen::Translation3d(centre_log + Eigen::Vector3d(set.translation * std::cos(direction),
+                                                                                           set.translation * std::sin(direction), 0.0)) *
+                                       Eigen::AngleAxisd(phi, Eigen::Vector3d::UnitZ()) * Eigen::Translation3d(-centre_log);
+        const reg::StationFix fix = visit(move, rk);
+        const Eigen::Isometry3d truth = frame * move * frame.inverse();  // the motion in the taught frame
+        const Eigen::Isometry3d estimate = fix.moved(1);
+        tm.push_back(1000.0 * (estimate * centre_taught - truth * centre_taught).norm());
+        rd.push_back(Eigen::AngleAxisd((truth.inverse() * estimate).linear()).angle() * 180.0 / std::numbers::pi);
+        // One body: its transform for the object too; the motion it implies
+        // against the surroundings' transform of the multi-body answer.
+        const reg::GicpResult single = localiser.localise_single();
+        const Eigen::Isometry3d single_moved = fix.bodies[0].transform * single.transform.inverse();
+        stm.push_back(1000.0 * (single_moved * centre_taught - truth * centre_taught).norm());
+        srd.push_back(Eigen::AngleAxisd((truth.inverse() * single_moved).linear()).angle() * 180.0 / std::numbers::pi);
+        if (!fix.bodies[1].observed) ++sr.unobserved;
+        done += 1.0;
+        if (options.progress) options.progress(done / total);
+      }
+      sr.runs = options.runs;
+      sr.translation_mm = stats_of(tm);
+      sr.rotation_deg = stats_of(rd);
+      sr.single_translation_mm = stats_of(stm);
+      sr.single_rotation_deg = stats_of(srd);
+      obj.sets.push_back(sr);
+    }
+    result.objects.push_back(std::move(obj));
+  }
+  if (result.objects.empty()) result.error = options.log + ": no place passed twice with a free-standing object in view";
   return result;
 }
 
