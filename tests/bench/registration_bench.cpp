@@ -17,6 +17,8 @@
 #include "trailnav/perception/registration/cloud.hpp"
 #include "trailnav/perception/registration/gicp.hpp"
 #include "trailnav/perception/registration/multi_body.hpp"
+#include "trailnav/perception/registration/station.hpp"
+#include "station_world.hpp"
 
 #include "registration_data.hpp"
 
@@ -121,6 +123,50 @@ void BM_StationUpdate(benchmark::State& state) {
   state.counters["converged"] = out[0].converged && out[1].converged ? 1 : 0;
 }
 BENCHMARK(BM_StationUpdate)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond);
+
+// A visit to the thesis' simulated station (board/sim/station_world.hpp):
+// the box taught from 16 scans, then per iteration a visit of 10 scans
+// (each registered onto the previous ones: `BM_StationVisit/0` stops there)
+// and the multi-body localisation against the surroundings and the box
+// (`/1`): what trailnavd's station task does at each arrival.
+void BM_StationVisit(benchmark::State& state) {
+  namespace st = trailnav::sim::station;
+  const st::World w = st::thesis_world();
+  std::vector<st::Pose2> taught;
+  for (const auto& o : w.objects) taught.push_back(o.pose);
+  std::vector<st::Segment> seg = w.walls;
+  const auto os = st::object_segments(w, taught);
+  seg.insert(seg.end(), os.begin(), os.end());
+  const st::ObjectShape& box = w.objects[0];
+  const st::LaserConfig laser;
+  const st::Drive teach = st::teach_drive(box, 16, 1);
+  std::vector<StationScan> scans(teach.truth.size());
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    scans[i].points = st::cast(seg, teach.truth[i], laser, 100 + i);
+    scans[i].pose = st::to_isometry(teach.truth[i]);
+  }
+  const StationConfig config;
+  const StationObject marked{"box", {box.mark.begin(), box.mark.end()}};
+  const BuiltStation built = build_station(scans, std::span<const StationObject>(&marked, 1), config);
+  if (!built.error.empty()) throw std::runtime_error(built.error);
+  StationLocaliser localiser(built.station, config);
+  const st::Drive visit = st::visit_drive(box, 10, 2);
+  std::vector<std::vector<Point>> visit_scans;
+  for (std::size_t i = 0; i < visit.truth.size(); ++i) visit_scans.push_back(st::cast(seg, visit.truth[i], laser, 200 + i));
+  const bool localise = state.range(0) != 0;
+  std::size_t local = 0;
+  for (auto _ : state) {
+    localiser.begin(st::to_isometry(visit.truth.front()));
+    for (std::size_t i = 0; i < visit_scans.size(); ++i) localiser.add(visit_scans[i], st::to_isometry(visit.odometry[i]));
+    if (localise) {
+      const StationFix fix = localiser.localise();
+      local = fix.local_points;
+      benchmark::DoNotOptimize(fix.bodies[1].transform.data());
+    }
+  }
+  state.counters["local_points"] = static_cast<double>(local);
+}
+BENCHMARK(BM_StationVisit)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
