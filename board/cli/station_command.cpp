@@ -4,6 +4,7 @@
 // move set, the translation and rotation error of the robot's pose
 // relative to the object (mean, std, max) for the multi-body registration
 // and for one GICP over the whole reference. docs/registration.md.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -12,6 +13,7 @@
 #include <CLI/CLI.hpp>
 
 #include "commands.hpp"
+#include "figure.hpp"
 #include "station_eval.hpp"
 #include "terminal.hpp"
 
@@ -35,10 +37,65 @@ struct Options {
   double noise = 1.0;
   bool teach_truth = false;
   bool quiet = false;
+  std::string png_dir;
 };
 
 void stats_json(const char* name, const eval::ErrorStats& s, const char* tail) {
   std::printf("\"%s\": {\"mean\": %.4f, \"std\": %.4f, \"max\": %.4f}%s", name, s.mean, s.std, s.max, tail);
+}
+
+// One picture per object: 5 m x 5 m around it at 1 cm a pixel.
+int write_png(const std::string& dir, const eval::StationObjectResult& ob, bool simulated, const char* who) {
+  constexpr int kSize = 500;
+  constexpr double kRes = 0.01;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(kSize) * kSize * 3, 255);
+  const double x0 = ob.centre.x() - 0.5 * kSize * kRes, y0 = ob.centre.y() - 0.5 * kSize * kRes;
+  auto plot = [&](const std::vector<Eigen::Vector2f>& pts, Rgb c, int dot) {
+    for (const Eigen::Vector2f& p : pts) {
+      const int px = static_cast<int>(std::floor((static_cast<double>(p.x()) - x0) / kRes));
+      const int py = kSize - 1 - static_cast<int>(std::floor((static_cast<double>(p.y()) - y0) / kRes));
+      for (int dy = 0; dy < dot; ++dy) {
+        for (int dx = 0; dx < dot; ++dx) {
+          const int x = px + dx - dot / 2, y = py + dy - dot / 2;
+          if (x < 0 || y < 0 || x >= kSize || y >= kSize) continue;
+          std::uint8_t* q = &rgb[(static_cast<std::size_t>(y) * kSize + static_cast<std::size_t>(x)) * 3];
+          q[0] = c.r;
+          q[1] = c.g;
+          q[2] = c.b;
+        }
+      }
+    }
+  };
+  const Rgb grey{150, 150, 150}, blue{40, 90, 220}, orange{240, 140, 20}, green{20, 160, 60};
+  plot(ob.taught_surroundings, grey, 2);
+  plot(ob.taught_object, blue, 2);
+  plot(ob.last_visit, orange, 3);
+  plot(ob.object_moved, green, 2);
+  MapFigure f;
+  f.title = "station: " + ob.name;
+  f.notes.push_back(simulated ? "the thesis' simulated floor (simulated truth)" : "constructed from a real log");
+  if (!ob.where.empty()) {
+    for (const std::string& l : wrap_text(ob.where, 34)) f.notes.push_back(l);
+  }
+  char line[128];
+  std::snprintf(line, sizeof line, "last visit (set %zu): %.1f mm, %.2f deg off", ob.sets.size(), ob.last_error_mm,
+                ob.last_error_deg);
+  f.notes.push_back(line);
+  f.notes.push_back("5 m x 5 m around the object");
+  f.legend = {{grey, "taught surroundings"},
+              {blue, "taught object"},
+              {orange, "last visit, placed by the surroundings"},
+              {green, "taught object moved as estimated"}};
+  f.metres_per_pixel = kRes;
+  f.north_up = false;
+  std::string name = ob.name;
+  for (char& c : name) c = c == ' ' ? '-' : c;
+  const std::string path = dir + "/station-" + name + ".png";
+  if (const Status st = write_map_figure(path, rgb, kSize, kSize, f); !st.is_ok()) {
+    std::fprintf(stderr, "%s: cannot write %s: %s\n", who, path.c_str(), st.message().c_str());
+    return 1;
+  }
+  return 0;
 }
 
 int run(const Options& o) {
@@ -96,6 +153,11 @@ int run(const Options& o) {
   if (!r.error.empty()) {
     std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
     return 1;
+  }
+  if (!o.png_dir.empty()) {
+    for (const eval::StationObjectResult& ob : r.objects) {
+      if (write_png(o.png_dir, ob, o.sim, who) != 0) return 1;
+    }
   }
   if (o.report == "json") {
     std::printf("{\"truth\": \"%s\", \"runs\": %d, \"seed\": %llu, \"objects\": [",
@@ -192,6 +254,10 @@ void add_station_commands(CLI::App& app) {
   ev->add_option("--noise", o.noise, "Scales every simulated noise: the laser's 1 cm, the odometry's 0.1 m/s and 0.1 rad/s, the start's 3 cm and 1.1 deg (0: none)")
       ->capture_default_str()->check(CLI::Range(0.0, 10.0));
   ev->add_flag("--teach-truth", o.teach_truth, "Take the teach-in's poses from the simulated truth (the visits' own error alone)");
+  ev->add_option("--png", o.png_dir,
+                 "Directory for one picture per object (station-NAME.png, 5 m around it): the taught surroundings and\n"
+                 "object, the last visit placed by the surroundings, and the taught object moved as estimated")
+      ->check(CLI::ExistingDirectory);
   ev->add_flag("--quiet", o.quiet, "No progress bar");
   ev->callback([] { std::exit(run(o)); });
 }

@@ -76,6 +76,19 @@ Eigen::Isometry3d taught_frame(const std::vector<st::Pose2>& truth, const std::v
   return d;
 }
 
+void picture_of(const reg::Station& station, const reg::StationLocaliser& localiser, const reg::StationFix& fix,
+                StationObjectResult& obj) {
+  auto flat = [](const std::vector<reg::Point>& in, const Eigen::Isometry3d& t, std::vector<Eigen::Vector2f>& out) {
+    out.clear();
+    const Eigen::Isometry3f tf = t.cast<float>();
+    for (const reg::Point& p : in) out.push_back((tf * p).head<2>());
+  };
+  flat(station.bodies[0].cloud.points, Eigen::Isometry3d::Identity(), obj.taught_surroundings);
+  flat(station.bodies[1].cloud.points, Eigen::Isometry3d::Identity(), obj.taught_object);
+  flat(localiser.local_points().points, fix.bodies[0].transform, obj.last_visit);
+  flat(station.bodies[1].cloud.points, fix.moved(1), obj.object_moved);
+}
+
 }  // namespace
 
 StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
@@ -176,6 +189,12 @@ StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
         error_of(truth, fix.bodies[1].transform, mm, deg, centre);
         tm.push_back(mm);
         rd.push_back(deg);
+        if (s + 1 == st::kThesisSets.size() && run + 1 == options.runs) {
+          picture_of(built.station, localiser, fix, obj);
+          obj.centre = centre.head<2>();
+          obj.last_error_mm = mm;
+          obj.last_error_deg = deg;
+        }
         const reg::GicpResult single = localiser.localise_single();
         error_of(truth, single.transform, mm, deg, centre);
         stm.push_back(mm);
@@ -503,6 +522,12 @@ StationEvalResult evaluate_station_carmen(const StationCarmenOptions& options) {
         const Eigen::Isometry3d estimate = fix.moved(1);
         tm.push_back(1000.0 * (estimate * centre_taught - truth * centre_taught).norm());
         rd.push_back(Eigen::AngleAxisd((truth.inverse() * estimate).linear()).angle() * 180.0 / std::numbers::pi);
+        if (s + 1 == std::size(kRealSets) && run + 1 == options.runs) {
+          picture_of(built.station, localiser, fix, obj);
+          obj.centre = centre_taught.head<2>();
+          obj.last_error_mm = tm.back();
+          obj.last_error_deg = rd.back();
+        }
         // One body: its transform for the object too; the motion it implies
         // against the surroundings' transform of the multi-body answer.
         const reg::GicpResult single = localiser.localise_single();

@@ -55,6 +55,13 @@ struct StationObjectResult {
   double teach_error_mm = 0.0, teach_error_deg = 0.0;  // the refined poses' largest error against the truth
   std::size_t object_points = 0, surroundings_points = 0;  // taught, before the voxel filter
   std::vector<StationSetResult> sets;
+  // For a picture (taught frame, metres): the taught surroundings and
+  // object, the last visit's local model placed by the surroundings'
+  // transform, the taught object moved by its estimated motion, and the
+  // object's centre. The last visit: the last run of the last set.
+  std::vector<Eigen::Vector2f> taught_surroundings, taught_object, last_visit, object_moved;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double last_error_mm = 0.0, last_error_deg = 0.0;
 };
 
 struct StationEvalResult {

@@ -135,6 +135,9 @@ class StationLocaliser {
                                 const Eigen::Isometry3d& initial) noexcept;
 
   const Eigen::Isometry3d& pose() const noexcept { return pose_; }
+  // The local model of the last localise() or localise_single(), in the
+  // robot frame (for pictures and diagnostics).
+  const Cloud& local_points() const noexcept { return query_; }
   std::size_t scans() const noexcept { return count_; }
 
  private:
