@@ -4,6 +4,9 @@
 // move set, the translation and rotation error of the robot's pose
 // relative to the object (mean, std, max) for the multi-body registration
 // and for one GICP over the whole reference. docs/registration.md.
+#include <zlib.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -16,6 +19,10 @@
 #include "figure.hpp"
 #include "station_eval.hpp"
 #include "terminal.hpp"
+#include "trailnav/perception/registration/carmen.hpp"
+#include "trailnav/perception/registration/station.hpp"
+#include "trailnav/perception/registration/station_file.hpp"
+#include "trailnav/runtime/config.hpp"
 
 namespace trailnav::cli {
 namespace {
@@ -217,6 +224,177 @@ int run(const Options& o) {
   return 0;
 }
 
+namespace reg = perception::registration;
+
+struct TeachOptions {
+  std::string log;
+  long from = 0, to = -1;
+  std::string objects;
+  std::string out;
+  std::string png;
+  std::string name = "station";
+  float max_range = 20.0f;
+};
+
+// The objects a user marked (station frame, metres):
+//   objects:
+//     - name: table
+//       polygon: [[x, y], [x, y], [x, y], ...]
+//     - name: box
+//       box: {centre: [x, y], size: [length, width], heading_deg: 0}
+std::vector<reg::StationObject> read_objects(const std::string& path) {
+  const ConfigNode root = ConfigNode::load_file(path);
+  std::vector<reg::StationObject> out;
+  for (const ConfigNode& o : root.map_list("objects")) {
+    reg::StationObject obj;
+    obj.name = o.string("name");
+    if (obj.name.empty() || obj.name.size() > reg::kStationMaxName || obj.name == "surroundings") {
+      throw ConfigError(o.file(), o.line(), o.path() + ".name", "a name of 1 to 64 characters other than 'surroundings'");
+    }
+    if (o.has("polygon") == o.has("box")) {
+      throw ConfigError(o.file(), o.line(), o.path(), "give either polygon (corners [x, y]) or box (centre, size, heading_deg)");
+    }
+    if (o.has("polygon")) {
+      for (const std::vector<double>& c : o.number_rows("polygon", 2, -1e5, 1e5)) obj.polygon.emplace_back(c[0], c[1]);
+      if (obj.polygon.size() < 3 || obj.polygon.size() > reg::kStationMaxCorners) {
+        throw ConfigError(o.file(), o.line(), o.path() + ".polygon", "3 to 1024 corners");
+      }
+    } else {
+      const ConfigNode b = o.map("box");
+      const std::vector<double> c = b.number_list("centre", -1e5, 1e5);
+      const std::vector<double> size = b.number_list("size", 0.01, 100.0);
+      if (c.size() != 2 || size.size() != 2) throw ConfigError(b.file(), b.line(), b.path(), "centre: [x, y], size: [length, width]");
+      const double h = b.number("heading_deg", -360.0, 360.0, 0.0) * 3.14159265358979323846 / 180.0;
+      const double ch = std::cos(h), sh = std::sin(h);
+      for (const auto& [u, v] : {std::pair{-1.0, -1.0}, std::pair{1.0, -1.0}, std::pair{1.0, 1.0}, std::pair{-1.0, 1.0}}) {
+        const double x = 0.5 * size[0] * u, y = 0.5 * size[1] * v;
+        obj.polygon.emplace_back(c[0] + ch * x - sh * y, c[1] + sh * x + ch * y);
+      }
+      b.reject_unknown_keys();
+    }
+    o.reject_unknown_keys();
+    out.push_back(std::move(obj));
+  }
+  root.reject_unknown_keys();
+  return out;
+}
+
+int write_station_png(const std::string& path, const reg::Station& s, const std::string& title, std::size_t scans,
+                      const char* who) {
+  Eigen::Vector2f lo(1e9f, 1e9f), hi(-1e9f, -1e9f);
+  for (const reg::Target& b : s.bodies) {
+    for (const reg::Point& p : b.cloud.points) {
+      lo = lo.cwiseMin(p.head<2>());
+      hi = hi.cwiseMax(p.head<2>());
+    }
+  }
+  for (const auto& poly : s.polygons) {
+    for (const Eigen::Vector2d& c : poly) {
+      lo = lo.cwiseMin(c.cast<float>());
+      hi = hi.cwiseMax(c.cast<float>());
+    }
+  }
+  lo -= Eigen::Vector2f(0.2f, 0.2f);
+  hi += Eigen::Vector2f(0.2f, 0.2f);
+  const double extent = static_cast<double>(std::max(hi.x() - lo.x(), hi.y() - lo.y()));
+  const double res = std::max(0.01, extent / 800.0);
+  const int w = std::max(1, static_cast<int>(std::ceil(static_cast<double>(hi.x() - lo.x()) / res)));
+  const int h = std::max(1, static_cast<int>(std::ceil(static_cast<double>(hi.y() - lo.y()) / res)));
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 3, 255);
+  auto set = [&](double x, double y, Rgb c) {
+    const int px = static_cast<int>(std::floor((x - static_cast<double>(lo.x())) / res));
+    const int py = h - 1 - static_cast<int>(std::floor((y - static_cast<double>(lo.y())) / res));
+    if (px < 0 || py < 0 || px >= w || py >= h) return;
+    std::uint8_t* q = &rgb[(static_cast<std::size_t>(py) * static_cast<std::size_t>(w) + static_cast<std::size_t>(px)) * 3];
+    q[0] = c.r;
+    q[1] = c.g;
+    q[2] = c.b;
+  };
+  const Rgb palette[] = {{40, 90, 220}, {220, 60, 40}, {20, 160, 60}, {200, 120, 0}, {140, 60, 180}, {0, 150, 160}};
+  MapFigure f;
+  f.title = title;
+  f.notes.push_back(std::to_string(scans) + " teach-in scans, jointly registered");
+  f.notes.push_back("station frame; objects outlined as marked");
+  for (std::size_t k = 0; k < s.bodies.size(); ++k) {
+    const Rgb c = k == 0 ? Rgb{150, 150, 150} : palette[(k - 1) % std::size(palette)];
+    for (const reg::Point& p : s.bodies[k].cloud.points) set(static_cast<double>(p.x()), static_cast<double>(p.y()), c);
+    if (k > 0) {
+      const auto& poly = s.polygons[k];
+      for (std::size_t i = 0; i < poly.size(); ++i) {
+        const Eigen::Vector2d a = poly[i], b = poly[(i + 1) % poly.size()];
+        const int steps = std::max(1, static_cast<int>((b - a).norm() / (0.5 * res)));
+        for (int t = 0; t <= steps; ++t) {
+          const Eigen::Vector2d q = a + (b - a) * (static_cast<double>(t) / steps);
+          set(q.x(), q.y(), c);
+        }
+      }
+    }
+    f.legend.push_back({c, s.names[k] + " (" + std::to_string(s.bodies[k].cloud.size()) + " points)"});
+  }
+  f.metres_per_pixel = res;
+  f.north_up = false;
+  if (const Status st = write_map_figure(path, rgb, w, h, f); !st.is_ok()) {
+    std::fprintf(stderr, "%s: cannot write %s: %s\n", who, path.c_str(), st.message().c_str());
+    return 1;
+  }
+  return 0;
+}
+
+int run_teach(const TeachOptions& o) {
+  const char* who = "trailnav station teach";
+  gzFile f = gzopen(o.log.c_str(), "rb");
+  if (f == nullptr) {
+    std::fprintf(stderr, "%s: cannot open %s\n", who, o.log.c_str());
+    return 1;
+  }
+  std::vector<reg::StationScan> scans;
+  std::vector<char> line(1 << 16);
+  long index = 0;
+  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
+    reg::LaserScan2 s;
+    if (!reg::parse_flaser(line.data(), s).empty()) continue;
+    if (index >= o.from && (o.to < 0 || index <= o.to)) {
+      reg::StationScan st;
+      st.points.reserve(s.ranges.size());
+      reg::scan_points(s, o.max_range, 0.05f, st.points);
+      st.pose = reg::to_isometry(s.pose);
+      scans.push_back(std::move(st));
+    }
+    ++index;
+  }
+  gzclose(f);
+  const reg::StationConfig config;
+  if (scans.size() < 2 || scans.size() > config.max_scans) {
+    std::fprintf(stderr, "%s: scans %ld to %ld of %s: %zu FLASER scans; a teach-in takes 2 to %zu\n", who, o.from, o.to,
+                 o.log.c_str(), scans.size(), config.max_scans);
+    return 1;
+  }
+  const std::vector<reg::StationObject> objects = o.objects.empty() ? std::vector<reg::StationObject>{} : read_objects(o.objects);
+  const reg::TeachResult t = reg::teach(scans, config);
+  const reg::BuiltStation built = reg::build_station(scans, objects, config);
+  if (!built.error.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, built.error.c_str());
+    return 1;
+  }
+  if (const std::string e = reg::save_station(reg::station_file_of(built.station, o.name), o.out); !e.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, e.c_str());
+    return 1;
+  }
+  std::printf("station '%s' taught from %zu scans of %s: %d joint-registration rounds%s, poses moved by up to %.1f mm\n",
+              o.name.c_str(), scans.size(), o.log.c_str(), t.rounds, t.converged ? "" : " (not converged)",
+              1000.0 * t.largest_correction);
+  for (std::size_t k = 0; k < built.station.bodies.size(); ++k) {
+    std::printf("  %-14s %zu points (%zu before the %.0f cm voxels)\n", built.station.names[k].c_str(),
+                built.station.bodies[k].cloud.size(), built.station.taught_points[k], 100.0 * static_cast<double>(config.voxel));
+  }
+  std::printf("wrote %s\n", o.out.c_str());
+  if (!o.png.empty()) {
+    if (write_station_png(o.png, built.station, "station: " + o.name, scans.size(), who) != 0) return 1;
+    std::printf("wrote %s\n", o.png.c_str());
+  }
+  return 0;
+}
+
 }  // namespace
 
 void add_station_commands(CLI::App& app) {
@@ -226,6 +404,24 @@ void add_station_commands(CLI::App& app) {
       "people push around) taught once and localised against at every visit, relative to each object at once\n"
       "by Generalized ICP for multiple rigid bodies.");
   station->require_subcommand(1);
+  static TeachOptions t;
+  auto* teach = station->add_subcommand(
+      "teach",
+      "Teaches a station from a recording (section 4.2.1): the scans around it, their poses refined by joint\n"
+      "registration, split into the surroundings and the objects marked in --objects (a YAML list of polygons\n"
+      "or boxes in the recording's frame), written to --out. Without --objects the station holds only the\n"
+      "surroundings: look at --png and mark the objects. Recordings: CARMEN logs (FLASER lines; plain or gzip).");
+  teach->add_option("recording", t.log, "CARMEN log (.log or .log.gz)")->required();
+  teach->add_option("--from", t.from, "First FLASER scan of the teach-in (0: the log's first)")->capture_default_str();
+  teach->add_option("--to", t.to, "Last FLASER scan of the teach-in (-1: the log's last)")->capture_default_str();
+  teach->add_option("--objects", t.objects,
+                    "YAML: objects: [{name: table, polygon: [[x, y], ...]}, {name: box, box: {centre: [x, y], size: [l, w], "
+                    "heading_deg: 0}}]")
+      ->check(CLI::ExistingFile);
+  teach->add_option("--out", t.out, "The station file to write (written whole or not at all)")->required();
+  teach->add_option("--png", t.png, "A picture of the taught station: each body's points, the objects' polygons, a scale");
+  teach->add_option("--name", t.name, "The station's name (kept in the file)")->capture_default_str();
+  teach->callback([] { std::exit(run_teach(t)); });
   static Options o;
   auto* ev = station->add_subcommand(
       "eval",

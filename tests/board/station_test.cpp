@@ -2,14 +2,20 @@
 // thesis' simulated floor (board/sim/station_world.hpp). Simulated truth
 // throughout.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
 #include <numbers>
 
 #include "station_eval.hpp"
 #include "station_world.hpp"
 #include "trailnav/perception/registration/station.hpp"
+#include "trailnav/perception/registration/station_file.hpp"
 
 namespace trailnav {
 namespace {
@@ -145,6 +151,94 @@ TEST(Station, CasesConstructedFromARealLog) {
   }
   std::printf("[ station ] %d of %zu places good\n", good, r.objects.size());
   EXPECT_GE(good, 7);
+}
+
+// The station file: what is written loads back bit for bit; damaged, cut
+// or foreign bytes are refused with what is wrong.
+TEST(StationFile, RoundTripAndDamageRefusedWithItsReason) {
+  reg::StationFile f;
+  f.name = "dock";
+  f.bodies.push_back({"surroundings", {}, {{1.0f, 2.0f, 0.0f}, {1.5f, 2.0f, 0.0f}}});
+  f.bodies.push_back({"table", {{0, 0}, {1, 0}, {1, 1}}, {{0.5f, 0.5f, 0.0f}}});
+  const std::vector<std::uint8_t> bytes = reg::serialize_station(f);
+  const reg::LoadedStation back = reg::parse_station(bytes, "a.tnst");
+  ASSERT_TRUE(back.station) << back.error;
+  EXPECT_EQ(back.station->name, "dock");
+  ASSERT_EQ(back.station->bodies.size(), 2u);
+  EXPECT_EQ(back.station->bodies[1].name, "table");
+  EXPECT_EQ(back.station->bodies[1].polygon.size(), 3u);
+  EXPECT_EQ(back.station->bodies[0].points[1], reg::Point(1.5f, 2.0f, 0.0f));
+  EXPECT_EQ(reg::serialize_station(*back.station), bytes);
+
+  std::vector<std::uint8_t> damaged = bytes;
+  damaged[30] ^= 0x10;
+  EXPECT_NE(reg::parse_station(damaged, "a.tnst").error.find("checksum"), std::string::npos);
+  const std::vector<std::uint8_t> cut(bytes.begin(), bytes.end() - 9);
+  EXPECT_NE(reg::parse_station(cut, "a.tnst").error.find("a.tnst"), std::string::npos);
+  EXPECT_FALSE(reg::parse_station(cut, "a.tnst").station);
+  std::vector<std::uint8_t> other = bytes;
+  other[8] = 7;  // version 7
+  EXPECT_NE(reg::parse_station(other, "a.tnst").error.find("version 7"), std::string::npos);
+  const std::vector<std::uint8_t> foreign{'P', 'K', 3, 4, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+  EXPECT_NE(reg::parse_station(foreign, "a.tnst").error.find("not a trailnav station file"), std::string::npos);
+  // A loaded station becomes bodies to register against again.
+  reg::StationFile big;
+  big.name = "x";
+  big.bodies.push_back({"surroundings", {}, {}});
+  for (int i = 0; i < 50; ++i) big.bodies[0].points.emplace_back(0.02f * static_cast<float>(i), 0.0f, 0.0f);
+  const reg::BuiltStation built = reg::station_from_file(big, reg::StationConfig{});
+  ASSERT_EQ(built.error, "");
+  EXPECT_EQ(built.station.bodies[0].tree.size(), 50u);
+  EXPECT_NE(reg::station_from_file(f, reg::StationConfig{}).error.find("'surroundings' holds 2 points"), std::string::npos);
+}
+
+int run(const std::vector<std::string>& args, std::string& out) {
+  const std::filesystem::path log = std::filesystem::temp_directory_path() / ("station-cli-" + std::to_string(::getpid()));
+  std::string cmd = TRAILNAV_BINARY;
+  for (const std::string& a : args) cmd += " '" + a + "'";
+  cmd += " > " + log.string() + " 2>&1";
+  const int status = std::system(cmd.c_str());
+  std::ifstream in(log);
+  out.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  std::filesystem::remove(log);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// `trailnav station teach` on sixteen scans of the real Freiburg log with a
+// cabinet marked as a box: a station file with the surroundings and the
+// cabinet, and its picture; a polygon of two corners is refused with its
+// object's line, and nothing is written.
+TEST(StationTeach, ARealLogsScansAndAMarkedObjectMakeAStationFile) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("station-teach-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string objects = (dir / "objects.yaml").string();
+  std::ofstream(objects) << "objects:\n  - name: cabinet\n    box: {centre: [-14.32, -0.96], size: [1.1, 1.5], heading_deg: 0}\n";
+  const std::string out = (dir / "dock.tnst").string(), png = (dir / "dock.png").string();
+  std::string text;
+  ASSERT_EQ(run({"station", "teach", "../shared/data/carmen/freiburg-079-corrected.log.gz", "--from", "1480", "--to", "1495",
+                 "--objects", objects, "--out", out, "--png", png, "--name", "dock"},
+                text),
+            0)
+      << text;
+  EXPECT_NE(text.find("taught from 16 scans"), std::string::npos) << text;
+  const reg::LoadedStation loaded = reg::load_station(out);
+  ASSERT_TRUE(loaded.station) << loaded.error;
+  EXPECT_EQ(loaded.station->name, "dock");
+  ASSERT_EQ(loaded.station->bodies.size(), 2u);
+  EXPECT_EQ(loaded.station->bodies[1].name, "cabinet");
+  EXPECT_GT(loaded.station->bodies[1].points.size(), 200u);
+  EXPECT_GT(loaded.station->bodies[0].points.size(), 1000u);
+  EXPECT_GT(std::filesystem::file_size(png), 1000u);
+  const std::string bad = (dir / "bad.yaml").string();
+  std::ofstream(bad) << "objects:\n  - name: a\n    polygon: [[0, 0], [1, 0]]\n";
+  EXPECT_NE(run({"station", "teach", "../shared/data/carmen/freiburg-079-corrected.log.gz", "--from", "1480", "--to", "1495",
+                 "--objects", bad, "--out", (dir / "x.tnst").string()},
+                text),
+            0);
+  EXPECT_NE(text.find("bad.yaml:2"), std::string::npos) << text;  // the object's line
+  EXPECT_NE(text.find("3 to 1024 corners"), std::string::npos) << text;
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.tnst"));
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -153,6 +153,8 @@ BuiltStation build_station(std::span<const StationScan> scans, std::span<const S
   }
   s.names.push_back("surroundings");
   for (const StationObject& o : objects) s.names.push_back(o.name);
+  s.polygons.emplace_back();
+  for (const StationObject& o : objects) s.polygons.push_back(o.polygon);
   s.bodies = std::vector<Target>(nb);
   CovarianceEstimator covariances(config.neighbours, 1e-3f, config.planar, config.max_thickness);
   for (std::size_t k = 0; k < nb; ++k) {
@@ -166,6 +168,40 @@ BuiltStation build_station(std::span<const StationScan> scans, std::span<const S
     VoxelFilter filter(points[k].size());
     s.bodies[k].cloud.points.reserve(points[k].size());
     filter.filter(points[k], config.voxel, s.bodies[k].cloud);
+    prepare_target(s.bodies[k], covariances);
+  }
+  return built;
+}
+
+StationFile station_file_of(const Station& station, const std::string& name) {
+  StationFile f;
+  f.name = name;
+  for (std::size_t k = 0; k < station.bodies.size(); ++k) {
+    StationBodyFile b;
+    b.name = station.names[k];
+    if (k < station.polygons.size()) b.polygon = station.polygons[k];
+    b.points = station.bodies[k].cloud.points;
+    f.bodies.push_back(std::move(b));
+  }
+  return f;
+}
+
+BuiltStation station_from_file(const StationFile& file, const StationConfig& config) {
+  BuiltStation built;
+  Station& s = built.station;
+  CovarianceEstimator covariances(config.neighbours, 1e-3f, config.planar, config.max_thickness);
+  for (const StationBodyFile& b : file.bodies) {
+    if (b.points.size() < 6) {
+      built.error = "body '" + b.name + "' holds " + std::to_string(b.points.size()) + " points (at least 6 are needed)";
+      return built;
+    }
+    s.names.push_back(b.name);
+    s.polygons.push_back(b.polygon);
+    s.taught_points.push_back(b.points.size());
+  }
+  s.bodies = std::vector<Target>(file.bodies.size());
+  for (std::size_t k = 0; k < file.bodies.size(); ++k) {
+    s.bodies[k].cloud.points = file.bodies[k].points;
     prepare_target(s.bodies[k], covariances);
   }
   return built;

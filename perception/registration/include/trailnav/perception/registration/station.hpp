@@ -41,6 +41,7 @@
 #include "trailnav/perception/registration/cloud.hpp"
 #include "trailnav/perception/registration/gicp.hpp"
 #include "trailnav/perception/registration/multi_body.hpp"
+#include "trailnav/perception/registration/station_file.hpp"
 
 namespace trailnav::perception::registration {
 
@@ -93,6 +94,7 @@ struct Station {
   std::vector<std::string> names;  // names[0] == "surroundings"
   std::vector<Target> bodies;
   std::vector<std::size_t> taught_points;  // per body, before the voxel filter
+  std::vector<std::vector<Eigen::Vector2d>> polygons;  // per body as marked; [0] empty
 };
 // The teach-in's scans under their refined poses, split by the objects'
 // polygons, voxel filtered, with covariances, normals and trees. Empty
@@ -104,6 +106,11 @@ struct BuiltStation {
 };
 BuiltStation build_station(std::span<const StationScan> scans, std::span<const StationObject> objects,
                            const StationConfig& config);
+
+// The station as a file (station_file.hpp) and back: the covariances,
+// normals and trees are worked out again on the way in.
+StationFile station_file_of(const Station& station, const std::string& name);
+BuiltStation station_from_file(const StationFile& file, const StationConfig& config);
 
 struct StationFix {
   std::vector<BodyResult> bodies;  // per body: the robot's pose in its reference frame
