@@ -43,6 +43,7 @@ struct Options {
   double gate = 0.0;
   double noise = 1.0;
   bool teach_truth = false;
+  bool teach_graph = false;
   bool quiet = false;
   std::string png_dir;
 };
@@ -124,6 +125,7 @@ int run(const Options& o) {
   opt.visit_scans = o.local_scans;
   opt.noise = o.noise;
   opt.teach_truth = o.teach_truth;
+  opt.station.teach_graph = o.teach_graph;
   if (o.voxel > 0.0f) opt.station.voxel = o.voxel;
   if (o.neighbours > 0) opt.station.neighbours = o.neighbours;
   if (o.teach_rounds > 0) opt.station.teach_rounds = o.teach_rounds;
@@ -449,6 +451,7 @@ void add_station_commands(CLI::App& app) {
   ev->add_option("--max-correspondence", o.gate, "Associations farther are dropped (m; default " + std::to_string(d.gicp.max_correspondence_distance) + ")");
   ev->add_option("--noise", o.noise, "Scales every simulated noise: the laser's 1 cm, the odometry's 0.1 m/s and 0.1 rad/s, the start's 3 cm and 1.1 deg (0: none)")
       ->capture_default_str()->check(CLI::Range(0.0, 10.0));
+  ev->add_flag("--teach-graph", o.teach_graph, "Teach-in as a pose graph over every pair of scans (instead of Gauss-Seidel rounds)");
   ev->add_flag("--teach-truth", o.teach_truth, "Take the teach-in's poses from the simulated truth (the visits' own error alone)");
   ev->add_option("--png", o.png_dir,
                  "Directory for one picture per object (station-NAME.png, 5 m around it): the taught surroundings and\n"

@@ -45,11 +45,121 @@ double angle_of(const Eigen::Isometry3d& t) { return Eigen::AngleAxisd(t.linear(
 
 }  // namespace
 
+namespace {
+
+// (x, y, θ) of a planar transform.
+Eigen::Vector3d planar_of(const Eigen::Isometry3d& t) {
+  return {t.translation().x(), t.translation().y(), std::atan2(t.linear()(1, 0), t.linear()(0, 0))};
+}
+Eigen::Isometry3d from_planar(const Eigen::Vector3d& v) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(v.z(), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  t.translation() = Eigen::Vector3d(v.x(), v.y(), 0.0);
+  return t;
+}
+
+// The teach-in as the thesis' dense graph (Fig. 4.5) made a pose graph:
+// every pair of scans registered (j onto i, from their current poses), each
+// result an edge weighted by its associations, and the planar poses solved
+// for by Gauss–Newton with the first one fixed; twice, the pairs registered
+// again from the solved poses.
+void teach_graph(std::span<StationScan> scans, std::size_t n, const StationConfig& config, TeachResult& result) {
+  VoxelFilter filter(config.max_points);
+  CovarianceEstimator covariances(config.neighbours, 1e-3f, config.planar, config.max_thickness);
+  std::vector<Target> single(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::span<const Point> own(scans[k].points.data(), std::min(scans[k].points.size(), config.max_points));
+    single[k].cloud.points.reserve(own.size());
+    filter.filter(own, config.voxel, single[k].cloud);
+    prepare_target(single[k], covariances);
+  }
+  Gicp gicp(config.gicp, config.max_points), fine(fine_config(config), config.max_points);
+  struct Edge {
+    std::size_t i, j;
+    Eigen::Vector3d z;  // j in i's frame
+    double weight;
+  };
+  constexpr double kLever2 = 4.0;  // m²: a turn's weight against a shift's (points some 2 m away)
+  for (int outer = 0; outer < 2; ++outer) {
+    std::vector<Edge> edges;
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t j = i + 1; j < n; ++j) {
+        const Eigen::Isometry3d guess = scans[i].pose.inverse() * scans[j].pose;
+        const GicpResult r = StationLocaliser::align_twice(gicp, fine, single[j].cloud, single[i], guess);
+        if (!r.transform.matrix().allFinite() || r.correspondences < single[j].cloud.size() / 3) continue;
+        // A pair that moved far from its guess found a wrong match (two
+        // scans of a corridor seen from far apart): no edge.
+        const Eigen::Vector3d moved = planar_of(guess.inverse() * r.transform);
+        if (moved.head<2>().norm() > 0.2 || std::abs(moved.z()) > 0.1) continue;
+        edges.push_back({i, j, planar_of(r.transform), static_cast<double>(r.correspondences)});
+      }
+    }
+    // Gauss–Newton over poses 1..n-1 (pose 0 fixed), numeric Jacobians.
+    std::vector<Eigen::Vector3d> x(n);
+    for (std::size_t k = 0; k < n; ++k) x[k] = planar_of(scans[k].pose);
+    const auto m = static_cast<Eigen::Index>(3 * (n - 1));
+    auto residual = [&](const Edge& e, const Eigen::Vector3d& xi, const Eigen::Vector3d& xj) {
+      Eigen::Vector3d r = planar_of(from_planar(e.z).inverse() * from_planar(xi).inverse() * from_planar(xj));
+      return r;
+    };
+    for (int it = 0; it < 10; ++it) {
+      Eigen::MatrixXd h = Eigen::MatrixXd::Zero(m, m);
+      Eigen::VectorXd g = Eigen::VectorXd::Zero(m);
+      for (const Edge& e : edges) {
+        const Eigen::Vector3d r0 = residual(e, x[e.i], x[e.j]);
+        Eigen::Matrix<double, 3, 6> jac;
+        for (int d = 0; d < 6; ++d) {
+          constexpr double kStep = 1e-6;
+          Eigen::Vector3d xi = x[e.i], xj = x[e.j];
+          (d < 3 ? xi : xj)(d % 3) += kStep;
+          jac.col(d) = (residual(e, xi, xj) - r0) / kStep;
+        }
+        const Eigen::Vector3d w(e.weight, e.weight, e.weight * kLever2);
+        const std::size_t idx[2] = {e.i, e.j};
+        for (int a = 0; a < 2; ++a) {
+          if (idx[a] == 0) continue;
+          const Eigen::Index ra = static_cast<Eigen::Index>(3 * (idx[a] - 1));
+          const Eigen::Matrix3d ja = jac.middleCols<3>(3 * a);
+          g.segment<3>(ra) += ja.transpose() * w.asDiagonal() * r0;
+          for (int b = 0; b < 2; ++b) {
+            if (idx[b] == 0) continue;
+            const Eigen::Index rb = static_cast<Eigen::Index>(3 * (idx[b] - 1));
+            h.block<3, 3>(ra, rb) += ja.transpose() * w.asDiagonal() * jac.middleCols<3>(3 * b);
+          }
+        }
+      }
+      h.diagonal().array() += 1e-9;
+      const Eigen::VectorXd delta = -h.ldlt().solve(g);
+      if (!delta.allFinite()) break;
+      for (std::size_t k = 1; k < n; ++k) x[k] += delta.segment<3>(static_cast<Eigen::Index>(3 * (k - 1)));
+      if (delta.norm() < 1e-9) break;
+    }
+    for (std::size_t k = 1; k < n; ++k) {
+      Eigen::Isometry3d t = from_planar(x[k]);
+      t.translation().z() = scans[k].pose.translation().z();
+      scans[k].pose = t;
+    }
+    result.rounds = outer + 1;
+  }
+  result.converged = true;
+}
+
+}  // namespace
+
 TeachResult teach(std::span<StationScan> scans, const StationConfig& config) {
   TeachResult result;
   const std::size_t n = std::min(scans.size(), config.max_scans);
   if (n < 2) {
     result.converged = true;
+    return result;
+  }
+  if (config.teach_graph) {
+    std::vector<Eigen::Isometry3d> first(n);
+    for (std::size_t k = 0; k < n; ++k) first[k] = scans[k].pose;
+    teach_graph(scans, n, config, result);
+    for (std::size_t k = 0; k < n; ++k) {
+      result.largest_correction = std::max(result.largest_correction, (first[k].inverse() * scans[k].pose).translation().norm());
+    }
     return result;
   }
   std::size_t total = 0;

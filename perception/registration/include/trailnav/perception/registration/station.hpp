@@ -58,6 +58,7 @@ struct StationConfig {
   float voxel = 0.01f;    // m, the reference and the local model
   int neighbours = 10;    // k for the covariances and normals (a table's leg holds few points)
   int teach_rounds = 10;  // at most; fewer when the poses stop moving
+  bool teach_graph = false;  // the teach-in as a pose graph over every pair of scans instead
   int local_scans = 10;   // N: scans in a visit's local model
   bool planar = true;     // 2D laser scans at z = 0
   std::size_t max_points = 2048;  // per scan
