@@ -281,8 +281,15 @@ std::vector<reg::StationObject> read_objects(const std::string& path) {
   return out;
 }
 
-int write_station_png(const std::string& path, const reg::Station& s, const std::string& title, std::size_t scans,
-                      const char* who) {
+// A located visit drawn over the station: its scans placed by the
+// surroundings' transform and each object moved as estimated.
+struct Overlay {
+  std::vector<reg::Point> visit;                 // station frame
+  std::vector<std::vector<reg::Point>> moved;    // per body (0 empty)
+};
+
+int write_station_png(const std::string& path, const reg::Station& s, const std::string& title, const std::string& note,
+                      const char* who, const Overlay* overlay = nullptr) {
   Eigen::Vector2f lo(1e9f, 1e9f), hi(-1e9f, -1e9f);
   for (const reg::Target& b : s.bodies) {
     for (const reg::Point& p : b.cloud.points) {
@@ -315,7 +322,7 @@ int write_station_png(const std::string& path, const reg::Station& s, const std:
   const Rgb palette[] = {{40, 90, 220}, {220, 60, 40}, {20, 160, 60}, {200, 120, 0}, {140, 60, 180}, {0, 150, 160}};
   MapFigure f;
   f.title = title;
-  f.notes.push_back(std::to_string(scans) + " teach-in scans, jointly registered");
+  f.notes.push_back(note);
   f.notes.push_back("station frame; objects outlined as marked");
   for (std::size_t k = 0; k < s.bodies.size(); ++k) {
     const Rgb c = k == 0 ? Rgb{150, 150, 150} : palette[(k - 1) % std::size(palette)];
@@ -332,6 +339,15 @@ int write_station_png(const std::string& path, const reg::Station& s, const std:
       }
     }
     f.legend.push_back({c, s.names[k] + " (" + std::to_string(s.bodies[k].cloud.size()) + " points)"});
+  }
+  if (overlay != nullptr) {
+    const Rgb orange{240, 140, 20}, green{20, 160, 60};
+    for (const reg::Point& p : overlay->visit) set(static_cast<double>(p.x()), static_cast<double>(p.y()), orange);
+    for (const auto& body : overlay->moved) {
+      for (const reg::Point& p : body) set(static_cast<double>(p.x()), static_cast<double>(p.y()), green);
+    }
+    f.legend.push_back({orange, "the visit, placed by the surroundings"});
+    f.legend.push_back({green, "the objects moved as estimated"});
   }
   f.metres_per_pixel = res;
   f.north_up = false;
@@ -391,9 +407,129 @@ int run_teach(const TeachOptions& o) {
   }
   std::printf("wrote %s\n", o.out.c_str());
   if (!o.png.empty()) {
-    if (write_station_png(o.png, built.station, "station: " + o.name, scans.size(), who) != 0) return 1;
+    if (write_station_png(o.png, built.station, "station: " + o.name,
+                          std::to_string(scans.size()) + " teach-in scans, jointly registered", who) != 0) return 1;
     std::printf("wrote %s\n", o.png.c_str());
   }
+  return 0;
+}
+
+struct LocateOptions {
+  std::string station;
+  std::string log;
+  long from = 0, to = -1;
+  std::string report;
+  std::string png;
+  float max_range = 20.0f;
+};
+
+// A visit from a recording against a taught station: the scans registered
+// into a local model from the recording's poses (the first one as the
+// regular localisation's, the steps between them as odometry), then every
+// body at once. What moved since the teach-in, and by how much.
+int run_locate(const LocateOptions& o) {
+  const char* who = "trailnav station locate";
+  if (o.report != "" && o.report != "json") {
+    std::fprintf(stderr, "%s: --report takes json, not '%s'\n", who, o.report.c_str());
+    return 2;
+  }
+  const reg::LoadedStation loaded = reg::load_station(o.station);
+  if (!loaded.station) {
+    std::fprintf(stderr, "%s: %s\n", who, loaded.error.c_str());
+    return 1;
+  }
+  const reg::StationConfig config;
+  const reg::BuiltStation built = reg::station_from_file(*loaded.station, config);
+  if (!built.error.empty()) {
+    std::fprintf(stderr, "%s: %s: %s\n", who, o.station.c_str(), built.error.c_str());
+    return 1;
+  }
+  gzFile f = gzopen(o.log.c_str(), "rb");
+  if (f == nullptr) {
+    std::fprintf(stderr, "%s: cannot open %s\n", who, o.log.c_str());
+    return 1;
+  }
+  std::vector<reg::LaserScan2> scans;
+  std::vector<char> line(1 << 16);
+  long index = 0;
+  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
+    reg::LaserScan2 s;
+    if (!reg::parse_flaser(line.data(), s).empty()) continue;
+    if (index >= o.from && (o.to < 0 || index <= o.to)) scans.push_back(std::move(s));
+    ++index;
+  }
+  gzclose(f);
+  if (scans.empty() || scans.size() > static_cast<std::size_t>(config.local_scans)) {
+    std::fprintf(stderr, "%s: scans %ld to %ld of %s: %zu FLASER scans; a visit takes 1 to %d\n", who, o.from, o.to,
+                 o.log.c_str(), scans.size(), config.local_scans);
+    return 1;
+  }
+  reg::StationLocaliser localiser(built.station, config);
+  localiser.begin(reg::to_isometry(scans.front().pose));
+  std::vector<reg::Point> pts;
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    pts.clear();
+    pts.reserve(scans[k].ranges.size());
+    reg::scan_points(scans[k], o.max_range, 0.05f, pts);
+    const Eigen::Isometry3d odometry = k == 0 ? Eigen::Isometry3d::Identity()
+                                              : Eigen::Isometry3d(reg::to_isometry(scans[k - 1].pose).inverse() *
+                                                                  reg::to_isometry(scans[k].pose));
+    localiser.add(pts, odometry);
+  }
+  const reg::StationFix fix = localiser.localise();
+  const reg::Station& st = built.station;
+  auto yaw_deg = [](const Eigen::Isometry3d& t) { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)) * 180.0 / 3.14159265358979323846; };
+  // How far each body's centre (the mean of its taught points) moved.
+  auto centre_shift = [&](std::size_t k) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (const reg::Point& p : st.bodies[k].cloud.points) c += p.cast<double>();
+    c /= static_cast<double>(std::max<std::size_t>(1, st.bodies[k].cloud.size()));
+    return Eigen::Vector3d(fix.moved(k) * c - c);
+  };
+  if (!o.png.empty()) {
+    Overlay ov;
+    const Eigen::Isometry3f world = fix.bodies[0].transform.cast<float>();
+    for (const reg::Point& p : localiser.local_points().points) ov.visit.push_back(world * p);
+    ov.moved.resize(st.bodies.size());
+    for (std::size_t k = 1; k < st.bodies.size(); ++k) {
+      const Eigen::Isometry3f m = fix.moved(k).cast<float>();
+      for (const reg::Point& p : st.bodies[k].cloud.points) ov.moved[k].push_back(m * p);
+    }
+    if (write_station_png(o.png, st, "station " + loaded.station->name + ": a visit",
+                          "a visit of " + std::to_string(scans.size()) + " scans, located", who, &ov) != 0) return 1;
+  }
+  if (o.report == "json") {
+    const Eigen::Isometry3d& r = fix.bodies[0].transform;
+    std::printf("{\"station\": \"%s\", \"scans\": %zu, \"local_points\": %zu, \"robot\": {\"x\": %.4f, \"y\": %.4f, "
+                "\"yaw_deg\": %.3f}, \"bodies\": [",
+                loaded.station->name.c_str(), scans.size(), fix.local_points, r.translation().x(), r.translation().y(),
+                yaw_deg(r));
+    for (std::size_t k = 0; k < st.bodies.size(); ++k) {
+      const Eigen::Isometry3d m = fix.moved(k);
+      const Eigen::Vector3d d = centre_shift(k);
+      std::printf("%s{\"name\": \"%s\", \"observed\": %s, \"correspondences\": %zu, \"moved_x\": %.4f, \"moved_y\": %.4f, "
+                  "\"turned_deg\": %.3f}",
+                  k ? ", " : "", st.names[k].c_str(), fix.bodies[k].observed ? "true" : "false", fix.bodies[k].correspondences,
+                  d.x(), d.y(), yaw_deg(m));
+    }
+    std::printf("]}\n");
+    return 0;
+  }
+  const Eigen::Isometry3d& r = fix.bodies[0].transform;
+  std::printf("station '%s', a visit of %zu scans (%zu points in its local model), %d iterations\n",
+              loaded.station->name.c_str(), scans.size(), fix.local_points, fix.iterations);
+  std::printf("  robot in the station frame: (%.3f, %.3f) m, %.2f deg\n", r.translation().x(), r.translation().y(), yaw_deg(r));
+  for (std::size_t k = 1; k < st.bodies.size(); ++k) {
+    const Eigen::Isometry3d m = fix.moved(k);
+    const Eigen::Vector3d d = centre_shift(k);
+    if (!fix.bodies[k].observed) {
+      std::printf("  %-14s not in view (%zu associations)\n", st.names[k].c_str(), fix.bodies[k].correspondences);
+      continue;
+    }
+    std::printf("  %-14s its centre moved by (%+.3f, %+.3f) m, turned by %+.2f deg since the teach-in (%zu associations)\n",
+                st.names[k].c_str(), d.x(), d.y(), yaw_deg(m), fix.bodies[k].correspondences);
+  }
+  if (!o.png.empty()) std::printf("wrote %s\n", o.png.c_str());
   return 0;
 }
 
@@ -424,6 +560,20 @@ void add_station_commands(CLI::App& app) {
   teach->add_option("--png", t.png, "A picture of the taught station: each body's points, the objects' polygons, a scale");
   teach->add_option("--name", t.name, "The station's name (kept in the file)")->capture_default_str();
   teach->callback([] { std::exit(run_teach(t)); });
+  static LocateOptions l;
+  auto* locate = station->add_subcommand(
+      "locate",
+      "A visit from a recording against a taught station (section 4.2.2): the scans --from..--to registered into\n"
+      "a local model (the recording's first pose as the regular localisation's, its steps as odometry), then the\n"
+      "surroundings and every object at once. Prints where the robot is in the station frame and how far each\n"
+      "object moved and turned since the teach-in. The recording's frame must be the teach-in's.");
+  locate->add_option("station", l.station, "The station file (trailnav station teach --out)")->required();
+  locate->add_option("recording", l.log, "CARMEN log (.log or .log.gz)")->required();
+  locate->add_option("--from", l.from, "First FLASER scan of the visit")->required();
+  locate->add_option("--to", l.to, "Last FLASER scan of the visit (at most 10 scans in all)")->required();
+  locate->add_option("--report", l.report, "json: robot {x, y, yaw_deg}, bodies[] {name, observed, correspondences, moved_x, moved_y (its centre's shift, m), turned_deg}");
+  locate->add_option("--png", l.png, "A picture: the station, the visit placed by the surroundings, the objects moved as estimated");
+  locate->callback([] { std::exit(run_locate(l)); });
   static Options o;
   auto* ev = station->add_subcommand(
       "eval",

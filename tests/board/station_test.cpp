@@ -230,7 +230,8 @@ int run(const std::vector<std::string>& args, std::string& out) {
 
 // `trailnav station teach` on sixteen scans of the real Freiburg log with a
 // cabinet marked as a box: a station file with the surroundings and the
-// cabinet, and its picture; a polygon of two corners is refused with its
+// cabinet, and its picture; `trailnav station locate` of a later pass finds
+// the cabinet where it was taught; a polygon of two corners is refused with its
 // object's line, and nothing is written.
 TEST(StationTeach, ARealLogsScansAndAMarkedObjectMakeAStationFile) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("station-teach-" + std::to_string(::getpid()));
@@ -253,6 +254,35 @@ TEST(StationTeach, ARealLogsScansAndAMarkedObjectMakeAStationFile) {
   EXPECT_GT(loaded.station->bodies[1].points.size(), 200u);
   EXPECT_GT(loaded.station->bodies[0].points.size(), 1000u);
   EXPECT_GT(std::filesystem::file_size(png), 1000u);
+  // A later pass by the same cabinet (scans 553–562, 121 s, against 1480–1495
+  // at 328 s), located against the file: nothing moved it, and the answer says
+  // so (measured 2026-12-05: its centre 4 mm and 3 mm off, 0.02 deg).
+  ASSERT_EQ(run({"station", "locate", out, "../shared/data/carmen/freiburg-079-corrected.log.gz", "--from", "553", "--to", "562",
+                 "--report", "json", "--png", (dir / "visit.png").string()},
+                text),
+            0)
+      << text;
+  double dx = 1.0, dy = 1.0, turned = 10.0;
+  const std::size_t at = text.find("\"name\": \"cabinet\"");
+  ASSERT_NE(at, std::string::npos) << text;
+  ASSERT_EQ(std::sscanf(text.c_str() + text.find("\"moved_x\"", at), "\"moved_x\": %lf, \"moved_y\": %lf, \"turned_deg\": %lf", &dx, &dy,
+                        &turned),
+            3)
+      << text;
+  EXPECT_LT(std::hypot(dx, dy), 0.015) << text;
+  EXPECT_LT(std::abs(turned), 0.5) << text;
+  EXPECT_NE(text.find("\"observed\": true", at), std::string::npos) << text;
+  EXPECT_GT(std::filesystem::file_size(dir / "visit.png"), 1000u);
+  // A damaged file is refused with its reason.
+  {
+    std::fstream damaged(out, std::ios::in | std::ios::out | std::ios::binary);
+    damaged.seekp(40);
+    damaged.put('\x7f');
+  }
+  EXPECT_NE(run({"station", "locate", out, "../shared/data/carmen/freiburg-079-corrected.log.gz", "--from", "553", "--to", "562"},
+                text),
+            0);
+  EXPECT_NE(text.find("checksum"), std::string::npos) << text;
   const std::string bad = (dir / "bad.yaml").string();
   std::ofstream(bad) << "objects:\n  - name: a\n    polygon: [[0, 0], [1, 0]]\n";
   EXPECT_NE(run({"station", "teach", "../shared/data/carmen/freiburg-079-corrected.log.gz", "--from", "1480", "--to", "1495",
