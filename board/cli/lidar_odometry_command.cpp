@@ -3,8 +3,6 @@
 // CARMEN log's 2D laser scans (FLASER lines, plain or gzip), scored against
 // the log's own poses (SLAM-corrected in ../shared/data/carmen) by the
 // relative pose error per 10 m of travel. docs/registration.md.
-#include <zlib.h>
-
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -53,30 +51,14 @@ int run(const Options& o) {
     return 2;
   }
   // The scans first (the progress bar needs their count).
-  gzFile f = gzopen(o.input.c_str(), "rb");
-  if (f == nullptr) {
-    std::fprintf(stderr, "%s: cannot open %s\n", who, o.input.c_str());
+  reg::FlaserLog log = reg::read_flaser_log(o.input, 0, o.max_scans > 0 ? o.max_scans - 1 : -1);
+  if (!log.error.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, log.error.c_str());
     return 1;
   }
-  std::vector<reg::LaserScan2> scans;
-  std::vector<char> line(1 << 16);
-  long number = 0, refused = 0;
-  std::string first_error;
-  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
-    ++number;
-    const std::string_view text(line.data());
-    if (text.rfind("FLASER", 0) != 0) continue;
-    reg::LaserScan2 s;
-    const std::string error = reg::parse_flaser(text, s);
-    if (!error.empty()) {
-      if (first_error.empty()) first_error = "line " + std::to_string(number) + ": " + error;
-      ++refused;
-      continue;
-    }
-    scans.push_back(std::move(s));
-    if (o.max_scans > 0 && static_cast<long>(scans.size()) >= o.max_scans) break;
-  }
-  gzclose(f);
+  const std::vector<reg::LaserScan2>& scans = log.scans;
+  const long refused = log.refused;
+  const std::string& first_error = log.first_error;
   if (scans.size() < 2) {
     std::fprintf(stderr, "%s: %s holds %zu FLASER scans; at least 2 are needed%s%s\n", who, o.input.c_str(), scans.size(),
                  first_error.empty() ? "" : "; ", first_error.c_str());

@@ -4,8 +4,6 @@
 // move set, the translation and rotation error of the robot's pose
 // relative to the object (mean, std, max) for the multi-body registration
 // and for one GICP over the whole reference. docs/registration.md.
-#include <zlib.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -360,27 +358,19 @@ int write_station_png(const std::string& path, const reg::Station& s, const std:
 
 int run_teach(const TeachOptions& o) {
   const char* who = "trailnav station teach";
-  gzFile f = gzopen(o.log.c_str(), "rb");
-  if (f == nullptr) {
-    std::fprintf(stderr, "%s: cannot open %s\n", who, o.log.c_str());
+  const reg::FlaserLog log = reg::read_flaser_log(o.log, o.from, o.to);
+  if (!log.error.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, log.error.c_str());
     return 1;
   }
   std::vector<reg::StationScan> scans;
-  std::vector<char> line(1 << 16);
-  long index = 0;
-  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
-    reg::LaserScan2 s;
-    if (!reg::parse_flaser(line.data(), s).empty()) continue;
-    if (index >= o.from && (o.to < 0 || index <= o.to)) {
-      reg::StationScan st;
-      st.points.reserve(s.ranges.size());
-      reg::scan_points(s, o.max_range, 0.05f, st.points);
-      st.pose = reg::to_isometry(s.pose);
-      scans.push_back(std::move(st));
-    }
-    ++index;
+  for (const reg::LaserScan2& s : log.scans) {
+    reg::StationScan st;
+    st.points.reserve(s.ranges.size());
+    reg::scan_points(s, o.max_range, 0.05f, st.points);
+    st.pose = reg::to_isometry(s.pose);
+    scans.push_back(std::move(st));
   }
-  gzclose(f);
   const reg::StationConfig config;
   if (scans.size() < 2 || scans.size() > config.max_scans) {
     std::fprintf(stderr, "%s: scans %ld to %ld of %s: %zu FLASER scans; a teach-in takes 2 to %zu\n", who, o.from, o.to,
@@ -444,21 +434,12 @@ int run_locate(const LocateOptions& o) {
     std::fprintf(stderr, "%s: %s: %s\n", who, o.station.c_str(), built.error.c_str());
     return 1;
   }
-  gzFile f = gzopen(o.log.c_str(), "rb");
-  if (f == nullptr) {
-    std::fprintf(stderr, "%s: cannot open %s\n", who, o.log.c_str());
+  const reg::FlaserLog log = reg::read_flaser_log(o.log, o.from, o.to);
+  if (!log.error.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, log.error.c_str());
     return 1;
   }
-  std::vector<reg::LaserScan2> scans;
-  std::vector<char> line(1 << 16);
-  long index = 0;
-  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
-    reg::LaserScan2 s;
-    if (!reg::parse_flaser(line.data(), s).empty()) continue;
-    if (index >= o.from && (o.to < 0 || index <= o.to)) scans.push_back(std::move(s));
-    ++index;
-  }
-  gzclose(f);
+  const std::vector<reg::LaserScan2>& scans = log.scans;
   if (scans.empty() || scans.size() > static_cast<std::size_t>(config.local_scans)) {
     std::fprintf(stderr, "%s: scans %ld to %ld of %s: %zu FLASER scans; a visit takes 1 to %d\n", who, o.from, o.to,
                  o.log.c_str(), scans.size(), config.local_scans);

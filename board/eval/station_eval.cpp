@@ -1,7 +1,5 @@
 #include "station_eval.hpp"
 
-#include <zlib.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -31,6 +29,15 @@ ErrorStats stats_of(const std::vector<double>& v) {
   s.std = std::sqrt(var / static_cast<double>(v.size()));
   s.max = *std::max_element(v.begin(), v.end());
   return s;
+}
+
+void finish_set(StationSetResult& sr, int runs, const std::vector<double>& tm, const std::vector<double>& rd,
+                const std::vector<double>& stm, const std::vector<double>& srd) {
+  sr.runs = runs;
+  sr.translation_mm = stats_of(tm);
+  sr.rotation_deg = stats_of(rd);
+  sr.single_translation_mm = stats_of(stm);
+  sr.single_rotation_deg = stats_of(srd);
 }
 
 // The error of an estimated pose against the true one, its translation
@@ -202,11 +209,7 @@ StationEvalResult evaluate_station_sim(const StationEvalOptions& options) {
         done += 1.0;
         if (options.progress) options.progress(done / total);
       }
-      sr.runs = options.runs;
-      sr.translation_mm = stats_of(tm);
-      sr.rotation_deg = stats_of(rd);
-      sr.single_translation_mm = stats_of(stm);
-      sr.single_rotation_deg = stats_of(srd);
+      finish_set(sr, options.runs, tm, rd, stm, srd);
       obj.sets.push_back(sr);
     }
     result.objects.push_back(std::move(obj));
@@ -335,18 +338,12 @@ StationEvalResult evaluate_station_carmen(const StationCarmenOptions& options) {
     result.error = "station: " + e;
     return result;
   }
-  gzFile f = gzopen(options.log.c_str(), "rb");
-  if (f == nullptr) {
-    result.error = "cannot open " + options.log;
+  reg::FlaserLog log = reg::read_flaser_log(options.log);
+  if (!log.error.empty()) {
+    result.error = log.error;
     return result;
   }
-  std::vector<reg::LaserScan2> scans;
-  std::vector<char> line(1 << 16);
-  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
-    reg::LaserScan2 s;
-    if (reg::parse_flaser(line.data(), s).empty()) scans.push_back(std::move(s));
-  }
-  gzclose(f);
+  const std::vector<reg::LaserScan2>& scans = log.scans;
   const int teach_n = options.teach_scans, visit_n = options.visit_scans;
   if (scans.size() < static_cast<std::size_t>(teach_n + visit_n) * 2) {
     result.error = options.log + " holds " + std::to_string(scans.size()) + " FLASER scans: too few for a teach-in and a visit";
@@ -538,11 +535,7 @@ StationEvalResult evaluate_station_carmen(const StationCarmenOptions& options) {
         done += 1.0;
         if (options.progress) options.progress(done / total);
       }
-      sr.runs = options.runs;
-      sr.translation_mm = stats_of(tm);
-      sr.rotation_deg = stats_of(rd);
-      sr.single_translation_mm = stats_of(stm);
-      sr.single_rotation_deg = stats_of(srd);
+      finish_set(sr, options.runs, tm, rd, stm, srd);
       obj.sets.push_back(sr);
     }
     result.objects.push_back(std::move(obj));

@@ -1,5 +1,7 @@
 #include "trailnav/perception/registration/carmen.hpp"
 
+#include <zlib.h>
+
 #include <charconv>
 #include <cmath>
 
@@ -73,6 +75,34 @@ std::size_t scan_points(const LaserScan2& scan, float max_range, float min_range
                      static_cast<float>(static_cast<double>(r) * std::sin(a)), 0.0f);
   }
   return no_room;
+}
+
+FlaserLog read_flaser_log(const std::string& path, long from, long to) {
+  FlaserLog log;
+  gzFile f = gzopen(path.c_str(), "rb");
+  if (f == nullptr) {
+    log.error = "cannot open " + path;
+    return log;
+  }
+  std::vector<char> line(1 << 16);
+  long number = 0, index = 0;
+  while (gzgets(f, line.data(), static_cast<int>(line.size())) != nullptr) {
+    ++number;
+    const std::string_view text(line.data());
+    if (text.rfind("FLASER", 0) != 0) continue;
+    LaserScan2 s;
+    const std::string error = parse_flaser(text, s);
+    if (!error.empty()) {
+      if (log.first_error.empty()) log.first_error = "line " + std::to_string(number) + ": " + error;
+      ++log.refused;
+      continue;
+    }
+    if (index >= from) log.scans.push_back(std::move(s));
+    ++index;
+    if (to >= 0 && index > to) break;
+  }
+  gzclose(f);
+  return log;
 }
 
 Eigen::Isometry3d to_isometry(const Pose2& p) noexcept {

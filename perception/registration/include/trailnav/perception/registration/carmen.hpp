@@ -37,6 +37,18 @@ std::string parse_flaser(std::string_view line, LaserScan2& out, std::size_t max
 // within its reserved capacity; returns how many returns found no room.
 std::size_t scan_points(const LaserScan2& scan, float max_range, float min_range, std::vector<Point>& out) noexcept;
 
+// A CARMEN log's scans (plain or gzip): the FLASER lines that parse, those
+// numbered `from` to `to` among them (0 the first; `to` < 0: to the end).
+// Lines of other messages are skipped; FLASER lines that do not parse are
+// counted, the first with its line number and reason.
+struct FlaserLog {
+  std::vector<LaserScan2> scans;
+  long refused = 0;
+  std::string first_error;  // "line N: ..." of the first refused line
+  std::string error;        // the file could not be opened: empty otherwise
+};
+FlaserLog read_flaser_log(const std::string& path, long from = 0, long to = -1);
+
 // A planar pose as a 3D transform (z = 0, yaw θ).
 Eigen::Isometry3d to_isometry(const Pose2& p) noexcept;
 
