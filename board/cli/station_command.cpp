@@ -39,6 +39,7 @@ struct Options {
   int neighbours = 0;
   int teach_rounds = 0;
   double gate = 0.0;
+  double fine_gate = 0.0;
   double noise = 1.0;
   bool teach_truth = false;
   bool teach_graph = false;
@@ -128,6 +129,7 @@ int run(const Options& o) {
   if (o.neighbours > 0) opt.station.neighbours = o.neighbours;
   if (o.teach_rounds > 0) opt.station.teach_rounds = o.teach_rounds;
   if (o.gate > 0.0) opt.station.gicp.max_correspondence_distance = static_cast<float>(o.gate);
+  if (o.fine_gate > 0.0) opt.station.fine_gate = static_cast<float>(o.fine_gate);
   if (o.metric == "point-to-plane") {
     opt.station.gicp.metric = perception::registration::Metric::point_to_plane;
   } else if (o.metric == "plane-to-plane") {
@@ -579,6 +581,7 @@ void add_station_commands(CLI::App& app) {
   ev->add_option("--voxel", o.voxel, "Voxel size of the reference and the local model (m; default " + std::to_string(d.voxel) + ")");
   ev->add_option("--neighbours", o.neighbours, "k for the covariances and normals (default " + std::to_string(d.neighbours) + ")");
   ev->add_option("--teach-rounds", o.teach_rounds, "Joint-registration rounds of the teach-in at most (default " + std::to_string(d.teach_rounds) + ")");
+  ev->add_option("--fine-gate", o.fine_gate, "The second pass's gate (m; default " + std::to_string(d.fine_gate) + ")");
   ev->add_option("--max-correspondence", o.gate, "Associations farther are dropped (m; default " + std::to_string(d.gicp.max_correspondence_distance) + ")");
   ev->add_option("--noise", o.noise, "Scales every simulated noise: the laser's 1 cm, the odometry's 0.1 m/s and 0.1 rad/s, the start's 3 cm and 1.1 deg (0: none)")
       ->capture_default_str()->check(CLI::Range(0.0, 10.0));
