@@ -9,6 +9,7 @@
 #include <iterator>
 
 #include "trailnav/runtime/atomic_file.hpp"
+#include "trailnav/runtime/le_bytes.hpp"
 
 namespace trailnav::perception::registration {
 
@@ -16,69 +17,42 @@ namespace {
 
 constexpr char kMagic[8] = {'T', 'N', 'S', 'T', 'A', 'T', 'N', '\0'};
 
-template <typename T>
-void put(std::vector<std::uint8_t>& out, T v) {
-  std::uint8_t b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));  // little-endian hosts only (x86-64, arm64)
-  out.insert(out.end(), b, b + sizeof(T));
+void put_string(std::vector<std::uint8_t>& out, const std::string& s) {
+  le::put_u16(out, static_cast<std::uint16_t>(s.size()));
+  out.insert(out.end(), s.begin(), s.end());
 }
 
-void put_string(std::vector<std::uint8_t>& out, const std::string& s) {
-  put<std::uint16_t>(out, static_cast<std::uint16_t>(s.size()));
-  out.insert(out.end(), s.begin(), s.end());
+bool get_string(le::Reader& in, std::string& s, std::size_t max) {
+  std::uint16_t n = 0;
+  return in.u16(n) && n <= max && in.bytes(n, s);
 }
 
 std::uint32_t crc_of(std::span<const std::uint8_t> bytes) {
   return static_cast<std::uint32_t>(crc32(0L, bytes.data(), static_cast<uInt>(bytes.size())));
 }
 
-class Reader {
- public:
-  explicit Reader(std::span<const std::uint8_t> b) : bytes_(b) {}
-  template <typename T>
-  bool get(T& v) {
-    if (bytes_.size() - at_ < sizeof(T)) return false;
-    std::memcpy(&v, bytes_.data() + at_, sizeof(T));
-    at_ += sizeof(T);
-    return true;
-  }
-  bool get_string(std::string& s, std::size_t max) {
-    std::uint16_t n = 0;
-    if (!get(n) || n > max || bytes_.size() - at_ < n) return false;
-    s.assign(reinterpret_cast<const char*>(bytes_.data() + at_), n);
-    at_ += n;
-    return true;
-  }
-  std::size_t at() const noexcept { return at_; }
-  std::size_t left() const noexcept { return bytes_.size() - at_; }
-
- private:
-  std::span<const std::uint8_t> bytes_;
-  std::size_t at_ = 0;
-};
-
 }  // namespace
 
 std::vector<std::uint8_t> serialize_station(const StationFile& s) {
   std::vector<std::uint8_t> out(kMagic, kMagic + sizeof kMagic);
-  put<std::uint32_t>(out, kStationFileVersion);
+  le::put_u32(out, kStationFileVersion);
   put_string(out, s.name);
-  put<std::uint32_t>(out, static_cast<std::uint32_t>(s.bodies.size()));
+  le::put_u32(out, static_cast<std::uint32_t>(s.bodies.size()));
   for (const StationBodyFile& b : s.bodies) {
     put_string(out, b.name);
-    put<std::uint32_t>(out, static_cast<std::uint32_t>(b.polygon.size()));
+    le::put_u32(out, static_cast<std::uint32_t>(b.polygon.size()));
     for (const Eigen::Vector2d& c : b.polygon) {
-      put<double>(out, c.x());
-      put<double>(out, c.y());
+      le::put_f64(out, c.x());
+      le::put_f64(out, c.y());
     }
-    put<std::uint32_t>(out, static_cast<std::uint32_t>(b.points.size()));
+    le::put_u32(out, static_cast<std::uint32_t>(b.points.size()));
     for (const Point& p : b.points) {
-      put<float>(out, p.x());
-      put<float>(out, p.y());
-      put<float>(out, p.z());
+      le::put_f32(out, p.x());
+      le::put_f32(out, p.y());
+      le::put_f32(out, p.z());
     }
   }
-  put<std::uint32_t>(out, crc_of(out));
+  le::put_u32(out, crc_of(out));
   return out;
 }
 
@@ -94,25 +68,25 @@ LoadedStation parse_station(std::span<const std::uint8_t> bytes, std::string_vie
   }
   const std::span<const std::uint8_t> body = bytes.first(bytes.size() - 4);
   std::uint32_t stored = 0;
-  std::memcpy(&stored, bytes.data() + bytes.size() - 4, 4);
-  Reader in(body.subspan(sizeof kMagic));
+  le::Reader(bytes.last(4)).u32(stored);
+  le::Reader in(body.subspan(sizeof kMagic));
   std::uint32_t version = 0;
-  in.get(version);
+  in.u32(version);
   if (version != kStationFileVersion) {
     return fail("version " + std::to_string(version) + ", this trailnav reads version " +
                 std::to_string(kStationFileVersion) + " (teach the station again)");
   }
   if (crc_of(body) != stored) return fail("the checksum does not match: the file is damaged or cut short");
   StationFile s;
-  if (!in.get_string(s.name, kStationMaxName)) return fail("the station's name is cut short or longer than 64 bytes");
+  if (!get_string(in, s.name, kStationMaxName)) return fail("the station's name is cut short or longer than 64 bytes");
   std::uint32_t nb = 0;
-  if (!in.get(nb) || nb < 1 || nb > kStationMaxBodies) return fail("bodies: 1 to 64 (the surroundings and the objects)");
+  if (!in.u32(nb) || nb < 1 || nb > kStationMaxBodies) return fail("bodies: 1 to 64 (the surroundings and the objects)");
   for (std::uint32_t k = 0; k < nb; ++k) {
     StationBodyFile b;
     const std::string which = "body " + std::to_string(k);
-    if (!in.get_string(b.name, kStationMaxName) || b.name.empty()) return fail(which + ": a name of 1 to 64 bytes");
+    if (!get_string(in, b.name, kStationMaxName) || b.name.empty()) return fail(which + ": a name of 1 to 64 bytes");
     std::uint32_t corners = 0;
-    if (!in.get(corners)) return fail(which + " (" + b.name + "): cut short");
+    if (!in.u32(corners)) return fail(which + " (" + b.name + "): cut short");
     if (k == 0 ? corners != 0 : (corners < 3 || corners > kStationMaxCorners)) {
       return fail(which + " (" + b.name + "): " + std::to_string(corners) + " polygon corners; the surroundings have none, "
                   "an object 3 to 1024");
@@ -120,20 +94,20 @@ LoadedStation parse_station(std::span<const std::uint8_t> bytes, std::string_vie
     if (in.left() / 16 < corners) return fail(which + " (" + b.name + "): its polygon is cut short");
     for (std::uint32_t c = 0; c < corners; ++c) {
       double x = 0.0, y = 0.0;
-      in.get(x);
-      in.get(y);
+      in.f64(x);
+      in.f64(y);
       if (!std::isfinite(x) || !std::isfinite(y)) return fail(which + " (" + b.name + "): a polygon corner is not finite");
       b.polygon.emplace_back(x, y);
     }
     std::uint32_t n = 0;
-    if (!in.get(n) || n > kStationMaxPoints) return fail(which + " (" + b.name + "): at most 4,194,304 points");
+    if (!in.u32(n) || n > kStationMaxPoints) return fail(which + " (" + b.name + "): at most 4,194,304 points");
     if (in.left() / 12 < n) return fail(which + " (" + b.name + "): its points are cut short");
     b.points.reserve(n);
     for (std::uint32_t i = 0; i < n; ++i) {
       float x = 0.0f, y = 0.0f, z = 0.0f;
-      in.get(x);
-      in.get(y);
-      in.get(z);
+      in.f32(x);
+      in.f32(y);
+      in.f32(z);
       if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
         return fail(which + " (" + b.name + "): point " + std::to_string(i) + " is not finite");
       }

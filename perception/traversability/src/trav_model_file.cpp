@@ -8,70 +8,18 @@
 #include <iterator>
 
 #include "trailnav/runtime/atomic_file.hpp"
+#include "trailnav/runtime/le_bytes.hpp"
 
 namespace trailnav::perception::trav {
 namespace {
 
 constexpr std::uint8_t kMagic[8] = {'T', 'N', 'T', 'R', 'A', 'V', 0x1a, '\n'};
 
-void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
-void put_u64(std::vector<std::uint8_t>& out, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
-void put_f32(std::vector<std::uint8_t>& out, float f) {
-  std::uint32_t v;
-  std::memcpy(&v, &f, 4);
-  put_u32(out, v);
-}
-void put_f64(std::vector<std::uint8_t>& out, double f) {
-  std::uint64_t v;
-  std::memcpy(&v, &f, 8);
-  put_u64(out, v);
-}
-
-class Reader {
- public:
-  explicit Reader(std::span<const std::uint8_t> d) : d_(d) {}
-  bool u32(std::uint32_t& v) {
-    if (d_.size() - pos_ < 4) return false;
-    v = 0;
-    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(d_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
-    pos_ += 4;
-    return true;
-  }
-  bool u64(std::uint64_t& v) {
-    if (d_.size() - pos_ < 8) return false;
-    v = 0;
-    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(d_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
-    pos_ += 8;
-    return true;
-  }
-  bool f32(float& f) {
-    std::uint32_t v = 0;
-    if (!u32(v)) return false;
-    std::memcpy(&f, &v, 4);
-    return true;
-  }
-  bool f64(double& f) {
-    std::uint64_t v = 0;
-    if (!u64(v)) return false;
-    std::memcpy(&f, &v, 8);
-    return true;
-  }
-  bool bytes(std::size_t n, std::string& s) {
-    if (d_.size() - pos_ < n) return false;
-    s.assign(reinterpret_cast<const char*>(d_.data() + pos_), n);
-    pos_ += n;
-    return true;
-  }
-  std::size_t left() const noexcept { return d_.size() - pos_; }
-
- private:
-  std::span<const std::uint8_t> d_;
-  std::size_t pos_ = 0;
-};
+using le::put_f32;
+using le::put_f64;
+using le::put_u32;
+using le::put_u64;
+using le::Reader;
 
 }  // namespace
 
