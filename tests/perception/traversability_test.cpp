@@ -992,6 +992,7 @@ TEST(TravDemonstration, TheRecorderTakesTheLayersWordsAsItsOwnWouldBe) {
   TravRecorder own(rc, t.vocabulary, tc.map.size_x, tc.map.size_y, tc.map.resolution);
   Mailbox<LocalMapWords> local_maps(t.vocabulary.size());
   TravOnline online(*made.layer, &shared, &local_maps);
+  ASSERT_TRUE(online.shares_words());  // the path under test, not two recorders each on their own
   struct Both final : CellSumsSink {
     TravOnline* online;
     TravRecorder* own;
@@ -1012,6 +1013,14 @@ TEST(TravDemonstration, TheRecorderTakesTheLayersWordsAsItsOwnWouldBe) {
   drive.mapper->set_sums_sink(&both);
   for (int n = 1; n <= 40; ++n) drive.revolution(n);  // 12 m
 
+  {
+    VocabularyConfig other;
+    other.bins[0].bins = 5;
+    const Vocabulary v5(other);
+    TravRecorder apart(rc, v5, tc.map.size_x, tc.map.size_y, tc.map.resolution);
+    Mailbox<LocalMapWords> maps5(v5.size());
+    EXPECT_FALSE(TravOnline(*made.layer, &apart, &maps5).shares_words());
+  }
   ASSERT_GT(shared.counters().words, 10'000u);
   EXPECT_EQ(shared.counters().words, own.counters().words);
   // The layer turns the distant cells away for both (TravOnline's counters

@@ -63,6 +63,8 @@ class TravOnline final : public CellSumsSink {
   bool finish_partial() noexcept;
 
   const TravLayer& layer() const noexcept { return layer_; }
+  // Whether the recorder takes the layer's words (one ground and word per cell).
+  bool shares_words() const noexcept { return shared_words_; }
   const OnlineCounters& counters() const noexcept { return counters_; }
   OnlineCounters status() const noexcept { return shared_.read(); }  // any thread
 
