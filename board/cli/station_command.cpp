@@ -461,7 +461,7 @@ int run_locate(const LocateOptions& o) {
   }
   const reg::StationFix fix = localiser.localise();
   const reg::Station& st = built.station;
-  auto yaw_deg = [](const Eigen::Isometry3d& t) { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)) * 180.0 / 3.14159265358979323846; };
+  auto yaw_deg = [](const Eigen::Isometry3d& t) { return reg::to_pose2(t).theta * 180.0 / 3.14159265358979323846; };
   // How far each body's centre (the mean of its taught points) moved.
   auto centre_shift = [&](std::size_t k) {
     Eigen::Vector3d c = Eigen::Vector3d::Zero();

@@ -228,14 +228,8 @@ namespace {
 // The real experiment's sets (§4.3.2): 0.1 m, 10°, both.
 constexpr st::MoveSet kRealSets[] = {{0.10, 0.0}, {0.0, 10.0 * std::numbers::pi / 180.0}, {0.10, 10.0 * std::numbers::pi / 180.0}};
 
-Eigen::Isometry3d planar(double x, double y, double theta) {
-  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.linear() = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  t.translation() = Eigen::Vector3d(x, y, 0.0);
-  return t;
-}
+Eigen::Isometry3d planar(double x, double y, double theta) { return reg::to_isometry(reg::Pose2{x, y, theta}); }
 
-double yaw_of(const Eigen::Isometry3d& t) { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
 
 struct Cluster {
   Eigen::Vector2d lo{1e9, 1e9}, hi{-1e9, -1e9};
@@ -349,7 +343,7 @@ StationEvalResult evaluate_station_carmen(const StationCarmenOptions& options) {
     result.error = options.log + " holds " + std::to_string(scans.size()) + " FLASER scans: too few for a teach-in and a visit";
     return result;
   }
-  auto pose_of = [&](std::size_t i) { return planar(scans[i].pose.x, scans[i].pose.y, scans[i].pose.theta); };
+  auto pose_of = [&](std::size_t i) { return reg::to_isometry(scans[i].pose); };
 
   // Places passed twice: a teach-in block and, a minute or more later, a
   // scan within 0.4 m and 20° of its middle.
@@ -396,7 +390,10 @@ StationEvalResult evaluate_station_carmen(const StationCarmenOptions& options) {
     const reg::TeachResult taught = reg::teach(teach, options.station);
     // The taught frame against the log's: D (log -> taught), as in the simulation.
     std::vector<st::Pose2> log_poses;
-    for (const auto& l : logged) log_poses.push_back({l.translation().x(), l.translation().y(), yaw_of(l)});
+    for (const auto& l : logged) {
+      const reg::Pose2 p = reg::to_pose2(l);
+      log_poses.push_back({p.x, p.y, p.theta});
+    }
     const Eigen::Isometry3d frame = taught_frame(log_poses, teach);
     // The object: the free-standing cluster with the most returns.
     std::vector<reg::Point> merged;

@@ -112,4 +112,8 @@ Eigen::Isometry3d to_isometry(const Pose2& p) noexcept {
   return t;
 }
 
+Pose2 to_pose2(const Eigen::Isometry3d& t) noexcept {
+  return {t.translation().x(), t.translation().y(), std::atan2(t.linear()(1, 0), t.linear()(0, 0))};
+}
+
 }  // namespace trailnav::perception::registration

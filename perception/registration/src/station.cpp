@@ -1,5 +1,7 @@
 #include "trailnav/perception/registration/station.hpp"
 
+#include "trailnav/perception/registration/carmen.hpp"
+
 #include <algorithm>
 #include <cmath>
 
@@ -47,16 +49,12 @@ double angle_of(const Eigen::Isometry3d& t) { return Eigen::AngleAxisd(t.linear(
 
 namespace {
 
-// (x, y, θ) of a planar transform.
+// (x, y, θ) of a planar transform as a vector (the graph's unknowns) and back.
 Eigen::Vector3d planar_of(const Eigen::Isometry3d& t) {
-  return {t.translation().x(), t.translation().y(), std::atan2(t.linear()(1, 0), t.linear()(0, 0))};
+  const Pose2 p = to_pose2(t);
+  return {p.x, p.y, p.theta};
 }
-Eigen::Isometry3d from_planar(const Eigen::Vector3d& v) {
-  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.linear() = Eigen::AngleAxisd(v.z(), Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  t.translation() = Eigen::Vector3d(v.x(), v.y(), 0.0);
-  return t;
-}
+Eigen::Isometry3d from_planar(const Eigen::Vector3d& v) { return to_isometry(Pose2{v.x(), v.y(), v.z()}); }
 
 // The teach-in as the thesis' dense graph (Fig. 4.5) made a pose graph:
 // every pair of scans registered (j onto i, from their current poses), each
@@ -342,6 +340,11 @@ StationLocaliser::StationLocaliser(const Station& station, const StationConfig& 
   }
   CovarianceEstimator whole_cov(config.neighbours, 1e-3f, config.planar, config.max_thickness);
   prepare_target(whole_, whole_cov);
+  const std::size_t nb = station.bodies.size();
+  for (const Target& b : station.bodies) body_ptrs_.push_back(&b);
+  initial_.resize(nb);
+  coarse_.resize(nb);
+  fine_results_.resize(nb);
 }
 
 void StationLocaliser::begin(const Eigen::Isometry3d& pose) {
@@ -395,17 +398,13 @@ StationFix StationLocaliser::localise() {
   fix.local_points = query_.size();
   const std::size_t nb = station_.bodies.size();
   fix.bodies.resize(nb);
-  std::vector<const Target*> bodies(nb);
-  for (std::size_t k = 0; k < nb; ++k) bodies[k] = &station_.bodies[k];
-  const std::vector<Eigen::Isometry3d> initial(nb, pose_);
-  fix.iterations = multi_.align(query_, bodies, initial, fix.bodies);
+  for (std::size_t k = 0; k < nb; ++k) initial_[k] = pose_;
+  fix.iterations = multi_.align(query_, body_ptrs_, initial_, fix.bodies);
   // From there with the fine gate; a body it loses keeps the coarse answer.
-  std::vector<Eigen::Isometry3d> coarse(nb);
-  for (std::size_t k = 0; k < nb; ++k) coarse[k] = fix.bodies[k].transform;
-  std::vector<BodyResult> fine(nb);
-  fix.iterations += multi_fine_.align(query_, bodies, coarse, fine);
+  for (std::size_t k = 0; k < nb; ++k) coarse_[k] = fix.bodies[k].transform;
+  fix.iterations += multi_fine_.align(query_, body_ptrs_, coarse_, fine_results_);
   for (std::size_t k = 0; k < nb; ++k) {
-    if (fine[k].observed && fine[k].transform.matrix().allFinite()) fix.bodies[k] = fine[k];
+    if (fine_results_[k].observed && fine_results_[k].transform.matrix().allFinite()) fix.bodies[k] = fine_results_[k];
   }
   return fix;
 }

@@ -49,7 +49,9 @@ struct FlaserLog {
 };
 FlaserLog read_flaser_log(const std::string& path, long from = 0, long to = -1);
 
-// A planar pose as a 3D transform (z = 0, yaw θ).
+// A planar pose as a 3D transform (z = 0, yaw θ), and a transform's planar
+// part back (its translation's x and y, its yaw).
 Eigen::Isometry3d to_isometry(const Pose2& p) noexcept;
+Pose2 to_pose2(const Eigen::Isometry3d& t) noexcept;
 
 }  // namespace trailnav::perception::registration

@@ -27,8 +27,9 @@
 //
 // 2D laser scans are points at z = 0 (`planar`): covariances of lines, and
 // the solution stays in the plane. Buffers are sized at construction; a
-// registration's k-d trees allocate (nanoflann's node pool), so a visit runs
-// on a normal-priority thread, not a real-time one.
+// registration's k-d trees allocate (nanoflann's node pool) and localise()
+// returns its answer in a vector, so a visit runs on a normal-priority
+// thread, not a real-time one.
 #pragma once
 
 #include <cstddef>
@@ -166,6 +167,10 @@ class StationLocaliser {
   Target local_;  // the previous scans, a visit's registration target
   Cloud query_;   // the local model in the robot frame, localise()'s
   KdTree scratch_;
+  // localise()'s per-body scratch, sized by the station's bodies.
+  std::vector<const Target*> body_ptrs_;
+  std::vector<Eigen::Isometry3d> initial_, coarse_;
+  std::vector<BodyResult> fine_results_;
   std::vector<Point> normals_;
 };
 
