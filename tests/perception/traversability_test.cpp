@@ -1023,8 +1023,7 @@ TEST(TravDemonstration, TheRecorderTakesTheLayersWordsAsItsOwnWouldBe) {
   }
   ASSERT_GT(shared.counters().words, 10'000u);
   EXPECT_EQ(shared.counters().words, own.counters().words);
-  // The layer turns the distant cells away for both (TravOnline's counters
-  // give its count as the recorder's).
+  EXPECT_EQ(shared.counters().too_far, own.counters().too_far);
   EXPECT_EQ(made.layer->counters().too_far, own.counters().too_far);
   EXPECT_EQ(made.layer->counters().words, shared.counters().words);
   std::vector<std::pair<CellIndex, std::vector<std::uint32_t>>> a, b;

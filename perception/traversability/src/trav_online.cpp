@@ -25,8 +25,9 @@ TravOnline::TravOnline(TravLayer& layer, TravRecorder* recorder, Mailbox<LocalMa
 void TravOnline::cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
                            double y) noexcept {
   if (shared_words_) {
+    const bool within = !recorder_->too_far(x, y);  // the recorder's own range, counted by it
     std::uint32_t word = 0;
-    if (layer_.classify(cell, sums, feature, x, y, word)) recorder_->record(cell, x, y, word);
+    if (layer_.classify(cell, sums, feature, x, y, word) && within) recorder_->record(cell, word);
     return;
   }
   layer_.cell_sums(cell, sums, feature, x, y);
@@ -58,8 +59,6 @@ void TravOnline::step_begins(double robot_x, double robot_y, std::int64_t now_ns
   // The counters of the step before (this one's cells follow): posted once a step.
   counters_.layer = layer_.counters();
   if (recorder_ != nullptr) counters_.recorder = recorder_->counters();
-  // With shared words the layer turned the distant cells away for both.
-  if (shared_words_) counters_.recorder.too_far = counters_.layer.too_far;
   counters_.models = std::min(layer_.models().models(), kLayerModels);
   shared_.post(counters_);
 }
@@ -69,7 +68,6 @@ bool TravOnline::finish_partial() noexcept {
   const std::uint64_t before = counters_.handed;
   hand_over(true);
   counters_.recorder = recorder_->counters();
-  if (shared_words_) counters_.recorder.too_far = counters_.layer.too_far;
   shared_.post(counters_);
   return counters_.handed > before;
 }

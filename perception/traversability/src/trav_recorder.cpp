@@ -103,10 +103,6 @@ void TravRecorder::cell_sums(CellIndex cell, const CellStats& sums, const Featur
   store(cell, vocabulary_.word(f));
 }
 
-void TravRecorder::record(CellIndex cell, double x, double y, std::uint32_t word) noexcept {
-  if (!too_far(x, y)) store(cell, word);
-}
-
 void TravRecorder::finish_local_map(WordCounts& counts, const std::function<void(const CellWords&)>& each_cell) noexcept {
   counts.clear();
   // Cell by cell, in the order recorded within a cell (std::sort, in place:

@@ -61,9 +61,12 @@ class TravRecorder final : public CellSumsSink {
   void drive(double x, double y, double yaw) noexcept;
   void cell_sums(CellIndex cell, const CellStats& sums, const FeatureVector* feature, double x,
                  double y) noexcept override;
-  // A cell's word made elsewhere over the same vocabulary and ground (the
-  // layer's, TravOnline): recorded as cell_sums() would have made it.
-  void record(CellIndex cell, double x, double y, std::uint32_t word) noexcept;
+  // For a word made elsewhere over the same vocabulary and ground (the
+  // layer's, TravOnline): whether the cell at (x, y) lies beyond max_range
+  // (counted, as cell_sums() counts it), then the word recorded as
+  // cell_sums() would have made it.
+  bool too_far(double x, double y) noexcept;
+  void record(CellIndex cell, std::uint32_t word) noexcept { store(cell, word); }
 
   bool local_map_complete() const noexcept { return travelled_ >= config_.local_map_distance; }
   double travelled() const noexcept { return travelled_; }
@@ -94,7 +97,6 @@ class TravRecorder final : public CellSumsSink {
     std::uint32_t order;  // when recorded
   };
   void mark(double x, double y, double yaw) noexcept;
-  bool too_far(double x, double y) noexcept;
   void store(CellIndex cell, std::uint32_t word) noexcept;
 
   RecorderConfig config_;
