@@ -100,6 +100,7 @@ void teach_graph(std::span<StationScan> scans, std::size_t n, const StationConfi
       Eigen::Vector3d r = planar_of(from_planar(e.z).inverse() * from_planar(xi).inverse() * from_planar(xj));
       return r;
     };
+    result.converged = false;
     for (int it = 0; it < 10; ++it) {
       Eigen::MatrixXd h = Eigen::MatrixXd::Zero(m, m);
       Eigen::VectorXd g = Eigen::VectorXd::Zero(m);
@@ -130,7 +131,10 @@ void teach_graph(std::span<StationScan> scans, std::size_t n, const StationConfi
       const Eigen::VectorXd delta = -h.ldlt().solve(g);
       if (!delta.allFinite()) break;
       for (std::size_t k = 1; k < n; ++k) x[k] += delta.segment<3>(static_cast<Eigen::Index>(3 * (k - 1)));
-      if (delta.norm() < 1e-9) break;
+      if (delta.norm() < 1e-9) {
+        result.converged = true;  // the last solve's step vanished
+        break;
+      }
     }
     for (std::size_t k = 1; k < n; ++k) {
       Eigen::Isometry3d t = from_planar(x[k]);
@@ -139,7 +143,6 @@ void teach_graph(std::span<StationScan> scans, std::size_t n, const StationConfi
     }
     result.rounds = outer + 1;
   }
-  result.converged = true;
 }
 
 }  // namespace
