@@ -42,6 +42,7 @@
 #include "subscriber.hpp"
 #include "terminal.hpp"
 #include "trailnav/drivers/velodyne/model.hpp"
+#include "trailnav/perception/random_forest.hpp"
 #include "trailnav/runtime/histogram.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
@@ -211,6 +212,16 @@ int run_bench_demo(const BenchDemoOptions& o) {
   {
     std::ofstream file(out / "terrain-sim.tnrf", std::ios::binary);
     file.write(reinterpret_cast<const char*>(terrain_model.data()), static_cast<std::streamsize>(terrain_model.size()));
+  }
+  // The cells the terrain model learnt from, as its file says (trailnavd
+  // refuses others): the HDL-64E's are not the bench config's VLP-16 cells.
+  if (const auto parsed = perception::RandomForest::parse(terrain_model, "built-in terrain model");
+      parsed.forest && parsed.forest->feature_settings().said()) {
+    const perception::FeatureSettings& s = parsed.forest->feature_settings();
+    char keys[160];
+    std::snprintf(keys, sizeof keys, "  min_points: %u\n  min_range: %.9g\n  max_range: %.9g", s.min_points,
+                  static_cast<double>(s.min_range), static_cast<double>(s.max_range));
+    replace_all(config, "  min_points: 15          # minPoints per cell", keys);
   }
   // The traversability layer's model was learnt from a VLP-16's demonstration
   // (its remission words are that lidar's): with another lidar the demo runs

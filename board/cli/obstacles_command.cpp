@@ -200,10 +200,14 @@ int run(ObstaclesCliOptions& o) {
     } else if (o.terrain == "estimated") {
       o.run.terrain = eval::TerrainMode::estimated;
       o.run.config.fixed_class.reset();
+      bool terrain_section = false;
       if (!o.config_file.empty()) {
         try {
           const ConfigNode root = ConfigNode::load_file(o.config_file);
-          if (auto t = root.optional_map("terrain")) o.run.terrain_config = perception::parse_terrain_config(*t);
+          if (auto t = root.optional_map("terrain")) {
+            o.run.terrain_config = perception::parse_terrain_config(*t);
+            terrain_section = true;
+          }
         } catch (const ConfigError& e) {
           std::fprintf(stderr, "trailnav obstacles: %s\n", e.what());
           return 2;
@@ -220,6 +224,8 @@ int run(ObstaclesCliOptions& o) {
         return 2;
       }
       o.forest = std::move(loaded.forest);
+      // No terrain section: the cells the model learnt from.
+      if (!terrain_section) perception::adopt_forest_settings(*o.forest, o.run.terrain_config);
       o.run.terrain_forest = &*o.forest;
       o.run.terrain_forest_name = o.run.terrain_config.model;
     } else if (o.terrain == "adaptive") {

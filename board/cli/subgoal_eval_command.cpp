@@ -76,6 +76,8 @@ int run_eval(SubgoalEvalCli& c) {
   }
   o.forest = &*forest;
   o.forest_name = model_name;
+  // No config: the cells the model learnt from (terrain_run checks them).
+  if (c.config_file.empty()) perception::adopt_forest_settings(*forest, o.terrain);
   // The learnt traversability cost (docs/traversability.md "On the robot"): its model's full feature set.
   o.costs.clear();
   for (const std::string& name : c.costs) {

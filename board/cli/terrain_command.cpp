@@ -3,8 +3,12 @@
 // (simulated recordings' truth, or CSV files users labelled); evaluation runs
 // the terrain analysis over recordings and prints the cell-wise confusion
 // matrices of the integrated map and of single features (thesis Table 7.2).
+#include <algorithm>
+#include <array>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -12,6 +16,7 @@
 #include "terminal.hpp"
 #include "terrain_run.hpp"
 #include "trailnav/perception/forest_training.hpp"
+#include "trailnav/perception/terrain_class_map.hpp"
 
 namespace trailnav::cli {
 namespace {
@@ -63,6 +68,7 @@ struct TrainOptions {
   std::string save_features;
   perception::ForestParams forest;
   std::size_t max_per_class = 40000;
+  std::vector<std::string> class_cells;  // CLASS=N: that class's own cap
   std::string lidar;  // empty: the recordings' lidar model
   bool quiet = false;
 };
@@ -77,6 +83,7 @@ int train(TrainOptions& o) {
   }
   perception::LabelledFeatures data;
   std::string lidar;  // the recordings' lidar model, if they agree
+  bool from_recordings = false;
   for (const std::string& input : o.inputs) {
     if (fs::path(input).extension() == ".csv") {
       const std::size_t before = data.size();
@@ -87,6 +94,7 @@ int train(TrainOptions& o) {
       std::printf("%s: %zu labelled cells\n", input.c_str(), data.size() - before);
       continue;
     }
+    from_recordings = true;
     eval::TerrainRunOptions run;
     run.input = input;
     run.config = config;
@@ -115,7 +123,22 @@ int train(TrainOptions& o) {
     }
     std::printf("wrote %s (%zu labelled cells)\n", o.save_features.c_str(), data.size());
   }
-  if (o.max_per_class > 0) data.limit_per_class(o.max_per_class, o.forest.seed);
+  std::array<std::size_t, perception::kTerrainClasses> caps;
+  caps.fill(o.max_per_class);
+  for (const std::string& c : o.class_cells) {
+    const std::size_t eq = c.find('=');
+    const auto cls = eq == std::string::npos ? std::nullopt : perception::parse_terrain_class(c.substr(0, eq));
+    char* end = nullptr;
+    const std::string count = eq == std::string::npos ? std::string() : c.substr(eq + 1);
+    const unsigned long long n = std::strtoull(count.c_str(), &end, 10);
+    if (!cls || count.empty() || end != count.c_str() + count.size() || count[0] == '-') {
+      std::fprintf(stderr, "%s: --class-cells '%s': expected CLASS=N with CLASS one of street, dirt, grass, vegetation, other\n",
+                   who, c.c_str());
+      return 2;
+    }
+    caps[static_cast<std::size_t>(*cls)] = static_cast<std::size_t>(n);
+  }
+  if (std::any_of(caps.begin(), caps.end(), [](std::size_t v) { return v > 0; })) data.limit_per_class(caps, o.forest.seed);
   std::printf("training on %zu cells:", data.size());
   print_counts(data);
   std::printf("\n");
@@ -129,6 +152,13 @@ int train(TrainOptions& o) {
     return 2;
   }
   perception::RandomForest model = *trained.forest;
+  if (from_recordings) {
+    // The cells the features came from (CSV files do not say theirs).
+    if (std::string e = model.set_feature_settings(perception::feature_settings_of(config)); !e.empty()) {
+      std::fprintf(stderr, "%s: %s\n", who, e.c_str());
+      return 2;
+    }
+  }
   if (!o.lidar.empty()) lidar = o.lidar;
   if (std::string e = model.set_lidar(lidar); !e.empty()) {
     std::fprintf(stderr, "%s: --lidar: %s\n", who, e.c_str());
@@ -177,6 +207,10 @@ int evaluate(EvalOptions& o) {
   if (!loaded.forest) {
     std::fprintf(stderr, "%s: %s\n", who, loaded.error.c_str());
     return 2;
+  }
+  if (o.config_file.empty() && loaded.forest->feature_settings().said()) {
+    // No config: the cells the model learnt from.
+    perception::adopt_forest_settings(*loaded.forest, config);
   }
   std::printf("model %s: %zu trees, %zu nodes, depth up to %zu, for %s\n", config.model.c_str(), loaded.forest->trees(),
               loaded.forest->nodes(), loaded.forest->max_depth(),
@@ -232,11 +266,13 @@ int evaluate(EvalOptions& o) {
 void add_terrain_commands(CLI::App& app) {
   auto* tr = app.add_subcommand(
       "terrain-train",
-      "Learn the terrain classifier (thesis §7.2.2): a random forest over the five cell features (max, mean\n"
-      "and standard deviation of remission, roughness, slope). Inputs are simulated recordings, whose\n"
-      "cells are labelled from the truth (only cells of one class), and CSV files of labelled cells\n"
-      "(docs/terrain.md). Prints the out-of-bag confusion matrix. The same inputs and seed give the same\n"
-      "model, byte for byte.\n"
+      "Learn the terrain classifier (thesis §7.2.2): a random forest over the six cell features (max, mean\n"
+      "and standard deviation of remission, roughness, slope, and the remission's spread over the cells\n"
+      "around). Inputs are simulated recordings, whose cells are labelled from the truth (only cells of\n"
+      "one class), and CSV files of labelled cells (docs/terrain.md). The model file says the lidar and\n"
+      "the cells (--config's map resolution, min_points, min_range, max_range) its features came from;\n"
+      "trailnavd refuses a config that makes other cells. Prints the out-of-bag confusion matrix. The\n"
+      "same inputs and seed give the same model, byte for byte.\n"
       "Example:\n"
       "  trailnav terrain-train build/sim/urban build/sim/forest --out build/terrain.tnrf");
   static TrainOptions t;
@@ -251,6 +287,9 @@ void add_terrain_commands(CLI::App& app) {
   tr->add_option("--seed", t.forest.seed, "Random seed (bootstrap samples, features per split)")->capture_default_str();
   tr->add_option("--max-per-class", t.max_per_class, "Keep at most this many cells of each class (0: all)")
       ->capture_default_str();
+  tr->add_option("--class-cells", t.class_cells,
+                 "CLASS=N: keep at most N cells of this class instead (0: all), e.g. other=60000; the share of a class "
+                 "in training moves the line between overlapping classes (docs/terrain.md)");
   tr->add_option("--threads", t.forest.threads, "Trees grown in parallel (0: one per core)")->capture_default_str();
   tr->add_option("--save-features", t.save_features, "Also write every labelled cell feature to this CSV");
   tr->add_option("--lidar", t.lidar,

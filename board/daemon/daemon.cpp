@@ -179,6 +179,9 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
         !e.empty()) {
       return fail("terrain: " + e);
     }
+    if (std::string e = perception::check_forest_settings(*model.forest, *config.terrain, config.terrain->model); !e.empty()) {
+      return fail("terrain: " + e);
+    }
     d->forest_ = std::move(model.forest);
     const perception::MountParams mount = config.obstacles ? config.obstacles->mount : perception::MountParams{};
     const perception::FeatureParams alignment = config.obstacles ? config.obstacles->features : perception::FeatureParams{};

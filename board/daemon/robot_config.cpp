@@ -342,15 +342,17 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     c.terrain = perception::parse_terrain_config(*n);
     if (!c.lidar) root.fail("terrain", "the terrain map needs a lidar: add a 'lidar' section");
     if (c.terrain->model.empty()) n->fail("model", "the terrain classifier needs its model file (trailnav terrain-train)");
-    if (auto m = perception::RandomForest::load(c.terrain->model); !m.forest) {
-      n->fail("model", m.error);
-    } else if (c.lidar) {
-      const std::string e = perception::check_forest_lidar(*m.forest, velodyne::model_info(c.lidar->model).name, c.terrain->model);
-      if (!e.empty()) n->fail("model", e);
-    }
     const std::string e =
         perception::check_terrain_alignment(*c.terrain, c.obstacles ? c.obstacles->features : perception::FeatureParams{});
     if (!e.empty()) root.fail("terrain", e);
+    if (auto m = perception::RandomForest::load(c.terrain->model); !m.forest) {
+      n->fail("model", m.error);
+    } else if (c.lidar) {
+      const std::string l = perception::check_forest_lidar(*m.forest, velodyne::model_info(c.lidar->model).name, c.terrain->model);
+      if (!l.empty()) n->fail("model", l);
+      const std::string s = perception::check_forest_settings(*m.forest, *c.terrain, c.terrain->model);
+      if (!s.empty()) n->fail("model", s);
+    }
   }
   if (auto n = root.optional_map("traversability")) {
     c.traversability = perception::trav::parse_traversability_config(*n);

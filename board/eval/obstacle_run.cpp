@@ -621,6 +621,12 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
       report.error = e;
       return report;
     }
+    if (std::string e = perception::check_forest_settings(*options.terrain_forest, options.terrain_config,
+                                                          options.terrain_forest_name);
+        !e.empty()) {
+      report.error = e;
+      return report;
+    }
     auto made_mapper = perception::TerrainMapper::create(options.terrain_config, config.mount, shape, options.terrain_forest,
                                                          config.features);
     if (!made_mapper.mapper) {

@@ -105,6 +105,10 @@ TerrainRunReport run_terrain(const TerrainRunOptions& options) {
       report.error = options.input + ": " + e;
       return report;
     }
+    if (std::string e = perception::check_forest_settings(*options.forest, options.config, options.forest_name); !e.empty()) {
+      report.error = e;
+      return report;
+    }
   }
   const SimTruth& truth = *source.truth();
   perception::MountParams mount = options.mount;

@@ -121,6 +121,13 @@ TEST(RobotConfig, TerrainNeedsAModelThatLoadsAndItsTask) {
   EXPECT_NE(e.find(":9: 'terrain': min_range..max_range 1..45 m reaches outside the 1..40 m of obstacles.features"),
             std::string::npos)
       << e;
+  // The model learnt cells of at least 15 points: a config of 10 is refused, naming both.
+  e = load_error(std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf, min_points: 10}\n");
+  EXPECT_NE(e.find(":9:"), std::string::npos) << e;
+  EXPECT_NE(e.find("learnt the features of cells of 0.2 m with at least 15 points, returns from 1 to 30 m; this "
+                   "config makes cells of 0.2 m with at least 10 points"),
+            std::string::npos)
+      << e;
   std::string narrow = std::string(kMinimal) + task + "terrain: {model: ../models/terrain-sim.tnrf}\n";
   narrow.replace(narrow.find("obstacles: {model: PC}"), 22, "obstacles: {model: PC, features: {max_range: 25}}");
   e = load_error(narrow);

@@ -37,12 +37,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
     check(std::abs(sum - 1.0f) < 1e-2f);
   }
-  // Round trip: what loads, saves to the same bytes.
+  // Round trip: what loads, saves to the same bytes; a version 3 file (no
+  // feature settings) as version 4 whose settings say nothing, the same
+  // forest.
   const std::string path = "/tmp/trailnav-fuzz-model-" + std::to_string(::getpid()) + ".tnrf";
   check(f.save(path).is_ok());
   std::ifstream in(path, std::ios::binary);
   const std::vector<std::uint8_t> back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   std::remove(path.c_str());
-  check(back.size() == size && std::equal(back.begin(), back.end(), data));
+  if (data[8] == RandomForest::kVersion) {
+    check(back.size() == size && std::equal(back.begin(), back.end(), data));
+  } else {
+    check(data[8] == 3 && !f.feature_settings().said());
+    check(back.size() == size + RandomForest::kSettingsBytes);
+    const std::size_t settings = 48;  // after the header and the lidar field
+    check(std::equal(data + 12, data + settings, back.begin() + 12));
+    check(std::all_of(back.begin() + settings, back.begin() + settings + RandomForest::kSettingsBytes,
+                      [](std::uint8_t b) { return b == 0; }));
+    check(std::equal(data + settings, data + size - 4, back.begin() + settings + RandomForest::kSettingsBytes));
+  }
   return 0;
 }

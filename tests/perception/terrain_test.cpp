@@ -278,6 +278,77 @@ TEST(RandomForest, ModelFileNamesItsLidarAndAnotherLidarIsRefused) {
   fs::remove_all(dir);
 }
 
+// A model says the cells whose features it learnt (map resolution,
+// min_points, the range of returns); the tools refuse a config that makes
+// other cells, naming both, and take the model's when run without one.
+// Version 3 files, which do not say, still load.
+TEST(RandomForest, ModelFileSaysItsCellsAndAConfigOfOtherCellsIsRefused) {
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-forest-cells-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string path = (dir / "m.tnrf").string();
+  RandomForest f = stump({0.7f, 0.3f, 0, 0, 0}, {0, 0, 0.25f, 0.75f, 0});
+  TerrainConfig config;  // 0.2 m cells, 15 points, 1 to 30 m
+  EXPECT_FALSE(f.feature_settings().said());
+  EXPECT_EQ(check_forest_settings(f, config, path), "");  // says nothing: any cells
+  EXPECT_NE(f.set_feature_settings({0.2f, 2, 1.0f, 30.0f}).find("min_points 2"), std::string::npos);
+  EXPECT_NE(f.set_feature_settings({0.2f, 10, 20.0f, 15.0f}).find("above min_range"), std::string::npos);
+  EXPECT_NE(f.set_feature_settings({5.0f, 10, 1.0f, 15.0f}).find("map resolution"), std::string::npos);
+  EXPECT_FALSE(f.feature_settings().said());
+  TerrainConfig hdl = config;
+  hdl.min_points = 10;
+  hdl.max_range = 15.0f;
+  ASSERT_EQ(f.set_feature_settings(feature_settings_of(hdl)), "");
+  ASSERT_TRUE(f.save(path));
+  const auto saved = file_bytes(path);
+  auto back = RandomForest::load(path);
+  ASSERT_TRUE(back.forest) << back.error;
+  EXPECT_TRUE(back.forest->feature_settings() == feature_settings_of(hdl));
+  EXPECT_EQ(check_forest_settings(*back.forest, hdl, path), "");
+  const std::string e = check_forest_settings(*back.forest, config, path);
+  EXPECT_EQ(e.rfind(path, 0), 0u) << e;
+  EXPECT_NE(e.find("learnt the features of cells of 0.2 m with at least 10 points, returns from 1 to 15 m"),
+            std::string::npos) << e;
+  EXPECT_NE(e.find("this config makes cells of 0.2 m with at least 15 points, returns from 1 to 30 m"), std::string::npos)
+      << e;
+  TerrainConfig adopted;
+  adopt_forest_settings(*back.forest, adopted);
+  EXPECT_EQ(check_forest_settings(*back.forest, adopted, path), "");
+  EXPECT_EQ(adopted.min_points, 10);
+  EXPECT_EQ(adopted.max_range, 15.0f);
+
+  auto with_crc = [](std::vector<std::uint8_t> b) {
+    const auto crc = static_cast<std::uint32_t>(crc32(0L, b.data(), static_cast<uInt>(b.size() - 4)));
+    for (std::size_t i = 0; i < 4; ++i) b[b.size() - 4 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
+    return b;
+  };
+  // Settings out of range in an intact file: named.
+  auto bad = saved;
+  bad[48 + 4] = 1;  // min_points 1
+  write_bytes(path, with_crc(bad));
+  EXPECT_NE(RandomForest::load(path).error.find("feature settings: min_points 1"), std::string::npos)
+      << RandomForest::load(path).error;
+  // A version 3 file: the same without the 16 bytes of settings.
+  auto v3 = saved;
+  v3[8] = 3;
+  v3.erase(v3.begin() + 48, v3.begin() + 64);
+  write_bytes(path, with_crc(v3));
+  auto old = RandomForest::load(path);
+  ASSERT_TRUE(old.forest) << old.error;
+  EXPECT_FALSE(old.forest->feature_settings().said());
+  EXPECT_EQ(old.forest->lidar(), "");
+  EXPECT_EQ(check_forest_settings(*old.forest, config, path), "");
+
+  // The shipped HDL-64E model learnt cells of its robot config's settings.
+  auto shipped = RandomForest::load("board/models/terrain-sim-hdl64e.tnrf");
+  ASSERT_TRUE(shipped.forest) << shipped.error;
+  const ConfigNode root = ConfigNode::load_file("board/robots/bench-hdl64e.yaml");
+  EXPECT_EQ(check_forest_settings(*shipped.forest, parse_terrain_config(root.map("terrain")),
+                                  "board/models/terrain-sim-hdl64e.tnrf"),
+            "");
+  EXPECT_EQ(shipped.forest->feature_settings().min_points, 10u);
+  fs::remove_all(dir);
+}
+
 LabelledFeatures separable(int n, std::uint32_t seed) {
   // Street: bright and flat; grass: dark and rough; other: steep. Noise in
   // the remaining features.

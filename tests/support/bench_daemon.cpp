@@ -18,12 +18,29 @@
 #include "trailnav/drivers/velodyne/model.hpp"
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/osm/router.hpp"
+#include "trailnav/perception/random_forest.hpp"
 #include "trailnav/runtime/clock.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
 namespace trailnav::test {
 
 namespace fs = std::filesystem;
+
+namespace {
+// The terrain section's cell settings as the model's file says it learnt
+// them (trailnavd refuses others), as YAML keys after a comma; "" when the
+// file does not say them.
+std::string terrain_cells(const std::string& model) {
+  const auto loaded = perception::RandomForest::load(model);
+  if (!loaded.forest || !loaded.forest->feature_settings().said()) return {};
+  const perception::FeatureSettings& s = loaded.forest->feature_settings();
+  std::ostringstream out;
+  out.precision(9);
+  out << ", map: {resolution: " << s.resolution << "}, min_points: " << s.min_points << ", min_range: " << s.min_range
+      << ", max_range: " << s.max_range;
+  return out.str();
+}
+}  // namespace
 
 bool far_routable_goal(const std::string& recording, FarGoal& out, std::string& error) {
   auto loaded = eval::load_sim_truth(recording + "/truth");
@@ -159,7 +176,8 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
       << "gpio: {transport: tunnel, tunnel: 127.0.0.1:" << base + 3 << ", estop_line: ESTOP}\n"
       << "pose: {antenna: [0.0, 0.0, 1.3], feed_obstacles: " << nav << ", feed_terrain: " << nav << "}\n"
       << "obstacles: {model: PC, terrain: other, mount: {translation: [0.2, 0.0, 1.1]}, map: {size: 600, resolution: 0.1}}\n"
-      << "terrain: {model: " << fs::absolute(terrain_model).string() << ", max_step_interval: 1.0}\n"
+      << "terrain: {model: " << fs::absolute(terrain_model).string() << ", max_step_interval: 1.0" << terrain_cells(terrain_model)
+      << "}\n"
       << "dds: {domain: " << b->domain_ << ", cyclone_config: loopback, pose_rate_hz: 20, health_period_s: 0.5"
       << options.dds_yaml << "}\n";
     if (options.preset_tasks) {

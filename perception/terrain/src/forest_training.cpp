@@ -185,12 +185,20 @@ std::array<std::uint64_t, kTerrainClasses> LabelledFeatures::class_counts() cons
 }
 
 void LabelledFeatures::limit_per_class(std::size_t per_class, std::uint64_t seed) {
+  std::array<std::size_t, kTerrainClasses> caps;
+  caps.fill(per_class);
+  limit_per_class(caps, seed);
+}
+
+void LabelledFeatures::limit_per_class(const std::array<std::size_t, kTerrainClasses>& caps, std::uint64_t seed) {
   Rng rng(seed);
   std::array<std::vector<std::uint32_t>, kTerrainClasses> members;
   for (std::size_t i = 0; i < labels.size(); ++i) members[labels[i]].push_back(static_cast<std::uint32_t>(i));
   std::vector<std::uint32_t> keep;
-  for (auto& m : members) {
-    if (m.size() > per_class) {
+  for (std::size_t c = 0; c < members.size(); ++c) {
+    auto& m = members[c];
+    const std::size_t per_class = caps[c];
+    if (per_class > 0 && m.size() > per_class) {
       for (std::size_t i = 0; i < per_class; ++i) std::swap(m[i], m[i + rng.below(m.size() - i)]);
       m.resize(per_class);
     }

@@ -151,6 +151,10 @@ Status RandomForest::save(const std::string& path) const {
   put_u32(out, static_cast<std::uint32_t>(walk_.size()));
   put_u32(out, static_cast<std::uint32_t>(leaves()));
   for (std::size_t i = 0; i < kLidarBytes; ++i) out.push_back(i < lidar_.size() ? static_cast<std::uint8_t>(lidar_[i]) : 0);
+  put_f32(out, settings_.resolution);
+  put_u32(out, settings_.min_points);
+  put_f32(out, settings_.min_range);
+  put_f32(out, settings_.max_range);
   for (std::uint32_t r : roots_) put_u32(out, r);
   for (const ForestNode& n : node_table()) {
     put_u32(out, static_cast<std::uint16_t>(n.feature));
@@ -190,7 +194,7 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
                 ") also use the remission spread around the cell, so train the model again with trailnav "
                 "terrain-train (toolchain/train-terrain-model.sh rebuilds the shipped ones)");
   }
-  if (version != kVersion) {
+  if (version != kVersion && version != 3) {
     return fail("model format version " + std::to_string(version) + "; this build reads version " +
                 std::to_string(kVersion));
   }
@@ -200,7 +204,9 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
                 " classes; this build uses " + std::to_string(kTerrainFeatures) + " and " + std::to_string(kTerrainClasses));
   }
   if (trees == 0 || trees > kMaxTrees || nodes > kMaxNodes || leaves > kMaxNodes) return fail("implausible sizes in the header");
-  const std::size_t expected = c.pos() + kLidarBytes + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
+  const std::size_t settings_bytes = version >= 4 ? kSettingsBytes : 0;
+  const std::size_t expected =
+      c.pos() + kLidarBytes + settings_bytes + 4ull * trees + 12ull * nodes + 4ull * kTerrainClasses * leaves + 4;
   if (data.size() != expected) {
     return fail("size " + std::to_string(data.size()) + " bytes, the header announces " + std::to_string(expected) +
                 " (truncated or corrupt)");
@@ -218,6 +224,13 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   const std::string lidar(reinterpret_cast<const char*>(lidar_field), lidar_chars);
   std::uint32_t skip_lidar;
   for (std::size_t i = 0; i < kLidarBytes / 4; ++i) c.u32(skip_lidar);
+  FeatureSettings settings;
+  if (version >= 4) {
+    c.f32(settings.resolution);
+    c.u32(settings.min_points);
+    c.f32(settings.min_range);
+    c.f32(settings.max_range);
+  }
   std::vector<std::uint32_t> roots(trees);
   for (auto& r : roots) c.u32(r);
   std::vector<ForestNode> table(nodes);
@@ -238,6 +251,7 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
     return loaded;
   }
   if (std::string e = loaded.forest->set_lidar(lidar); !e.empty()) return fail("lidar field: " + e);
+  if (std::string e = loaded.forest->set_feature_settings(settings); !e.empty()) return fail("feature settings: " + e);
   return loaded;
 }
 
@@ -247,6 +261,22 @@ std::string RandomForest::set_lidar(std::string_view name) {
     if (ch < 0x21 || ch > 0x7E) return "a lidar name is printable ASCII without spaces";
   }
   lidar_.assign(name);
+  return {};
+}
+
+std::string RandomForest::set_feature_settings(const FeatureSettings& s) {
+  if (s == FeatureSettings{}) {
+    settings_ = s;
+    return {};
+  }
+  // The ranges TerrainConfig accepts (terrain_config.cpp).
+  if (!(s.resolution >= 0.02f && s.resolution <= 2.0f)) return "map resolution " + std::to_string(s.resolution) + " m (0.02 to 2)";
+  if (s.min_points < 3 || s.min_points > 100000) return "min_points " + std::to_string(s.min_points) + " (3 to 100000)";
+  if (!(s.min_range >= 0.0f && s.min_range <= 50.0f)) return "min_range " + std::to_string(s.min_range) + " m (0 to 50)";
+  if (!(s.max_range >= 1.0f && s.max_range <= 300.0f && s.max_range > s.min_range)) {
+    return "max_range " + std::to_string(s.max_range) + " m (1 to 300, above min_range)";
+  }
+  settings_ = s;
   return {};
 }
 

@@ -65,4 +65,34 @@ std::string check_terrain_config(const TerrainConfig& c) {
   return {};
 }
 
+FeatureSettings feature_settings_of(const TerrainConfig& c) noexcept {
+  return {static_cast<float>(c.map.resolution), static_cast<std::uint32_t>(c.min_points), c.min_range, c.max_range};
+}
+
+std::string check_forest_settings(const RandomForest& forest, const TerrainConfig& config, const std::string& model_path) {
+  const FeatureSettings& trained = forest.feature_settings();
+  if (!trained.said()) return {};
+  const FeatureSettings here = feature_settings_of(config);
+  if (here == trained) return {};
+  const auto describe = [](const FeatureSettings& s) {
+    char text[160];
+    std::snprintf(text, sizeof text, "cells of %g m with at least %u points, returns from %g to %g m",
+                  static_cast<double>(s.resolution), s.min_points, static_cast<double>(s.min_range),
+                  static_cast<double>(s.max_range));
+    return std::string(text);
+  };
+  return model_path + ": the terrain model learnt the features of " + describe(trained) + "; this config makes " +
+         describe(here) + ", whose features differ. Set terrain.map.resolution, terrain.min_points, terrain.min_range "
+         "and terrain.max_range to the model's, or train a model with these (docs/terrain.md)";
+}
+
+void adopt_forest_settings(const RandomForest& forest, TerrainConfig& config) noexcept {
+  const FeatureSettings& s = forest.feature_settings();
+  if (!s.said()) return;
+  config.map.resolution = static_cast<double>(s.resolution);
+  config.min_points = static_cast<int>(s.min_points);
+  config.min_range = s.min_range;
+  config.max_range = s.max_range;
+}
+
 }  // namespace trailnav::perception

@@ -41,6 +41,8 @@ struct LabelledFeatures {
   std::array<std::uint64_t, kTerrainClasses> class_counts() const noexcept;
   // Keeps at most `per_class` samples of each class, chosen at random with `seed`.
   void limit_per_class(std::size_t per_class, std::uint64_t seed);
+  // The same with a cap per class (0: keep all of that class).
+  void limit_per_class(const std::array<std::size_t, kTerrainClasses>& caps, std::uint64_t seed);
 };
 
 // Rows: the true class; columns: the predicted one.

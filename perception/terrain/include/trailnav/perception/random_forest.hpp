@@ -8,11 +8,15 @@
 //
 // Model file (little-endian; docs/terrain.md):
 //   "TNTERRF\0"  magic (8 bytes)
-//   u32 version (3; 1 and 2, five-feature forests, are refused by name),
+//   u32 version (4; 3 is read too, without the feature settings; 1 and 2,
+//               five-feature forests, are refused by name),
 //   u32 features (6), u32 classes (5)
 //   u32 trees, u32 nodes, u32 leaves
 //   16 bytes: the lidar model the forest was trained for ("VLP-16",
 //             "HDL-64E", ...), ASCII, NUL-padded; all NUL: not said
+//   (version 4) the cells whose features it learnt: f32 map resolution (m),
+//             u32 min_points, f32 min_range (m), f32 max_range (m); all 0:
+//             not said (a forest trained from CSV files alone)
 //   trees  x u32 first node of each tree
 //   nodes  x { i16 feature (-1: leaf), u16 0, f32 threshold, i32 right child or leaf row }
 //   leaves x classes x f32 probability
@@ -43,12 +47,29 @@ static_assert(sizeof(ForestNode) == 12);
 
 using ClassDistribution = std::array<float, kTerrainClasses>;
 
+// What shaped the features a forest learnt: the terrain settings of its
+// training (TerrainConfig's map resolution, min_points, min_range and
+// max_range). The same ground gives other features in cells of another size,
+// from fewer points or from farther away, where the lidar sees it at a
+// grazing angle; a forest used with other settings answers other questions.
+struct FeatureSettings {
+  float resolution = 0.0f;  // m; 0: not said
+  std::uint32_t min_points = 0;
+  float min_range = 0.0f;  // m
+  float max_range = 0.0f;  // m
+  bool said() const noexcept { return resolution > 0.0f; }
+  friend bool operator==(const FeatureSettings&, const FeatureSettings&) = default;
+};
+
 class RandomForest {
  public:
-  // 3: six features (area_std_remission). 1 and 2 held forests of the five
-  // per-cell features, which this build cannot use; loading says so.
-  static constexpr std::uint32_t kVersion = 3;
+  // 4: the feature settings after the lidar. 3: six features
+  // (area_std_remission), read as a forest that does not say its settings.
+  // 1 and 2 held forests of the five per-cell features, which this build
+  // cannot use; loading says so.
+  static constexpr std::uint32_t kVersion = 4;
   static constexpr std::size_t kLidarBytes = 16;  // the lidar field, NUL-padded
+  static constexpr std::size_t kSettingsBytes = 16;  // version 4: the feature settings
 
   struct Loaded;
   // Reads and validates a model file.
@@ -92,6 +113,10 @@ class RandomForest {
   // Empty when `name` (printable ASCII, at most 15 characters) was taken,
   // else what is wrong with it.
   std::string set_lidar(std::string_view name);
+  // The cells whose features the forest learnt (not said: said() false).
+  const FeatureSettings& feature_settings() const noexcept { return settings_; }
+  // Empty when taken (all zero, or plausible values), else what is wrong.
+  std::string set_feature_settings(const FeatureSettings& s);
   std::span<const std::uint32_t> roots() const noexcept { return roots_; }
   // The nodes as the file stores them (rebuilt from the walking table).
   std::vector<ForestNode> node_table() const;
@@ -114,6 +139,7 @@ class RandomForest {
   std::vector<float> leaves_;
   std::size_t max_depth_ = 0;
   std::string lidar_;
+  FeatureSettings settings_;
 };
 
 // Empty when `forest` may classify the returns of a `lidar` (a model name as

@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 
+#include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
 #include "trailnav/runtime/config.hpp"
 
@@ -34,5 +35,15 @@ struct TerrainConfig {
 // A relative model path is resolved against the config file's directory.
 TerrainConfig parse_terrain_config(const ConfigNode& node);
 std::string check_terrain_config(const TerrainConfig& config);
+
+// The settings of `config` that shape a cell's features.
+FeatureSettings feature_settings_of(const TerrainConfig& config) noexcept;
+// Empty when `forest` learnt the features of cells as `config` makes them
+// (or does not say how its cells were made); else the error to show,
+// naming both.
+std::string check_forest_settings(const RandomForest& forest, const TerrainConfig& config, const std::string& model_path);
+// Takes the forest's settings into `config` where it says them (for the
+// offline tools run without a config file).
+void adopt_forest_settings(const RandomForest& forest, TerrainConfig& config) noexcept;
 
 }  // namespace trailnav::perception
