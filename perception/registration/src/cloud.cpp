@@ -108,6 +108,73 @@ bool KdTree::nearest(const Point& q, std::uint32_t& index, float& squared) const
   return nearest(q, std::span<std::uint32_t>(&index, 1), std::span<float>(&squared, 1)) == 1;
 }
 
+namespace {
+// nanoflann's result-set interface for one neighbour under a bound: the
+// search visits only cells that may hold a point closer than worstDist().
+struct NearestWithin {
+  float best;
+  std::uint32_t index;
+  bool found;
+  bool full() const noexcept { return true; }
+  bool addPoint(float d, std::uint32_t i) noexcept {
+    if (d < best) {
+      best = d;
+      index = i;
+      found = true;
+    }
+    return true;
+  }
+  float worstDist() const noexcept { return best; }
+};
+}  // namespace
+
+namespace {
+// The same for two neighbours: the second's distance (or the bound) is what
+// the search prunes against.
+struct NearestTwoWithin {
+  float d[2];
+  std::uint32_t i[2];
+  int count;
+  bool full() const noexcept { return true; }
+  bool addPoint(float dist, std::uint32_t index) noexcept {
+    if (dist >= d[1]) return true;
+    if (dist < d[0]) {
+      d[1] = d[0];
+      i[1] = i[0];
+      d[0] = dist;
+      i[0] = index;
+    } else {
+      d[1] = dist;
+      i[1] = index;
+    }
+    count = count < 2 ? count + 1 : 2;
+    return true;
+  }
+  float worstDist() const noexcept { return d[1]; }
+};
+}  // namespace
+
+int KdTree::nearest_two_within(const Point& q, float bound, std::uint32_t index[2], float squared[2]) const noexcept {
+  if (!impl_->tree || size() == 0) return 0;
+  NearestTwoWithin result{{bound, bound}, {0, 0}, 0};
+  impl_->tree->findNeighbors(result, q.data(), nanoflann::SearchParams());
+  for (int k = 0; k < result.count; ++k) {
+    index[k] = result.i[k];
+    squared[k] = result.d[k];
+  }
+  return result.count;
+}
+
+bool KdTree::nearest_within(const Point& q, float bound, bool known, std::uint32_t& index, float& squared) const noexcept {
+  if (!impl_->tree || size() == 0) return false;
+  NearestWithin result{bound, index, known};
+  impl_->tree->findNeighbors(result, q.data(), nanoflann::SearchParams());
+  if (!result.found) return false;
+  index = result.index;
+  squared = result.best;
+  return true;
+}
+
 // --- covariances ---
 
 CovarianceEstimator::CovarianceEstimator(int k, float epsilon, bool planar, float max_thickness)

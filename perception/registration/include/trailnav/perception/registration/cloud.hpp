@@ -72,6 +72,15 @@ class KdTree {
   std::size_t nearest(const Point& q, std::span<std::uint32_t> indices, std::span<float> squared) const noexcept;
   // The nearest point, or false for an empty tree.
   bool nearest(const Point& q, std::uint32_t& index, float& squared) const noexcept;
+  // The nearest point closer than `bound` (a squared distance): when the
+  // caller already knows a point at that distance (`index` holds it and
+  // `known` is true) or does not care beyond it, the search prunes every
+  // branch farther away. Returns whether a point was found (or known);
+  // `index` and `squared` are then the nearest.
+  bool nearest_within(const Point& q, float bound, bool known, std::uint32_t& index, float& squared) const noexcept;
+  // The two nearest points closer than `bound` (squared), nearest first;
+  // returns how many (0 to 2).
+  int nearest_two_within(const Point& q, float bound, std::uint32_t index[2], float squared[2]) const noexcept;
 
  private:
   struct Impl;

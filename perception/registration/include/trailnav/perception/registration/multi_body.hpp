@@ -60,6 +60,38 @@ class MultiBodyGicp {
   std::vector<Pair> pairs_;
   std::vector<Eigen::Matrix<double, 6, 6>> h_;
   std::vector<Eigen::Matrix<double, 6, 1>> b_;
+  // Each query point's partner in the last iteration (body, target point;
+  // kNone: none): its distance under the new transforms bounds the next
+  // search, so the k-d tree visits only what may lie closer.
+  static constexpr std::uint32_t kNone = 0xffffffffu;
+  std::vector<std::uint32_t> previous_body_, previous_target_;
+  // One body: where each query point's last search took place (in the
+  // target frame), the distance to the nearest point found there and a
+  // lower bound of the distance to every other point (the second nearest,
+  // or the gate). A point that has since moved by δ with
+  // nearest + 2δ < second still has that nearest point: no search.
+  void associate_everywhere(const Cloud& query, std::span<const Target* const> bodies, std::span<BodyResult> out,
+                            std::size_t n, bool to_plane, float gate2) noexcept;
+  void associate_one(const Cloud& query, const Target& body, const Eigen::Isometry3d& transform, std::size_t n,
+                     bool to_plane, float gate2, float gate_bound) noexcept;
+  struct Searched {
+    Eigen::Vector3f at;
+    float nearest;  // m
+    float second;   // m
+  };
+  std::vector<Searched> searched_;
+  std::uint64_t searches_ = 0, kept_ = 0;
+  bool search_every_point_ = false;
+
+ public:
+  // For tests and measurements: search the whole tree for every query point
+  // in every iteration, unbounded, as before the shortcuts above. The
+  // partners, and so the answers, are the same bit for bit.
+  void search_every_point(bool on) noexcept { search_every_point_ = on; }
+  // Association counters since construction: k-d tree searches, and
+  // associations kept without one (single body).
+  std::uint64_t searches() const noexcept { return searches_; }
+  std::uint64_t kept() const noexcept { return kept_; }
 };
 
 }  // namespace trailnav::perception::registration
