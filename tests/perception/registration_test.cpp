@@ -400,6 +400,30 @@ TEST(Carmen, FlaserLinesParseAndBadOnesAreNamed) {
 
 // The measure itself: an estimate on the reference's straight 30 m whose
 // heading drifts by 1° per 10 m.
+// De-skewing moves a point measured at the fraction s of a revolution into
+// the sensor's frame at its end: by motion^(s − 1), so the last firing's
+// points stay, the first ones take the whole motion back.
+TEST(Deskew, PointsGoToTheRevolutionsEndFrame) {
+  Eigen::Isometry3d motion = Eigen::Isometry3d::Identity();
+  motion.linear() = Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  motion.translation() = Eigen::Vector3d(1.0, 0.0, 0.0);
+  std::vector<Point> points = {Point(10, 0, 0), Point(10, 0, 0), Point(10, 0, 0)};
+  const std::vector<float> fraction = {0.0f, 0.5f, 1.0f};
+  deskew(points, fraction, motion);
+  // s = 1: as measured.
+  EXPECT_NEAR((points[2] - Point(10, 0, 0)).norm(), 0.0f, 1e-6f);
+  // s = 0: turned back by 0.1 rad and moved back by 1 m.
+  const Point first = (Eigen::AngleAxisf(-0.1f, Eigen::Vector3f::UnitZ()) * Point(10, 0, 0)) - Point(1, 0, 0);
+  EXPECT_NEAR((points[0] - first).norm(), 0.0f, 1e-5f);
+  // s = 0.5: half of each.
+  const Point half = (Eigen::AngleAxisf(-0.05f, Eigen::Vector3f::UnitZ()) * Point(10, 0, 0)) - Point(0.5f, 0, 0);
+  EXPECT_NEAR((points[1] - half).norm(), 0.0f, 1e-5f);
+  // No motion: nothing moves.
+  std::vector<Point> still = {Point(3, 4, 5)};
+  deskew(still, std::vector<float>{0.2f}, Eigen::Isometry3d::Identity());
+  EXPECT_EQ(still[0], Point(3, 4, 5));
+}
+
 TEST(RelativePoseError, AKnownDriftIsMeasured) {
   std::vector<Eigen::Isometry3d> ref, est;
   for (int i = 0; i <= 300; ++i) {

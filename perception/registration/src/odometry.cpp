@@ -124,4 +124,26 @@ RelativePoseError relative_pose_error(std::span<const Eigen::Isometry3d> referen
   return e;
 }
 
+void deskew(std::span<Point> points, std::span<const float> fraction, const Eigen::Isometry3d& motion) noexcept {
+  const Eigen::AngleAxisd turn(motion.linear());
+  const Eigen::Vector3d axis = turn.angle() > 1e-12 ? turn.axis() : Eigen::Vector3d::UnitZ();
+  const double angle = turn.angle();
+  const Eigen::Vector3d move = motion.translation();
+  // Points of one firing share their fraction: the transform is worked out
+  // again only when it changes.
+  float last = std::numeric_limits<float>::quiet_NaN();
+  Eigen::Matrix3f r = Eigen::Matrix3f::Identity();
+  Eigen::Vector3f t = Eigen::Vector3f::Zero();
+  const std::size_t n = std::min(points.size(), fraction.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    if (fraction[i] != last) {
+      last = fraction[i];
+      const double u = static_cast<double>(last) - 1.0;
+      r = Eigen::AngleAxisd(u * angle, axis).toRotationMatrix().cast<float>();
+      t = (u * move).cast<float>();
+    }
+    points[i] = r * points[i] + t;
+  }
+}
+
 }  // namespace trailnav::perception::registration

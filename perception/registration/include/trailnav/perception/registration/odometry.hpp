@@ -51,6 +51,10 @@ class LidarOdometry {
   // (the first scan's pose is the identity).
   Eigen::Isometry3d add(std::span<const Point> scan);
   const OdometryCounters& counters() const noexcept { return counters_; }
+  // The motion from the scan before the last to the last one (in the
+  // former's frame): what the constant-velocity prediction repeats, and
+  // what de-skewing the next scan assumes (the identity before two scans).
+  Eigen::Isometry3d last_motion() const noexcept { return previous_.inverse() * last_; }
 
  private:
   void rebuild_map();
@@ -75,6 +79,15 @@ class LidarOdometry {
   Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity();
   OdometryCounters counters_;
 };
+
+// Motion compensation of a spinning lidar's scan (de-skewing): a point
+// measured at the fraction s of the scan (0 its first firing, 1 its last),
+// while the sensor moved by `motion` over the whole scan (constant
+// velocity, in the scan's first frame), goes into the sensor's frame at the
+// scan's end: p_end = motion^(s − 1) · p, where motion^u turns by u times
+// its rotation (about the same axis) and moves by u times its translation.
+// `points` and `fraction` are parallel.
+void deskew(std::span<Point> points, std::span<const float> fraction, const Eigen::Isometry3d& motion) noexcept;
 
 struct RelativePoseError {
   double translation_percent = 0.0;

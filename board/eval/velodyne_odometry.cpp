@@ -1,0 +1,142 @@
+#include "velodyne_odometry.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "revolution_source.hpp"
+#include "sim_truth.hpp"
+#include "trailnav/perception/pose_track.hpp"
+
+namespace trailnav::eval {
+
+namespace reg = perception::registration;
+
+namespace {
+
+constexpr double kKeep = 0.9;
+
+Eigen::Isometry3d isometry_of(const perception::Pose& p) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = (Eigen::AngleAxisd(p.yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(p.pitch, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(p.roll, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  t.translation() = Eigen::Vector3d(p.x, p.y, p.z);
+  return t;
+}
+
+}  // namespace
+
+VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& options) {
+  VelodyneOdometryReport report;
+  report.end_error_m = std::numeric_limits<double>::quiet_NaN();
+  auto opened = RevolutionSource::open({options.input}, options.calibration);
+  if (!opened.source) {
+    report.error = opened.error;
+    return report;
+  }
+  RevolutionSource& source = *opened.source;
+  if (source.input_kind() != "recording") {
+    report.error = options.input + ": lidar odometry takes a recording or a capture (a sequence of revolutions)";
+    return report;
+  }
+  report.lidar = std::string(source.lidar_model());
+  // The reference: the simulated truth, moved from the robot to the lidar.
+  std::optional<perception::PoseTrack> truth;
+  Eigen::Isometry3d mount = Eigen::Isometry3d::Identity();
+  if (source.truth()) {
+    truth.emplace(source.truth()->trajectory.size() + 1);
+    fill_pose_track(*source.truth(), *truth);
+    const auto m = source.mount_translation();
+    mount.translation() = Eigen::Vector3d(m[0], m[1], m[2]);
+  }
+  reg::OdometryConfig config = options.odometry;
+  const velodyne::RangeImageShape shape = source.shape();
+  config.max_points = static_cast<std::size_t>(shape.rings) * static_cast<std::size_t>(shape.max_columns);
+  reg::LidarOdometry odometry(config);
+  std::vector<reg::Point> points;
+  std::vector<float> fraction;
+  points.reserve(config.max_points);
+  fraction.reserve(config.max_points);
+  Eigen::Isometry3d start = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d smoothed = Eigen::Isometry3d::Identity();
+  double busy_s = 0.0;
+  const auto on_image = [&](const velodyne::RangeImage& image) -> bool {
+    if (options.max_revolutions > 0 && static_cast<long>(report.revolutions) >= options.max_revolutions) return false;
+    const auto t0 = std::chrono::steady_clock::now();
+    points.clear();
+    fraction.clear();
+    const double span = static_cast<double>(image.end_ns - image.start_ns);
+    for (int c = 0; c < image.columns(); ++c) {
+      if (image.column_state(c) != velodyne::ColumnState::received) continue;
+      const std::int64_t t = image.column_time_ns(c);
+      const float s = span > 0.0 && t != velodyne::RangeImage::kNoTime
+                          ? static_cast<float>(static_cast<double>(t - image.start_ns) / span)
+                          : 1.0f;
+      for (int r = 0; r < image.rings(); ++r) {
+        const velodyne::RangeCell& cell = image.at(0, r, c);
+        if (!cell.valid() || cell.distance < options.min_range || cell.distance > options.max_range) continue;
+        if (points.size() == config.max_points) break;
+        points.emplace_back(cell.x, cell.y, cell.z);
+        fraction.push_back(s);
+      }
+    }
+    // The motion over this revolution, taken to be the last one's (the
+    // revolutions follow each other without a gap).
+    if (options.deskew && report.revolutions >= 2) reg::deskew(points, fraction, smoothed);
+    const Eigen::Isometry3d pose = odometry.add(points);
+    if (report.revolutions >= 1) {
+      // The motion de-skewing assumes: the scan-to-scan motions smoothed
+      // (translation and rotation vector, each new one weighing
+      // 1 − kKeep). The last motion alone made it worse than none: one
+      // registration's error bends the next scan, whose error bends the one
+      // after (docs/registration.md).
+      const double keep = kKeep;
+      const Eigen::Isometry3d m = odometry.last_motion();
+      const Eigen::AngleAxisd a(m.linear()), b(smoothed.linear());
+      const Eigen::Vector3d w = keep * b.angle() * b.axis() + (1.0 - keep) * a.angle() * a.axis();
+      smoothed.translation() = keep * smoothed.translation() + (1.0 - keep) * m.translation();
+      smoothed.linear() = w.norm() > 1e-12 ? Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix()
+                                           : Eigen::Matrix3d::Identity();
+    }
+    busy_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    report.points += points.size();
+    const std::int64_t at = image.end_ns + image.clock_offset_ns;
+    if (truth) {
+      perception::Pose p;
+      truth->at(at, p);
+      const Eigen::Isometry3d ref = isometry_of(p) * mount;
+      if (report.revolutions == 0) start = ref;
+      report.reference.push_back(ref);
+    }
+    report.estimate.push_back(start * pose);
+    report.times_ns.push_back(at);
+    ++report.revolutions;
+    return true;
+  };
+  if (std::string e = source.run(on_image, options.progress); !e.empty()) {
+    report.error = e;
+    return report;
+  }
+  if (report.revolutions < 2) {
+    report.error = options.input + ": " + std::to_string(report.revolutions) + " revolution(s); at least 2 are needed";
+    return report;
+  }
+  report.counters = odometry.counters();
+  report.ms_per_revolution = 1000.0 * busy_s / static_cast<double>(report.revolutions);
+  if (!report.reference.empty()) {
+    report.rpe = reg::relative_pose_error(report.reference, report.estimate, 10.0);
+    for (std::size_t i = 1; i < report.reference.size(); ++i) {
+      report.path_m += (report.reference[i].translation() - report.reference[i - 1].translation()).norm();
+    }
+    report.end_error_m = (report.estimate.back().translation() - report.reference.back().translation()).norm();
+  } else {
+    for (std::size_t i = 1; i < report.estimate.size(); ++i) {
+      report.path_m += (report.estimate[i].translation() - report.estimate[i - 1].translation()).norm();
+    }
+  }
+  return report;
+}
+
+}  // namespace trailnav::eval

@@ -1,0 +1,51 @@
+// Lidar odometry over a spinning lidar's revolutions (issue 40): a recording
+// directory or a capture (pcap, raw packets) through RevolutionSource, each
+// revolution's points taken from its range image (the strongest return),
+// de-skewed into the sensor's frame at the revolution's last firing with
+// the motion of the revolution before (constant velocity; the columns'
+// firing times give each point's share of the revolution), and registered
+// by LidarOdometry (scan to local map). A simulated recording's true
+// trajectory, moved to the lidar by its mount, is the reference for the
+// relative pose error per 10 m.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "trailnav/perception/registration/odometry.hpp"
+
+namespace trailnav::eval {
+
+struct VelodyneOdometryOptions {
+  std::string input;        // recording directory or capture file
+  std::string calibration;  // as RevolutionSource::open takes it ("" = the recording's or the model's)
+  perception::registration::OdometryConfig odometry;
+  float min_range = 2.0f;   // m: nearer returns are the robot and its mast
+  float max_range = 80.0f;  // m
+  bool deskew = true;
+  long max_revolutions = 0;  // 0: all
+  std::function<void(double)> progress;
+};
+
+struct VelodyneOdometryReport {
+  std::string error;
+  std::string lidar;
+  std::size_t revolutions = 0;
+  std::size_t points = 0;  // used, over all revolutions
+  std::vector<std::int64_t> times_ns;  // each revolution's last firing
+  std::vector<Eigen::Isometry3d> estimate;  // the lidar's pose at each, odometry frame (the first: the reference's)
+  std::vector<Eigen::Isometry3d> reference;  // the same from the simulated truth; empty without one
+  perception::registration::RelativePoseError rpe;
+  double path_m = 0.0;       // along the reference
+  double end_error_m = 0.0;  // NaN without a reference
+  double ms_per_revolution = 0.0;  // registration and de-skew, not decoding
+  perception::registration::OdometryCounters counters;
+};
+
+VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& options);
+
+}  // namespace trailnav::eval
