@@ -70,7 +70,6 @@ void MultiBodyGicp::associate_one(const Cloud& query, const Target& body, const 
       s = {q, std::sqrt(d2), found == 2 ? std::sqrt(sq[1]) : gate};
       previous_body_[i] = 0;
       previous_target_[i] = j;
-      have = true;
     }
     // The nearest point, as a search of the whole tree finds it: within the
     // gate, and with a normal for point-to-plane.
@@ -81,8 +80,8 @@ void MultiBodyGicp::associate_one(const Cloud& query, const Target& body, const 
 }
 
 void MultiBodyGicp::associate_everywhere(const Cloud& query, std::span<const Target* const> bodies,
-                                         std::span<BodyResult> out, std::size_t n, bool to_plane, float gate2) noexcept {
-  const std::size_t nb = std::min(bodies.size(), out.size());
+                                         std::span<BodyResult> out, std::size_t nb, std::size_t n, bool to_plane,
+                                         float gate2) noexcept {
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector3d q = query.points[i].cast<double>();
     float best = std::numeric_limits<float>::infinity();
@@ -128,7 +127,7 @@ int MultiBodyGicp::align(const Cloud& query, std::span<const Target* const> bodi
     // what cannot be closer; after the first iterations, most of it.
     pairs_.clear();
     if (search_every_point_) {
-      associate_everywhere(query, bodies, out, n, to_plane, gate2);
+      associate_everywhere(query, bodies, out, nb, n, to_plane, gate2);
     } else if (nb == 1) {
       associate_one(query, *bodies[0], out[0].transform, n, to_plane, gate2, gate_bound);
     }

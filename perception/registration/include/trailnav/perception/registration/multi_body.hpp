@@ -71,7 +71,7 @@ class MultiBodyGicp {
   // or the gate). A point that has since moved by δ with
   // nearest + 2δ < second still has that nearest point: no search.
   void associate_everywhere(const Cloud& query, std::span<const Target* const> bodies, std::span<BodyResult> out,
-                            std::size_t n, bool to_plane, float gate2) noexcept;
+                            std::size_t nb, std::size_t n, bool to_plane, float gate2) noexcept;
   void associate_one(const Cloud& query, const Target& body, const Eigen::Isometry3d& transform, std::size_t n,
                      bool to_plane, float gate2, float gate_bound) noexcept;
   struct Searched {
