@@ -103,24 +103,39 @@ TEST(KdTree, NearestNeighboursAgreeWithAFullSearch) {
   }
 }
 
+// KITTI scan 0 at 0.25 m as the target, and the same scan moved by a known
+// motion (3° yaw, 1° pitch, 0.6 m / 0.2 m / 0.05 m), voxel-filtered after
+// the motion, as the source; both with their covariances.
+struct KnownMotionPair {
+  Eigen::Isometry3d truth;
+  Target target;
+  Cloud source;
+  CovarianceEstimator estimator{20};
+};
+void make_known_motion_pair(KnownMotionPair& pair) {
+  const std::vector<Point> raw = kitti(0);
+  pair.truth = motion(3.0, 1.0, {0.6, 0.2, 0.05});
+  pair.target.cloud = downsampled(raw, 0.25f);
+  prepare_target(pair.target, pair.estimator);
+  std::vector<Point> moved;
+  for (const Point& p : raw) moved.push_back((pair.truth.inverse() * p.cast<double>()).cast<float>());
+  pair.source = downsampled(moved, 0.25f);
+  KdTree scratch;
+  std::vector<Point> normals;
+  prepare_source(pair.source, pair.estimator, scratch, normals);
+}
+
 // A real scan registered onto itself moved by a known motion (3° yaw, 1°
 // pitch, 0.6 m / 0.2 m / 0.05 m), from the identity: every metric finds it.
 // The moved scan is voxel-filtered after the motion, so its points are
 // other centroids than the target's (as a second look at the same place
 // gives): no point has an exact partner.
 TEST(Gicp, ARealScanOntoItselfMovedByAKnownMotion) {
-  const std::vector<Point> raw = kitti(0);
-  const Eigen::Isometry3d truth = motion(3.0, 1.0, {0.6, 0.2, 0.05});
-  Target target;
-  target.cloud = downsampled(raw, 0.25f);
-  CovarianceEstimator est(20);
-  prepare_target(target, est);
-  std::vector<Point> moved;
-  for (const Point& p : raw) moved.push_back((truth.inverse() * p.cast<double>()).cast<float>());
-  Cloud source = downsampled(moved, 0.25f);
-  KdTree scratch;
-  std::vector<Point> normals;
-  prepare_source(source, est, scratch, normals);
+  KnownMotionPair pair;
+  make_known_motion_pair(pair);
+  const Eigen::Isometry3d& truth = pair.truth;
+  const Target& target = pair.target;
+  const Cloud& source = pair.source;
   for (Metric m : {Metric::plane_to_plane, Metric::point_to_plane, Metric::point_to_point}) {
     GicpConfig config;
     config.metric = m;
@@ -145,18 +160,12 @@ TEST(Gicp, ARealScanOntoItselfMovedByAKnownMotion) {
 // answers bit for bit, on real scans, in every metric, with most searches
 // spared.
 TEST(Gicp, SkippedAndBoundedSearchesGiveTheFullSearchsPartners) {
-  const std::vector<Point> raw = kitti(0);
-  const Eigen::Isometry3d truth = motion(3.0, 1.0, {0.6, 0.2, 0.05});
-  Target target;
-  target.cloud = downsampled(raw, 0.25f);
-  CovarianceEstimator est(20);
-  prepare_target(target, est);
-  std::vector<Point> moved;
-  for (const Point& p : raw) moved.push_back((truth.inverse() * p.cast<double>()).cast<float>());
-  Cloud source = downsampled(moved, 0.25f);
-  KdTree scratch;
-  std::vector<Point> normals;
-  prepare_source(source, est, scratch, normals);
+  KnownMotionPair pair;
+  make_known_motion_pair(pair);
+  const Eigen::Isometry3d& truth = pair.truth;
+  const Target& target = pair.target;
+  const Cloud& source = pair.source;
+  CovarianceEstimator& est = pair.estimator;
   // Two bodies: the scan split by a vertical plane, each half its own body.
   Target left, right;
   for (const Point& p : target.cloud.points) (p.y() > 0.0f ? left : right).cloud.points.push_back(p);
