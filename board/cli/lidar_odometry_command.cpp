@@ -27,6 +27,7 @@ namespace reg = trailnav::perception::registration;
 
 struct Options {
   std::string input;
+  std::vector<std::string> more;  // further point-cloud files of a sequence
   std::string report;
   std::string poses_out;
   float voxel = 0.05f;
@@ -50,13 +51,17 @@ bool is_lidar_input(const std::string& input) {
   namespace fs = std::filesystem;
   if (fs::is_directory(input)) return true;
   const std::string ext = fs::path(input).extension().string();
-  return ext == ".pcap" || ext == ".pcapng" || ext == ".bin";
+  return ext == ".pcap" || ext == ".pcapng" || ext == ".bin" || ext == ".pcd" || ext == ".ply";
 }
 
 int run_lidar(const Options& o) {
   const char* who = "trailnav lidar-odometry";
   eval::VelodyneOdometryOptions v;
   v.input = o.input;
+  if (!o.more.empty()) {
+    v.inputs.push_back(o.input);
+    v.inputs.insert(v.inputs.end(), o.more.begin(), o.more.end());
+  }
   v.calibration = o.calibration;
   v.deskew = !o.no_deskew;
   v.max_revolutions = o.max_scans;
@@ -154,6 +159,10 @@ int run(const Options& o) {
     return 2;
   }
   if (is_lidar_input(o.input)) return run_lidar(o);
+  if (!o.more.empty()) {
+    std::fprintf(stderr, "%s: one CARMEN log at a time (more inputs are for a sequence of point-cloud files)\n", who);
+    return 2;
+  }
   // The scans first (the progress bar needs their count).
   reg::FlaserLog log = reg::read_flaser_log(o.input, 0, o.max_scans > 0 ? o.max_scans - 1 : -1);
   if (!log.error.empty()) {
@@ -258,7 +267,8 @@ void add_lidar_odometry_command(CLI::App& app) {
       "lidar-odometry",
       "Lidar odometry by scan-to-local-map Generalized ICP (thesis section 2.5) over a CARMEN log's 2D laser\n"
       "scans (FLASER lines; plain or gzip), scored against the log's own poses, or over a spinning lidar's\n"
-      "recording (a directory) or capture (.pcap, .pcapng, raw .bin): each revolution de-skewed with the\n"
+      "recording (a directory), capture (.pcap, .pcapng, raw .bin) or sequence of point-cloud files (KITTI\n"
+      ".bin, PCD, PLY; a revolution each): each revolution de-skewed with the\n"
       "last motion and the columns' firing times, scored against a simulated recording's truth. The measure:\n"
       "the relative pose error per 10 m of travel (translation in percent, rotation in degrees per 100 m), as\n"
       "KITTI's benchmark defines it. The 3D input's defaults: --voxel 0.25, --local-scans 10,\n"
@@ -267,7 +277,8 @@ void add_lidar_odometry_command(CLI::App& app) {
       "  trailnav lidar-odometry ../shared/data/carmen/freiburg-079-corrected.log.gz --report json\n"
       "  trailnav sim --scenario urban --out build/sim/urban && trailnav lidar-odometry build/sim/urban");
   static Options o;
-  cmd->add_option("input", o.input, "CARMEN log (.log or .log.gz), or a lidar recording directory or capture")->required();
+  cmd->add_option("input", o.input, "CARMEN log (.log or .log.gz), a lidar recording directory or capture, or the first of a sequence of point-cloud files (KITTI .bin, PCD, PLY)")->required();
+  cmd->add_option("more", o.more, "The rest of a sequence of point-cloud files, in order");
   cmd->add_option("--report", o.report, "json: one JSON object (rpe_translation_percent, rpe_rotation_deg_per_100m, ...)");
   cmd->add_option("--voxel", o.voxel, "Voxel size of the scans and the local map (m)")
       ->capture_default_str()

@@ -31,16 +31,13 @@ Eigen::Isometry3d isometry_of(const perception::Pose& p) {
 VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& options) {
   VelodyneOdometryReport report;
   report.end_error_m = std::numeric_limits<double>::quiet_NaN();
-  auto opened = RevolutionSource::open({options.input}, options.calibration);
+  auto opened = RevolutionSource::open(options.inputs.empty() ? std::vector<std::string>{options.input} : options.inputs,
+                                       options.calibration);
   if (!opened.source) {
     report.error = opened.error;
     return report;
   }
   RevolutionSource& source = *opened.source;
-  if (source.input_kind() != "recording") {
-    report.error = options.input + ": lidar odometry takes a recording or a capture (a sequence of revolutions)";
-    return report;
-  }
   report.lidar = std::string(source.lidar_model());
   // The reference: the simulated truth, moved from the robot to the lidar.
   std::optional<perception::PoseTrack> truth;

@@ -1,5 +1,6 @@
 // Lidar odometry over a spinning lidar's revolutions (issue 40): a recording
-// directory or a capture (pcap, raw packets) through RevolutionSource, each
+// directory, a capture (pcap, raw packets) or a sequence of point-cloud
+// files (KITTI .bin, PCD, PLY) through RevolutionSource, each
 // revolution's points taken from its range image (the strongest return),
 // de-skewed into the sensor's frame at the revolution's last firing with
 // the motion of the revolution before (constant velocity; the columns'
@@ -22,6 +23,9 @@ namespace trailnav::eval {
 
 struct VelodyneOdometryOptions {
   std::string input;        // recording directory or capture file
+  // Or a sequence of point-cloud files (KITTI .bin, PCD, PLY), a revolution
+  // each, in this order (used instead of `input` when not empty).
+  std::vector<std::string> inputs;
   std::string calibration;  // as RevolutionSource::open takes it ("" = the recording's or the model's)
   perception::registration::OdometryConfig odometry;
   float min_range = 2.0f;   // m: nearer returns are the robot and its mast

@@ -55,3 +55,30 @@ TEST(VelodyneOdometry, ASimulatedDriveAgainstItsTruthAndDeskewingHelps) {
   EXPECT_LT(rpe[0], rpe[1]) << "de-skewing should help on a drive";
   fs::remove_all(dir);
 }
+
+// A sequence of point-cloud files, a revolution each: the two consecutive
+// KITTI scans give the car's motion between them, forward and nearly
+// straight (Gicp.TwoConsecutiveRealScansForwardAndBackwardAgree measures the
+// same pair by one registration); no reference, so no relative pose error.
+TEST(VelodyneOdometry, ASequenceOfKittiScans) {
+  eval::VelodyneOdometryOptions o;
+  o.inputs = {"../shared/data/kitti/000000.bin", "../shared/data/kitti/000001.bin"};
+  o.odometry.voxel = 0.25f;
+  o.odometry.gicp.max_correspondence_distance = 1.0f;
+  const eval::VelodyneOdometryReport r = eval::run_velodyne_odometry(o);
+  ASSERT_EQ(r.error, "");
+  EXPECT_EQ(r.lidar, "HDL-64E");
+  ASSERT_EQ(r.revolutions, 2u);
+  EXPECT_TRUE(r.reference.empty());
+  EXPECT_TRUE(std::isnan(r.end_error_m));
+  const Eigen::Isometry3d step = r.estimate[0].inverse() * r.estimate[1];
+  std::printf("[ lidar odometry ] KITTI 0 -> 1: %.3f m forward, %.3f m left, %.3f deg\n", step.translation().x(),
+              step.translation().y(), Eigen::AngleAxisd(step.linear()).angle() * 180.0 / M_PI);
+  EXPECT_GT(step.translation().x(), 0.5);
+  EXPECT_LT(step.translation().x(), 1.5);
+  EXPECT_LT(std::abs(step.translation().y()), 0.1);
+  EXPECT_LT(Eigen::AngleAxisd(step.linear()).angle(), 0.02);
+  // One file alone is not a sequence.
+  o.inputs = {"../shared/data/kitti/000000.bin"};
+  EXPECT_NE(eval::run_velodyne_odometry(o).error.find("at least 2 are needed"), std::string::npos);
+}
