@@ -124,6 +124,12 @@ RelativePoseError relative_pose_error(std::span<const Eigen::Isometry3d> referen
   return e;
 }
 
+double path_length(std::span<const Eigen::Isometry3d> poses) noexcept {
+  double length = 0.0;
+  for (std::size_t i = 1; i < poses.size(); ++i) length += (poses[i].translation() - poses[i - 1].translation()).norm();
+  return length;
+}
+
 void deskew(std::span<Point> points, std::span<const float> fraction, const Eigen::Isometry3d& motion) noexcept {
   const Eigen::AngleAxisd turn(motion.linear());
   const Eigen::Vector3d axis = turn.angle() > 1e-12 ? turn.axis() : Eigen::Vector3d::UnitZ();

@@ -1,6 +1,7 @@
 #include "trailnav/perception/random_forest.hpp"
 
 #include "trailnav/runtime/atomic_file.hpp"
+#include "trailnav/runtime/le_bytes.hpp"
 
 #include <zlib.h>
 
@@ -20,37 +21,8 @@ constexpr char kMagic[8] = {'T', 'N', 'T', 'E', 'R', 'R', 'F', '\0'};
 constexpr std::uint32_t kMaxNodes = 1u << 24;
 constexpr std::uint32_t kMaxTrees = 4096;
 
-void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
-void put_f32(std::vector<std::uint8_t>& out, float f) {
-  std::uint32_t v;
-  std::memcpy(&v, &f, 4);
-  put_u32(out, v);
-}
-
-class Cursor {
- public:
-  explicit Cursor(std::span<const std::uint8_t> data) : data_(data) {}
-  bool u32(std::uint32_t& v) {
-    if (pos_ + 4 > data_.size()) return false;
-    v = 0;
-    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(data_[pos_ + static_cast<std::size_t>(i)]) << (8 * i);
-    pos_ += 4;
-    return true;
-  }
-  bool f32(float& f) {
-    std::uint32_t v;
-    if (!u32(v)) return false;
-    std::memcpy(&f, &v, 4);
-    return true;
-  }
-  std::size_t pos() const noexcept { return pos_; }
-
- private:
-  std::span<const std::uint8_t> data_;
-  std::size_t pos_ = 0;
-};
+using le::put_f32;
+using le::put_u32;
 
 std::string describe_node(std::size_t tree, std::size_t node) {
   return "tree " + std::to_string(tree) + ", node " + std::to_string(node);
@@ -182,7 +154,7 @@ RandomForest::Loaded RandomForest::parse(std::span<const std::uint8_t> data, con
   if (data.size() < sizeof kMagic || std::memcmp(data.data(), kMagic, sizeof kMagic) != 0) {
     return fail("not a trailnav terrain model (trailnav terrain-train writes them)");
   }
-  Cursor c(data);
+  le::Reader c(data);
   std::uint32_t skip;
   c.u32(skip);
   c.u32(skip);  // the magic

@@ -1,5 +1,5 @@
-// Little-endian bytes for trailnav's own file formats (the traversability
-// model, the station): values appended to a byte vector and read back from
+// Little-endian bytes for trailnav's own file formats (the terrain and
+// traversability models, the station): values appended to a byte vector and read back from
 // a span with bounds checks, byte by byte, so a file means the same on any
 // host. Not for real-time threads (the writer grows a vector).
 #pragma once
@@ -58,6 +58,7 @@ class Reader {
     return true;
   }
   std::size_t left() const noexcept { return d_.size() - pos_; }
+  std::size_t pos() const noexcept { return pos_; }  // bytes read so far
 
  private:
   template <typename T>

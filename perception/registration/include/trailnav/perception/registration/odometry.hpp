@@ -96,5 +96,7 @@ struct RelativePoseError {
 };
 RelativePoseError relative_pose_error(std::span<const Eigen::Isometry3d> reference,
                                       std::span<const Eigen::Isometry3d> estimate, double segment = 10.0);
+// The length of the path through the poses' positions (m).
+double path_length(std::span<const Eigen::Isometry3d> poses) noexcept;
 
 }  // namespace trailnav::perception::registration
