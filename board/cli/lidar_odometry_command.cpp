@@ -42,9 +42,18 @@ struct Options {
   bool one_start = false;
   bool no_deskew = false;
   std::string calibration;
-  // Which of the tuning options the user gave (the 3D input has its own defaults).
+  // Which of the tuning options the user gave (the 3D input has its own
+  // defaults; the command's callback reads them off the parser).
   bool set_voxel = false, set_local = false, set_keyframe = false, set_gate = false, set_range = false;
 };
+
+// A number for JSON, or null when it is not finite (JSON has no NaN).
+std::string num(double value, int digits) {
+  if (!std::isfinite(value)) return "null";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", digits, value);
+  return b;
+}
 
 // A spinning lidar's recording or capture: a directory, or a capture file.
 bool is_lidar_input(const std::string& input) {
@@ -109,12 +118,6 @@ int run_lidar(const Options& o) {
   }
   const bool ref = !r.reference.empty();
   const auto& c = r.counters;
-  auto num = [](double value, int digits) {
-    if (!std::isfinite(value)) return std::string("null");
-    char b[64];
-    std::snprintf(b, sizeof b, "%.*f", digits, value);
-    return std::string(b);
-  };
   if (o.report == "json") {
     std::printf(
         "{\"input\": \"%s\", \"lidar\": \"%s\", \"scans\": %zu, \"points\": %zu, \"deskew\": %s, \"path_m\": %s, "
@@ -223,18 +226,10 @@ int run(const Options& o) {
     }
     std::fclose(out);
   }
-  double path = 0.0;
-  for (std::size_t i = 1; i < reference.size(); ++i) path += (reference[i].translation() - reference[i - 1].translation()).norm();
+  const double path = reg::path_length(reference);
   const double end_error = (estimate.back().translation() - reference.back().translation()).norm();
   const auto& c = odometry.counters();
   if (o.report == "json") {
-    // A number, or null when it is not finite (JSON has no NaN).
-    auto num = [](double v, int digits) {
-      if (!std::isfinite(v)) return std::string("null");
-      char b[64];
-      std::snprintf(b, sizeof b, "%.*f", digits, v);
-      return std::string(b);
-    };
     std::printf(
         "{\"input\": \"%s\", \"scans\": %zu, \"refused_lines\": %ld, \"returns_dropped\": %zu, \"path_m\": %s, \"keyframes\": %llu, "
         "\"not_converged\": %llu, \"second_start\": %llu, \"rejected\": %llu, \"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, "
@@ -280,21 +275,16 @@ void add_lidar_odometry_command(CLI::App& app) {
   cmd->add_option("input", o.input, "CARMEN log (.log or .log.gz), a lidar recording directory or capture, or the first of a sequence of point-cloud files (KITTI .bin, PCD, PLY)")->required();
   cmd->add_option("more", o.more, "The rest of a sequence of point-cloud files, in order");
   cmd->add_option("--report", o.report, "json: one JSON object (rpe_translation_percent, rpe_rotation_deg_per_100m, ...)");
-  cmd->add_option("--voxel", o.voxel, "Voxel size of the scans and the local map (m)")
-      ->capture_default_str()
-      ->each([](const std::string&) { o.set_voxel = true; });
-  cmd->add_option("--local-scans", o.local_scans, "Keyframes in the local map")
-      ->capture_default_str()
-      ->each([](const std::string&) { o.set_local = true; });
-  cmd->add_option("--keyframe-distance", o.keyframe_distance, "Travel between keyframes (m)")
-      ->capture_default_str()
-      ->each([](const std::string&) { o.set_keyframe = true; });
-  cmd->add_option("--max-correspondence", o.max_correspondence, "Associations farther are dropped (m)")
-      ->capture_default_str()
-      ->each([](const std::string&) { o.set_gate = true; });
-  cmd->add_option("--max-range", o.max_range, "Ranges at or beyond are no return (m; the SICK's 81.91 m is none)")
-      ->capture_default_str()
-      ->each([](const std::string&) { o.set_range = true; });
+  // The 3D input has its own defaults for these, where the user gave none.
+  CLI::Option* voxel = cmd->add_option("--voxel", o.voxel, "Voxel size of the scans and the local map (m)")->capture_default_str();
+  CLI::Option* local = cmd->add_option("--local-scans", o.local_scans, "Keyframes in the local map")->capture_default_str();
+  CLI::Option* keyframe =
+      cmd->add_option("--keyframe-distance", o.keyframe_distance, "Travel between keyframes (m)")->capture_default_str();
+  CLI::Option* gate =
+      cmd->add_option("--max-correspondence", o.max_correspondence, "Associations farther are dropped (m)")->capture_default_str();
+  CLI::Option* range =
+      cmd->add_option("--max-range", o.max_range, "Ranges at or beyond are no return (m; the SICK's 81.91 m is none)")
+          ->capture_default_str();
   cmd->add_option("--calibration", o.calibration,
                   "A lidar input's calibration (a file, or builtin); default: the recording's or the model's");
   cmd->add_flag("--no-deskew", o.no_deskew, "A lidar input's revolutions as they are, without motion compensation");
@@ -306,7 +296,14 @@ void add_lidar_odometry_command(CLI::App& app) {
                 "Register from the prediction only (by default a second registration starts at the last pose when the "
                 "prediction moved away from it, and the answer with the smaller truncated cost is kept)");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
-  cmd->callback([] { std::exit(run(o)); });
+  cmd->callback([=] {
+    o.set_voxel = voxel->count() > 0;
+    o.set_local = local->count() > 0;
+    o.set_keyframe = keyframe->count() > 0;
+    o.set_gate = gate->count() > 0;
+    o.set_range = range->count() > 0;
+    std::exit(run(o));
+  });
 }
 
 }  // namespace trailnav::cli

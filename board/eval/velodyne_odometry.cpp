@@ -5,6 +5,7 @@
 #include <limits>
 #include <optional>
 
+#include "motion.hpp"
 #include "revolution_source.hpp"
 #include "sim_truth.hpp"
 #include "trailnav/perception/pose_track.hpp"
@@ -19,9 +20,7 @@ constexpr double kKeep = 0.9;
 
 Eigen::Isometry3d isometry_of(const perception::Pose& p) {
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.linear() = (Eigen::AngleAxisd(p.yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(p.pitch, Eigen::Vector3d::UnitY()) *
-                Eigen::AngleAxisd(p.roll, Eigen::Vector3d::UnitX()))
-                   .toRotationMatrix();
+  t.linear() = sim::rotation(p.roll, p.pitch, p.yaw);  // the simulator's own convention
   t.translation() = Eigen::Vector3d(p.x, p.y, p.z);
   return t;
 }
@@ -124,14 +123,10 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
   report.ms_per_revolution = 1000.0 * busy_s / static_cast<double>(report.revolutions);
   if (!report.reference.empty()) {
     report.rpe = reg::relative_pose_error(report.reference, report.estimate, 10.0);
-    for (std::size_t i = 1; i < report.reference.size(); ++i) {
-      report.path_m += (report.reference[i].translation() - report.reference[i - 1].translation()).norm();
-    }
+    report.path_m = reg::path_length(report.reference);
     report.end_error_m = (report.estimate.back().translation() - report.reference.back().translation()).norm();
   } else {
-    for (std::size_t i = 1; i < report.estimate.size(); ++i) {
-      report.path_m += (report.estimate[i].translation() - report.estimate[i - 1].translation()).norm();
-    }
+    report.path_m = reg::path_length(report.estimate);
   }
   return report;
 }
