@@ -218,10 +218,17 @@ int run_bench_demo(const BenchDemoOptions& o) {
   if (const auto parsed = perception::RandomForest::parse(terrain_model, "built-in terrain model");
       parsed.forest && parsed.forest->feature_settings().said()) {
     const perception::FeatureSettings& s = parsed.forest->feature_settings();
+    const std::string line = "  min_points: 15          # minPoints per cell";
+    if (config.find(line) == std::string::npos || config.find("    resolution: 0.2       # m") == std::string::npos ||
+        s.resolution != 0.2f) {
+      std::fprintf(stderr, "trailnav demo: the built-in bench config's terrain section (board/robots/bench.yaml) no longer "
+                           "has the lines this command sets the model's cells in, or the model's cells are not 0.2 m\n");
+      return 1;
+    }
     char keys[160];
     std::snprintf(keys, sizeof keys, "  min_points: %u\n  min_range: %.9g\n  max_range: %.9g", s.min_points,
                   static_cast<double>(s.min_range), static_cast<double>(s.max_range));
-    replace_all(config, "  min_points: 15          # minPoints per cell", keys);
+    replace_all(config, line, keys);
   }
   // The traversability layer's model was learnt from a VLP-16's demonstration
   // (its remission words are that lidar's): with another lidar the demo runs
