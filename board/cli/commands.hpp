@@ -32,5 +32,6 @@ bool load_terrain_config(const std::string& file, perception::TerrainConfig& out
 void add_route_command(CLI::App& app);
 void add_subgoal_eval_command(CLI::App& app);
 void add_pose_graph_command(CLI::App& app);
+void add_place_commands(CLI::App& app);
 
 }  // namespace trailnav::cli

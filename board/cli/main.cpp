@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   trailnav::cli::add_route_command(app);
   trailnav::cli::add_subgoal_eval_command(app);
   trailnav::cli::add_pose_graph_command(app);
+  trailnav::cli::add_place_commands(app);
   trailnav::cli::add_gps_decode_command(app);
   trailnav::cli::add_imu_decode_command(app);
   trailnav::cli::add_can_decode_command(app);

@@ -1,0 +1,396 @@
+#include "place_eval.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "trailnav/drivers/camera/image_file.hpp"
+#include "trailnav/perception/place/similarity.hpp"
+
+namespace trailnav::eval {
+
+namespace place = perception::place;
+namespace camera = drivers::camera;
+
+namespace {
+
+constexpr int kDefaultTolerance = 5;  // the thesis' "fewer than six frames"
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+struct Sequence {
+  std::vector<camera::GreyImage> images;
+  std::string error;
+};
+
+Sequence read_sequence(const std::string& dir, int subsample, int max_images, const std::string& stage,
+                       const PlaceEvalOptions& o) {
+  Sequence out;
+  camera::ImageList list = camera::list_images(dir);
+  if (!list.error.empty()) {
+    out.error = list.error;
+    return out;
+  }
+  std::vector<std::string> paths;
+  for (std::size_t i = 0; i < list.paths.size(); i += static_cast<std::size_t>(subsample)) paths.push_back(list.paths[i]);
+  if (max_images > 0 && paths.size() > static_cast<std::size_t>(max_images)) paths.resize(static_cast<std::size_t>(max_images));
+  for (std::size_t i = 0; i < paths.size(); ++i) {
+    camera::ImageRead r = camera::read_grey_image(paths[i]);
+    if (!r.ok()) {
+      out.error = r.error;
+      return out;
+    }
+    if (!out.images.empty() &&
+        (r.image.width != out.images.front().width || r.image.height != out.images.front().height)) {
+      out.error = paths[i] + ": " + std::to_string(r.image.width) + " x " + std::to_string(r.image.height) +
+                  " pixels where the sequence's first image has " + std::to_string(out.images.front().width) + " x " +
+                  std::to_string(out.images.front().height) + ": a sequence's images must share one size";
+      return out;
+    }
+    out.images.push_back(std::move(r.image));
+    if (o.progress && (i % 64 == 0 || i + 1 == paths.size()))
+      o.progress(stage, static_cast<double>(i + 1) / static_cast<double>(paths.size()));
+  }
+  return out;
+}
+
+// Ground truth in the query directory's and the database directory's own
+// indices (0-based, after subsampling): reference and tolerance per query.
+bool read_truth(const PlaceEvalOptions& o, std::size_t queries, std::size_t database, std::vector<int>& reference,
+                std::vector<int>& tolerance, std::string& error) {
+  reference.assign(queries, -1);
+  tolerance.assign(queries, o.tolerance >= 0 ? o.tolerance : kDefaultTolerance);
+  if (o.ground_truth == "same-index") {
+    for (std::size_t i = 0; i < queries; ++i) reference[i] = i < database ? static_cast<int>(i) : -1;
+    return true;
+  }
+  std::ifstream in(o.ground_truth);
+  if (!in) {
+    error = o.ground_truth + ": cannot read the ground truth";
+    return false;
+  }
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    if (line.empty() || line[0] == '#') continue;
+    std::replace(line.begin(), line.end(), ',', ' ');
+    std::istringstream fields(line);
+    long q = 0, r = 0, t = -1;
+    if (!(fields >> q >> r)) {
+      if (number == 1) continue;  // a header
+      error = o.ground_truth + ":" + std::to_string(number) + ": expected `query,reference[,tolerance]` (1-based indices)";
+      return false;
+    }
+    if (!(fields >> t)) t = -1;
+    std::string rest;
+    if (fields >> rest) {
+      error = o.ground_truth + ":" + std::to_string(number) + ": more than three fields";
+      return false;
+    }
+    if (q < 1 || r < 1 || (t < -1)) {
+      error = o.ground_truth + ":" + std::to_string(number) + ": indices are 1-based and the tolerance not negative";
+      return false;
+    }
+    if (static_cast<std::size_t>(q) > queries) continue;  // beyond the queries read (--max-images)
+    reference[static_cast<std::size_t>(q - 1)] = static_cast<std::size_t>(r) <= database ? static_cast<int>(r - 1) : -1;
+    if (o.tolerance < 0 && t >= 0) tolerance[static_cast<std::size_t>(q - 1)] = static_cast<int>(t);
+  }
+  return true;
+}
+
+// Matches from the case's database positions to the directory's indices.
+void to_directory(std::vector<place::Match>& matches, const std::vector<int>& kept) {
+  for (place::Match& m : matches) m.database = kept[static_cast<std::size_t>(m.database)];
+}
+
+// Peaks in the case's database positions (the sequence filter's column gap
+// counts positions of the database as it is), scored in the directory's.
+place::PrCurve sequence_curve(const std::vector<place::Match>& peaks, const place::SequenceConfig& config,
+                              const place::GroundTruth& truth, const std::vector<int>& positions,
+                              std::vector<place::Match>& best_matches) {
+  std::vector<float> scores;
+  scores.reserve(peaks.size());
+  for (const place::Match& m : peaks) scores.push_back(m.score);
+  std::sort(scores.begin(), scores.end(), std::greater<>());
+  // Thresholds at geometrically spaced ranks of the peaks' scores.
+  std::vector<float> thresholds;
+  for (double rank = 1.0; rank < static_cast<double>(scores.size()); rank *= 1.08) {
+    const float t = scores[static_cast<std::size_t>(rank)];
+    if (thresholds.empty() || t < thresholds.back()) thresholds.push_back(t);
+  }
+  if (!scores.empty() && (thresholds.empty() || scores.back() < thresholds.back())) thresholds.push_back(scores.back());
+  std::vector<place::PrPoint> points;
+  std::vector<place::Match> above;
+  double best_f1 = -1.0;
+  for (float t : thresholds) {
+    above.clear();
+    for (const place::Match& m : peaks)
+      if (m.score >= t) above.push_back(m);
+    std::vector<place::Match> kept = place::sequence_filter(above, config);
+    to_directory(kept, positions);
+    const place::PrPoint p = place::score(kept, truth, t);
+    if (p.matches > 0 && p.f1 > best_f1) {
+      best_f1 = p.f1;
+      best_matches = kept;
+    }
+    points.push_back(p);
+  }
+  return place::curve_of(std::move(points));
+}
+
+std::vector<place::Match> best_of_sweep(const std::vector<place::Match>& matches, double threshold) {
+  std::vector<place::Match> out;
+  for (const place::Match& m : matches)
+    if (static_cast<double>(m.score) >= threshold) out.push_back(m);
+  return out;
+}
+
+}  // namespace
+
+bool scattered_case(const std::string& name, int images, ScatteredCase& out) {
+  out = {};
+  int which = 0;
+  if (name == "scattered-1") which = 1;
+  if (name == "scattered-2") which = 2;
+  if (name == "scattered-3") which = 3;
+  if (which == 0 || images < 200) return false;
+  std::mt19937 rng(static_cast<std::uint32_t>(4100 + which));
+  // Chunks of 20-150 images cover the sequence; the database loses a
+  // stretch of an eighth of it (queries there have no place).
+  std::vector<std::pair<int, int>> chunks;
+  for (int at = 0; at < images;) {
+    const int len = std::min(images - at, std::uniform_int_distribution<int>(20, 150)(rng));
+    chunks.emplace_back(at, at + len);
+    at += len;
+  }
+  const int gap = images / 8;
+  out.database_gap_begin = std::uniform_int_distribution<int>(images / 4, images - images / 4 - gap)(rng);
+  out.database_gap_end = out.database_gap_begin + gap;
+  // Shuffled; case 1 revisits a fifth of the chunks, case 2 a third, case 3
+  // keeps long runs in order between jumps (the chunks in order in blocks of
+  // three, the blocks shuffled) and revisits a tenth.
+  std::vector<std::pair<int, int>> order = chunks;
+  if (which == 3) {
+    std::vector<std::vector<std::pair<int, int>>> blocks;
+    for (std::size_t i = 0; i < chunks.size(); i += 3)
+      blocks.emplace_back(chunks.begin() + static_cast<long>(i), chunks.begin() + static_cast<long>(std::min(chunks.size(), i + 3)));
+    std::shuffle(blocks.begin(), blocks.end(), rng);
+    order.clear();
+    for (const auto& b : blocks) order.insert(order.end(), b.begin(), b.end());
+  } else {
+    std::shuffle(order.begin(), order.end(), rng);
+  }
+  const double revisit = which == 1 ? 0.2 : which == 2 ? 1.0 / 3.0 : 0.1;
+  const std::size_t extra = static_cast<std::size_t>(std::lround(revisit * static_cast<double>(chunks.size())));
+  for (std::size_t k = 0; k < extra; ++k) {
+    const auto& c = chunks[std::uniform_int_distribution<std::size_t>(0, chunks.size() - 1)(rng)];
+    const std::size_t at = std::uniform_int_distribution<std::size_t>(0, order.size())(rng);
+    order.insert(order.begin() + static_cast<long>(at), c);
+  }
+  for (const auto& [b, e] : order)
+    for (int i = b; i < e; ++i) out.query_order.push_back(i);
+  return true;
+}
+
+PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
+  PlaceEvalReport r;
+  if (o.subsample < 1) {
+    r.error = "--subsample must be at least 1";
+    return r;
+  }
+  Sequence db = read_sequence(o.database, o.subsample, o.max_images, "reading the database", o);
+  if (!db.error.empty()) {
+    r.error = db.error;
+    return r;
+  }
+  Sequence qs = read_sequence(o.query, o.subsample, o.max_images, "reading the queries", o);
+  if (!qs.error.empty()) {
+    r.error = qs.error;
+    return r;
+  }
+  const camera::GreyImage& first = db.images.front();
+  if (qs.images.front().width != first.width || qs.images.front().height != first.height) {
+    r.error = "the database's images are " + std::to_string(first.width) + " x " + std::to_string(first.height) +
+              " pixels and the queries' " + std::to_string(qs.images.front().width) + " x " +
+              std::to_string(qs.images.front().height) + ": both must have one size";
+    return r;
+  }
+  // The case: which database images stay, and the queries' order.
+  std::vector<int> kept;  // case database position -> directory index
+  ScatteredCase sc;
+  if (o.case_name == "connected") {
+    for (std::size_t i = 0; i < qs.images.size(); ++i) r.query_order.push_back(static_cast<int>(i));
+    for (std::size_t j = 0; j < db.images.size(); ++j) kept.push_back(static_cast<int>(j));
+  } else if (scattered_case(o.case_name, static_cast<int>(std::min(qs.images.size(), db.images.size())), sc)) {
+    r.query_order = sc.query_order;
+    for (int j = 0; j < static_cast<int>(db.images.size()); ++j)
+      if (j < sc.database_gap_begin || j >= sc.database_gap_end) kept.push_back(j);
+  } else {
+    r.error = "--case takes connected, scattered-1, scattered-2 or scattered-3 (a scattered case needs 200 images), not '" +
+              o.case_name + "'";
+    return r;
+  }
+  r.database_images = kept.size();
+  r.query_images = r.query_order.size();
+  r.width = first.width;
+  r.height = first.height;
+  const bool have_truth = !o.ground_truth.empty();
+  if (have_truth) {
+    std::vector<int> reference, tolerance;
+    if (!read_truth(o, qs.images.size(), db.images.size(), reference, tolerance, r.error)) return r;
+    // Per query of the case; a query has a place when a kept database image
+    // lies within its tolerance of the reference.
+    for (int q : r.query_order) {
+      int ref = reference[static_cast<std::size_t>(q)];
+      const int tol = tolerance[static_cast<std::size_t>(q)];
+      if (ref >= 0) {
+        const auto lo = std::lower_bound(kept.begin(), kept.end(), ref - tol);
+        if (lo == kept.end() || *lo > ref + tol) ref = -1;
+      }
+      r.truth.reference.push_back(ref);
+      r.truth.tolerance.push_back(tol);
+    }
+    r.positives = r.truth.positives();
+  }
+
+  // Descriptors.
+  auto t0 = std::chrono::steady_clock::now();
+  place::Hog hog(o.hog, first.width, first.height);
+  r.descriptor_length = hog.length();
+  r.patch = hog.config().patch;
+  std::vector<float> f(static_cast<std::size_t>(hog.length()));
+  const auto len = static_cast<Eigen::Index>(hog.length());
+  place::Matrix s;
+  {
+    place::Matrix dq(static_cast<Eigen::Index>(r.query_images), len), dd(static_cast<Eigen::Index>(kept.size()), len);
+    place::CompactDescriptors cq, cd;
+    const std::size_t total = kept.size() + r.query_images;
+    std::size_t done = 0;
+    const auto describe = [&](const camera::GreyImage& im, place::Matrix& m, Eigen::Index row, place::CompactDescriptors& c) {
+      hog.compute(im.pixels, im.width, f);
+      if (o.compact) {
+        c.add(f);
+      } else {
+        for (Eigen::Index k = 0; k < len; ++k) m(row, k) = f[static_cast<std::size_t>(k)];
+      }
+      ++done;
+      if (o.progress && (done % 64 == 0 || done == total)) o.progress("HOG descriptors", static_cast<double>(done) / static_cast<double>(total));
+    };
+    for (std::size_t j = 0; j < kept.size(); ++j)
+      describe(db.images[static_cast<std::size_t>(kept[j])], dd, static_cast<Eigen::Index>(j), cd);
+    for (std::size_t i = 0; i < r.query_images; ++i)
+      describe(qs.images[static_cast<std::size_t>(r.query_order[i])], dq, static_cast<Eigen::Index>(i), cq);
+    r.descriptor_bytes = o.compact ? static_cast<std::size_t>(hog.length()) + sizeof(float)
+                                   : static_cast<std::size_t>(hog.length()) * sizeof(float);
+    r.seconds_descriptors = seconds_since(t0);
+    t0 = std::chrono::steady_clock::now();
+    s = o.compact ? place::cosine_similarities(cq, cd) : place::cosine_similarities(dq, dd);
+    r.seconds_similarity = seconds_since(t0);
+  }
+  const auto finish = [&](const std::string& name, std::vector<place::Match> scored, bool already_swept,
+                          place::PrCurve curve, std::vector<place::Match> best) {
+    PlaceMethod m;
+    m.method = name;
+    if (!already_swept) {
+      to_directory(scored, kept);
+      if (have_truth) {
+        m.curve = place::sweep(scored, r.truth);
+        m.matches = best_of_sweep(scored, m.curve.best.threshold);
+      } else {
+        m.matches = std::move(scored);
+      }
+    } else {
+      m.curve = std::move(curve);
+      m.matches = std::move(best);
+    }
+    r.methods.push_back(std::move(m));
+  };
+
+  // Raw best match.
+  {
+    std::vector<place::Match> raw;
+    for (Eigen::Index i = 0; i < s.rows(); ++i) {
+      Eigen::Index j = 0;
+      const float v = s.row(i).maxCoeff(&j);
+      raw.push_back({static_cast<int>(i), static_cast<int>(j), v});
+    }
+    finish("raw", std::move(raw), false, {}, {});
+  }
+  const float uniform = 1.0f / static_cast<float>(kept.size());
+  const auto filtered = [&](const place::Matrix& likelihood, const std::string& name) {
+    const auto t1 = std::chrono::steady_clock::now();
+    const place::Matrix b = place::forward_backward(likelihood, o.transition);
+    // Without the sequence filter: each query's most likely place (the
+    // filter's answer, as raw's is the best similarity), thresholded on its
+    // belief.
+    std::vector<place::Match> most_likely;
+    for (Eigen::Index i = 0; i < b.rows(); ++i) {
+      Eigen::Index j = 0;
+      const float v = b.row(i).maxCoeff(&j);
+      most_likely.push_back({static_cast<int>(i), static_cast<int>(j), v});
+    }
+    finish(name, std::move(most_likely), false, {}, {});
+    // With it: every local peak (a database revisited holds several), kept
+    // in sequences.
+    std::vector<place::Match> peaks = place::row_peaks(b, uniform, o.peak_radius);
+    if (have_truth) {
+      std::vector<place::Match> best;
+      place::PrCurve c = sequence_curve(peaks, o.sequence, r.truth, kept, best);
+      finish(name + "+seq", {}, true, std::move(c), std::move(best));
+    } else {
+      std::vector<place::Match> in_sequences = place::sequence_filter(peaks, o.sequence);
+      to_directory(in_sequences, kept);
+      finish(name + "+seq", {}, true, {}, std::move(in_sequences));
+    }
+    r.seconds_filters += seconds_since(t1);
+  };
+  if (o.progress) o.progress("filters", 0.0);
+  {
+    place::Matrix l = s;
+    place::normalise_columns(l);  // Eq. 5.3
+    place::stretch_rows(l);       // Eq. 5.4
+    filtered(l, "filter");
+  }
+  if (o.progress) o.progress("ZCA whitening", 0.0);
+  {
+    t0 = std::chrono::steady_clock::now();
+    place::Matrix l;
+    if (o.zca_after_columns) {
+      place::Matrix c = s;
+      place::normalise_columns(c);
+      l = place::zca_whiten(c, o.zca_epsilon);
+    } else {
+      l = place::zca_whiten(s, o.zca_epsilon);
+    }
+    place::stretch_rows(l);
+    r.seconds_zca = seconds_since(t0);
+    if (o.progress) o.progress("ZCA whitening", 1.0);
+    filtered(l, "zca+filter");
+  }
+  if (o.progress) o.progress("filters", 1.0);
+  if (o.seqslam) {
+    t0 = std::chrono::steady_clock::now();
+    std::vector<std::vector<float>> pd, pq;
+    for (int j : kept) {
+      const camera::GreyImage& im = db.images[static_cast<std::size_t>(j)];
+      pd.push_back(seqslam_prepare(im.pixels, im.width, im.height, o.seqslam_config));
+    }
+    for (int q : r.query_order) {
+      const camera::GreyImage& im = qs.images[static_cast<std::size_t>(q)];
+      pq.push_back(seqslam_prepare(im.pixels, im.width, im.height, o.seqslam_config));
+    }
+    if (o.progress) o.progress("SeqSLAM", 0.0);
+    finish("seqslam", seqslam_matches(pd, pq, o.seqslam_config), false, {}, {});
+    if (o.progress) o.progress("SeqSLAM", 1.0);
+    r.seconds_seqslam = seconds_since(t0);
+  }
+  return r;
+}
+
+}  // namespace trailnav::eval

@@ -1,0 +1,175 @@
+// `trailnav place-eval` on the real Nordland frames (../shared/data/nordland,
+// summer as the database, winter as the queries): the thesis' ordering of
+// the methods on a stretch of the connected case, the same figures twice,
+// OpenSeqSLAM's ground-truth file, the scattered cases' shape, and bad input
+// refused with its reason.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+
+#include "place_eval.hpp"
+#include "png.hpp"
+#include "test_data.hpp"
+
+namespace trailnav::eval {
+namespace {
+
+PlaceEvalOptions nordland(int images) {
+  PlaceEvalOptions o;
+  o.database = test::shared_data("nordland/summer");
+  o.query = test::shared_data("nordland/winter");
+  o.ground_truth = "same-index";
+  o.max_images = images;
+  return o;
+}
+
+std::map<std::string, perception::place::PrPoint> best_of(const PlaceEvalReport& r) {
+  std::map<std::string, perception::place::PrPoint> out;
+  for (const PlaceMethod& m : r.methods) out[m.method] = m.curve.best;
+  return out;
+}
+
+// The first 1,200 frames (on the first 600 the raw best match and the
+// filter's are within 0.015 of each other, either way).
+TEST(PlaceEval, OnRealNordlandFramesTheThesisOrderingHoldsAndRunsRepeatBitForBit) {
+  PlaceEvalOptions o = nordland(1200);
+  const PlaceEvalReport r = run_place_eval(o);
+  ASSERT_TRUE(r.error.empty()) << r.error;
+  EXPECT_EQ(r.database_images, 1200u);
+  EXPECT_EQ(r.positives, 1200u);
+  EXPECT_EQ(r.patch, 16);
+  EXPECT_EQ(r.descriptor_length, 1024);
+  EXPECT_EQ(r.descriptor_bytes, 1028u);
+  auto best = best_of(r);
+  ASSERT_EQ(best.size(), 6u);
+  EXPECT_LT(best["raw"].f1, best["filter"].f1);
+  EXPECT_LT(best["filter"].f1, best["zca+filter"].f1);
+  EXPECT_LT(best["filter+seq"].f1, best["zca+filter+seq"].f1);
+  EXPECT_LT(best["zca+filter"].f1, best["zca+filter+seq"].f1);
+  EXPECT_GT(best["zca+filter+seq"].f1, 0.85);
+  EXPECT_GT(best["zca+filter+seq"].f1, best["seqslam"].f1);
+  // Every match listed at the best F1 is what the curve counted.
+  for (const PlaceMethod& m : r.methods) {
+    std::size_t right = 0;
+    for (const auto& x : m.matches) right += r.truth.correct(x) ? 1u : 0u;
+    EXPECT_EQ(m.matches.size(), m.curve.best.matches) << m.method;
+    EXPECT_EQ(right, m.curve.best.true_matches) << m.method;
+  }
+  const PlaceEvalReport again = run_place_eval(o);
+  ASSERT_EQ(again.methods.size(), r.methods.size());
+  for (std::size_t k = 0; k < r.methods.size(); ++k) {
+    EXPECT_EQ(again.methods[k].curve.best.f1, r.methods[k].curve.best.f1);
+    EXPECT_EQ(again.methods[k].matches, r.methods[k].matches);
+  }
+}
+
+TEST(PlaceEval, OpenSeqSlamsGroundTruthFileWithItsSubsampling) {
+  PlaceEvalOptions o = nordland(0);
+  o.ground_truth = test::shared_data("nordland/sample_ground_truth.csv");
+  o.subsample = 10;  // its rows index every 10th image, tolerance 15 of those
+  o.seqslam = false;
+  const PlaceEvalReport r = run_place_eval(o);
+  ASSERT_TRUE(r.error.empty()) << r.error;
+  EXPECT_EQ(r.database_images, 240u);
+  EXPECT_EQ(r.positives, 240u);
+  EXPECT_EQ(r.truth.tolerance.front(), 15);
+  EXPECT_EQ(r.truth.reference[99], 99);
+  o.tolerance = 2;  // the option over the file's column
+  EXPECT_EQ(run_place_eval(o).truth.tolerance.front(), 2);
+}
+
+TEST(PlaceEval, ScatteredCasesJumpRevisitAndLeaveAStretchOfTheDatabaseOut) {
+  for (const char* name : {"scattered-1", "scattered-2", "scattered-3"}) {
+    ScatteredCase c;
+    ASSERT_TRUE(scattered_case(name, 2400, c));
+    EXPECT_EQ(c.database_gap_end - c.database_gap_begin, 300);
+    std::set<int> seen(c.query_order.begin(), c.query_order.end());
+    EXPECT_EQ(seen.size(), 2400u) << name;             // every query at least once
+    EXPECT_GT(c.query_order.size(), 2400u) << name;    // some twice
+    int jumps = 0;
+    for (std::size_t i = 1; i < c.query_order.size(); ++i) jumps += c.query_order[i] != c.query_order[i - 1] + 1 ? 1 : 0;
+    EXPECT_GT(jumps, 10) << name;
+    ScatteredCase again;
+    scattered_case(name, 2400, again);
+    EXPECT_EQ(again.query_order, c.query_order);
+  }
+  ScatteredCase c;
+  EXPECT_FALSE(scattered_case("connected", 2400, c));
+  EXPECT_FALSE(scattered_case("scattered-9", 2400, c));
+  // Queries whose place was left out count as having none.
+  PlaceEvalOptions o = nordland(400);
+  o.case_name = "scattered-2";
+  o.seqslam = false;
+  const PlaceEvalReport r = run_place_eval(o);
+  ASSERT_TRUE(r.error.empty()) << r.error;
+  EXPECT_EQ(r.database_images, 350u);
+  EXPECT_LT(r.positives, r.query_images);
+  EXPECT_GT(r.positives, r.query_images / 2);
+}
+
+int run(const std::vector<std::string>& args, std::string& out) {
+  const std::filesystem::path log = std::filesystem::temp_directory_path() / ("place-cli-log-" + std::to_string(::getpid()));
+  std::string cmd = TRAILNAV_BINARY;
+  for (const std::string& a : args) cmd += " '" + a + "'";
+  cmd += " > " + log.string() + " 2>&1";
+  const int status = std::system(cmd.c_str());
+  std::ifstream in(log);
+  out.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  std::filesystem::remove(log);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST(PlaceEvalCli, ReportsEachMethodInJsonAndDrawsTheCurves) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("place-cli-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string png = (dir / "pr.png").string();
+  std::string out;
+  ASSERT_EQ(run({"place-eval", test::shared_data("nordland/summer"), test::shared_data("nordland/winter"), "--ground-truth",
+                 "same-index", "--max-images", "300", "--report", "json", "--png", png, "--quiet"},
+                out),
+            0)
+      << out;
+  for (const char* m : {"raw", "filter", "filter+seq", "zca+filter", "zca+filter+seq", "seqslam"})
+    EXPECT_NE(out.find(std::string("{\"method\": \"") + m + "\", \"best_f1\": "), std::string::npos) << m << "\n" << out;
+  EXPECT_NE(out.find("\"precision\": "), std::string::npos);
+  EXPECT_NE(out.find("\"recall\": "), std::string::npos);
+  EXPECT_GT(std::filesystem::file_size(png), 5000u);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(PlaceEvalCli, BadInputIsRefusedWithItsReason) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("place-bad-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir / "a");
+  std::filesystem::create_directories(dir / "b");
+  std::vector<std::uint8_t> grey(64 * 32, 100), other(32 * 32, 100);
+  ASSERT_TRUE(cli::write_png((dir / "a" / "0001.png").string(), 64, 32, cli::PngColor::grey, grey).ok());
+  ASSERT_TRUE(cli::write_png((dir / "a" / "0002.png").string(), 32, 32, cli::PngColor::grey, other).ok());
+  ASSERT_TRUE(cli::write_png((dir / "b" / "0001.png").string(), 64, 32, cli::PngColor::grey, grey).ok());
+  std::string out;
+  EXPECT_EQ(run({"place-eval", (dir / "a").string(), (dir / "b").string(), "--quiet"}, out), 1);
+  EXPECT_NE(out.find("0002.png: 32 x 32 pixels where the sequence's first image has 64 x 32"), std::string::npos) << out;
+  std::ofstream(dir / "truth.csv") << "query,reference,tolerance\n1,1,2\n2,x,3\n";
+  EXPECT_EQ(run({"place-eval", (dir / "b").string(), (dir / "b").string(), "--ground-truth", (dir / "truth.csv").string(),
+                 "--quiet"},
+                out),
+            1);
+  EXPECT_NE(out.find("truth.csv:3: expected `query,reference[,tolerance]`"), std::string::npos) << out;
+  EXPECT_EQ(run({"place-eval", (dir / "b").string(), (dir / "nowhere").string(), "--quiet"}, out), 1);
+  EXPECT_NE(out.find("not a directory of images"), std::string::npos) << out;
+  EXPECT_EQ(run({"place-eval", (dir / "b").string(), (dir / "b").string(), "--case", "loop"}, out), 1);
+  EXPECT_NE(out.find("--case takes connected"), std::string::npos) << out;
+  EXPECT_EQ(run({"place-eval", (dir / "b").string(), (dir / "b").string(), "--report", "xml"}, out), 2);
+  EXPECT_EQ(run({"place-eval", (dir / "b").string(), (dir / "b").string(), "--png", "x.png"}, out), 2);
+  EXPECT_NE(out.find("need --ground-truth"), std::string::npos) << out;
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace trailnav::eval
