@@ -7,18 +7,24 @@
 
 namespace trailnav::perception::place {
 
-void CompactDescriptors::add(std::span<const float> descriptor) {
-  if (length == 0) length = static_cast<int>(descriptor.size());
+float encode_descriptor(std::span<const float> descriptor, std::span<std::uint8_t> code) noexcept {
   float largest = 0.0f;
   for (float v : descriptor) largest = std::max(largest, v);
   const float scale = largest > 0.0f ? 255.0f / largest : 0.0f;
   double norm = 0.0;
-  for (float v : descriptor) {
-    const auto c = static_cast<std::uint8_t>(std::lround(std::max(v, 0.0f) * scale));
-    codes.push_back(c);
-    norm += static_cast<double>(c) * c;
+  for (std::size_t k = 0; k < descriptor.size(); ++k) {
+    const auto c = static_cast<std::uint8_t>(std::lround(std::max(descriptor[k], 0.0f) * scale));
+    code[k] = c;
+    norm += static_cast<double>(c) * static_cast<double>(c);
   }
-  norms.push_back(static_cast<float>(std::sqrt(norm)));
+  return static_cast<float>(std::sqrt(norm));
+}
+
+void CompactDescriptors::add(std::span<const float> descriptor) {
+  if (length == 0) length = static_cast<int>(descriptor.size());
+  const std::size_t at = codes.size();
+  codes.resize(at + descriptor.size());
+  norms.push_back(encode_descriptor(descriptor, {codes.data() + at, descriptor.size()}));
 }
 
 float cosine(std::span<const std::uint8_t> a, float norm_a, std::span<const std::uint8_t> b, float norm_b) noexcept {

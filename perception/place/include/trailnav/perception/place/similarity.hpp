@@ -41,6 +41,10 @@ struct CompactDescriptors {
   }
 };
 
+// A descriptor as bytes into `code` (its size): each value x 255 / the
+// largest, rounded. Returns the code's length.
+float encode_descriptor(std::span<const float> descriptor, std::span<std::uint8_t> code) noexcept;
+
 // cos of two codes: their dot product over the product of their lengths
 // (0 when either has none).
 float cosine(std::span<const std::uint8_t> a, float norm_a, std::span<const std::uint8_t> b, float norm_b) noexcept;

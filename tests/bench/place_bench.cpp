@@ -1,0 +1,87 @@
+// Place recognition (issue 41): one online step (HOG of the frame, its
+// similarities to every database image, Eq. 5.3-5.4, the filter's step) for
+// databases of 2,400 and 10,000 images, on real Nordland frames (summer as
+// the database, cycled to fill it; winter as the queries) at their 64 x 32
+// pixels and enlarged to 128 x 64 and 320 x 160; and HOG alone.
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "trailnav/drivers/camera/image_file.hpp"
+#include "trailnav/perception/place/online.hpp"
+
+namespace {
+
+using namespace trailnav::perception::place;
+namespace camera = trailnav::drivers::camera;
+
+std::vector<std::uint8_t> frame(const std::string& season, int number, int zoom) {
+  char name[96];
+  std::snprintf(name, sizeof name, "../shared/data/nordland/%s/images-%05d.png", season.c_str(), number);
+  const camera::ImageRead r = camera::read_grey_image(name);
+  if (!r.ok()) return {};
+  if (zoom == 1) return r.image.pixels;
+  std::vector<std::uint8_t> big(static_cast<std::size_t>(r.image.width * zoom * r.image.height * zoom));
+  for (int y = 0; y < r.image.height * zoom; ++y)
+    for (int x = 0; x < r.image.width * zoom; ++x)
+      big[static_cast<std::size_t>(y * r.image.width * zoom + x)] =
+          r.image.pixels[static_cast<std::size_t>((y / zoom) * r.image.width + x / zoom)];
+  return big;
+}
+
+// Arguments: database images, zoom of the 64 x 32 frames.
+void BM_PlaceStep(benchmark::State& state) {
+  const auto images = static_cast<std::size_t>(state.range(0));
+  const int zoom = static_cast<int>(state.range(1));
+  OnlineConfig config;
+  config.width = 64 * zoom;
+  config.height = 32 * zoom;
+  config.capacity = images;
+  OnlinePlace place(config);
+  std::vector<std::vector<float>> summer;
+  for (int k = 0; k < 240; ++k) {
+    const std::vector<std::uint8_t> f = frame("summer", 100 + 100 * k, zoom);
+    if (f.empty()) {
+      state.SkipWithError("../shared/data/nordland not found (run from the repository's root)");
+      return;
+    }
+    const auto d = place.describe(f, config.width);
+    summer.emplace_back(d.begin(), d.end());
+  }
+  for (std::size_t j = 0; j < images; ++j) place.add_database(summer[j % summer.size()]);
+  place.finish_database();
+  std::vector<std::vector<std::uint8_t>> winter;
+  for (int k = 0; k < 16; ++k) winter.push_back(frame("winter", 5000 + 100 * k, zoom));
+  std::size_t k = 0;
+  for (auto _ : state) {
+    const auto& f = winter[k++ % winter.size()];
+    const PlaceEstimate e = place.step(place.describe(f, config.width));
+    benchmark::DoNotOptimize(e);
+  }
+  state.counters["descriptor"] = place.descriptor_length();
+  state.counters["database_MB"] = static_cast<double>(images * place.bytes_per_image()) / 1e6;
+}
+BENCHMARK(BM_PlaceStep)->Args({2400, 1})->Args({10000, 1})->Args({10000, 2})->Args({10000, 5})->Unit(benchmark::kMillisecond);
+
+void BM_Hog(benchmark::State& state) {
+  const int zoom = static_cast<int>(state.range(0));
+  const std::vector<std::uint8_t> f = frame("winter", 5000, zoom);
+  if (f.empty()) {
+    state.SkipWithError("../shared/data/nordland not found");
+    return;
+  }
+  Hog hog(HogConfig{0}, 64 * zoom, 32 * zoom);
+  std::vector<float> out(static_cast<std::size_t>(hog.length()));
+  for (auto _ : state) {
+    hog.compute(f, 64 * zoom, out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["pixels"] = 64.0 * 32.0 * zoom * zoom;
+}
+BENCHMARK(BM_Hog)->Arg(1)->Arg(5)->Arg(10)->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
