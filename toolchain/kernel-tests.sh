@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs the drivers against real kernel devices: boots Debian's kernel under
 # qemu-system-x86_64 (software emulation: no KVM needed) with an initramfs
-# that holds busybox, the modules vcan, can-raw and gpio-sim, iproute2's `ip`
+# that holds busybox, the modules vcan, can-raw, gpio-sim and the V4L2 test
+# driver vivid (with the media modules it needs), iproute2's `ip`
 # the test binary and trailnavd, runs the binary there and returns its exit
 # status.
 #
@@ -112,9 +113,16 @@ vm=$(mktemp -d /tmp/trailnav-kernel-vm.XXXXXX)
 root=$vm/root
 mkdir -p "$root"/{bin,sbin,proc,sys,dev,tmp,mods,work/board/sim}
 cp /usr/bin/busybox "$root/bin/"
-for a in sh mount mkdir cat echo insmod poweroff sleep; do ln -s busybox "$root/bin/$a"; done
+for a in sh mount mkdir cat echo insmod rmmod poweroff sleep; do ln -s busybox "$root/bin/$a"; done
 cp "$modules/fs/configfs/configfs.ko" "$modules/net/can/can.ko" "$modules/net/can/can-raw.ko" \
    "$modules/drivers/net/can/dev/can-dev.ko" "$modules/drivers/net/can/vcan.ko" "$cache/gpio-sim/gpio-sim.ko" "$root/mods/"
+# vivid and what it needs, in the order they are loaded below.
+media="mc videodev videobuf2-common videobuf2-v4l2 videobuf2-memops videobuf2-vmalloc videobuf2-dma-contig v4l2-dv-timings v4l2-tpg rc-core cec vivid"
+for m in $media; do
+  f=$(find "$modules/drivers/media" -name "$m.ko" | head -1)
+  [ -n "$f" ] || { echo "kernel-tests: $kver has no $m.ko" >&2; exit 1; }
+  cp "$f" "$root/mods/"
+done
 cp "$(command -v ip)" "$root/sbin/ip"
 cp "$binary" "$root/bin/trailnav_kernel_tests"
 cp "$daemon" "$root/bin/trailnavd"
@@ -130,8 +138,10 @@ cat > "$root/init" <<EOF
 mount -t proc proc /proc
 mount -t sysfs sys /sys
 mount -t devtmpfs dev /dev
-for m in configfs can can-raw can-dev vcan gpio-sim; do
-  insmod /mods/\$m.ko || { echo "kernel-tests: insmod \$m failed"; echo "@@TEST_RC=3@@"; poweroff -f; }
+for m in configfs can can-raw can-dev vcan gpio-sim $media; do
+  args=""
+  [ "\$m" = vivid ] && args="n_devs=1 node_types=0x1 num_inputs=1 input_types=0"
+  insmod /mods/\$m.ko \$args || { echo "kernel-tests: insmod \$m failed"; echo "@@TEST_RC=3@@"; poweroff -f; }
 done
 mount -t configfs none /sys/kernel/config
 mount -t tmpfs tmp /tmp

@@ -29,8 +29,8 @@ packages=(
   liblzf-dev
   libosmium2-dev libprotozero-dev zlib1g-dev libbz2-dev libexpat1-dev liblz4-dev
   libyaml-cpp-dev
-  # camera images: PNG files (drivers/camera)
-  libpng-dev
+  # camera images: PNG files and the cameras' MJPEG frames (drivers/camera)
+  libpng-dev libturbojpeg0-dev
   libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libsystemd-dev

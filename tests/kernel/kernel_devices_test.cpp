@@ -1,8 +1,9 @@
-// The CAN and GPIO drivers against real kernel devices: SocketCAN on a
-// `vcan` interface (kernel receive filters, kernel timestamps, error frames,
-// the interface taken down and up, removed and added back) and libgpiod on
-// a `gpio-sim` chip (lines found by name, the e-stop debounced, outputs
-// driven, the chip removed under the driver).
+// The CAN, GPIO and camera drivers against real kernel devices: SocketCAN on
+// a `vcan` interface (kernel receive filters, kernel timestamps, error
+// frames, the interface taken down and up, removed and added back), libgpiod
+// on a `gpio-sim` chip (lines found by name, the e-stop debounced, outputs
+// driven, the chip removed under the driver) and V4L2 on `vivid` (formats,
+// memory-mapped streaming, kernel timestamps, the camera unplugged).
 //
 // These need the devices, which a developer's machine or a container rarely
 // has and must not be changed for a test: they run inside a virtual machine
@@ -13,6 +14,9 @@
 
 #include <linux/can.h>
 #include <linux/can/error.h>
+#include <linux/videodev2.h>
+#include <fcntl.h>
+#include <sys/ioctl.h>
 #include <net/if.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -26,6 +30,7 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <numeric>
 #include <fstream>
 #include <string>
 #include <thread>
@@ -35,12 +40,14 @@
 #include "diagnostic_msgs.h"
 #include "geometry_msgs.h"
 #include "subscriber.hpp"
+#include "trailnav/drivers/camera/camera_driver.hpp"
 #include "trailnav/drivers/can/can_driver.hpp"
 #include "trailnav/drivers/gpio/gpio_driver.hpp"
 #include "trailnav/runtime/host_clock.hpp"
 #include "trailnav/runtime/spawn.hpp"
 
 using namespace trailnav;
+namespace camera = trailnav::drivers::camera;
 namespace fs = std::filesystem;
 
 namespace {
@@ -601,4 +608,137 @@ TEST(KernelGpio, AChipRemovedUnderTheDriverIsReportedAndTheStopEngages) {
   ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().health == gpio::GpioHealth::failed; }));
   EXPECT_NE(d.status().estop, gpio::EstopState::released);
   EXPECT_NE(std::string(d.status().last_error.data()), "");
+}
+
+// --- The camera driver against the kernel's `vivid` test driver (one
+// webcam input: 320 x 180, 640 x 360, ... in YUYV, GREY and others, frame
+// rates from 1 to 60 Hz), loaded by toolchain/kernel-tests.sh with
+// n_devs=1 node_types=0x1 num_inputs=1 input_types=0.
+
+namespace {
+
+camera::CameraOptions vivid_options(camera::PixelFormat format, int width, int height) {
+  camera::CameraOptions o;
+  o.device = "/dev/video0";
+  o.format = format;
+  o.width = width;
+  o.height = height;
+  o.fps = 10.0;
+  o.out_width = 64;
+  o.out_height = 32;
+  o.reconnect_s = 0.2;
+  o.silence_s = 1.0;
+  return o;
+}
+
+// One of vivid's own controls, found by its name ("Disconnect", a button;
+// "Timestamp Source", 0 end of frame, 1 start of exposure).
+bool set_vivid_control(const std::string& device, const std::string& name, int value) {
+  const int fd = ::open(device.c_str(), O_RDWR);
+  if (fd < 0) return false;
+  v4l2_queryctrl q{};
+  q.id = V4L2_CTRL_FLAG_NEXT_CTRL;
+  bool pressed = false;
+  while (::ioctl(fd, VIDIOC_QUERYCTRL, &q) == 0) {
+    if (std::string(reinterpret_cast<const char*>(q.name)) == name) {
+      v4l2_control c{};
+      c.id = q.id;
+      c.value = value;
+      pressed = ::ioctl(fd, VIDIOC_S_CTRL, &c) == 0;
+      break;
+    }
+    q.id |= V4L2_CTRL_FLAG_NEXT_CTRL;
+  }
+  ::close(fd);
+  return pressed;
+}
+
+}  // namespace
+
+// Frames stream through the memory-mapped buffers in YUYV and GREY, reduced
+// to 64 x 32, stamped by the kernel (in host time, just before they were
+// dequeued) and numbered by it at 10 Hz. vivid stamps the end of a frame a
+// frame period ahead of when it hands the frame over (a simulated sensor);
+// set to stamp the start of exposure, as a UVC camera does, its stamps come
+// before the frames are dequeued, and the driver says which it got.
+TEST(KernelCamera, VividStreamsYuyvAndGreyStampedAndNumberedByTheKernel) {
+  REQUIRE_VM();
+  ASSERT_TRUE(set_vivid_control("/dev/video0", "Timestamp Source", 1));
+  for (camera::PixelFormat format : {camera::PixelFormat::yuyv, camera::PixelFormat::grey}) {
+    auto made = camera::CameraDriver::create(vivid_options(format, 320, 180));
+    ASSERT_TRUE(made.driver) << made.error;
+    camera::CameraDriver& d = *made.driver;
+    std::vector<std::int64_t> stamps;
+    std::vector<std::uint32_t> sequences;
+    double mean_grey = 0.0;
+    run_until(d, 2.5, [&] {
+      if (const camera::CameraFrame* f = d.frames().try_read()) {
+        stamps.push_back(f->stamp_ns);
+        sequences.push_back(f->sequence);
+        EXPECT_TRUE(f->start_of_exposure);
+        EXPECT_LE(f->stamp_ns, f->receive_ns);
+        EXPECT_LT(f->receive_ns - f->stamp_ns, 500'000'000);
+        mean_grey = std::accumulate(f->pixels.begin(), f->pixels.end(), 0.0) / static_cast<double>(f->pixels.size());
+      }
+      return stamps.size() >= 15;
+    });
+    const camera::CameraStatus s = d.status();
+    EXPECT_EQ(s.health, camera::CameraHealth::streaming) << s.last_error.data();
+    EXPECT_EQ(s.counters.opens, 1u);
+    EXPECT_GE(stamps.size(), 15u) << camera::pixel_format_name(format);
+    EXPECT_NEAR(s.fps, 10.0, 1e-6);
+    for (std::size_t i = 1; i < stamps.size(); ++i) {
+      EXPECT_GT(stamps[i], stamps[i - 1]);
+      EXPECT_GT(sequences[i], sequences[i - 1]);
+    }
+    if (stamps.size() > 2) {
+      // 10 Hz: a frame every 100 ms.
+      const double period = static_cast<double>(stamps.back() - stamps.front()) / static_cast<double>(sequences.back() - sequences.front());
+      EXPECT_NEAR(period, 100e6, 10e6);
+    }
+    EXPECT_GT(mean_grey, 5.0);  // vivid's test pattern, not an empty buffer
+    EXPECT_EQ(s.counters.corrupt, 0u);
+    EXPECT_GE(s.counters.frames, s.counters.published);
+    // Four buffers hold 400 ms of frames; only a stall that long drops one.
+    EXPECT_LE(s.counters.dropped, s.counters.frames / 4);
+  }
+}
+
+// A size or format the device does not offer is refused at open, naming
+// what it offered instead; the driver keeps trying and says why.
+TEST(KernelCamera, ASizeOrFormatTheDeviceDoesNotOfferIsRefusedNamingItsOffer) {
+  REQUIRE_VM();
+  camera::V4l2Camera cam;
+  std::string e = cam.open(vivid_options(camera::PixelFormat::yuyv, 320, 240));
+  EXPECT_NE(e.find("/dev/video0: offers 320 x 180 YUYV where 320 x 240 YUYV was set"), std::string::npos) << e;
+  EXPECT_FALSE(cam.is_open());
+  e = cam.open(vivid_options(camera::PixelFormat::mjpeg, 320, 180));
+  EXPECT_NE(e.find("where 320 x 180 MJPG was set"), std::string::npos) << e;
+  camera::CameraOptions manual = vivid_options(camera::PixelFormat::yuyv, 320, 180);
+  manual.exposure_us = 5000;
+  e = cam.open(manual);
+  EXPECT_NE(e.find("does not take a manual exposure"), std::string::npos) << e;
+  EXPECT_EQ(cam.open(vivid_options(camera::PixelFormat::yuyv, 640, 360)), "");
+  EXPECT_EQ(cam.width(), 640);
+  EXPECT_GE(cam.bytes_per_line(), 1280);
+  cam.close();
+}
+
+// vivid unplugged under the driver (its Disconnect button: every call then
+// fails with ENODEV): reported as lost, then, when the module is loaded again
+// and /dev/video0 is back, reopened and streaming.
+TEST(KernelCamera, AnUnpluggedCameraIsReportedAndReopenedWhenItReturns) {
+  REQUIRE_VM();
+  auto made = camera::CameraDriver::create(vivid_options(camera::PixelFormat::yuyv, 320, 180));
+  ASSERT_TRUE(made.driver) << made.error;
+  camera::CameraDriver& d = *made.driver;
+  ASSERT_TRUE(run_until(d, 3.0, [&] { return d.status().counters.published >= 3; }));
+  ASSERT_TRUE(set_vivid_control("/dev/video0", "Disconnect", 1));
+  ASSERT_TRUE(run_until(d, 3.0, [&] { return d.status().counters.lost >= 1; })) << d.status().last_error.data();
+  EXPECT_EQ(d.status().health, camera::CameraHealth::no_device);
+  ASSERT_EQ(sh("rmmod vivid && insmod /mods/vivid.ko n_devs=1 node_types=0x1 num_inputs=1 input_types=0"), 0);
+  const std::uint64_t before = d.status().counters.published;
+  ASSERT_TRUE(run_until(d, 5.0, [&] { return d.status().counters.published >= before + 3; })) << d.status().last_error.data();
+  EXPECT_EQ(d.status().counters.opens, 2u);
+  EXPECT_EQ(d.status().health, camera::CameraHealth::streaming);
 }

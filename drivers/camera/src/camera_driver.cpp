@@ -1,0 +1,132 @@
+#include "trailnav/drivers/camera/camera_driver.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "trailnav/runtime/host_clock.hpp"
+
+namespace trailnav::drivers::camera {
+
+const char* camera_health_name(CameraHealth h) noexcept {
+  switch (h) {
+    case CameraHealth::no_device: return "no_device";
+    case CameraHealth::streaming: return "streaming";
+    case CameraHealth::silent: return "silent";
+  }
+  return "?";
+}
+
+CameraDriver::Created CameraDriver::create(const CameraOptions& options) {
+  Created c;
+  c.error = check_camera_options(options);
+  if (!c.error.empty()) return c;
+  try {
+    c.driver.reset(new CameraDriver(options));
+  } catch (const std::exception& e) {
+    c.error = e.what();
+  }
+  return c;
+}
+
+CameraDriver::CameraDriver(const CameraOptions& options)
+    : options_(options),
+      converter_(options.format, options.width, options.height, options.out_width, options.out_height),
+      frames_(options.out_width, options.out_height) {
+  error_.reserve(256);
+}
+
+void CameraDriver::note_error(const std::string& e) noexcept {
+  const std::size_t n = std::min(e.size(), local_.last_error.size() - 1);
+  std::memcpy(local_.last_error.data(), e.data(), n);
+  local_.last_error[n] = '\0';
+}
+
+void CameraDriver::lose(Nanos now, const std::string& why) noexcept {
+  note_error(why);
+  camera_.close();
+  ++local_.counters.lost;
+  local_.health = CameraHealth::no_device;
+  next_open_ = now + static_cast<Nanos>(options_.reconnect_s * 1e9);
+  have_sequence_ = false;
+}
+
+void CameraDriver::run(const TaskTick& tick) {
+  const Nanos now = tick.started;
+  if (!camera_.is_open()) {
+    if (now >= next_open_) {
+      const std::string e = camera_.open(options_);
+      if (e.empty()) {
+        ++local_.counters.opens;
+        local_.health = CameraHealth::streaming;
+        local_.fps = camera_.fps();
+        last_frame_ = now;
+      } else {
+        ++local_.counters.open_failures;
+        note_error(e);
+        next_open_ = now + static_cast<Nanos>(options_.reconnect_s * 1e9);
+      }
+    }
+    shared_.post(local_);
+    return;
+  }
+  // Every frame the kernel has filled: counted, the newest converted and
+  // published (a late run does not publish stale frames one after another).
+  Dequeued d, newest;
+  bool have = false;
+  for (;;) {
+    const V4l2Camera::Got got = camera_.dequeue(d, error_);
+    if (got == V4l2Camera::Got::none) break;
+    if (got == V4l2Camera::Got::lost) {
+      if (have) camera_.requeue(newest.index, error_);
+      lose(now, options_.device + ": " + error_);
+      shared_.post(local_);
+      return;
+    }
+    ++local_.counters.frames;
+    if (have_sequence_ && d.sequence > last_sequence_ + 1) local_.counters.dropped += d.sequence - last_sequence_ - 1;
+    have_sequence_ = true;
+    last_sequence_ = d.sequence;
+    if (d.error_flag) {
+      ++local_.counters.damaged;
+      camera_.requeue(d.index, error_);
+      continue;
+    }
+    if (have) camera_.requeue(newest.index, error_);
+    newest = d;
+    have = true;
+  }
+  if (have) {
+    last_frame_ = now;
+    local_.health = CameraHealth::streaming;
+    if (converter_.convert(newest.bytes, camera_.bytes_per_line())) {
+      CameraFrame& f = frames_.write_slot();
+      std::copy(converter_.grey().begin(), converter_.grey().end(), f.pixels.begin());
+      timespec mono{};
+      ::clock_gettime(CLOCK_MONOTONIC, &mono);
+      const std::int64_t mono_now = static_cast<std::int64_t>(mono.tv_sec) * 1'000'000'000LL + mono.tv_nsec;
+      f.receive_ns = host_now_ns();
+      f.stamp_ns = f.receive_ns - (mono_now - newest.monotonic_ns);
+      f.sequence = newest.sequence;
+      f.start_of_exposure = newest.start_of_exposure;
+      frames_.publish();
+      ++local_.counters.published;
+    } else {
+      ++local_.counters.corrupt;
+      note_error(converter_.error());
+    }
+    local_.counters.jpeg_warnings = converter_.jpeg_warnings();
+    if (!camera_.requeue(newest.index, error_)) {
+      lose(now, options_.device + ": " + error_);
+      shared_.post(local_);
+      return;
+    }
+  } else if (now - last_frame_ > static_cast<Nanos>(options_.silence_s * 1e9)) {
+    local_.health = CameraHealth::silent;
+    lose(now, options_.device + ": no frame for " + std::to_string(options_.silence_s) + " s while streaming");
+  }
+  shared_.post(local_);
+}
+
+}  // namespace trailnav::drivers::camera
