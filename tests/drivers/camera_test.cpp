@@ -6,7 +6,11 @@
 // virtual machine (tests/kernel/kernel_devices_test.cpp, KernelCamera).
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <turbojpeg.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <numeric>
@@ -15,7 +19,9 @@
 #include "trailnav/drivers/camera/camera_driver.hpp"
 #include "trailnav/drivers/camera/frame.hpp"
 #include "trailnav/drivers/camera/image_file.hpp"
+#include "trailnav/drivers/camera/image_tunnel.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/host_clock.hpp"
 
 namespace trailnav::drivers::camera {
 namespace {
@@ -144,6 +150,111 @@ TEST(CameraDevice, NoDeviceAndAFileThatIsNoCameraAreExplainedAndRetried) {
   EXPECT_EQ(d.frames().try_read(), nullptr);
   o.buffers = 0;
   EXPECT_FALSE(CameraDriver::create(o).error.empty());
+}
+
+}  // namespace
+}  // namespace trailnav::drivers::camera
+
+namespace trailnav::drivers::camera {
+namespace {
+
+std::vector<std::uint8_t> pattern(int w, int h, int seed) {
+  std::vector<std::uint8_t> p(static_cast<std::size_t>(w * h));
+  for (std::size_t k = 0; k < p.size(); ++k) p[k] = static_cast<std::uint8_t>((k * 7 + static_cast<std::size_t>(seed)) & 0xff);
+  return p;
+}
+
+TEST(ImageTunnel, FramesSurviveReorderingAndLossIsCountedNotPublished) {
+  const int w = 100, h = 50;  // 5,000 pixels: 4 fragments
+  ASSERT_EQ(fragment_count(w, h), 4u);
+  ImageAssembler a(w, h);
+  const auto one = pattern(w, h, 1), two = pattern(w, h, 2);
+  // Frame 7 in reverse order, one fragment twice.
+  for (std::size_t i = 4; i-- > 0;) {
+    const TunnelFragment f = encode_fragment(one, w, h, 7, 123456789, i);
+    ASSERT_GT(f.size, kImageTunnelHeader);
+    EXPECT_EQ(a.add(f.view()), i == 0);
+    if (i == 2) {
+      EXPECT_FALSE(a.add(f.view()));
+    }
+  }
+  EXPECT_EQ(std::vector<std::uint8_t>(a.frame().begin(), a.frame().end()), one);
+  EXPECT_EQ(a.sequence(), 7u);
+  EXPECT_EQ(a.time_ns(), 123456789);
+  // A late duplicate of the finished frame is stale; frame 8 loses fragment 1
+  // and frame 9 arrives whole: 8 is given up.
+  EXPECT_FALSE(a.add(encode_fragment(one, w, h, 7, 123456789, 3).view()));
+  for (std::size_t i : {0u, 2u, 3u}) EXPECT_FALSE(a.add(encode_fragment(two, w, h, 8, 2, i).view()));
+  bool done = false;
+  for (std::size_t i = 0; i < 4; ++i) done = a.add(encode_fragment(two, w, h, 9, 3, i).view());
+  EXPECT_TRUE(done);
+  EXPECT_EQ(std::vector<std::uint8_t>(a.frame().begin(), a.frame().end()), two);
+  const AssemblerCounters& c = a.counters();
+  EXPECT_EQ(c.frames, 2u);
+  EXPECT_EQ(c.incomplete, 1u);
+  EXPECT_EQ(c.stale, 1u);
+  // Malformed: too short, a wrong magic, an offset that is not its index's, a
+  // frame larger than the assembler holds.
+  TunnelFragment f = encode_fragment(one, w, h, 10, 0, 1);
+  EXPECT_FALSE(a.add(std::span(f.bytes).first(20)));
+  f.bytes[20] ^= 1;
+  EXPECT_FALSE(a.add(f.view()));
+  f = encode_fragment(one, w, h, 10, 0, 1);
+  f.bytes[0] = 'X';
+  EXPECT_FALSE(a.add(f.view()));
+  EXPECT_EQ(a.counters().malformed, 3u);
+  const auto big = pattern(200, 100, 3);
+  EXPECT_FALSE(a.add(encode_fragment(big, 200, 100, 11, 0, 0).view()));
+  EXPECT_EQ(a.counters().too_large, 1u);
+  EXPECT_EQ(encode_fragment(one, w, h, 1, 0, 4).size, 0u);  // no fragment 4
+}
+
+// The driver with `input: tunnel` on loopback: frames sent as a replay sends
+// them are published reduced, a frame of another size is refused by name.
+TEST(ImageTunnel, TheDriverTakesFramesFromTheTunnel) {
+  CameraOptions o;
+  o.input = CameraInput::tunnel;
+  o.tunnel_port = 0;  // the kernel picks
+  o.width = 128;
+  o.height = 64;
+  auto made = CameraDriver::create(o);
+  ASSERT_TRUE(made.driver) << made.error;
+  CameraDriver& d = *made.driver;
+  const std::uint16_t port = d.status().tunnel_port;
+  ASSERT_NE(port, 0);
+  const int s = ::socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(port);
+  to.sin_addr.s_addr = htonl(0x7F000001u);
+  const auto send_frame = [&](const std::vector<std::uint8_t>& px, int w, int h, std::uint32_t seq) {
+    for (std::size_t i = 0; i < fragment_count(w, h); ++i) {
+      const TunnelFragment f = encode_fragment(px, w, h, seq, 0, i);
+      ::sendto(s, f.bytes.data(), f.size, 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+    }
+  };
+  const auto frame = pattern(128, 64, 5);
+  send_frame(frame, 128, 64, 1);
+  send_frame(pattern(64, 32, 6), 64, 32, 2);
+  send_frame(frame, 128, 64, 4);
+  TaskTick t;
+  for (int k = 0; k < 50 && d.status().counters.frames < 3; ++k) {
+    t.started = host_now_ns();
+    d.run(t);
+    ::usleep(2000);
+  }
+  ::close(s);
+  const CameraStatus st = d.status();
+  EXPECT_EQ(st.counters.frames, 3u);
+  EXPECT_EQ(st.counters.published, 2u);
+  EXPECT_EQ(st.counters.corrupt, 1u);
+  EXPECT_EQ(st.counters.dropped, 2u);  // 2 (refused) and 3 (never sent) between 1 and 4
+  EXPECT_NE(std::string(st.last_error.data()).find("a tunnel frame of 64 x 32 pixels"), std::string::npos);
+  const CameraFrame* f = d.frames().try_read();
+  ASSERT_NE(f, nullptr);
+  EXPECT_EQ(f->sequence, 4u);
+  // 2 x 2 averages of the pattern.
+  EXPECT_EQ(f->pixels[0], (frame[0] + frame[1] + frame[128] + frame[129] + 2) / 4);
 }
 
 }  // namespace

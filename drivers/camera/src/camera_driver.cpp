@@ -3,8 +3,10 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 
+#include "trailnav/drivers/udp/udp_receiver.hpp"
 #include "trailnav/runtime/host_clock.hpp"
 
 namespace trailnav::drivers::camera {
@@ -26,15 +28,74 @@ CameraDriver::Created CameraDriver::create(const CameraOptions& options) {
     c.driver.reset(new CameraDriver(options));
   } catch (const std::exception& e) {
     c.error = e.what();
+    return c;
+  }
+  if (options.input == CameraInput::tunnel) {
+    udp::ReceiverOptions r;
+    r.bind = {0x7F000001u, options.tunnel_port};  // loopback only
+    r.max_datagram_bytes = static_cast<int>(kImageTunnelHeader + kFragmentBytes);
+    r.batch = 64;
+    auto opened = udp::UdpReceiver::open(r);
+    if (!opened.receiver) {
+      c.error = "camera tunnel: " + opened.error;
+      c.driver.reset();
+      return c;
+    }
+    c.driver->tunnel_ = std::move(opened.receiver);
+    c.driver->local_.tunnel_port = c.driver->tunnel_->local().port;
+    c.driver->shared_.post(c.driver->local_);
   }
   return c;
 }
 
+CameraDriver::~CameraDriver() = default;
+
+int CameraDriver::wake_fd() const noexcept { return tunnel_ ? tunnel_->fd() : camera_.fd(); }
+
+void CameraDriver::run_tunnel(Nanos now) noexcept {
+  for (const udp::Datagram& d : tunnel_->receive()) {
+    if (!assembler_->add(d.payload)) continue;
+    ++local_.counters.frames;
+    last_frame_ = now;
+    local_.health = CameraHealth::streaming;
+    if (assembler_->width() != options_.width || assembler_->height() != options_.height) {
+      ++local_.counters.corrupt;
+      char b[160];
+      std::snprintf(b, sizeof b, "a tunnel frame of %d x %d pixels where camera.width x height is %d x %d",
+                    assembler_->width(), assembler_->height(), options_.width, options_.height);
+      note_error(b);
+      continue;
+    }
+    if (have_sequence_ && assembler_->sequence() > last_sequence_ + 1)
+      local_.counters.dropped += assembler_->sequence() - last_sequence_ - 1;
+    have_sequence_ = true;
+    last_sequence_ = assembler_->sequence();
+    converter_.convert(assembler_->frame(), options_.width);
+    CameraFrame& f = frames_.write_slot();
+    std::copy(converter_.grey().begin(), converter_.grey().end(), f.pixels.begin());
+    f.receive_ns = d.receive_ns;
+    f.stamp_ns = d.receive_ns;
+    f.sequence = assembler_->sequence();
+    f.start_of_exposure = false;
+    frames_.publish();
+    ++local_.counters.published;
+  }
+  local_.counters.tunnel = assembler_->counters();
+  if (local_.health == CameraHealth::streaming && now - last_frame_ > static_cast<Nanos>(options_.silence_s * 1e9)) {
+    local_.health = CameraHealth::silent;
+    ++local_.counters.lost;
+  }
+  shared_.post(local_);
+}
+
 CameraDriver::CameraDriver(const CameraOptions& options)
     : options_(options),
-      converter_(options.format, options.width, options.height, options.out_width, options.out_height),
+      // The tunnel carries grey frames whatever the camera's format was.
+      converter_(options.input == CameraInput::tunnel ? PixelFormat::grey : options.format, options.width, options.height,
+                 options.out_width, options.out_height),
       frames_(options.out_width, options.out_height) {
   error_.reserve(256);
+  if (options.input == CameraInput::tunnel) assembler_ = std::make_unique<ImageAssembler>(options.width, options.height);
 }
 
 void CameraDriver::note_error(const std::string& e) noexcept {
@@ -54,6 +115,10 @@ void CameraDriver::lose(Nanos now, const std::string& why) noexcept {
 
 void CameraDriver::run(const TaskTick& tick) {
   const Nanos now = tick.started;
+  if (tunnel_) {
+    run_tunnel(now);
+    return;
+  }
   if (!camera_.is_open()) {
     if (now >= next_open_) {
       const std::string e = camera_.open(options_);

@@ -7,6 +7,10 @@
 // damaged or not decodable, opens and losses, readable from any thread. Woken
 // by the device's descriptor (a frame ready), not by polling.
 //
+// With `input: tunnel` the frames come over UDP on loopback instead
+// (image_tunnel.hpp), grey and of the configured size, stamped when their
+// last fragment arrived; health follows them the same way.
+//
 // Opening allocates (the buffers' mappings), and libjpeg decodes MJPEG in
 // pools of its own: the task runs with normal scheduling, like the mapping
 // task, off the real-time threads.
@@ -19,10 +23,15 @@
 #include <vector>
 
 #include "trailnav/drivers/camera/frame.hpp"
+#include "trailnav/drivers/camera/image_tunnel.hpp"
 #include "trailnav/drivers/camera/v4l2_camera.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/status_board.hpp"
+
+namespace trailnav::udp {
+class UdpReceiver;
+}
 
 namespace trailnav::drivers::camera {
 
@@ -49,12 +58,14 @@ struct CameraCounters {
   std::uint64_t opens = 0;
   std::uint64_t open_failures = 0;
   std::uint64_t lost = 0;        // streaming stopped by an error or silence
+  AssemblerCounters tunnel;      // input: tunnel
 };
 
 struct CameraStatus {
   CameraHealth health = CameraHealth::no_device;
   CameraCounters counters;
   double fps = 0.0;  // what the device accepted
+  std::uint16_t tunnel_port = 0;  // input: tunnel: the port bound
   std::array<char, 200> last_error{};
 };
 
@@ -66,7 +77,8 @@ class CameraDriver final : public Task {
   static Created create(const CameraOptions& options);
 
   void run(const TaskTick& tick) override;
-  int wake_fd() const noexcept override { return camera_.fd(); }
+  int wake_fd() const noexcept override;
+  ~CameraDriver() override;
 
   Mailbox<CameraFrame>& frames() noexcept { return frames_; }
   CameraStatus status() const noexcept { return shared_.read(); }
@@ -74,12 +86,15 @@ class CameraDriver final : public Task {
 
  private:
   explicit CameraDriver(const CameraOptions& options);
+  void run_tunnel(Nanos now) noexcept;
   void note_error(const std::string& e) noexcept;
   void lose(Nanos now, const std::string& why) noexcept;
 
   CameraOptions options_;
   V4l2Camera camera_;
   FrameConverter converter_;
+  std::unique_ptr<udp::UdpReceiver> tunnel_;
+  std::unique_ptr<ImageAssembler> assembler_;
   Mailbox<CameraFrame> frames_;
   Nanos next_open_ = 0;
   Nanos last_frame_ = 0;

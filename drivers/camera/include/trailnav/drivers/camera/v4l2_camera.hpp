@@ -17,8 +17,14 @@
 
 namespace trailnav::drivers::camera {
 
+// Where frames come from: a V4L2 device, or the image tunnel on a bench
+// (image_tunnel.hpp; `trailnav replay --image-tunnel`).
+enum class CameraInput : std::uint8_t { v4l2, tunnel };
+
 struct CameraOptions {
+  CameraInput input = CameraInput::v4l2;
   std::string device = "/dev/video0";
+  std::uint16_t tunnel_port = 29538;  // tunnel: the loopback port listened on (0: the kernel picks)
   PixelFormat format = PixelFormat::yuyv;
   int width = 640, height = 480;
   double fps = 10.0;         // asked of the device (VIDIOC_S_PARM); 0: the device's own
