@@ -130,7 +130,7 @@ int run(Options& o) {
       p.series.push_back(std::move(series));
     }
     const Status st = write_plot(o.png, p);
-    if (!st.ok()) {
+    if (!st.is_ok()) {
       std::fprintf(stderr, "%s: %s\n", who, st.message().c_str());
       return 1;
     }

@@ -31,6 +31,7 @@ struct ReplayCliOptions {
   std::string can_interface;
   std::string can_tunnel = "127.0.0.1:29536";
   std::string gpio_tunnel = "127.0.0.1:29537";
+  std::string image_tunnel = "127.0.0.1:29538";
   std::vector<std::string> serial_links;
   double skip = 0.0;
   double duration = 0.0;
@@ -197,6 +198,12 @@ int run_replay(const ReplayCliOptions& o) {
     return 2;
   }
   options.gpio_tunnel = *gpio_tunnel;
+  auto image_tunnel = udp::parse_endpoint(o.image_tunnel, error);
+  if (!image_tunnel) {
+    std::fprintf(stderr, "trailnav replay: --image-tunnel: %s\n", error.c_str());
+    return 2;
+  }
+  options.image_tunnel = *image_tunnel;
   for (const std::string& f : o.faults) {
     const replay::FaultSpecResult parsed = replay::parse_fault_spec(f);
     if (!parsed.spec) {
@@ -299,6 +306,10 @@ void add_replay_command(CLI::App& app) {
   cmd->add_option("--can-tunnel", o.can_tunnel, "Where the CAN tunnel sends when there is no --can-interface")
       ->capture_default_str();
   cmd->add_option("--gpio-tunnel", o.gpio_tunnel, "Where GPIO streams (e-stop levels) are sent, as GPIO tunnel datagrams")
+      ->capture_default_str();
+  cmd->add_option("--image-tunnel", o.image_tunnel,
+                  "Where image streams (camera frames) are sent, as image tunnel fragments (trailnavd's camera.input: "
+                  "tunnel)")
       ->capture_default_str();
   cmd->add_option("--serial-link", o.serial_links, "STREAM=PATH: a symlink to the stream's pseudo-terminal (repeatable)");
   cmd->add_option("--skip", o.skip, "Start this many seconds into the recording")->check(CLI::NonNegativeNumber);

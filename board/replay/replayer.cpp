@@ -65,6 +65,21 @@ struct GpioTunnelOutput final : Replayer::Output {
   }
 };
 
+// A camera frame as the image tunnel's fragments, back to back.
+struct ImageTunnelOutput final : Replayer::Output {
+  std::shared_ptr<udp::UdpSender> sender;
+  bool send(const recording::Event& e) override {
+    const std::size_t n = drivers::camera::fragment_count(e.image_width, e.image_height);
+    if (n == 0) return false;
+    for (std::size_t i = 0; i < n; ++i) {
+      const drivers::camera::TunnelFragment f = drivers::camera::encode_fragment(
+          e.payload, e.image_width, e.image_height, e.image_sequence, e.time_ns, i);
+      if (f.size == 0 || !sender->send(f.view())) return false;
+    }
+    return true;
+  }
+};
+
 struct CanTunnelOutput final : Replayer::Output {
   std::shared_ptr<udp::UdpSender> sender;
   bool send(const recording::Event& e) override { return sender->send(can::encode_tunnel(*e.can).view()); }
@@ -195,6 +210,7 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
 
   std::shared_ptr<udp::UdpSender> tunnel;
   std::shared_ptr<udp::UdpSender> gpio_tunnel;
+  std::shared_ptr<udp::UdpSender> image_tunnel;
   for (const recording::StreamInfo& s : r->reader_->streams()) {
     StreamReport report;
     report.name = s.name;
@@ -265,6 +281,19 @@ Replayer::Created Replayer::create(const std::string& path, const ReplayOptions&
       auto out = std::make_unique<GpioTunnelOutput>();
       out->sender = gpio_tunnel;
       report.target = "gpio-tunnel udp " + udp::format_endpoint(options.gpio_tunnel);
+      r->outputs_.push_back(std::move(out));
+    } else if (s.kind == StreamKind::image) {
+      if (!image_tunnel) {
+        auto sender = udp::UdpSender::open(options.image_tunnel);
+        if (!sender.sender) {
+          result.error = "image tunnel: " + sender.error;
+          return result;
+        }
+        image_tunnel = std::move(sender.sender);
+      }
+      auto out = std::make_unique<ImageTunnelOutput>();
+      out->sender = image_tunnel;
+      report.target = "image-tunnel udp " + udp::format_endpoint(options.image_tunnel);
       r->outputs_.push_back(std::move(out));
     } else {
       auto out = std::make_unique<PtyOutput>();

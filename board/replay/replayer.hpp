@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "faults.hpp"
+#include "trailnav/drivers/camera/image_tunnel.hpp"
 #include "trailnav/drivers/gpio/line_tunnel.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_sender.hpp"
@@ -24,7 +25,8 @@
 namespace trailnav::replay {
 
 // CAN frames go out as trailnav's tunnel datagrams (trailnav/drivers/can/frame.hpp),
-// GPIO levels as GPIO tunnel datagrams (trailnav/drivers/gpio/line_tunnel.hpp).
+// GPIO levels as GPIO tunnel datagrams (trailnav/drivers/gpio/line_tunnel.hpp),
+// camera frames as image tunnel fragments (trailnav/drivers/camera/image_tunnel.hpp).
 inline constexpr std::uint16_t kDefaultCanTunnelPort = can::kDefaultTunnelPort;
 inline constexpr std::uint16_t kDefaultGpioTunnelPort = gpio::kDefaultTunnelPort;
 
@@ -39,6 +41,7 @@ struct ReplayOptions {
   std::string can_interface;                          // SocketCAN interface; empty: the UDP tunnel
   udp::Endpoint can_tunnel{0x7F000001u, kDefaultCanTunnelPort};
   udp::Endpoint gpio_tunnel{0x7F000001u, kDefaultGpioTunnelPort};
+  udp::Endpoint image_tunnel{0x7F000001u, drivers::camera::kDefaultImageTunnelPort};  // camera frames (image streams)
   std::map<std::string, std::string> serial_links;    // per stream name: a symlink to its pseudo-terminal
   double skip_s = 0.0;      // start this far into the recording
   double duration_s = 0.0;  // replay only this much (0: all)

@@ -149,9 +149,9 @@ TEST(PlaceEvalCli, BadInputIsRefusedWithItsReason) {
   std::filesystem::create_directories(dir / "a");
   std::filesystem::create_directories(dir / "b");
   std::vector<std::uint8_t> grey(64 * 32, 100), other(32 * 32, 100);
-  ASSERT_TRUE(cli::write_png((dir / "a" / "0001.png").string(), 64, 32, cli::PngColor::grey, grey).ok());
-  ASSERT_TRUE(cli::write_png((dir / "a" / "0002.png").string(), 32, 32, cli::PngColor::grey, other).ok());
-  ASSERT_TRUE(cli::write_png((dir / "b" / "0001.png").string(), 64, 32, cli::PngColor::grey, grey).ok());
+  ASSERT_TRUE(cli::write_png((dir / "a" / "0001.png").string(), 64, 32, cli::PngColor::grey, grey).is_ok());
+  ASSERT_TRUE(cli::write_png((dir / "a" / "0002.png").string(), 32, 32, cli::PngColor::grey, other).is_ok());
+  ASSERT_TRUE(cli::write_png((dir / "b" / "0001.png").string(), 64, 32, cli::PngColor::grey, grey).is_ok());
   std::string out;
   EXPECT_EQ(run({"place-eval", (dir / "a").string(), (dir / "b").string(), "--quiet"}, out), 1);
   EXPECT_NE(out.find("0002.png: 32 x 32 pixels where the sequence's first image has 64 x 32"), std::string::npos) << out;

@@ -20,6 +20,8 @@
 #include "replayer.hpp"
 #include "collecting_sink.hpp"
 #include "test_data.hpp"
+#include "trailnav/drivers/camera/camera_driver.hpp"
+#include "trailnav/drivers/camera/image_file.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
 #include "trailnav/drivers/udp/udp_receiver.hpp"
 #include "trailnav/drivers/udp/udp_sender.hpp"
@@ -572,6 +574,100 @@ TEST(Replay, CanTunnelDatagramsRoundTrip) {
   broken = bytes;
   broken.bytes[0] = 'X';
   EXPECT_FALSE(can::decode_tunnel(broken.view(), back));
+}
+
+}  // namespace
+}  // namespace trailnav
+
+namespace trailnav {
+namespace {
+
+// Camera frames in a recording (images/<name>.log and its PNG files): real
+// Nordland frames written and read back pixel for pixel, a bad line and a
+// missing file counted and named; then replayed through the image tunnel
+// into the camera driver (`camera.input: tunnel`), which publishes each one.
+TEST(ImageStream, RecordedFramesReadBackAndReplayIntoTheCameraDriver) {
+  namespace camera = drivers::camera;
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("image-stream-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::vector<std::vector<std::uint8_t>> frames;
+  {
+    auto made = recording::RecordingWriter::create(dir.string(), "image stream test");
+    ASSERT_TRUE(made.writer) << made.error;
+    const int cam = made.writer->add_image_stream("camera");
+    for (int k = 0; k < 12; ++k) {
+      char name[96];
+      std::snprintf(name, sizeof name, "nordland/winter/images-%05d.png", 5000 + 10 * k);
+      const camera::ImageRead r = camera::read_grey_image(test::shared_data(name));
+      ASSERT_TRUE(r.ok()) << r.error;
+      frames.push_back(r.image.pixels);
+      ASSERT_TRUE(made.writer->write_image(cam, 1'000'000'000'000 + k * 100'000'000LL, static_cast<std::uint32_t>(100 + k),
+                                           r.image.pixels, 64, 32));
+    }
+    EXPECT_FALSE(made.writer->write_image(cam, 0, 1, frames[0], 64, 64).is_ok());  // too few bytes for 64 x 64
+    ASSERT_TRUE(made.writer->close());
+  }
+  {
+    auto opened = recording::RecordingReader::open(dir.string());
+    ASSERT_TRUE(opened.reader) << opened.error;
+    std::size_t k = 0;
+    while (auto e = opened.reader->next()) {
+      ASSERT_EQ(e->kind, recording::StreamKind::image);
+      ASSERT_LT(k, frames.size());
+      EXPECT_EQ(e->image_width, 64);
+      EXPECT_EQ(e->image_sequence, 100 + k);
+      EXPECT_EQ(std::vector<std::uint8_t>(e->payload.begin(), e->payload.end()), frames[k]);
+      ++k;
+    }
+    EXPECT_EQ(k, frames.size());
+  }
+  // Replayed at 4x into the driver.
+  camera::CameraOptions o;
+  o.input = camera::CameraInput::tunnel;
+  o.tunnel_port = 0;
+  o.width = 64;
+  o.height = 32;
+  auto made = camera::CameraDriver::create(o);
+  ASSERT_TRUE(made.driver) << made.error;
+  replay::ReplayOptions options;
+  options.image_tunnel = {0x7F000001u, made.driver->status().tunnel_port};
+  options.rate = 4.0;
+  auto created = replay::Replayer::create(dir.string(), options);
+  ASSERT_TRUE(created.replayer) << created.error;
+  std::atomic<bool> done{false};
+  std::vector<std::vector<std::uint8_t>> got;
+  std::thread consumer([&] {
+    TaskTick t;
+    for (;;) {
+      const bool finished = done.load();
+      t.started = host_now_ns();
+      made.driver->run(t);
+      if (const camera::CameraFrame* f = made.driver->frames().try_read()) got.push_back(f->pixels);
+      if (finished) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  });
+  const replay::ReplayReport report = created.replayer->run();
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  done.store(true);
+  consumer.join();
+  EXPECT_EQ(made.driver->status().counters.published, frames.size());
+  EXPECT_EQ(made.driver->status().counters.dropped, 0u);
+  ASSERT_EQ(got.size(), frames.size());  // 25 ms apart at 4x: each read before the next
+  EXPECT_EQ(got.back(), frames.back());
+  // A bad line and a missing frame are skipped, counted and named.
+  {
+    std::ofstream log(dir / "images" / "camera.log", std::ios::app);
+    log << "(1000000002.000000) x 1.png\n(1000000002.100000) 7 missing.png\n";
+  }
+  auto opened = recording::RecordingReader::open(dir.string());
+  ASSERT_TRUE(opened.reader);
+  while (opened.reader->next()) {
+  }
+  EXPECT_EQ(opened.reader->counters().bad_lines, 2u);
+  EXPECT_NE(opened.reader->first_problem().find("camera.log:13: the sequence 'x'"), std::string::npos)
+      << opened.reader->first_problem();
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

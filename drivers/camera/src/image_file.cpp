@@ -41,6 +41,24 @@ ImageRead read_grey_image(const std::string& path, std::uint64_t max_pixels) {
   return out;
 }
 
+std::string write_grey_png(const std::string& path, std::span<const std::uint8_t> grey, int width, int height) {
+  if (width < 1 || height < 1 || grey.size() < static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+    return path + ": " + std::to_string(grey.size()) + " bytes are no " + std::to_string(width) + " x " +
+           std::to_string(height) + " grey image";
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  image.width = static_cast<png_uint_32>(width);
+  image.height = static_cast<png_uint_32>(height);
+  image.format = PNG_FORMAT_GRAY;
+  if (png_image_write_to_file(&image, path.c_str(), 0, grey.data(), width, nullptr) == 0) {
+    std::string e = path + ": cannot write the PNG (" + image.message + ")";
+    png_image_free(&image);
+    return e;
+  }
+  return "";
+}
+
 ImageList list_images(const std::string& directory) {
   namespace fs = std::filesystem;
   ImageList out;

@@ -12,11 +12,13 @@
 #include <map>
 
 #include "trailnav/drivers/capture/capture_reader.hpp"
+#include "trailnav/drivers/camera/image_file.hpp"
 #include "trailnav/drivers/gpio/line_tunnel.hpp"
 #include "trailnav/drivers/velodyne/packet.hpp"
 #include "trailnav/runtime/config.hpp"
 
 namespace trailnav::recording {
+namespace camera = trailnav::drivers::camera;
 namespace {
 
 namespace fs = std::filesystem;
@@ -118,6 +120,8 @@ const char* stream_kind_name(StreamKind kind) noexcept {
       return "serial";
     case StreamKind::gpio:
       return "gpio";
+    case StreamKind::image:
+      return "image";
   }
   return "?";
 }
@@ -141,11 +145,12 @@ ManifestResult load_manifest(const std::string& path) {
         s.fail("name", info.name.empty() ? "must not be empty" : "'" + info.name + "' names two streams");
       }
       names[info.name] = 1;
-      const std::string kind = s.choice("kind", {"udp", "can", "serial", "gpio"});
+      const std::string kind = s.choice("kind", {"udp", "can", "serial", "gpio", "image"});
       info.kind = kind == "udp"      ? StreamKind::udp
                   : kind == "can"    ? StreamKind::can
                   : kind == "serial" ? StreamKind::serial
-                                     : StreamKind::gpio;
+                  : kind == "gpio"   ? StreamKind::gpio
+                                     : StreamKind::image;
       info.file = s.string("file");
       if (info.file.empty() || info.file.front() == '/' || info.file.find("..") != std::string::npos) {
         s.fail("file", "must be a path inside the recording directory");
@@ -337,6 +342,46 @@ bool parse_gpio_line(std::string_view line, std::int64_t& time_ns, std::string& 
   return true;
 }
 
+bool parse_image_line(std::string_view line, std::int64_t& time_ns, std::uint32_t& sequence, std::string& file,
+                      std::string& error) {
+  while (!line.empty() && (line.back() == '\r' || line.back() == '\n' || line.back() == ' ')) line.remove_suffix(1);
+  if (!parse_stamp(line, time_ns, error)) return false;
+  const std::size_t space = line.find(' ');
+  if (space == std::string_view::npos || space == 0) {
+    error = "expected 'SEQUENCE FILE' after the time";
+    return false;
+  }
+  std::uint64_t seq = 0;
+  for (char c : line.substr(0, space)) {
+    if (c < '0' || c > '9' || seq > 0xFFFFFFFFull / 10) {
+      error = "the sequence '" + std::string(line.substr(0, space)) + "' is not a number of 0 to 4294967295";
+      return false;
+    }
+    seq = seq * 10 + static_cast<std::uint64_t>(c - '0');
+  }
+  if (seq > 0xFFFFFFFFull) {
+    error = "the sequence is larger than 4294967295";
+    return false;
+  }
+  const std::string_view f = line.substr(space + 1);
+  if (f.empty() || f.find('/') != std::string_view::npos || f.find(' ') != std::string_view::npos || f == "." || f == "..") {
+    error = "the frame's file must be a plain name in the stream's directory";
+    return false;
+  }
+  sequence = static_cast<std::uint32_t>(seq);
+  file.assign(f);
+  return true;
+}
+
+std::string format_image_line(std::int64_t time_ns, std::uint32_t sequence, std::string_view file) {
+  std::string out = format_stamp(time_ns);
+  out += ' ';
+  out += std::to_string(sequence);
+  out += ' ';
+  out += file;
+  return out;
+}
+
 std::string format_gpio_line(std::int64_t time_ns, std::string_view name, bool value) {
   std::string out = format_stamp(time_ns);
   out += ' ';
@@ -507,6 +552,40 @@ struct RecordingReader::GpioSource final : LineSource {
   }
 };
 
+struct RecordingReader::ImageSource final : LineSource {
+  int stream = 0;
+  std::string directory;  // images/<name>/ next to the log
+  camera::GreyImage image;
+
+  bool advance(RecordingReader& reader) override {
+    std::string error, name;
+    while (next_line()) {
+      std::int64_t t = 0;
+      std::uint32_t sequence = 0;
+      if (!parse_image_line(line, t, sequence, name, error)) {
+        problem(reader, error);
+        continue;
+      }
+      camera::ImageRead read = camera::read_grey_image((fs::path(directory) / name).string());
+      if (!read.ok()) {
+        problem(reader, read.error);
+        continue;
+      }
+      image = std::move(read.image);
+      event = Event{};
+      event.time_ns = t;
+      event.stream = stream;
+      event.kind = StreamKind::image;
+      event.payload = image.pixels;
+      event.image_width = image.width;
+      event.image_height = image.height;
+      event.image_sequence = sequence;
+      return true;
+    }
+    return false;
+  }
+};
+
 void RecordingReader::note_problem(const std::string& problem) {
   ++counters_.bad_lines;
   if (first_problem_.empty()) first_problem_ = problem;
@@ -595,10 +674,19 @@ RecordingReader::Opened RecordingReader::open(const std::string& path) {
       if (!source->open_file(file, result.error)) return result;
       source->stream = static_cast<int>(i);
       r->sources_.push_back(std::move(source));
-    } else {
+    } else if (s.kind == StreamKind::gpio) {
       auto source = std::make_unique<GpioSource>();
       if (!source->open_file(file, result.error)) return result;
       source->stream = static_cast<int>(i);
+      r->sources_.push_back(std::move(source));
+    } else {
+      auto source = std::make_unique<ImageSource>();
+      if (!source->open_file(file, result.error)) return result;
+      source->stream = static_cast<int>(i);
+      // images/<name>.log -> images/<name>/
+      fs::path dir = fs::path(file);
+      dir.replace_extension();
+      source->directory = dir.string();
       r->sources_.push_back(std::move(source));
     }
   }
@@ -623,7 +711,7 @@ std::optional<Event> RecordingReader::next() {
   // Hand out the event, then let its source read ahead into its other buffer.
   current_ = best->event;
   current_bytes_.assign(best->event.payload.begin(), best->event.payload.end());
-  current_.payload = current_bytes_;
+  current_.payload = current_bytes_;  // (an image's pixels too: they stay valid until the next call)
   if (best->event.can != nullptr) {
     current_can_ = *best->event.can;
     current_.can = &current_can_;
@@ -679,7 +767,7 @@ RecordingWriter::~RecordingWriter() {
 }
 
 int RecordingWriter::add_stream(StreamInfo info) {
-  if (info.kind == StreamKind::serial || info.kind == StreamKind::gpio) {
+  if (info.kind == StreamKind::serial || info.kind == StreamKind::gpio || info.kind == StreamKind::image) {
     serial_.push_back(std::fopen((fs::path(directory_) / info.file).c_str(), "w"));
   } else {
     serial_.push_back(nullptr);
@@ -830,6 +918,35 @@ Status RecordingWriter::write_gpio(int stream, std::int64_t time_ns, std::string
   std::FILE* f = serial_[static_cast<std::size_t>(stream)];
   if (f == nullptr) return Status::error("cannot write the GPIO log of stream " + std::to_string(stream));
   std::fprintf(f, "%s\n", format_gpio_line(time_ns, line, value).c_str());
+  return Status::ok();
+}
+
+int RecordingWriter::add_image_stream(const std::string& name, const std::string& description) {
+  std::error_code ec;
+  fs::create_directories(fs::path(directory_) / "images" / name, ec);
+  StreamInfo s;
+  s.name = name;
+  s.kind = StreamKind::image;
+  s.file = "images/" + name + ".log";
+  s.description = description;
+  return add_stream(std::move(s));
+}
+
+Status RecordingWriter::write_image(int stream, std::int64_t time_ns, std::uint32_t sequence,
+                                    std::span<const std::uint8_t> grey, int width, int height) {
+  if (stream < 0 || static_cast<std::size_t>(stream) >= manifest_.streams.size() ||
+      manifest_.streams[static_cast<std::size_t>(stream)].kind != StreamKind::image) {
+    return Status::error("write_image: stream " + std::to_string(stream) + " is not an image stream");
+  }
+  std::FILE* f = serial_[static_cast<std::size_t>(stream)];
+  if (f == nullptr) return Status::error("cannot write the image log of stream " + std::to_string(stream));
+  const StreamInfo& info = manifest_.streams[static_cast<std::size_t>(stream)];
+  char name[32];
+  std::snprintf(name, sizeof name, "%010u.png", sequence);
+  const std::string e =
+      camera::write_grey_png((fs::path(directory_) / "images" / info.name / name).string(), grey, width, height);
+  if (!e.empty()) return Status::error("write_image: " + e);
+  std::fprintf(f, "%s\n", format_image_line(time_ns, sequence, name).c_str());
   return Status::ok();
 }
 

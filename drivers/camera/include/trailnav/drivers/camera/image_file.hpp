@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,10 @@ struct ImageRead {
 // One image file. Refuses what is not a PNG, is truncated or corrupt, or
 // larger than max_pixels (a bound on memory: 64 M pixels by default).
 ImageRead read_grey_image(const std::string& path, std::uint64_t max_pixels = 64ULL << 20);
+
+// A grey image (width x height bytes, row-major) as an 8-bit grey PNG.
+// "" or the error, naming the file.
+std::string write_grey_png(const std::string& path, std::span<const std::uint8_t> grey, int width, int height);
 
 struct ImageList {
   std::vector<std::string> paths;  // sorted by file name

@@ -6,6 +6,8 @@
 //   can.log             CAN frames, can-utils candump log format
 //   serial/<name>.log   serial byte streams: "(seconds.micros) HEXBYTES" per read
 //   gpio/<name>.log     GPIO line levels: "(seconds.micros) LINE 0|1" per change
+//   images/<name>.log   camera frames: "(seconds.micros) SEQUENCE FILE" per frame,
+//   images/<name>/      the frames, grey PNG files
 //
 // A bare pcap, pcapng or raw Velodyne file is read as a recording of its UDP
 // streams alone. Offline tooling: allocates freely.
@@ -26,7 +28,7 @@
 
 namespace trailnav::recording {
 
-enum class StreamKind : std::uint8_t { udp, can, serial, gpio };
+enum class StreamKind : std::uint8_t { udp, can, serial, gpio, image };
 const char* stream_kind_name(StreamKind kind) noexcept;
 
 struct StreamInfo {
@@ -75,22 +77,32 @@ std::string format_serial_line(std::int64_t time_ns, std::span<const std::uint8_
 bool parse_gpio_line(std::string_view line, std::int64_t& time_ns, std::string& name, bool& value, std::string& error);
 std::string format_gpio_line(std::int64_t time_ns, std::string_view name, bool value);
 
+// One line of an image log, "(1436509052.249713) 42 000042.png": the frame's
+// time (its camera timestamp), the camera's sequence number and the PNG file
+// in the stream's directory (images/<name>/; a plain name, no directories).
+bool parse_image_line(std::string_view line, std::int64_t& time_ns, std::uint32_t& sequence, std::string& file,
+                      std::string& error);
+std::string format_image_line(std::int64_t time_ns, std::uint32_t sequence, std::string_view file);
+
 // One record of a recording, in time order over all streams.
 struct Event {
   std::int64_t time_ns = 0;
   int stream = 0;  // index into streams()
   StreamKind kind = StreamKind::udp;
-  std::span<const std::uint8_t> payload;  // udp and serial: the bytes; gpio: the line name; valid until the next call
+  std::span<const std::uint8_t> payload;  // udp and serial: the bytes; gpio: the line name; image: the grey pixels;
+                                          // valid until the next call
   std::uint32_t source_ip = 0;            // udp
   std::uint16_t source_port = 0;          // udp
   const CanFrame* can = nullptr;          // can
   bool gpio_value = false;                // gpio: the line's level
+  int image_width = 0, image_height = 0;  // image
+  std::uint32_t image_sequence = 0;       // image: the camera's frame number
 };
 
 struct ReaderCounters {
   std::uint64_t events = 0;
   std::uint64_t unassigned_udp = 0;  // datagrams to a port no stream claims: skipped
-  std::uint64_t bad_lines = 0;       // unparsable CAN, serial or GPIO log lines: skipped
+  std::uint64_t bad_lines = 0;       // unparsable CAN, serial, GPIO or image log lines, unreadable frames: skipped
 };
 
 class RecordingReader {
@@ -121,6 +133,7 @@ class RecordingReader {
   struct CanSource;
   struct SerialSource;
   struct GpioSource;
+  struct ImageSource;
 
   void note_problem(const std::string& problem);
 
@@ -151,6 +164,8 @@ class RecordingWriter {
   int add_can_stream(const std::string& name, const std::string& interface, const std::string& description = "");
   int add_serial_stream(const std::string& name, int baud, const std::string& description = "");
   int add_gpio_stream(const std::string& name, const std::string& description = "");
+  // Camera frames: images/<name>.log and the PNG files in images/<name>/.
+  int add_image_stream(const std::string& name, const std::string& description = "");
 
   // A UDP datagram from source to 127.0.0.1:<the stream's port>.
   Status write_udp(int stream, std::int64_t time_ns, std::span<const std::uint8_t> payload,
@@ -158,6 +173,9 @@ class RecordingWriter {
   Status write_can(int stream, const CanFrame& frame);
   Status write_serial(int stream, std::int64_t time_ns, std::span<const std::uint8_t> bytes);
   Status write_gpio(int stream, std::int64_t time_ns, std::string_view line, bool value);
+  // A grey frame (width x height), stamped with the camera's time.
+  Status write_image(int stream, std::int64_t time_ns, std::uint32_t sequence, std::span<const std::uint8_t> grey,
+                     int width, int height);
   Status close();
 
  private:
