@@ -1,5 +1,5 @@
 // `trailnav place-eval DATABASE QUERY [--ground-truth CSV] [--tolerance N]
-// [--report json]`: camera place recognition across seasons (thesis chapter
+// [--report json]` and `trailnav place-map RECORDING --out DB`: camera place recognition across seasons (thesis chapter
 // 5) measured on two image sequences, side by side with SeqSLAM
 // (board/eval/place_eval.hpp, docs/place.md).
 #include <cmath>
@@ -12,6 +12,7 @@
 
 #include "commands.hpp"
 #include "place_eval.hpp"
+#include "place_map.hpp"
 #include "plot.hpp"
 #include "terminal.hpp"
 
@@ -178,6 +179,51 @@ int run(Options& o) {
   return 0;
 }
 
+struct MapOptions {
+  eval::PlaceMapOptions map;
+  std::string out;
+  bool quiet = false;
+};
+
+int run_map(MapOptions& o) {
+  const char* who = "trailnav place-map";
+  if (o.out.empty()) {
+    std::fprintf(stderr, "%s: --out DB is required\n", who);
+    return 2;
+  }
+  if (o.map.width < 4 || o.map.height < 4 || !(o.map.every_m >= 0.0)) {
+    std::fprintf(stderr, "%s: --width and --height must be at least 4 pixels and --every not negative\n", who);
+    return 2;
+  }
+  std::unique_ptr<ProgressBar> bar;
+  if (!o.quiet) {
+    bar = std::make_unique<ProgressBar>("place map", 100.0, "%");
+    o.map.progress = [&](double f) { bar->update(100.0 * f); };
+  }
+  eval::PlaceMapReport r;
+  try {
+    r = eval::make_place_map(o.map);
+  } catch (const std::exception& e) {
+    r.error = e.what();
+  }
+  if (bar) bar->finish();
+  if (!r.error.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
+    return 1;
+  }
+  const std::string e = perception::place::save_place_database(r.database, o.out);
+  if (!e.empty()) {
+    std::fprintf(stderr, "%s: %s\n", who, e.c_str());
+    return 1;
+  }
+  const auto& db = r.database;
+  std::printf("place database %s: %zu images of %zu frames (%zu without a pose, %zu closer than %.2f m), %.1f m of path\n",
+              o.out.c_str(), db.entries.size(), r.frames, r.without_pose, r.too_close, o.map.every_m, r.path_m);
+  std::printf("  descriptors: %d x %d frames, %d-pixel patches, %d values (%d bytes an image); poses from %s\n", db.width,
+              db.height, db.hog.patch, db.length, db.length + 48, r.pose_source.c_str());
+  return 0;
+}
+
 }  // namespace
 
 void add_place_commands(CLI::App& app) {
@@ -227,9 +273,33 @@ void add_place_commands(CLI::App& app) {
   cmd->add_option("--peak-radius", e.peak_radius, "A match is the largest belief within this many database images")->capture_default_str();
   cmd->add_option("--zca-epsilon", e.zca_epsilon, "ZCA's epsilon as a fraction of the covariance's mean eigenvalue")->capture_default_str();
   cmd->add_flag("--zca-after-columns", e.zca_after_columns, "Eq. 5.3 before ZCA (by default ZCA replaces it)");
+  cmd->add_flag("--zca-from-database", e.zca_from_database,
+                "Learn ZCA's whitening from the database against itself instead of from the queries (what a robot "
+                "has before it drives)");
   cmd->add_flag("--no-seqslam", o.no_seqslam, "Leave SeqSLAM out");
   cmd->add_flag("--quiet", o.quiet, "No progress bars");
   cmd->callback([] { std::exit(run(o)); });
+
+  auto* map = app.add_subcommand(
+      "place-map",
+      "A place database for trailnavd's place task from a recording's camera frames (an image stream) and the\n"
+      "poses the robot had when it took them: a simulated recording's true trajectory (simulated truth), or\n"
+      "--poses CSV `time,x,y,yaw[,lat,lon]` (seconds since the epoch, metres, radians, degrees) from whatever\n"
+      "localised that drive. Frames are reduced to --width x --height (the camera's out_width x out_height) and\n"
+      "described as place-eval describes them; one is kept every --every metres. docs/place.md.\n"
+      "Example:\n"
+      "  trailnav place-map build/sim/meadow --out meadow.tnplace --every 2");
+  static MapOptions m;
+  map->add_option("recording", m.map.recording, "A recording directory with an image stream")->required();
+  map->add_option("--out", m.out, "The database file to write (.tnplace)")->required();
+  map->add_option("--camera", m.map.camera, "The image stream's name (default: the recording's only one)");
+  map->add_option("--poses", m.map.poses, "CSV of the drive's poses: time,x,y,yaw[,lat,lon] (default: the simulated truth)");
+  map->add_option("--every", m.map.every_m, "Keep a frame every this many metres driven (0: every frame)")->capture_default_str();
+  map->add_option("--width", m.map.width, "Frame width the descriptors are computed on")->capture_default_str();
+  map->add_option("--height", m.map.height, "Frame height the descriptors are computed on")->capture_default_str();
+  map->add_option("--hog-patch", m.map.hog.patch, "HOG patch side (0: auto, as place-eval)")->capture_default_str();
+  map->add_flag("--quiet", m.quiet, "No progress bar");
+  map->callback([] { std::exit(run_map(m)); });
 }
 
 }  // namespace trailnav::cli

@@ -267,6 +267,8 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
   std::vector<float> f(static_cast<std::size_t>(hog.length()));
   const auto len = static_cast<Eigen::Index>(hog.length());
   place::Matrix s;
+  place::Matrix dd_keep;
+  place::CompactDescriptors cd_keep;
   {
     place::Matrix dq(static_cast<Eigen::Index>(r.query_images), len), dd(static_cast<Eigen::Index>(kept.size()), len);
     place::CompactDescriptors cq, cd;
@@ -292,6 +294,10 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
     t0 = std::chrono::steady_clock::now();
     s = o.compact ? place::cosine_similarities(cq, cd) : place::cosine_similarities(dq, dd);
     r.seconds_similarity = seconds_since(t0);
+    if (o.zca_from_database) {
+      dd_keep = std::move(dd);
+      cd_keep = std::move(cd);
+    }
   }
   const auto finish = [&](const std::string& name, std::vector<place::Match> scored, bool already_swept,
                           place::PrCurve curve, std::vector<place::Match> best) {
@@ -361,7 +367,10 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
   {
     t0 = std::chrono::steady_clock::now();
     place::Matrix l;
-    if (o.zca_after_columns) {
+    if (o.zca_from_database) {
+      const place::Matrix dd = o.compact ? place::cosine_similarities(cd_keep, cd_keep) : place::cosine_similarities(dd_keep, dd_keep);
+      l = place::zca_whiten_with(dd, s, o.zca_epsilon);
+    } else if (o.zca_after_columns) {
       place::Matrix c = s;
       place::normalise_columns(c);
       l = place::zca_whiten(c, o.zca_epsilon);

@@ -46,7 +46,8 @@ struct PlaceEvalOptions {
   perception::place::SequenceConfig sequence;
   int peak_radius = 50;  // a peak is the largest belief within ±this many database images
   double zca_epsilon = 0.1;  // relative to Σ's mean eigenvalue
-  bool zca_after_columns = false;  // Eq. 5.3, then ZCA, then Eq. 5.4 (the other order, measured)
+  bool zca_after_columns = false;
+  bool zca_from_database = false;  // Σ from the database against itself, not from the queries (what a robot has)  // Eq. 5.3, then ZCA, then Eq. 5.4 (the other order, measured)
   bool seqslam = true;
   SeqSlamConfig seqslam_config;
   std::function<void(const std::string& stage, double fraction)> progress;

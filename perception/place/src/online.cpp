@@ -36,6 +36,15 @@ bool OnlinePlace::add_database(std::span<const float> descriptor) noexcept {
   return true;
 }
 
+bool OnlinePlace::add_database_code(std::span<const std::uint8_t> code, float norm) noexcept {
+  const auto len = static_cast<std::size_t>(hog_.length());
+  if (count_ >= capacity_ || code.size() != len) return false;
+  std::copy(code.begin(), code.end(), codes_.begin() + static_cast<long>(count_ * len));
+  norms_[count_] = norm;
+  ++count_;
+  return true;
+}
+
 void OnlinePlace::finish_database() noexcept {
   const auto len = static_cast<std::size_t>(hog_.length());
   // The priors: each image's mean similarity to the others (O(n_D²), once).

@@ -104,4 +104,23 @@ Matrix zca_whiten(const Matrix& s, double epsilon_relative) {
   return out.cast<float>();
 }
 
+Matrix zca_whiten_with(const Matrix& reference, const Matrix& s, double epsilon_relative) {
+  using MatrixD = Eigen::MatrixXd;
+  const Eigen::Index n_r = reference.rows();
+  const Eigen::Index n_d = reference.cols();
+  MatrixD centred = reference.cast<double>();
+  const Eigen::RowVectorXd mean = centred.colwise().mean();
+  centred.rowwise() -= mean;
+  const double rows = static_cast<double>(std::max<Eigen::Index>(n_r, 1));
+  const MatrixD sigma = centred.transpose() * centred / rows;
+  Eigen::SelfAdjointEigenSolver<MatrixD> eig(sigma);
+  const Eigen::VectorXd lambda = eig.eigenvalues().array().max(0.0).matrix();
+  const double epsilon = epsilon_relative * lambda.sum() / static_cast<double>(std::min(n_r, n_d));
+  const Eigen::VectorXd g = (lambda.array() + epsilon).rsqrt().matrix();
+  const MatrixD& u = eig.eigenvectors();
+  MatrixD q = s.cast<double>();
+  q.rowwise() -= mean;
+  return (q * (u * g.asDiagonal() * u.transpose())).cast<float>();
+}
+
 }  // namespace trailnav::perception::place

@@ -57,6 +57,12 @@ class Reader {
     pos_ += n;
     return true;
   }
+  bool bytes(std::size_t n, std::vector<std::uint8_t>& v) {
+    if (left() < n) return false;
+    v.assign(d_.data() + pos_, d_.data() + pos_ + n);
+    pos_ += n;
+    return true;
+  }
   std::size_t left() const noexcept { return d_.size() - pos_; }
   std::size_t pos() const noexcept { return pos_; }  // bytes read so far
 

@@ -50,6 +50,8 @@ class OnlinePlace {
   // descriptor's length is not this one's. Then finish_database() once (it
   // computes the priors of Eq. 5.3 and starts the filter).
   bool add_database(std::span<const float> descriptor) noexcept;
+  // The same from a stored code (database.hpp) and its length.
+  bool add_database_code(std::span<const std::uint8_t> code, float norm) noexcept;
   void finish_database() noexcept;
 
   // The descriptor of a grey frame (width x height, `stride` bytes a row).

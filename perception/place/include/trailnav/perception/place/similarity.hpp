@@ -67,4 +67,10 @@ void stretch_rows(Matrix& s);
 // eigenvectors of Ŝ Ŝᵀ).
 Matrix zca_whiten(const Matrix& s, double epsilon_relative);
 
+// The whitening learnt from `reference` (rows: other queries of the same
+// database, e.g. the database against itself) applied to `s`: centred with
+// the reference's column means, Σ from the reference's rows. What a robot
+// can do before it has driven (it has no queries yet).
+Matrix zca_whiten_with(const Matrix& reference, const Matrix& s, double epsilon_relative);
+
 }  // namespace trailnav::perception::place

@@ -1,0 +1,137 @@
+#include "trailnav/perception/place/database.hpp"
+
+#include <zlib.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+#include "trailnav/runtime/atomic_file.hpp"
+#include "trailnav/runtime/le_bytes.hpp"
+
+namespace trailnav::perception::place {
+namespace {
+
+constexpr char kMagic[8] = {'T', 'N', 'P', 'L', 'A', 'C', 'E', '\0'};
+
+std::uint32_t crc_of(std::span<const std::uint8_t> bytes) {
+  return static_cast<std::uint32_t>(crc32(0L, bytes.data(), static_cast<uInt>(bytes.size())));
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> serialize_place_database(const PlaceDatabase& db) {
+  std::vector<std::uint8_t> out(kMagic, kMagic + sizeof kMagic);
+  le::put_u32(out, kPlaceFileVersion);
+  le::put_u16(out, static_cast<std::uint16_t>(db.width));
+  le::put_u16(out, static_cast<std::uint16_t>(db.height));
+  le::put_u16(out, static_cast<std::uint16_t>(db.hog.patch));
+  le::put_u16(out, static_cast<std::uint16_t>(db.hog.cells));
+  le::put_u16(out, static_cast<std::uint16_t>(db.hog.bins));
+  le::put_f32(out, db.hog.clip);
+  le::put_u32(out, static_cast<std::uint32_t>(db.length));
+  le::put_u16(out, static_cast<std::uint16_t>(db.source.size()));
+  out.insert(out.end(), db.source.begin(), db.source.end());
+  le::put_u32(out, static_cast<std::uint32_t>(db.entries.size()));
+  for (const PlaceEntry& e : db.entries) {
+    le::put_u64(out, static_cast<std::uint64_t>(e.time_ns));
+    le::put_f64(out, e.x);
+    le::put_f64(out, e.y);
+    le::put_f64(out, e.yaw);
+    le::put_f64(out, e.lat);
+    le::put_f64(out, e.lon);
+    out.insert(out.end(), e.code.begin(), e.code.end());
+  }
+  le::put_u32(out, crc_of(out));
+  return out;
+}
+
+LoadedPlaceDatabase parse_place_database(std::span<const std::uint8_t> bytes, std::string_view what) {
+  LoadedPlaceDatabase r;
+  const std::string w(what);
+  auto fail = [&](const std::string& e) {
+    r.error = w + ": " + e;
+    return r;
+  };
+  if (bytes.size() < sizeof kMagic + 8 || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)
+    return fail("not a trailnav place database (it does not begin with TNPLACE)");
+  const std::span<const std::uint8_t> body = bytes.first(bytes.size() - 4);
+  std::uint32_t stored = 0;
+  le::Reader(bytes.last(4)).u32(stored);
+  le::Reader in(body.subspan(sizeof kMagic));
+  std::uint32_t version = 0;
+  in.u32(version);
+  if (version != kPlaceFileVersion)
+    return fail("version " + std::to_string(version) + ", this trailnav reads version " + std::to_string(kPlaceFileVersion) +
+                " (make the database again with trailnav place-map)");
+  if (crc_of(body) != stored) return fail("the checksum does not match: the file is damaged or cut short");
+  PlaceDatabase db;
+  std::uint16_t width = 0, height = 0, patch = 0, cells = 0, bins = 0;
+  float clip = 0.0f;
+  std::uint32_t length = 0;
+  if (!in.u16(width) || !in.u16(height) || !in.u16(patch) || !in.u16(cells) || !in.u16(bins) || !in.f32(clip) ||
+      !in.u32(length))
+    return fail("the descriptor's settings are cut short");
+  db.width = width;
+  db.height = height;
+  db.hog = HogConfig{patch, cells, bins, clip};
+  db.length = static_cast<int>(length);
+  if (patch < 2 || cells < 1 || bins < 2 || patch % cells != 0 || !(clip > 0.0f) || width < patch || height < patch)
+    return fail("descriptor settings that describe no image (" + std::to_string(width) + " x " + std::to_string(height) +
+                " frames, patch " + std::to_string(patch) + ", cells " + std::to_string(cells) + ", bins " +
+                std::to_string(bins) + ")");
+  const std::size_t expected = static_cast<std::size_t>(width / patch) * static_cast<std::size_t>(height / patch) *
+                               static_cast<std::size_t>(cells) * cells * bins;
+  if (length != expected)
+    return fail("a descriptor of " + std::to_string(length) + " values where these settings make " + std::to_string(expected));
+  std::uint16_t source_length = 0;
+  if (!in.u16(source_length) || source_length > kPlaceMaxSource || !in.bytes(source_length, db.source))
+    return fail("the source's name is cut short or longer than 256 bytes");
+  std::uint32_t n = 0;
+  if (!in.u32(n) || n < 1 || n > kPlaceMaxImages) return fail("images: 1 to 1,000,000");
+  const std::size_t per = 8 + 5 * 8 + length;
+  if (in.left() / per < n) return fail(std::to_string(n) + " images announced, the file holds fewer");
+  db.entries.reserve(n);
+  for (std::uint32_t k = 0; k < n; ++k) {
+    PlaceEntry e;
+    std::uint64_t t = 0;
+    in.u64(t);
+    e.time_ns = static_cast<std::int64_t>(t);
+    in.f64(e.x);
+    in.f64(e.y);
+    in.f64(e.yaw);
+    in.f64(e.lat);
+    in.f64(e.lon);
+    if (!std::isfinite(e.x) || !std::isfinite(e.y) || !std::isfinite(e.yaw))
+      return fail("image " + std::to_string(k) + ": a pose that is not finite");
+    in.bytes(length, e.code);
+    double norm = 0.0;
+    for (std::uint8_t c : e.code) norm += static_cast<double>(c) * static_cast<double>(c);
+    e.norm = static_cast<float>(std::sqrt(norm));
+    db.entries.push_back(std::move(e));
+  }
+  if (in.left() != 0) return fail(std::to_string(in.left()) + " bytes after the last image");
+  r.database = std::move(db);
+  return r;
+}
+
+LoadedPlaceDatabase load_place_database(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) {
+    LoadedPlaceDatabase r;
+    r.error = path + ": cannot open (" + std::strerror(errno) + ")";
+    return r;
+  }
+  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  return parse_place_database(bytes, path);
+}
+
+std::string save_place_database(const PlaceDatabase& db, const std::string& path) {
+  const AtomicFile file(path);
+  if (const int e = file.write(serialize_place_database(db)); e != 0) return path + ": cannot write (" + std::strerror(e) + ")";
+  return "";
+}
+
+}  // namespace trailnav::perception::place
