@@ -124,6 +124,44 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     if (!g.driver) return fail("gpio: " + g.error);
     d->gpio_ = std::move(g.driver);
   }
+  if (config.camera) {
+    auto c = drivers::camera::CameraDriver::create(*config.camera);
+    if (!c.driver) return fail("camera: " + c.error);
+    d->camera_ = std::move(c.driver);
+  }
+  if (config.place) {
+    // The database: its descriptors must be of the camera's reduced frames.
+    const PlaceSection& p = *config.place;
+    auto loaded = perception::place::load_place_database(p.database);
+    if (!loaded.database) return fail("place: " + loaded.error);
+    const perception::place::PlaceDatabase& db = *loaded.database;
+    if (db.width != config.camera->out_width || db.height != config.camera->out_height) {
+      return fail("place: " + p.database + " describes " + std::to_string(db.width) + " x " + std::to_string(db.height) +
+                  " frames, the camera reduces its frames to " + std::to_string(config.camera->out_width) + " x " +
+                  std::to_string(config.camera->out_height) + " (camera.out_width, out_height)");
+    }
+    perception::place::OnlineConfig oc;
+    oc.hog = db.hog;
+    oc.transition = p.transition;
+    oc.width = db.width;
+    oc.height = db.height;
+    oc.capacity = db.entries.size();
+    oc.prior_queries = p.prior_queries;
+    try {
+      d->place_online_ = std::make_unique<perception::place::OnlinePlace>(oc);
+    } catch (const std::exception& e) {
+      return fail("place: " + p.database + ": " + e.what());
+    }
+    if (d->place_online_->descriptor_length() != db.length) return fail("place: " + p.database + ": descriptors of another length");
+    for (const perception::place::PlaceEntry& e : db.entries) d->place_online_->add_database_code(e.code, e.norm);
+    d->place_online_->finish_database();
+    d->place_images_ = db.entries.size();
+    d->place_out_ = std::make_unique<Mailbox<perception::place::PlaceSnapshot>>();
+    d->place_ = std::make_unique<perception::place::PlaceTask>(db, *d->place_online_, d->camera_->frames(), *d->place_out_,
+                                                               p.task);
+    TN_LOG_INFO("place: %s: %zu images of %d x %d frames (%d-pixel patches), poses in frame '%s'", p.database.c_str(),
+                db.entries.size(), db.width, db.height, db.hog.patch, p.frame.c_str());
+  }
   // The road network first: the pose's UTM frame must be the network's zone.
   std::optional<pose::PoseEstimatorOptions> pose_options = config.pose;
   if (config.navigation) {
@@ -269,6 +307,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   }
   inputs.navigation = d->navigation_out_.get();
   inputs.mapping = d->mapping_out_.get();
+  inputs.place = d->place_out_.get();
   if (d->obstacles_ && config.dds.publisher.points_rate_hz > 0.0) {
     // Viewers' points: every point a revolution can have, allocated now.
     const velodyne::RangeImageShape shape = d->lidar_shape();
@@ -284,6 +323,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   Daemon* self = d.get();
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
   dds::PublisherOptions popt = config.dds.publisher;
+  if (config.place) popt.place_frame = config.place->frame;
   // tf_static: where each sensor sits on the robot (the config's mounts).
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   if (config.lidar) {
@@ -324,6 +364,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (d->terrain_) d->terrain_->set_notify(&d->publisher_->wakeup());
   if (d->navigation_) d->navigation_->set_notify(&d->publisher_->wakeup());
   if (d->mapping_) d->mapping_->set_notify(&d->publisher_->wakeup());
+  if (d->place_) d->place_->set_notify(&d->publisher_->wakeup());
 
   // The task table, in a fixed order.
   auto add = [&](const char* name, Task* task, TaskEvent* event) -> bool {
@@ -340,7 +381,8 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       !add("gpio", d->gpio_.get(), nullptr) || !add("pose", d->pose_.get(), nullptr) ||
       !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr) ||
       !add("navigation", d->navigation_.get(), nullptr) || !add("mapping", d->mapping_.get(), nullptr) ||
-      !add("demonstration", d->trav_training_.get(), nullptr)) {
+      !add("demonstration", d->trav_training_.get(), nullptr) || !add("camera", d->camera_.get(), nullptr) ||
+      !add("place", d->place_.get(), nullptr)) {
     return result;
   }
   d->last_runs_.assign(d->scheduler_->task_count(), 0);
@@ -622,6 +664,37 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
             gpio::gpio_transport_name(config_.gpio->transport));
     m.value("estop", gpio::estop_state_name(s.estop));
     m.value("engagements", s.estop_counters.engagements);
+  }
+  if (camera_) {
+    const drivers::camera::CameraStatus s = camera_->status();
+    const bool tunnel = config_.camera->input == drivers::camera::CameraInput::tunnel;
+    m.begin(s.health == drivers::camera::CameraHealth::streaming ? L::ok : L::error, "trailnavd: camera",
+            s.health == drivers::camera::CameraHealth::streaming ? "streaming"
+            : s.last_error[0] != '\0'                            ? s.last_error.data()
+                                                                 : drivers::camera::camera_health_name(s.health),
+            tunnel ? "tunnel" : config_.camera->device.c_str());
+    m.value("health", drivers::camera::camera_health_name(s.health));
+    m.value("frames", s.counters.frames);
+    m.value("published", s.counters.published);
+    m.value("dropped", s.counters.dropped);
+    m.value("damaged", s.counters.damaged);
+    m.value("corrupt", s.counters.corrupt);
+    m.value("opens", s.counters.opens);
+    m.value("lost", s.counters.lost);
+    if (tunnel) {
+      m.value("tunnel_incomplete", s.counters.tunnel.incomplete);
+      m.value("tunnel_malformed", s.counters.tunnel.malformed);
+    }
+  }
+  if (place_) {
+    const perception::place::PlaceCounters c = place_->counters();
+    m.begin(c.steps == 0 ? L::warn : L::ok, "trailnavd: place", c.steps == 0 ? "no camera frame yet" : "localising",
+            config_.place->database);
+    m.value("database_images", static_cast<std::uint64_t>(place_images_));
+    m.value("frames", c.frames);
+    m.value("steps", c.steps);
+    if (c.last_index >= 0) m.value("last_index", static_cast<std::uint64_t>(c.last_index));
+    m.value("last_probability", c.last_probability, 4);
   }
   if (pose_) {
     const pose::PoseTaskStatus s = pose_->status();

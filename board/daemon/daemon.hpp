@@ -33,7 +33,11 @@
 #include "trailnav/navigation/navigator/navigation_task.hpp"
 #include "trailnav/navigation/osm/road_graph.hpp"
 #include "trailnav/navigation/slam/mapping_task.hpp"
+#include "trailnav/drivers/camera/camera_driver.hpp"
 #include "trailnav/perception/obstacle_pipeline.hpp"
+#include "trailnav/perception/place/database.hpp"
+#include "trailnav/perception/place/online.hpp"
+#include "trailnav/perception/place/place_task.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/random_forest.hpp"
 #include "trailnav/perception/terrain_task.hpp"
@@ -80,6 +84,9 @@ class Daemon {
   std::string status_line() const;
   // False when a task has stopped making progress (for the watchdog).
   bool alive() noexcept;
+  // The camera's image tunnel port (input: tunnel; chosen by the kernel when
+  // the config says 0); 0 without one.
+  std::uint16_t camera_tunnel_port() const noexcept { return camera_ ? camera_->status().tunnel_port : 0; }
   DaemonSummary summary() const;
   // Task statistics, one line per task.
   std::string task_report() const;
@@ -104,6 +111,11 @@ class Daemon {
   std::optional<can::Dbc> dbc_;
   std::unique_ptr<can::CanDriver> can_;
   std::unique_ptr<gpio::GpioDriver> gpio_;
+  std::unique_ptr<drivers::camera::CameraDriver> camera_;
+  std::unique_ptr<perception::place::OnlinePlace> place_online_;
+  std::unique_ptr<Mailbox<perception::place::PlaceSnapshot>> place_out_;
+  std::unique_ptr<perception::place::PlaceTask> place_;
+  std::size_t place_images_ = 0;
   std::unique_ptr<pose::PoseTask> pose_;
   std::unique_ptr<perception::PoseQueue> pose_queue_;
   std::unique_ptr<perception::ObstaclePipeline> pipeline_;

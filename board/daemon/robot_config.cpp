@@ -191,6 +191,52 @@ gpio::GpioDriverOptions parse_gpio(const ConfigNode& n) {
   return o;
 }
 
+drivers::camera::CameraOptions parse_camera(const ConfigNode& n) {
+  namespace cam = drivers::camera;
+  cam::CameraOptions o;
+  o.input = n.choice("input", {"v4l2", "tunnel"}, "v4l2") == "v4l2" ? cam::CameraInput::v4l2 : cam::CameraInput::tunnel;
+  o.device = n.string("device", o.device);
+  const std::string format = n.choice("format", {"grey", "yuyv", "mjpeg"}, "yuyv");
+  cam::parse_pixel_format(format, o.format);
+  o.width = static_cast<int>(n.integer("width", 1, 8192, o.width));
+  o.height = static_cast<int>(n.integer("height", 1, 8192, o.height));
+  o.fps = n.number("fps", 0.0, 1000.0, o.fps);
+  o.buffers = static_cast<int>(n.integer("buffers", 2, 32, o.buffers));
+  o.exposure_us = static_cast<int>(n.integer("exposure_us", 0, 10'000'000, o.exposure_us));
+  o.out_width = static_cast<int>(n.integer("out_width", 4, 8192, o.out_width));
+  o.out_height = static_cast<int>(n.integer("out_height", 4, 8192, o.out_height));
+  o.tunnel_port = static_cast<std::uint16_t>(n.integer("tunnel_port", 0, 65535, o.tunnel_port));
+  o.reconnect_s = n.number("reconnect_s", 0.01, 60.0, o.reconnect_s);
+  o.silence_s = n.number("silence_s", 0.01, 60.0, o.silence_s);
+  if (o.out_width > o.width || o.out_height > o.height)
+    n.fail("out_width", "the reduced frame (" + std::to_string(o.out_width) + " x " + std::to_string(o.out_height) +
+                            ") must fit the camera's (" + std::to_string(o.width) + " x " + std::to_string(o.height) + ")");
+  n.reject_unknown_keys();
+  return o;
+}
+
+PlaceSection parse_place(const ConfigNode& n) {
+  PlaceSection p;
+  p.database = resolve(n, n.string("database"));
+  if (p.database.empty()) n.fail("database", "a place database file (trailnav place-map --out) is needed");
+  p.frame = n.string("frame", p.frame);
+  if (auto t = n.optional_map("transition")) {
+    p.transition.f = static_cast<int>(t->integer("f", 1, 1000, p.transition.f));
+    p.transition.b = static_cast<int>(t->integer("b", 1, 1000, p.transition.b));
+    p.transition.c_f = t->number("c_f", 1e-6, 1e9, p.transition.c_f);
+    p.transition.c_s = t->number("c_s", 1e-6, 1e9, p.transition.c_s);
+    p.transition.c_b = t->number("c_b", 1e-6, 1e9, p.transition.c_b);
+    t->reject_unknown_keys();
+  }
+  p.prior_queries = n.number("prior_queries", 0.0, 1e6, p.prior_queries);
+  p.task.window = static_cast<int>(n.integer("window", 0, 10000, p.task.window));
+  p.task.position_floor_m = n.number("position_floor_m", 0.0, 1e4, p.task.position_floor_m);
+  p.task.yaw_floor_rad = n.number("yaw_floor_deg", 0.0, 180.0, p.task.yaw_floor_rad * 180.0 / 3.14159265358979323846) *
+                         3.14159265358979323846 / 180.0;
+  n.reject_unknown_keys();
+  return p;
+}
+
 pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles, bool& feed_terrain,
                                       perception::PoseWait& wait) {
   pose::PoseEstimatorOptions o;
@@ -331,6 +377,11 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   if (auto n = root.optional_map("imu")) c.imu = parse_imu(*n, c.imu_position);
   if (auto n = root.optional_map("can")) c.can = parse_can(*n);
   if (auto n = root.optional_map("gpio")) c.gpio = parse_gpio(*n);
+  if (auto n = root.optional_map("camera")) c.camera = parse_camera(*n);
+  if (auto n = root.optional_map("place")) {
+    c.place = parse_place(*n);
+    if (!c.camera) root.fail("place", "the place task takes the camera's frames: add a 'camera' section");
+  }
   if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose, c.terrain_use_pose, c.pose_wait);
   if (auto n = root.optional_map("obstacles")) {
     c.obstacles = perception::parse_obstacle_config(*n);
@@ -423,7 +474,9 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"terrain", c.terrain.has_value(), TaskKind::periodic},
                         {"navigation", c.navigation.has_value(), TaskKind::periodic},
                         {"mapping", c.mapping.has_value(), TaskKind::periodic},
-                        {"demonstration", c.traversability && c.traversability->demonstration, TaskKind::periodic}};
+                        {"demonstration", c.traversability && c.traversability->demonstration, TaskKind::periodic},
+                        {"camera", c.camera.has_value(), TaskKind::periodic},
+                        {"place", c.place.has_value(), TaskKind::periodic}};
   if (root.is_map("tasks")) {
     // A preset: the measured table of a lidar model, for the parts configured.
     const ConfigNode t = root.map("tasks");
@@ -460,7 +513,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                                   [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
-                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping, demonstration");
+                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping, demonstration, camera, place");
     }
   }
   root.reject_unknown_keys();

@@ -13,6 +13,7 @@
 #include "cloud_reader.hpp"
 #include "commands.hpp"
 #include "publisher.hpp"
+#include "trailnav/drivers/camera/camera_driver.hpp"
 #include "trailnav/drivers/can/can_driver.hpp"
 #include "trailnav/drivers/gpio/gpio_driver.hpp"
 #include "trailnav/drivers/gps/gps_driver.hpp"
@@ -23,6 +24,8 @@
 #include "trailnav/navigation/pose/pose_estimator.hpp"
 #include "trailnav/navigation/slam/mapping_task.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
+#include "trailnav/perception/place/bayes_filter.hpp"
+#include "trailnav/perception/place/place_task.hpp"
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/perception/terrain_config.hpp"
 #include "trailnav/perception/trav_config.hpp"
@@ -47,6 +50,16 @@ struct CanSection {
   can::CanDriverOptions driver;
 };
 
+// The place task (docs/place.md "On the robot"): a database from an earlier
+// drive, the filter's transition, and how its answer is published.
+struct PlaceSection {
+  std::string database;  // file (.tnplace)
+  std::string frame = "map";  // the frame the database's poses are in (PlaceMatch, the place pose)
+  perception::place::TransitionModel transition;
+  double prior_queries = 10.0;
+  perception::place::PlaceTaskOptions task;
+};
+
 struct DdsSection {
   std::uint32_t domain = 0;
   std::string cyclone_config;  // file; empty: the built-in loopback configuration
@@ -68,6 +81,8 @@ struct RobotConfig {
   std::array<double, 3> imu_position{0.0, 0.0, 0.0};  // m, robot frame (tf_static only)
   std::optional<CanSection> can;
   std::optional<gpio::GpioDriverOptions> gpio;
+  std::optional<drivers::camera::CameraOptions> camera;
+  std::optional<PlaceSection> place;
   std::optional<pose::PoseEstimatorOptions> pose;
   std::optional<perception::ObstacleConfig> obstacles;
   bool obstacles_use_pose = true;

@@ -33,7 +33,7 @@ struct Task {
   int priority;
   std::string_view thread = {};
 };
-constexpr std::array<Task, 11> kTasks = {{
+constexpr std::array<Task, 13> kTasks = {{
     {"gpio", K::periodic, 200, 75},
     {"lidar", K::periodic, 1000, 70},
     {"imu", K::periodic, 100, 65, "sensors"},
@@ -49,6 +49,10 @@ constexpr std::array<Task, 11> kTasks = {{
     // Normal scheduling too: the demonstration's training (a local map every
     // d_M = 20 m driven) and the model file's save.
     {"demonstration", K::periodic, 1, 0},
+    // Normal scheduling, one thread: the camera's frames (at most 30 a
+    // second drained at each run), then the place filter's step on the newest.
+    {"camera", K::periodic, 30, 0, "place"},
+    {"place", K::periodic, 30, 0, "place"},
 }};
 
 // The budget a need gets: need x 1.5 rounded up to 0.1 ms, at least
@@ -72,8 +76,8 @@ constexpr double budget_for(double need_ms, TaskKind kind, double rate_hz) {
 }
 
 // One model's table from its measured needs, in kTasks' order.
-constexpr std::array<PresetRow, 11> rows(const std::array<double, 11>& need_ms) {
-  std::array<PresetRow, 11> out{};
+constexpr std::array<PresetRow, 13> rows(const std::array<double, 13>& need_ms) {
+  std::array<PresetRow, 13> out{};
   for (std::size_t i = 0; i < kTasks.size(); ++i) {
     const Task& t = kTasks[i];
     out[i] = {t.name, t.kind, t.rate_hz, need_ms[i], budget_for(need_ms[i], t.kind, t.rate_hz), t.priority, t.thread};
@@ -101,11 +105,19 @@ constexpr double kMappingNeedMs = 136.0;
 // of one run in trailnavd's demonstration test (tests/board/trav_daemon_test.cpp)
 // was 1.53 ms (docs/traversability.md "On the robot").
 constexpr double kDemonstrationNeedMs = 1.53;
-//                                          gpio   lidar  imu    can    gps    pose   obstacles navigation terrain mapping demonstration
-constexpr std::array<PresetRow, 11> kVlp16 = rows({0.036, 0.386, 0.225, 0.242, 0.229, 0.266, 10.488, 0.687, 7.400, kMappingNeedMs, kDemonstrationNeedMs});
-constexpr std::array<PresetRow, 11> kVlp32c = rows({0.037, 0.384, 0.527, 1.245, 0.586, 0.923, 11.216, 2.106, 10.544, kMappingNeedMs, kDemonstrationNeedMs});
-constexpr std::array<PresetRow, 11> kHdl32e = rows({0.027, 0.354, 0.639, 0.335, 0.325, 0.359, 16.391, 0.590, 7.831, kMappingNeedMs, kDemonstrationNeedMs});
-constexpr std::array<PresetRow, 11> kHdl64e = rows({0.097, 0.541, 0.486, 1.011, 0.332, 0.588, 5.785, 0.795, 12.778, kMappingNeedMs, kDemonstrationNeedMs});
+// The camera's and the place task's, the same for every lidar, from
+// `taskset -c 1 build/release/bin/trailnav_place_bench` on 2026-12-05
+// (docs/place.md; not yet from a daemon run): a 640 x 480 frame to 64 x 32,
+// YUYV 0.62 ms and MJPEG 0.87 ms (BM_CameraFrame); one place step over a
+// 10,000-image database 0.87-1.0 ms (BM_PlaceStep/10000/1). A larger
+// database needs a larger budget (tasks.change).
+constexpr double kCameraNeedMs = 0.87;
+constexpr double kPlaceNeedMs = 1.0;
+//                                          gpio   lidar  imu    can    gps    pose   obstacles navigation terrain mapping demonstration camera place
+constexpr std::array<PresetRow, 13> kVlp16 = rows({0.036, 0.386, 0.225, 0.242, 0.229, 0.266, 10.488, 0.687, 7.400, kMappingNeedMs, kDemonstrationNeedMs, kCameraNeedMs, kPlaceNeedMs});
+constexpr std::array<PresetRow, 13> kVlp32c = rows({0.037, 0.384, 0.527, 1.245, 0.586, 0.923, 11.216, 2.106, 10.544, kMappingNeedMs, kDemonstrationNeedMs, kCameraNeedMs, kPlaceNeedMs});
+constexpr std::array<PresetRow, 13> kHdl32e = rows({0.027, 0.354, 0.639, 0.335, 0.325, 0.359, 16.391, 0.590, 7.831, kMappingNeedMs, kDemonstrationNeedMs, kCameraNeedMs, kPlaceNeedMs});
+constexpr std::array<PresetRow, 13> kHdl64e = rows({0.097, 0.541, 0.486, 1.011, 0.332, 0.588, 5.785, 0.795, 12.778, kMappingNeedMs, kDemonstrationNeedMs, kCameraNeedMs, kPlaceNeedMs});
 
 }  // namespace
 

@@ -151,6 +151,37 @@ void PoseStampedMessage::fill(const pose::LocalPose& p) noexcept {
 
 // --- UTM pose and NavSatFix ---
 
+PlaceMessages::PlaceMessages(std::string_view frame_id) {
+  frame_.set(frame_id);
+  match_.header.frame_id = frame_.c_str();
+  pose_.header.frame_id = frame_.c_str();
+  pose_.pose.pose.orientation.w = 1.0;
+}
+
+void PlaceMessages::fill(const perception::place::PlaceSnapshot& s) noexcept {
+  match_.header.stamp = to_time(s.stamp_ns);
+  match_.database_index = static_cast<std::uint32_t>(s.index);
+  // The database image's own time: a UTC stamp from the drive it was taken on.
+  match_.database_stamp = {static_cast<std::int32_t>(s.database_stamp_ns / 1'000'000'000),
+                           static_cast<std::uint32_t>(s.database_stamp_ns % 1'000'000'000)};
+  match_.probability = s.probability;
+  match_.peak = s.peak;
+  match_.frame_sequence = s.frame_sequence;
+  match_.steps = s.number;
+  pose_.header.stamp = match_.header.stamp;
+  pose_.pose.pose.position = {s.x, s.y, 0.0};
+  pose_.pose.pose.orientation = to_quaternion(0.0, 0.0, s.yaw);
+  std::fill(std::begin(pose_.pose.covariance), std::end(pose_.pose.covariance), 0.0);
+  pose_.pose.covariance[0] = s.cov_xx;
+  pose_.pose.covariance[1] = s.cov_xy;
+  pose_.pose.covariance[6] = s.cov_xy;
+  pose_.pose.covariance[7] = s.cov_yy;
+  pose_.pose.covariance[14] = 1e6;  // z, roll, pitch: not measured
+  pose_.pose.covariance[21] = 1e6;
+  pose_.pose.covariance[28] = 1e6;
+  pose_.pose.covariance[35] = s.var_yaw;
+}
+
 UtmFixMessages::UtmFixMessages(std::string_view fix_frame_id) {
   fix_frame_.set(fix_frame_id);
   utm_frame_.set("utm");

@@ -20,6 +20,7 @@
 #include "nav_msgs.h"
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"
+#include "trailnav/perception/place/place_task.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
 #include "trailnav_msgs.h"
 
@@ -122,6 +123,24 @@ class UtmFixMessages {
   FixedString<64> fix_frame_;
   geometry_msgs_msg_dds__PoseWithCovarianceStamped_ utm_{};
   sensor_msgs_msg_dds__NavSatFix_ fix_{};
+};
+
+// The place task's answer: trailnav_msgs/PlaceMatch and the pose of the
+// matched database image (geometry_msgs/PoseWithCovarianceStamped), both in
+// the database's frame.
+class PlaceMessages {
+ public:
+  explicit PlaceMessages(std::string_view frame_id);
+  PlaceMessages(const PlaceMessages&) = delete;
+  PlaceMessages& operator=(const PlaceMessages&) = delete;
+  void fill(const perception::place::PlaceSnapshot& s) noexcept;
+  trailnav_msgs_msg_dds__PlaceMatch_& match() noexcept { return match_; }
+  geometry_msgs_msg_dds__PoseWithCovarianceStamped_& pose() noexcept { return pose_; }
+
+ private:
+  FixedString<64> frame_;
+  trailnav_msgs_msg_dds__PlaceMatch_ match_{};
+  geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose_{};
 };
 
 // A rigid transform parent -> child as REP 105 and tf2 mean it: the child

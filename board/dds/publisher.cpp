@@ -82,6 +82,12 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     make(p->keyframe_path_writer_, nav_msgs_msg_dds__Path__desc, options.topics.keyframe_path,
          {true, 1, Durability::transient_local});
   }
+  if (p->inputs_.place != nullptr) {
+    // Reliable, keep last 1: the newest answer, as the pose topics.
+    p->place_msg_.emplace(options.place_frame);
+    make(p->place_match_writer_, trailnav_msgs_msg_dds__PlaceMatch__desc, options.topics.place_match, {true, 1});
+    make(p->place_pose_writer_, geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, options.topics.place_pose, {true, 1});
+  }
   make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
   if (options.publish_tf) {
     // As ROS 2's tf2 does: rt/tf reliable, volatile, keep last 100;
@@ -130,6 +136,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.statuses = statuses_.load(std::memory_order_relaxed);
   s.point_clouds = point_clouds_.load(std::memory_order_relaxed);
   s.keyframe_paths = keyframe_paths_.load(std::memory_order_relaxed);
+  s.place_matches = place_matches_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
   return s;
 }
@@ -154,6 +161,7 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
   }
   if (points_writer_) health_msg_.value("point_clouds", s.point_clouds);
   if (keyframe_path_writer_) health_msg_.value("keyframe_paths", s.keyframe_paths);
+  if (place_match_writer_) health_msg_.value("place_matches", s.place_matches);
   if (tf_writer_) {
     health_msg_.value("tf_messages", s.transforms);
     health_msg_.value("odometry", s.odometry);
@@ -358,6 +366,14 @@ void DdsPublisher::loop() noexcept {
         while (inputs_.navigation_answers->try_pop(answer_)) publish_status(answer_);
       }
       if (const nav::NavigationSnapshot* n = inputs_.navigation->try_read()) publish_navigation(*n);
+    }
+    if (place_match_writer_) {
+      if (const perception::place::PlaceSnapshot* ps = inputs_.place->try_read()) {
+        place_msg_->fill(*ps);
+        const bool a = place_match_writer_->write(&place_msg_->match());
+        const bool b = place_pose_writer_->write(&place_msg_->pose());
+        count(a && b, place_matches_);
+      }
     }
     if (keyframe_path_writer_) {
       if (const slam::MappingSnapshot* m = inputs_.mapping->try_read()) publish_mapping(*m);

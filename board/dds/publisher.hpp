@@ -57,6 +57,8 @@ struct TopicNames {
   std::string coarse_map = "trailnav/obstacle_map_coarse";
   std::string points = "trailnav/points";
   std::string keyframe_path = "trailnav/keyframe_path";  // the mapping thread's optimised keyframes
+  std::string place_match = "trailnav/place_match";      // trailnav_msgs/PlaceMatch
+  std::string place_pose = "trailnav/place_pose";        // geometry_msgs/PoseWithCovarianceStamped
 };
 
 // REP 105 frame names (docs/dds.md, "Frames"). `map`: the frame of the GPS
@@ -79,6 +81,7 @@ struct PublisherOptions {
   TopicNames topics;
   std::string odom_frame = "odom";
   std::string fix_frame = "gps";        // the GPS antenna's frame (NavSatFix)
+  std::string place_frame = "map";      // the place database's poses (PlaceMatch, the place pose)
   FrameNames frames;
   bool publish_tf = true;               // rt/tf, rt/tf_static and odometry
   // Each obstacle map's own odom -> base_link (the pose it was placed with, at
@@ -115,6 +118,8 @@ struct PublisherInputs {
   Mailbox<perception::PointsSnapshot>* points = nullptr;
   // The mapping thread's snapshots (their path capacity gives the Path's), may be null.
   Mailbox<slam::MappingSnapshot>* mapping = nullptr;
+  // The place task's answers, may be null.
+  Mailbox<perception::place::PlaceSnapshot>* place = nullptr;
   // The navigation task's answer to each order (a status each), may be null.
   nav::NavStatusQueue* navigation_answers = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
@@ -128,6 +133,7 @@ struct PublisherStats {
   std::uint64_t statuses = 0;                  // navigation status samples
   std::uint64_t point_clouds = 0;
   std::uint64_t keyframe_paths = 0;  // the mapping thread's paths
+  std::uint64_t place_matches = 0;   // PlaceMatch samples (each with its place pose)
   std::uint64_t traversability_maps = 0;
   bool lidar_stale = false;
 };
@@ -181,6 +187,9 @@ class DdsPublisher {
   std::optional<PathMessage> path_msg_;
   // The mapping thread's path, and, for a map without GPS, its map -> odom
   // (docs/slam.md "Online mapping"; a map with GPS corrects the UTM poses).
+  std::unique_ptr<Writer> place_match_writer_, place_pose_writer_;
+  std::optional<PlaceMessages> place_msg_;
+  std::atomic<std::uint64_t> place_matches_{0};
   std::unique_ptr<Writer> keyframe_path_writer_;
   std::optional<PathMessage> keyframe_path_msg_;
   struct OdomParent {

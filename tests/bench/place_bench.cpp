@@ -84,4 +84,51 @@ BENCHMARK(BM_Hog)->Arg(1)->Arg(5)->Arg(10)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 
+
+// The camera driver's conversion of one frame to the descriptor's 64 x 32:
+// YUYV and MJPEG (libturbojpeg, quality 90) at 640 x 480 from a real Nordland
+// frame enlarged.
+#include <turbojpeg.h>
+
+#include "trailnav/drivers/camera/frame.hpp"
+
+namespace {
+
+void BM_CameraFrame(benchmark::State& state) {
+  namespace camera = trailnav::drivers::camera;
+  const bool mjpeg = state.range(0) == 1;
+  const int w = 640, h = 480;
+  const std::vector<std::uint8_t> grey = frame("winter", 5000, 10);  // 640 x 320
+  if (grey.empty()) {
+    state.SkipWithError("../shared/data/nordland not found");
+    return;
+  }
+  std::vector<std::uint8_t> yuyv(static_cast<std::size_t>(w * h * 2), 128), rgb(static_cast<std::size_t>(w * h * 3));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::uint8_t v = grey[static_cast<std::size_t>((y * 320 / h) * 640 + x)];
+      yuyv[static_cast<std::size_t>((y * w + x) * 2)] = v;
+      for (int c = 0; c < 3; ++c) rgb[static_cast<std::size_t>((y * w + x) * 3 + c)] = v;
+    }
+  std::vector<std::uint8_t> bytes = yuyv;
+  if (mjpeg) {
+    tjhandle enc = tjInitCompress();
+    unsigned char* jpeg = nullptr;
+    unsigned long size = 0;
+    tjCompress2(enc, rgb.data(), w, 0, h, TJPF_RGB, &jpeg, &size, TJSAMP_422, 90, 0);
+    bytes.assign(jpeg, jpeg + size);
+    tjFree(jpeg);
+    tjDestroy(enc);
+  }
+  camera::FrameConverter conv(mjpeg ? camera::PixelFormat::mjpeg : camera::PixelFormat::yuyv, w, h, 64, 32);
+  for (auto _ : state) {
+    if (!conv.convert(bytes, mjpeg ? 0 : 2 * w)) state.SkipWithError(conv.error());
+    benchmark::DoNotOptimize(conv.grey().data());
+  }
+  state.counters["bytes"] = static_cast<double>(bytes.size());
+}
+BENCHMARK(BM_CameraFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+
 BENCHMARK_MAIN();
