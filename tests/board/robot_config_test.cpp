@@ -381,7 +381,7 @@ TEST(RobotConfig, ThePresetsSensorsShareAThreadAndAChangedRateMustLeaveIt) {
 TEST(RobotConfig, EveryPresetsBudgetIsItsNeedWithTheStatedMargin) {
   for (const auto model : {velodyne::Model::vlp16, velodyne::Model::vlp32c, velodyne::Model::hdl32e, velodyne::Model::hdl64e}) {
     const auto rows = daemon::task_preset(model);
-    ASSERT_EQ(rows.size(), 11u);
+    ASSERT_EQ(rows.size(), 13u);  // the eleven and the camera and place tasks
     for (const daemon::PresetRow& r : rows) {
       const double cap = r.kind == TaskKind::periodic ? 0.9 * 1000.0 / r.rate_hz : 1e9;
       const double expected = std::min(cap, std::max(1.0, std::ceil(r.need_ms * 15.0 - 1e-9) / 10.0));
@@ -430,6 +430,45 @@ TEST(RobotConfig, TheTraversabilitySectionAndItsChecks) {
   e = load_error(replaced(bench_text, "  method: pnb", "  method: svm"));
   EXPECT_NE(e.find("method"), std::string::npos) << e;
   EXPECT_NE(e.find("test-"), std::string::npos) << "names the file: " << e;
+}
+
+}  // namespace
+
+namespace {
+
+// The camera and place sections (issue 41): read with the preset's tasks on
+// one thread of normal scheduling; a place without a camera, a reduced frame
+// larger than the camera's and an unknown format are refused by key.
+TEST(RobotConfig, TheCameraAndPlaceSectionsAndTheirChecks) {
+  const auto ok = load(
+      "runtime: {realtime: off}\n"
+      "camera: {input: tunnel, tunnel_port: 29538, width: 320, height: 240, out_width: 64, out_height: 32, format: grey}\n"
+      "place: {database: summer.tnplace, frame: map, window: 8, yaw_floor_deg: 5, transition: {f: 6, c_f: 400}}\n"
+      "dds: {domain: 0}\n"
+      "tasks: {preset: auto}\n");
+  ASSERT_TRUE(ok.config) << ok.error;
+  const auto& c = *ok.config;
+  ASSERT_TRUE(c.camera && c.place);
+  EXPECT_EQ(c.camera->input, drivers::camera::CameraInput::tunnel);
+  EXPECT_EQ(c.camera->format, drivers::camera::PixelFormat::grey);
+  EXPECT_EQ(c.camera->out_width, 64);
+  EXPECT_EQ(c.place->transition.f, 6);
+  EXPECT_DOUBLE_EQ(c.place->transition.c_f, 400.0);
+  EXPECT_EQ(c.place->task.window, 8);
+  EXPECT_NEAR(c.place->task.yaw_floor_rad, 5.0 * 3.14159265358979 / 180.0, 1e-9);
+  for (const char* name : {"camera", "place"}) {
+    const auto t = std::find_if(c.tasks.begin(), c.tasks.end(), [&](const TaskSpec& s) { return s.name == name; });
+    ASSERT_NE(t, c.tasks.end()) << name;
+    EXPECT_EQ(t->priority, 0) << name;
+    EXPECT_EQ(t->thread, "place") << name;
+  }
+  const auto no_camera = load("runtime: {realtime: off}\nplace: {database: x.tnplace}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
+  EXPECT_NE(no_camera.error.find("add a 'camera' section"), std::string::npos) << no_camera.error;
+  const auto too_big = load("runtime: {realtime: off}\ncamera: {width: 64, height: 32, out_width: 128}\ndds: {domain: 0}\n"
+                            "tasks: {preset: auto}\n");
+  EXPECT_NE(too_big.error.find("out_width"), std::string::npos) << too_big.error;
+  const auto format = load("runtime: {realtime: off}\ncamera: {format: rgb24}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
+  EXPECT_NE(format.error.find("format"), std::string::npos) << format.error;
 }
 
 }  // namespace
