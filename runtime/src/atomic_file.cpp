@@ -52,4 +52,17 @@ int AtomicFile::write(std::span<const std::uint8_t> bytes) const noexcept {
   return 0;
 }
 
+int read_whole_file(const std::string& path, std::vector<std::uint8_t>& bytes) {
+  bytes.clear();
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return errno;
+  std::uint8_t chunk[65536];
+  std::size_t n = 0;
+  while ((n = std::fread(chunk, 1, sizeof chunk, f)) > 0) bytes.insert(bytes.end(), chunk, chunk + n);
+  const int e = std::ferror(f) != 0 ? (errno != 0 ? errno : EIO) : 0;
+  std::fclose(f);
+  if (e != 0) bytes.clear();
+  return e;
+}
+
 }  // namespace trailnav

@@ -16,6 +16,7 @@
 
 #include "place_eval.hpp"
 #include "png.hpp"
+#include "run_cli.hpp"
 #include "test_data.hpp"
 
 namespace trailnav::eval {
@@ -114,17 +115,7 @@ TEST(PlaceEval, ScatteredCasesJumpRevisitAndLeaveAStretchOfTheDatabaseOut) {
   EXPECT_GT(r.positives, r.query_images / 2);
 }
 
-int run(const std::vector<std::string>& args, std::string& out) {
-  const std::filesystem::path log = std::filesystem::temp_directory_path() / ("place-cli-log-" + std::to_string(::getpid()));
-  std::string cmd = TRAILNAV_BINARY;
-  for (const std::string& a : args) cmd += " '" + a + "'";
-  cmd += " > " + log.string() + " 2>&1";
-  const int status = std::system(cmd.c_str());
-  std::ifstream in(log);
-  out.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  std::filesystem::remove(log);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+int run(const std::vector<std::string>& args, std::string& out) { return test::run_cli(args, out); }
 
 TEST(PlaceEvalCli, ReportsEachMethodInJsonAndDrawsTheCurves) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("place-cli-" + std::to_string(::getpid()));
@@ -257,6 +248,10 @@ TEST(PlaceMap, ARecordingsFramesAndPosesMakeADatabaseTheOnlineFilterLocalisesIn)
   EXPECT_FALSE(place::parse_place_database(std::span(bytes).first(bytes.size() / 2), "x").database);
   EXPECT_NE(place::load_place_database((dir / "poses.csv").string()).error.find("not a trailnav place database"),
             std::string::npos);
+  EXPECT_NE(place::load_place_database((dir / "none.tnplace").string()).error.find("none.tnplace: cannot read (No such file"),
+            std::string::npos);
+  EXPECT_NE(place::load_place_database(dir.string()).error.find("cannot read (Is a directory)"), std::string::npos)
+      << place::load_place_database(dir.string()).error;
   // Without poses a recording that is not simulated is refused, saying what to give.
   EXPECT_EQ(run({"place-map", dir.string(), "--out", db_path, "--quiet"}, out), 1);
   EXPECT_NE(out.find("give the drive's poses with --poses CSV"), std::string::npos) << out;

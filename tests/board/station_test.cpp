@@ -12,6 +12,7 @@
 #include <string>
 #include <numbers>
 
+#include "run_cli.hpp"
 #include "station_eval.hpp"
 #include "station_world.hpp"
 #include "trailnav/perception/registration/station.hpp"
@@ -216,17 +217,7 @@ TEST(StationFile, RoundTripAndDamageRefusedWithItsReason) {
   EXPECT_NE(reg::station_from_file(f, reg::StationConfig{}).error.find("'surroundings' holds 2 points"), std::string::npos);
 }
 
-int run(const std::vector<std::string>& args, std::string& out) {
-  const std::filesystem::path log = std::filesystem::temp_directory_path() / ("station-cli-" + std::to_string(::getpid()));
-  std::string cmd = TRAILNAV_BINARY;
-  for (const std::string& a : args) cmd += " '" + a + "'";
-  cmd += " > " + log.string() + " 2>&1";
-  const int status = std::system(cmd.c_str());
-  std::ifstream in(log);
-  out.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  std::filesystem::remove(log);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+int run(const std::vector<std::string>& args, std::string& out) { return test::run_cli(args, out); }
 
 // `trailnav station teach` on sixteen scans of the real Freiburg log with a
 // cabinet marked as a box: a station file with the surroundings and the

@@ -5,8 +5,6 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 
 #include "trailnav/runtime/atomic_file.hpp"
 #include "trailnav/runtime/le_bytes.hpp"
@@ -118,13 +116,12 @@ LoadedPlaceDatabase parse_place_database(std::span<const std::uint8_t> bytes, st
 }
 
 LoadedPlaceDatabase load_place_database(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) {
+  std::vector<std::uint8_t> bytes;
+  if (const int e = read_whole_file(path, bytes); e != 0) {
     LoadedPlaceDatabase r;
-    r.error = path + ": cannot open (" + std::strerror(errno) + ")";
+    r.error = path + ": cannot read (" + std::strerror(e) + ")";
     return r;
   }
-  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   return parse_place_database(bytes, path);
 }
 

@@ -5,8 +5,6 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 
 #include "trailnav/runtime/atomic_file.hpp"
 #include "trailnav/runtime/le_bytes.hpp"
@@ -121,13 +119,12 @@ LoadedStation parse_station(std::span<const std::uint8_t> bytes, std::string_vie
 }
 
 LoadedStation load_station(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) {
+  std::vector<std::uint8_t> bytes;
+  if (const int e = read_whole_file(path, bytes); e != 0) {
     LoadedStation r;
-    r.error = path + ": cannot open (" + std::strerror(errno) + ")";
+    r.error = path + ": cannot read (" + std::strerror(e) + ")";
     return r;
   }
-  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   return parse_station(bytes, path);
 }
 

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace trailnav {
 
@@ -28,5 +29,10 @@ class AtomicFile {
  private:
   std::string path_, tmp_, dir_;
 };
+
+// The whole of a file into `bytes` (for the file formats' loaders): 0, or the
+// errno of what failed (the bytes are then empty). Allocates; not for
+// real-time threads.
+int read_whole_file(const std::string& path, std::vector<std::uint8_t>& bytes);
 
 }  // namespace trailnav
