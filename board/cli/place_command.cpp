@@ -191,8 +191,12 @@ int run_map(MapOptions& o) {
     std::fprintf(stderr, "%s: --out DB is required\n", who);
     return 2;
   }
-  if (o.map.width < 4 || o.map.height < 4 || !(o.map.every_m >= 0.0)) {
-    std::fprintf(stderr, "%s: --width and --height must be at least 4 pixels and --every not negative\n", who);
+  if (o.map.width < 4 || o.map.height < 4 || !(o.map.every_m >= 0.0) || o.map.zca_rank < 0 || o.map.zca_rank > 1024 ||
+      !(o.map.zca_epsilon > 0.0)) {
+    std::fprintf(stderr,
+                 "%s: --width and --height must be at least 4 pixels, --every not negative, --zca-rank 0 to 1024 and "
+                 "--zca-epsilon positive\n",
+                 who);
     return 2;
   }
   std::unique_ptr<ProgressBar> bar;
@@ -221,6 +225,13 @@ int run_map(MapOptions& o) {
               o.out.c_str(), db.entries.size(), r.frames, r.without_pose, r.too_close, o.map.every_m, r.path_m);
   std::printf("  descriptors: %d x %d frames, %d-pixel patches, %d values (%d bytes an image); poses from %s\n", db.width,
               db.height, db.hog.patch, db.length, db.length + 48, r.pose_source.c_str());
+  if (db.whitening.rank > 0) {
+    std::printf("  ZCA for the robot: the %d largest directions of the database against itself, epsilon %.2g (%zu bytes)\n",
+                db.whitening.rank, static_cast<double>(db.whitening.epsilon_relative),
+                4 * (db.whitening.directions.size() + db.whitening.mean.size() + db.whitening.gains.size()));
+  } else {
+    std::printf("  no ZCA (--zca-rank 0): the robot normalises with Eq. 5.3\n");
+  }
   return 0;
 }
 
@@ -298,6 +309,10 @@ void add_place_commands(CLI::App& app) {
   map->add_option("--width", m.map.width, "Frame width the descriptors are computed on")->capture_default_str();
   map->add_option("--height", m.map.height, "Frame height the descriptors are computed on")->capture_default_str();
   map->add_option("--hog-patch", m.map.hog.patch, "HOG patch side (0: auto, as place-eval)")->capture_default_str();
+  map->add_option("--zca-rank", m.map.zca_rank,
+                  "ZCA for the robot, learnt from the database against itself: directions kept (0: none)")
+      ->capture_default_str();
+  map->add_option("--zca-epsilon", m.map.zca_epsilon, "ZCA's epsilon as a fraction of the mean eigenvalue")->capture_default_str();
   map->add_flag("--quiet", m.quiet, "No progress bar");
   map->callback([] { std::exit(run_map(m)); });
 }

@@ -155,12 +155,14 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     if (d->place_online_->descriptor_length() != db.length) return fail("place: " + p.database + ": descriptors of another length");
     for (const perception::place::PlaceEntry& e : db.entries) d->place_online_->add_database_code(e.code, e.norm);
     d->place_online_->finish_database();
+    if (!d->place_online_->set_whitening(db.whitening)) return fail("place: " + p.database + ": a whitening of another size");
     d->place_images_ = db.entries.size();
     d->place_out_ = std::make_unique<Mailbox<perception::place::PlaceSnapshot>>();
     d->place_ = std::make_unique<perception::place::PlaceTask>(db, *d->place_online_, d->camera_->frames(), *d->place_out_,
                                                                p.task);
-    TN_LOG_INFO("place: %s: %zu images of %d x %d frames (%d-pixel patches), poses in frame '%s'", p.database.c_str(),
-                db.entries.size(), db.width, db.height, db.hog.patch, p.frame.c_str());
+    TN_LOG_INFO("place: %s: %zu images of %d x %d frames (%d-pixel patches), %s, poses in frame '%s'", p.database.c_str(),
+                db.entries.size(), db.width, db.height, db.hog.patch,
+                db.whitening.rank > 0 ? "ZCA from the database" : "Eq. 5.3 (no ZCA in the database)", p.frame.c_str());
   }
   // The road network first: the pose's UTM frame must be the network's zone.
   std::optional<pose::PoseEstimatorOptions> pose_options = config.pose;

@@ -9,6 +9,7 @@
 #include "sim_truth.hpp"
 #include "trailnav/drivers/camera/frame.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
+#include "trailnav/perception/place/online.hpp"
 #include "trailnav/perception/place/similarity.hpp"
 
 namespace trailnav::eval {
@@ -165,6 +166,16 @@ PlaceMapReport make_place_map(const PlaceMapOptions& o) {
   if (db.entries.size() > place::kPlaceMaxImages) {
     r.error = std::to_string(db.entries.size()) + " images: a database holds at most 1,000,000 (raise --every)";
     return r;
+  }
+  if (o.zca_rank > 0 && db.entries.size() > 2) {
+    std::vector<std::uint8_t> codes;
+    std::vector<float> norms;
+    codes.reserve(db.entries.size() * static_cast<std::size_t>(db.length));
+    for (const place::PlaceEntry& e : db.entries) {
+      codes.insert(codes.end(), e.code.begin(), e.code.end());
+      norms.push_back(e.norm);
+    }
+    db.whitening = place::learn_whitening(codes, norms, db.length, std::min(o.zca_rank, place::kPlaceMaxRank), o.zca_epsilon);
   }
   return r;
 }

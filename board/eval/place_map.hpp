@@ -22,6 +22,10 @@ struct PlaceMapOptions {
   int width = 64, height = 32;  // the descriptor's frames (camera.out_width x out_height)
   perception::place::HogConfig hog{0};
   double every_m = 0.0;
+  // ZCA for the robot, learnt from the database against itself (docs/place.md):
+  // its largest directions kept (0: none, Eq. 5.3 online instead) and ε.
+  int zca_rank = 200;
+  double zca_epsilon = 0.3;
   std::function<void(double)> progress;
 };
 

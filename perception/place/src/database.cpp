@@ -42,6 +42,15 @@ std::vector<std::uint8_t> serialize_place_database(const PlaceDatabase& db) {
     le::put_f64(out, e.lon);
     out.insert(out.end(), e.code.begin(), e.code.end());
   }
+  const Whitening& w = db.whitening;
+  le::put_u32(out, static_cast<std::uint32_t>(w.rank));
+  if (w.rank > 0) {
+    le::put_f32(out, w.epsilon_relative);
+    le::put_f32(out, w.base);
+    for (float v : w.mean) le::put_f32(out, v);
+    for (float v : w.gains) le::put_f32(out, v);
+    for (float v : w.directions) le::put_f32(out, v);
+  }
   le::put_u32(out, crc_of(out));
   return out;
 }
@@ -61,7 +70,7 @@ LoadedPlaceDatabase parse_place_database(std::span<const std::uint8_t> bytes, st
   le::Reader in(body.subspan(sizeof kMagic));
   std::uint32_t version = 0;
   in.u32(version);
-  if (version != kPlaceFileVersion)
+  if (version != 1 && version != kPlaceFileVersion)
     return fail("version " + std::to_string(version) + ", this trailnav reads version " + std::to_string(kPlaceFileVersion) +
                 " (make the database again with trailnav place-map)");
   if (crc_of(body) != stored) return fail("the checksum does not match: the file is damaged or cut short");
@@ -109,6 +118,32 @@ LoadedPlaceDatabase parse_place_database(std::span<const std::uint8_t> bytes, st
     for (std::uint8_t c : e.code) norm += static_cast<double>(c) * static_cast<double>(c);
     e.norm = static_cast<float>(std::sqrt(norm));
     db.entries.push_back(std::move(e));
+  }
+  if (version >= 2) {
+    std::uint32_t rank = 0;
+    if (!in.u32(rank)) return fail("the whitening's rank is cut short");
+    if (rank > static_cast<std::uint32_t>(kPlaceMaxRank) || (rank > 0 && rank >= n))
+      return fail("a whitening of rank " + std::to_string(rank) + " (at most 1,024 and fewer than the images)");
+    if (rank > 0) {
+      Whitening& wh = db.whitening;
+      wh.rank = static_cast<int>(rank);
+      const std::size_t floats = 2 + n + rank + static_cast<std::size_t>(n) * rank;
+      if (in.left() / 4 < floats) return fail("the whitening is cut short");
+      in.f32(wh.epsilon_relative);
+      in.f32(wh.base);
+      const auto take = [&](std::vector<float>& v, std::size_t count) {
+        v.resize(count);
+        bool finite = true;
+        for (float& x : v) {
+          in.f32(x);
+          finite = finite && std::isfinite(x);
+        }
+        return finite;
+      };
+      if (!std::isfinite(wh.base) || !(wh.base > 0.0f) || !take(wh.mean, n) || !take(wh.gains, rank) ||
+          !take(wh.directions, static_cast<std::size_t>(n) * rank))
+        return fail("the whitening holds a value that is not a finite number");
+    }
   }
   if (in.left() != 0) return fail(std::to_string(in.left()) + " bytes after the last image");
   r.database = std::move(db);

@@ -26,10 +26,12 @@
 #include <vector>
 
 #include "trailnav/perception/place/hog.hpp"
+#include "trailnav/perception/place/online.hpp"
 
 namespace trailnav::perception::place {
 
-inline constexpr std::uint32_t kPlaceFileVersion = 1;
+inline constexpr std::uint32_t kPlaceFileVersion = 2;  // 1 is still read (no whitening)
+inline constexpr int kPlaceMaxRank = 1024;
 inline constexpr std::size_t kPlaceMaxImages = 1'000'000;
 inline constexpr std::size_t kPlaceMaxSource = 256;
 
@@ -47,6 +49,7 @@ struct PlaceDatabase {
   int length = 0;             // descriptor values
   std::string source;
   std::vector<PlaceEntry> entries;
+  Whitening whitening;  // rank 0: none (Eq. 5.3 online)
 };
 
 std::vector<std::uint8_t> serialize_place_database(const PlaceDatabase& db);

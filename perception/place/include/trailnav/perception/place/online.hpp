@@ -30,6 +30,27 @@ struct OnlineConfig {
   double prior_queries = 10.0;
 };
 
+// ZCA whitening learnt from the database against itself (docs/place.md "ZCA
+// for the robot"), kept to its `rank` largest directions: a query's raw
+// similarities s become (s - mean) W with W ≈ base I + U diag(gains) Uᵀ,
+// base = ε^-1/2, gains = (λ + ε)^-1/2 - ε^-1/2. It takes Eq. 5.3's place.
+struct Whitening {
+  int rank = 0;  // 0: none
+  float epsilon_relative = 0.0f;
+  float base = 0.0f;
+  std::vector<float> mean;        // n_D
+  std::vector<float> gains;       // rank
+  std::vector<float> directions;  // n_D x rank, row-major
+};
+
+// From a database's codes (count x length bytes) and their lengths: the
+// self-similarity matrix's column means and the `rank` largest
+// eigen-directions of its covariance (all of them by a full solve up to
+// 3,000 images, else by randomised subspace iteration); ε = epsilon_relative
+// x the covariance's mean eigenvalue. Offline (place-map): allocates.
+Whitening learn_whitening(std::span<const std::uint8_t> codes, std::span<const float> norms, int length, int rank,
+                          double epsilon_relative);
+
 struct PlaceEstimate {
   int index = -1;        // database image, -1 before a database
   double probability = 0.0;
@@ -54,10 +75,14 @@ class OnlinePlace {
   bool add_database_code(std::span<const std::uint8_t> code, float norm) noexcept;
   void finish_database() noexcept;
 
+  // ZCA instead of Eq. 5.3 (after finish_database(); sizes must match the
+  // database). False when they do not.
+  bool set_whitening(const Whitening& w);
+
   // The descriptor of a grey frame (width x height, `stride` bytes a row).
   std::span<const float> describe(std::span<const std::uint8_t> grey, int stride) noexcept;
-  // One query: similarities, Eq. 5.3 with the running means, Eq. 5.4, the
-  // filter's step. Returns the most likely database image.
+  // One query: similarities, Eq. 5.3 with the running means (or the
+  // whitening), Eq. 5.4, the filter's step. Returns the most likely database image.
   PlaceEstimate step(std::span<const float> descriptor) noexcept;
   std::span<const double> belief() const noexcept { return filter_.belief().first(count_); }
   // The last query's similarities after Eq. 5.3 and 5.4 (the likelihood).
@@ -75,6 +100,8 @@ class OnlinePlace {
   std::vector<float> descriptor_;
   std::vector<std::uint8_t> query_code_;
   std::vector<float> row_;
+  Whitening whitening_;
+  std::vector<float> projection_;  // rank
   BayesFilter filter_;
 };
 
