@@ -15,6 +15,7 @@
 #include "trailnav/perception/place/bayes_filter.hpp"
 #include "trailnav/perception/place/evaluation.hpp"
 #include "trailnav/perception/place/hog.hpp"
+#include "trailnav/perception/place/online.hpp"
 #include "trailnav/perception/place/sequence.hpp"
 #include "trailnav/perception/place/similarity.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
@@ -255,6 +256,41 @@ TEST(Similarity, ZcaWhitensAndBothPathsAgree) {
                                  eig.eigenvectors().transpose();
   for (int i = 0; i < 5; ++i)
     for (int j = 0; j < 12; ++j) EXPECT_NEAR(gram(i, j), direct(i, j), 1e-4);
+}
+
+// The whitening learnt from a database's codes (real Nordland frames): the
+// randomised subspace iteration finds the full solve's largest directions
+// and gains; a whitened row is what Eq. 5.14 gives with those directions.
+TEST(Whitening, TheRandomisedSolveFindsTheFullSolvesLargestDirections) {
+  Hog hog(HogConfig{0}, 64, 32);
+  std::vector<float> f(static_cast<std::size_t>(hog.length()));
+  CompactDescriptors db;
+  for (int k = 0; k < 300; ++k) {
+    const camera::ImageRead r = camera::read_grey_image(nordland("summer", 10 * (k + 1)));
+    ASSERT_TRUE(r.ok()) << r.error;
+    hog.compute(r.image.pixels, 64, f);
+    db.add(f);
+  }
+  const Whitening full = learn_whitening(db.codes, db.norms, db.length, 20, 0.3);
+  const Whitening fast = learn_whitening(db.codes, db.norms, db.length, 20, 0.3, 100);  // forced
+  ASSERT_EQ(full.rank, 20);
+  ASSERT_EQ(fast.rank, 20);
+  EXPECT_FLOAT_EQ(full.base, fast.base);
+  for (std::size_t j = 0; j < 300; ++j) EXPECT_FLOAT_EQ(full.mean[j], fast.mean[j]);
+  for (int c = 0; c < 5; ++c) {  // the leading ones, where the iteration has converged
+    EXPECT_NEAR(full.gains[static_cast<std::size_t>(c)], fast.gains[static_cast<std::size_t>(c)],
+                1e-3f * std::abs(full.gains[static_cast<std::size_t>(c)]));
+    double dot = 0.0;
+    for (std::size_t j = 0; j < 300; ++j)
+      dot += static_cast<double>(full.directions[j * 20 + static_cast<std::size_t>(c)]) *
+             static_cast<double>(fast.directions[j * 20 + static_cast<std::size_t>(c)]);
+    EXPECT_GT(std::abs(dot), 0.999) << c;  // unit vectors, up to their sign
+  }
+  // Gains shrink the largest directions (λ + ε > ε): negative, largest first in size.
+  EXPECT_LT(full.gains[0], full.gains[19]);
+  EXPECT_LT(full.gains[19], 0.0f);
+  EXPECT_EQ(learn_whitening(db.codes, db.norms, db.length, 0, 0.3).rank, 0);
+  EXPECT_EQ(learn_whitening(std::span(db.codes).first(2048), std::span(db.norms).first(2), db.length, 50, 0.3).rank, 1);
 }
 
 TEST(Sequence, PeaksAndTheLongestChainsThroughThem) {

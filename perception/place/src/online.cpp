@@ -131,7 +131,7 @@ PlaceEstimate OnlinePlace::step(std::span<const float> descriptor) noexcept {
 }
 
 Whitening learn_whitening(std::span<const std::uint8_t> codes, std::span<const float> norms, int length, int rank,
-                          double epsilon_relative) {
+                          double epsilon_relative, int full_solve_up_to) {
   using MatrixD = Eigen::MatrixXd;
   Whitening w;
   const auto n = static_cast<Eigen::Index>(norms.size());
@@ -154,7 +154,7 @@ Whitening learn_whitening(std::span<const std::uint8_t> codes, std::span<const f
   const double epsilon = epsilon_relative * s.squaredNorm() / rows / rows;
   Eigen::VectorXd lambda;
   MatrixD u;
-  if (n <= 3000) {
+  if (n <= full_solve_up_to) {
     const MatrixD sigma = s.transpose() * s / rows;
     Eigen::SelfAdjointEigenSolver<MatrixD> eig(sigma);  // ascending
     lambda = eig.eigenvalues().tail(rank).reverse();

@@ -45,11 +45,11 @@ struct Whitening {
 
 // From a database's codes (count x length bytes) and their lengths: the
 // self-similarity matrix's column means and the `rank` largest
-// eigen-directions of its covariance (all of them by a full solve up to
-// 3,000 images, else by randomised subspace iteration); ε = epsilon_relative
+// eigen-directions of its covariance (by a full solve up to
+// `full_solve_up_to` images, else by randomised subspace iteration); ε = epsilon_relative
 // x the covariance's mean eigenvalue. Offline (place-map): allocates.
 Whitening learn_whitening(std::span<const std::uint8_t> codes, std::span<const float> norms, int length, int rank,
-                          double epsilon_relative);
+                          double epsilon_relative, int full_solve_up_to = 3000);
 
 struct PlaceEstimate {
   int index = -1;        // database image, -1 before a database
