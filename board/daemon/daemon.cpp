@@ -156,7 +156,6 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     for (const perception::place::PlaceEntry& e : db.entries) d->place_online_->add_database_code(e.code, e.norm);
     d->place_online_->finish_database();
     if (!d->place_online_->set_whitening(db.whitening)) return fail("place: " + p.database + ": a whitening of another size");
-    d->place_images_ = db.entries.size();
     d->place_out_ = std::make_unique<Mailbox<perception::place::PlaceSnapshot>>();
     d->place_ = std::make_unique<perception::place::PlaceTask>(db, *d->place_online_, d->camera_->frames(), *d->place_out_,
                                                                p.task);
@@ -692,7 +691,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     const perception::place::PlaceCounters c = place_->counters();
     m.begin(c.steps == 0 ? L::warn : L::ok, "trailnavd: place", c.steps == 0 ? "no camera frame yet" : "localising",
             config_.place->database);
-    m.value("database_images", static_cast<std::uint64_t>(place_images_));
+    m.value("database_images", static_cast<std::uint64_t>(place_online_->size()));
     m.value("frames", c.frames);
     m.value("steps", c.steps);
     if (c.last_index >= 0) m.value("last_index", static_cast<std::uint64_t>(c.last_index));

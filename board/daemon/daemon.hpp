@@ -115,7 +115,6 @@ class Daemon {
   std::unique_ptr<perception::place::OnlinePlace> place_online_;
   std::unique_ptr<Mailbox<perception::place::PlaceSnapshot>> place_out_;
   std::unique_ptr<perception::place::PlaceTask> place_;
-  std::size_t place_images_ = 0;
   std::unique_ptr<pose::PoseTask> pose_;
   std::unique_ptr<perception::PoseQueue> pose_queue_;
   std::unique_ptr<perception::ObstaclePipeline> pipeline_;

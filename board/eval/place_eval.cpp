@@ -1,5 +1,7 @@
 #include "place_eval.hpp"
 
+#include "number_rows.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -69,39 +71,18 @@ bool read_truth(const PlaceEvalOptions& o, std::size_t queries, std::size_t data
     for (std::size_t i = 0; i < queries; ++i) reference[i] = i < database ? static_cast<int>(i) : -1;
     return true;
   }
-  std::ifstream in(o.ground_truth);
-  if (!in) {
-    error = o.ground_truth + ": cannot read the ground truth";
-    return false;
-  }
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    if (line.empty() || line[0] == '#') continue;
-    std::replace(line.begin(), line.end(), ',', ' ');
-    std::istringstream fields(line);
-    long q = 0, r = 0, t = -1;
-    if (!(fields >> q >> r)) {
-      if (number == 1) continue;  // a header
-      error = o.ground_truth + ":" + std::to_string(number) + ": expected `query,reference[,tolerance]` (1-based indices)";
-      return false;
-    }
-    if (!(fields >> t)) t = -1;
-    std::string rest;
-    if (fields >> rest) {
-      error = o.ground_truth + ":" + std::to_string(number) + ": more than three fields";
-      return false;
-    }
-    if (q < 1 || r < 1 || (t < -1)) {
-      error = o.ground_truth + ":" + std::to_string(number) + ": indices are 1-based and the tolerance not negative";
-      return false;
-    }
-    if (static_cast<std::size_t>(q) > queries) continue;  // beyond the queries read (--max-images)
-    reference[static_cast<std::size_t>(q - 1)] = static_cast<std::size_t>(r) <= database ? static_cast<int>(r - 1) : -1;
-    if (o.tolerance < 0 && t >= 0) tolerance[static_cast<std::size_t>(q - 1)] = static_cast<int>(t);
-  }
-  return true;
+  error = read_number_rows(
+      o.ground_truth, 2, 3, "`query,reference[,tolerance]` (1-based indices)", [&](int, std::span<const double> f) {
+        const double q = f[0], r = f[1], t = f.size() > 2 ? f[2] : -1.0;
+        if (q < 1 || r < 1 || t < -1 || q != std::floor(q) || r != std::floor(r) || t != std::floor(t))
+          return std::string("indices are whole and 1-based, the tolerance whole and not negative");
+        if (q > static_cast<double>(queries)) return std::string();  // beyond the queries read (--max-images)
+        const auto qi = static_cast<std::size_t>(q - 1);
+        reference[qi] = r <= static_cast<double>(database) ? static_cast<int>(r - 1) : -1;
+        if (o.tolerance < 0 && t >= 0) tolerance[qi] = static_cast<int>(t);
+        return std::string();
+      });
+  return error.empty();
 }
 
 // Matches from the case's database positions to the directory's indices.
@@ -299,23 +280,18 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
       cd_keep = std::move(cd);
     }
   }
-  const auto finish = [&](const std::string& name, std::vector<place::Match> scored, bool already_swept,
-                          place::PrCurve curve, std::vector<place::Match> best) {
-    PlaceMethod m;
-    m.method = name;
-    if (!already_swept) {
-      to_directory(scored, kept);
-      if (have_truth) {
-        m.curve = place::sweep(scored, r.truth);
-        m.matches = best_of_sweep(scored, m.curve.best.threshold);
-      } else {
-        m.matches = std::move(scored);
-      }
-    } else {
-      m.curve = std::move(curve);
-      m.matches = std::move(best);
-    }
-    r.methods.push_back(std::move(m));
+  // A method whose matches are thresholded on their own scores (raw,
+  // filter, SeqSLAM): swept here; the sequence filter's curve is made per
+  // threshold (sequence_curve) and handed over whole.
+  const auto add_method = [&](const std::string& name, place::PrCurve curve, std::vector<place::Match> matches) {
+    r.methods.push_back({name, std::move(curve), std::move(matches)});
+  };
+  const auto add_swept = [&](const std::string& name, std::vector<place::Match> scored) {
+    to_directory(scored, kept);
+    if (!have_truth) return add_method(name, {}, std::move(scored));
+    place::PrCurve c = place::sweep(scored, r.truth);
+    std::vector<place::Match> best = best_of_sweep(scored, c.best.threshold);
+    add_method(name, std::move(c), std::move(best));
   };
 
   // Raw best match.
@@ -326,7 +302,7 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
       const float v = s.row(i).maxCoeff(&j);
       raw.push_back({static_cast<int>(i), static_cast<int>(j), v});
     }
-    finish("raw", std::move(raw), false, {}, {});
+    add_swept("raw", std::move(raw));
   }
   const float uniform = 1.0f / static_cast<float>(kept.size());
   const auto filtered = [&](const place::Matrix& likelihood, const std::string& name) {
@@ -341,18 +317,18 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
       const float v = b.row(i).maxCoeff(&j);
       most_likely.push_back({static_cast<int>(i), static_cast<int>(j), v});
     }
-    finish(name, std::move(most_likely), false, {}, {});
+    add_swept(name, std::move(most_likely));
     // With it: every local peak (a database revisited holds several), kept
     // in sequences.
     std::vector<place::Match> peaks = place::row_peaks(b, uniform, o.peak_radius);
     if (have_truth) {
       std::vector<place::Match> best;
       place::PrCurve c = sequence_curve(peaks, o.sequence, r.truth, kept, best);
-      finish(name + "+seq", {}, true, std::move(c), std::move(best));
+      add_method(name + "+seq", std::move(c), std::move(best));
     } else {
       std::vector<place::Match> in_sequences = place::sequence_filter(peaks, o.sequence);
       to_directory(in_sequences, kept);
-      finish(name + "+seq", {}, true, {}, std::move(in_sequences));
+      add_method(name + "+seq", {}, std::move(in_sequences));
     }
     r.seconds_filters += seconds_since(t1);
   };
@@ -395,7 +371,7 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
       pq.push_back(seqslam_prepare(im.pixels, im.width, im.height, o.seqslam_config));
     }
     if (o.progress) o.progress("SeqSLAM", 0.0);
-    finish("seqslam", seqslam_matches(pd, pq, o.seqslam_config), false, {}, {});
+    add_swept("seqslam", seqslam_matches(pd, pq, o.seqslam_config));
     if (o.progress) o.progress("SeqSLAM", 1.0);
     r.seconds_seqslam = seconds_since(t0);
   }

@@ -6,6 +6,7 @@
 #include <limits>
 #include <sstream>
 
+#include "number_rows.hpp"
 #include "sim_truth.hpp"
 #include "trailnav/drivers/camera/frame.hpp"
 #include "trailnav/drivers/recording/recording.hpp"
@@ -20,44 +21,23 @@ namespace fs = std::filesystem;
 namespace {
 
 bool read_pose_csv(const std::string& path, std::vector<TruthPose>& out, std::string& error) {
-  std::ifstream in(path);
-  if (!in) {
-    error = path + ": cannot read the poses";
-    return false;
-  }
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    if (line.empty() || line[0] == '#') continue;
-    std::replace(line.begin(), line.end(), ',', ' ');
-    std::istringstream f(line);
-    double t = 0, x = 0, y = 0, yaw = 0;
-    if (!(f >> t >> x >> y >> yaw)) {
-      if (number == 1) continue;  // a header
-      error = path + ":" + std::to_string(number) + ": expected `time,x,y,yaw[,lat,lon]`";
-      return false;
-    }
+  error = read_number_rows(path, 4, 6, "`time,x,y,yaw[,lat,lon]`", [&](int, std::span<const double> f) {
+    for (double v : f)
+      if (!std::isfinite(v)) return std::string("a value that is not a finite number");
     TruthPose p;
-    p.utc_ns = static_cast<std::int64_t>(std::llround(t * 1e9));
-    p.x = x;
-    p.y = y;
-    p.yaw = yaw;
-    if (!(f >> p.lat >> p.lon)) {
-      p.lat = std::numeric_limits<double>::quiet_NaN();
-      p.lon = p.lat;
-    }
-    if (!std::isfinite(t) || !std::isfinite(x) || !std::isfinite(y) || !std::isfinite(yaw)) {
-      error = path + ":" + std::to_string(number) + ": a value that is not a finite number";
-      return false;
-    }
-    if (!out.empty() && p.utc_ns <= out.back().utc_ns) {
-      error = path + ":" + std::to_string(number) + ": times must increase";
-      return false;
-    }
-    if (!out.empty()) p.arc = out.back().arc + std::hypot(x - out.back().x, y - out.back().y);
+    p.utc_ns = static_cast<std::int64_t>(std::llround(f[0] * 1e9));
+    p.x = f[1];
+    p.y = f[2];
+    p.yaw = f[3];
+    p.lat = f.size() == 6 ? f[4] : std::numeric_limits<double>::quiet_NaN();
+    p.lon = f.size() == 6 ? f[5] : std::numeric_limits<double>::quiet_NaN();
+    if (f.size() == 5) return std::string("latitude without longitude");
+    if (!out.empty() && p.utc_ns <= out.back().utc_ns) return std::string("times must increase");
+    if (!out.empty()) p.arc = out.back().arc + std::hypot(p.x - out.back().x, p.y - out.back().y);
     out.push_back(p);
-  }
+    return std::string();
+  });
+  if (!error.empty()) return false;
   if (out.size() < 2) {
     error = path + ": fewer than two poses";
     return false;

@@ -1,5 +1,7 @@
 #include "seqslam.hpp"
 
+#include "trailnav/drivers/camera/frame.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -7,29 +9,21 @@
 namespace trailnav::eval {
 
 std::vector<float> seqslam_prepare(std::span<const std::uint8_t> grey, int width, int height, const SeqSlamConfig& c) {
-  // Area average onto c.width x c.height (each output pixel the mean of the
-  // input pixels whose centres fall in it; nearest when enlarging).
+  // Down-sampled by area averages (drivers/camera's, as the camera reduces
+  // its frames); a smaller image enlarged by its nearest pixels.
   std::vector<float> small(static_cast<std::size_t>(c.width * c.height), 0.0f);
-  std::vector<int> count(small.size(), 0);
-  for (int y = 0; y < height; ++y) {
-    const int sy = std::min(c.height - 1, y * c.height / height);
-    for (int x = 0; x < width; ++x) {
-      const int sx = std::min(c.width - 1, x * c.width / width);
-      const std::size_t k = static_cast<std::size_t>(sy * c.width + sx);
-      small[k] += grey[static_cast<std::size_t>(y * width + x)];
-      ++count[k];
-    }
+  if (width >= c.width && height >= c.height) {
+    std::vector<std::uint8_t> reduced(small.size());
+    std::vector<std::uint32_t> sums(small.size()), counts(small.size());
+    drivers::camera::area_counts(width, height, c.width, c.height, counts);
+    drivers::camera::reduce_area(grey, width, height, reduced, c.width, c.height, sums, counts);
+    for (std::size_t k = 0; k < small.size(); ++k) small[k] = reduced[k];
+  } else {
+    for (int sy = 0; sy < c.height; ++sy)
+      for (int sx = 0; sx < c.width; ++sx)
+        small[static_cast<std::size_t>(sy * c.width + sx)] =
+            grey[static_cast<std::size_t>((sy * height / c.height) * width + sx * width / c.width)];
   }
-  for (int sy = 0; sy < c.height; ++sy)
-    for (int sx = 0; sx < c.width; ++sx) {
-      const std::size_t k = static_cast<std::size_t>(sy * c.width + sx);
-      if (count[k] > 0) {
-        small[k] /= static_cast<float>(count[k]);
-      } else {
-        small[k] = grey[static_cast<std::size_t>(std::min(height - 1, sy * height / c.height) * width +
-                                                 std::min(width - 1, sx * width / c.width))];
-      }
-    }
   // Patch normalisation.
   for (int py = 0; py < c.height; py += c.patch)
     for (int px = 0; px < c.width; px += c.patch) {

@@ -31,6 +31,21 @@ std::vector<std::uint8_t> frame(const std::string& season, int number, int zoom)
   return big;
 }
 
+// A database of `images` summer frames (240 real ones, cycled), finished;
+// false when the data is not there.
+bool fill_summer(OnlinePlace& place, std::size_t images, int zoom, int width) {
+  std::vector<std::vector<float>> summer;
+  for (int k = 0; k < 240; ++k) {
+    const std::vector<std::uint8_t> f = frame("summer", 100 + 100 * k, zoom);
+    if (f.empty()) return false;
+    const auto d = place.describe(f, width);
+    summer.emplace_back(d.begin(), d.end());
+  }
+  for (std::size_t j = 0; j < images; ++j) place.add_database(summer[j % summer.size()]);
+  place.finish_database();
+  return true;
+}
+
 // Arguments: database images, zoom of the 64 x 32 frames.
 void BM_PlaceStep(benchmark::State& state) {
   const auto images = static_cast<std::size_t>(state.range(0));
@@ -40,18 +55,10 @@ void BM_PlaceStep(benchmark::State& state) {
   config.height = 32 * zoom;
   config.capacity = images;
   OnlinePlace place(config);
-  std::vector<std::vector<float>> summer;
-  for (int k = 0; k < 240; ++k) {
-    const std::vector<std::uint8_t> f = frame("summer", 100 + 100 * k, zoom);
-    if (f.empty()) {
-      state.SkipWithError("../shared/data/nordland not found (run from the repository's root)");
-      return;
-    }
-    const auto d = place.describe(f, config.width);
-    summer.emplace_back(d.begin(), d.end());
+  if (!fill_summer(place, images, zoom, config.width)) {
+    state.SkipWithError("../shared/data/nordland not found (run from the repository's root)");
+    return;
   }
-  for (std::size_t j = 0; j < images; ++j) place.add_database(summer[j % summer.size()]);
-  place.finish_database();
   std::vector<std::vector<std::uint8_t>> winter;
   for (int k = 0; k < 16; ++k) winter.push_back(frame("winter", 5000 + 100 * k, zoom));
   std::size_t k = 0;
@@ -72,18 +79,10 @@ void BM_PlaceStepZca(benchmark::State& state) {
   config.height = 32;
   config.capacity = images;
   OnlinePlace place(config);
-  std::vector<std::vector<float>> summer;
-  for (int k = 0; k < 240; ++k) {
-    const std::vector<std::uint8_t> f = frame("summer", 100 + 100 * k, 1);
-    if (f.empty()) {
-      state.SkipWithError("../shared/data/nordland not found (run from the repository's root)");
-      return;
-    }
-    const auto d = place.describe(f, config.width);
-    summer.emplace_back(d.begin(), d.end());
+  if (!fill_summer(place, images, 1, config.width)) {
+    state.SkipWithError("../shared/data/nordland not found (run from the repository's root)");
+    return;
   }
-  for (std::size_t j = 0; j < images; ++j) place.add_database(summer[j % summer.size()]);
-  place.finish_database();
   Whitening w;
   w.rank = 200;
   w.base = 3.0f;

@@ -474,7 +474,7 @@ TEST(RobotConfig, TheCameraAndPlaceSectionsAndTheirChecks) {
   const auto robot = load(example);
   ASSERT_TRUE(robot.config) << robot.error;
   ASSERT_TRUE(robot.config->camera && robot.config->place);
-  EXPECT_EQ(robot.config->camera->format, drivers::camera::PixelFormat::mjpeg);
+  EXPECT_EQ(robot.config->camera->format, drivers::camera::PixelFormat::yuyv);
   EXPECT_EQ(robot.config->place->database, "/var/lib/trailnav/route.tnplace");
   const auto no_camera = load("runtime: {realtime: off}\nplace: {database: x.tnplace}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
   EXPECT_NE(no_camera.error.find("add a 'camera' section"), std::string::npos) << no_camera.error;

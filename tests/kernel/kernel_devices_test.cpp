@@ -718,16 +718,19 @@ TEST(KernelCamera, VividStreamsYuyvAndGreyStampedAndNumberedByTheKernel) {
 TEST(KernelCamera, ASizeOrFormatTheDeviceDoesNotOfferIsRefusedNamingItsOffer) {
   REQUIRE_VM();
   camera::V4l2Camera cam;
-  std::string e = cam.open(vivid_options(camera::PixelFormat::yuyv, 320, 240));
+  EXPECT_FALSE(cam.open(vivid_options(camera::PixelFormat::yuyv, 320, 240)));
+  std::string e = cam.error();
   EXPECT_NE(e.find("/dev/video0: offers 320 x 180 YUYV where 320 x 240 YUYV was set"), std::string::npos) << e;
   EXPECT_FALSE(cam.is_open());
-  e = cam.open(vivid_options(camera::PixelFormat::mjpeg, 320, 180));
+  EXPECT_FALSE(cam.open(vivid_options(camera::PixelFormat::mjpeg, 320, 180)));
+  e = cam.error();
   EXPECT_NE(e.find("where 320 x 180 MJPG was set"), std::string::npos) << e;
   camera::CameraOptions manual = vivid_options(camera::PixelFormat::yuyv, 320, 180);
   manual.exposure_us = 5000;
-  e = cam.open(manual);
+  EXPECT_FALSE(cam.open(manual));
+  e = cam.error();
   EXPECT_NE(e.find("does not take a manual exposure"), std::string::npos) << e;
-  EXPECT_EQ(cam.open(vivid_options(camera::PixelFormat::yuyv, 640, 360)), "");
+  EXPECT_TRUE(cam.open(vivid_options(camera::PixelFormat::yuyv, 640, 360))) << cam.error();
   EXPECT_EQ(cam.width(), 640);
   EXPECT_GE(cam.bytes_per_line(), 1280);
   cam.close();

@@ -50,8 +50,6 @@ CameraDriver::Created CameraDriver::create(const CameraOptions& options) {
 
 CameraDriver::~CameraDriver() = default;
 
-int CameraDriver::wake_fd() const noexcept { return tunnel_ ? tunnel_->fd() : camera_.fd(); }
-
 void CameraDriver::run_tunnel(Nanos now) noexcept {
   for (const udp::Datagram& d : tunnel_->receive()) {
     if (!assembler_->add(d.payload)) continue;
@@ -94,17 +92,16 @@ CameraDriver::CameraDriver(const CameraOptions& options)
       converter_(options.input == CameraInput::tunnel ? PixelFormat::grey : options.format, options.width, options.height,
                  options.out_width, options.out_height),
       frames_(options.out_width, options.out_height) {
-  error_.reserve(256);
   if (options.input == CameraInput::tunnel) assembler_ = std::make_unique<ImageAssembler>(options.width, options.height);
 }
 
-void CameraDriver::note_error(const std::string& e) noexcept {
-  const std::size_t n = std::min(e.size(), local_.last_error.size() - 1);
-  std::memcpy(local_.last_error.data(), e.data(), n);
+void CameraDriver::note_error(const char* e) noexcept {
+  const std::size_t n = std::min(std::strlen(e), local_.last_error.size() - 1);
+  std::memcpy(local_.last_error.data(), e, n);
   local_.last_error[n] = '\0';
 }
 
-void CameraDriver::lose(Nanos now, const std::string& why) noexcept {
+void CameraDriver::lose(Nanos now, const char* why) noexcept {
   note_error(why);
   camera_.close();
   ++local_.counters.lost;
@@ -121,15 +118,14 @@ void CameraDriver::run(const TaskTick& tick) {
   }
   if (!camera_.is_open()) {
     if (now >= next_open_) {
-      const std::string e = camera_.open(options_);
-      if (e.empty()) {
+      if (camera_.open(options_)) {
         ++local_.counters.opens;
         local_.health = CameraHealth::streaming;
         local_.fps = camera_.fps();
         last_frame_ = now;
       } else {
         ++local_.counters.open_failures;
-        note_error(e);
+        note_error(camera_.error());
         next_open_ = now + static_cast<Nanos>(options_.reconnect_s * 1e9);
       }
     }
@@ -141,11 +137,11 @@ void CameraDriver::run(const TaskTick& tick) {
   Dequeued d, newest;
   bool have = false;
   for (;;) {
-    const V4l2Camera::Got got = camera_.dequeue(d, error_);
+    const V4l2Camera::Got got = camera_.dequeue(d);
     if (got == V4l2Camera::Got::none) break;
     if (got == V4l2Camera::Got::lost) {
-      if (have) camera_.requeue(newest.index, error_);
-      lose(now, options_.device + ": " + error_);
+      if (have) camera_.requeue(newest.index);
+      lose(now, camera_.error());
       shared_.post(local_);
       return;
     }
@@ -155,10 +151,10 @@ void CameraDriver::run(const TaskTick& tick) {
     last_sequence_ = d.sequence;
     if (d.error_flag) {
       ++local_.counters.damaged;
-      camera_.requeue(d.index, error_);
+      camera_.requeue(d.index);
       continue;
     }
-    if (have) camera_.requeue(newest.index, error_);
+    if (have) camera_.requeue(newest.index);
     newest = d;
     have = true;
   }
@@ -182,14 +178,16 @@ void CameraDriver::run(const TaskTick& tick) {
       note_error(converter_.error());
     }
     local_.counters.jpeg_warnings = converter_.jpeg_warnings();
-    if (!camera_.requeue(newest.index, error_)) {
-      lose(now, options_.device + ": " + error_);
+    if (!camera_.requeue(newest.index)) {
+      lose(now, camera_.error());
       shared_.post(local_);
       return;
     }
   } else if (now - last_frame_ > static_cast<Nanos>(options_.silence_s * 1e9)) {
     local_.health = CameraHealth::silent;
-    lose(now, options_.device + ": no frame for " + std::to_string(options_.silence_s) + " s while streaming");
+    char why[200];
+    std::snprintf(why, sizeof why, "%.120s: no frame for %.2f s while streaming", options_.device.c_str(), options_.silence_s);
+    lose(now, why);
   }
   shared_.post(local_);
 }

@@ -46,6 +46,7 @@ FrameConverter::FrameConverter(PixelFormat format, int width, int height, int ou
   const auto out = static_cast<std::size_t>(out_width) * static_cast<std::size_t>(out_height);
   sums_.resize(out);
   counts_.resize(out);
+  area_counts(width, height, out_width, out_height, counts_);
   out_.resize(out);
   if (format == PixelFormat::mjpeg) {
     jpeg_ = tjInitDecompress();
@@ -57,18 +58,23 @@ FrameConverter::~FrameConverter() {
   if (jpeg_ != nullptr) tjDestroy(jpeg_);
 }
 
-void reduce_area(std::span<const std::uint8_t> in, int w, int h, std::span<std::uint8_t> out, int ow, int oh,
-                 std::span<std::uint32_t> sums, std::span<std::uint32_t> counts) noexcept {
-  std::fill(sums.begin(), sums.end(), 0u);
+void area_counts(int w, int h, int ow, int oh, std::span<std::uint32_t> counts) noexcept {
   std::fill(counts.begin(), counts.end(), 0u);
   for (int y = 0; y < h; ++y) {
     const auto oy = static_cast<std::size_t>(std::min(oh - 1, y * oh / h));
+    for (int x = 0; x < w; ++x)
+      ++counts[oy * static_cast<std::size_t>(ow) + static_cast<std::size_t>(std::min(ow - 1, x * ow / w))];
+  }
+}
+
+void reduce_area(std::span<const std::uint8_t> in, int w, int h, std::span<std::uint8_t> out, int ow, int oh,
+                 std::span<std::uint32_t> sums, std::span<const std::uint32_t> counts) noexcept {
+  std::fill(sums.begin(), sums.end(), 0u);
+  for (int y = 0; y < h; ++y) {
+    const auto oy = static_cast<std::size_t>(std::min(oh - 1, y * oh / h));
     const std::uint8_t* row = in.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-    for (int x = 0; x < w; ++x) {
-      const auto k = oy * static_cast<std::size_t>(ow) + static_cast<std::size_t>(std::min(ow - 1, x * ow / w));
-      sums[k] += row[x];
-      ++counts[k];
-    }
+    for (int x = 0; x < w; ++x)
+      sums[oy * static_cast<std::size_t>(ow) + static_cast<std::size_t>(std::min(ow - 1, x * ow / w))] += row[x];
   }
   for (std::size_t k = 0; k < out.size(); ++k)
     out[k] = static_cast<std::uint8_t>(counts[k] > 0 ? (sums[k] + counts[k] / 2) / counts[k] : 0u);

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdarg>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -23,10 +24,9 @@ int xioctl(int fd, unsigned long request, void* arg) noexcept {
   return r;
 }
 
-std::string fourcc_text(std::uint32_t f) {
-  char s[5] = {static_cast<char>(f & 0xff), static_cast<char>((f >> 8) & 0xff), static_cast<char>((f >> 16) & 0xff),
-               static_cast<char>((f >> 24) & 0xff), 0};
-  return s;
+void fourcc_text(std::uint32_t f, char (&out)[5]) noexcept {
+  for (int i = 0; i < 4; ++i) out[i] = static_cast<char>((f >> (8 * i)) & 0xff);
+  out[4] = '\0';
 }
 
 }  // namespace
@@ -53,29 +53,37 @@ void V4l2Camera::close() noexcept {
     xioctl(fd_, VIDIOC_STREAMOFF, &type);
     streaming_ = false;
   }
-  for (const Mapping& m : maps_)
-    if (m.start != nullptr && m.start != MAP_FAILED) ::munmap(m.start, m.length);
-  maps_.clear();
+  for (std::size_t i = 0; i < mapped_; ++i) ::munmap(maps_[i].start, maps_[i].length);
+  mapped_ = 0;
   ::close(fd_);
   fd_ = -1;
 }
 
-std::string V4l2Camera::open(const CameraOptions& o) {
+// The error, after the device's name; the device closed. Always false.
+bool V4l2Camera::fail(const char* format, ...) noexcept {
+  char what[200];
+  va_list args;
+  va_start(args, format);
+  std::vsnprintf(what, sizeof what, format, args);
+  va_end(args);
+  std::snprintf(error_, sizeof error_, "%.100s: %.150s", device_, what);
   close();
-  const std::string dev = o.device;
-  const auto fail = [&](const std::string& what) {
-    const std::string message = dev + ": " + what;
-    close();
-    return message;
-  };
-  fd_ = ::open(dev.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);
-  if (fd_ < 0) return dev + ": cannot open (" + std::strerror(errno) + ")";
+  return false;
+}
+
+bool V4l2Camera::open(const CameraOptions& o) noexcept {
+  close();
+  error_[0] = '\0';
+  std::snprintf(device_, sizeof device_, "%s", o.device.c_str());
+  fd_ = ::open(device_, O_RDWR | O_NONBLOCK | O_CLOEXEC);
+  if (fd_ < 0) return fail("cannot open (%s)", std::strerror(errno));
   v4l2_capability cap{};
-  if (xioctl(fd_, VIDIOC_QUERYCAP, &cap) < 0) return fail(std::string("not a V4L2 device (VIDIOC_QUERYCAP: ") + std::strerror(errno) + ")");
-  card_ = reinterpret_cast<const char*>(cap.card);
+  if (xioctl(fd_, VIDIOC_QUERYCAP, &cap) < 0) return fail("not a V4L2 device (VIDIOC_QUERYCAP: %s)", std::strerror(errno));
+  std::snprintf(card_, sizeof card_, "%s", reinterpret_cast<const char*>(cap.card));
   const std::uint32_t caps = (cap.capabilities & V4L2_CAP_DEVICE_CAPS) != 0 ? cap.device_caps : cap.capabilities;
-  if ((caps & V4L2_CAP_VIDEO_CAPTURE) == 0) return fail("'" + card_ + "' does not capture video (a single-planar capture device is needed)");
-  if ((caps & V4L2_CAP_STREAMING) == 0) return fail("'" + card_ + "' cannot stream through memory-mapped buffers");
+  if ((caps & V4L2_CAP_VIDEO_CAPTURE) == 0)
+    return fail("'%s' does not capture video (a single-planar capture device is needed)", card_);
+  if ((caps & V4L2_CAP_STREAMING) == 0) return fail("'%s' cannot stream through memory-mapped buffers", card_);
   // The format.
   v4l2_format fmt{};
   fmt.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -83,14 +91,14 @@ std::string V4l2Camera::open(const CameraOptions& o) {
   fmt.fmt.pix.height = static_cast<std::uint32_t>(o.height);
   fmt.fmt.pix.pixelformat = fourcc_of(o.format);
   fmt.fmt.pix.field = V4L2_FIELD_NONE;
-  if (xioctl(fd_, VIDIOC_S_FMT, &fmt) < 0) return fail(std::string("VIDIOC_S_FMT refused: ") + std::strerror(errno));
+  if (xioctl(fd_, VIDIOC_S_FMT, &fmt) < 0) return fail("VIDIOC_S_FMT refused: %s", std::strerror(errno));
   if (fmt.fmt.pix.pixelformat != fourcc_of(o.format) || static_cast<int>(fmt.fmt.pix.width) != o.width ||
       static_cast<int>(fmt.fmt.pix.height) != o.height) {
-    char b[200];
-    std::snprintf(b, sizeof b, "offers %u x %u %s where %d x %d %s was set (camera.width, height, format)", fmt.fmt.pix.width,
-                  fmt.fmt.pix.height, fourcc_text(fmt.fmt.pix.pixelformat).c_str(), o.width, o.height,
-                  fourcc_text(fourcc_of(o.format)).c_str());
-    return fail(b);
+    char offered[5], wanted[5];
+    fourcc_text(fmt.fmt.pix.pixelformat, offered);
+    fourcc_text(fourcc_of(o.format), wanted);
+    return fail("offers %u x %u %s where %d x %d %s was set (camera.width, height, format)", fmt.fmt.pix.width,
+                fmt.fmt.pix.height, offered, o.width, o.height, wanted);
   }
   width_ = o.width;
   height_ = o.height;
@@ -102,7 +110,7 @@ std::string V4l2Camera::open(const CameraOptions& o) {
     parm.parm.capture.timeperframe.numerator = 1000;
     parm.parm.capture.timeperframe.denominator = static_cast<std::uint32_t>(std::lround(o.fps * 1000.0));
     if (xioctl(fd_, VIDIOC_S_PARM, &parm) < 0 && errno != ENOTTY)
-      return fail(std::string("VIDIOC_S_PARM (camera.fps) refused: ") + std::strerror(errno));
+      return fail("VIDIOC_S_PARM (camera.fps) refused: %s", std::strerror(errno));
   }
   parm = {};
   parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -120,47 +128,46 @@ std::string V4l2Camera::open(const CameraOptions& o) {
       e.id = V4L2_CID_EXPOSURE_ABSOLUTE;
       e.value = std::max(1, (o.exposure_us + 50) / 100);
       if (!has_auto || xioctl(fd_, VIDIOC_S_CTRL, &e) < 0)
-        return fail("'" + card_ + "' does not take a manual exposure (camera.exposure_us; 0 leaves it automatic)");
+        return fail("'%s' does not take a manual exposure (camera.exposure_us; 0 leaves it automatic)", card_);
     }
   }
   // Buffers.
   v4l2_requestbuffers req{};
-  req.count = static_cast<std::uint32_t>(o.buffers);
+  req.count = static_cast<std::uint32_t>(std::min<std::size_t>(static_cast<std::size_t>(o.buffers), maps_.size()));
   req.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   req.memory = V4L2_MEMORY_MMAP;
-  if (xioctl(fd_, VIDIOC_REQBUFS, &req) < 0) return fail(std::string("VIDIOC_REQBUFS refused: ") + std::strerror(errno));
-  if (req.count < 2) return fail("gave " + std::to_string(req.count) + " buffers; at least 2 are needed");
-  maps_.assign(req.count, Mapping{});
+  if (xioctl(fd_, VIDIOC_REQBUFS, &req) < 0) return fail("VIDIOC_REQBUFS refused: %s", std::strerror(errno));
+  if (req.count < 2 || req.count > maps_.size()) return fail("gave %u buffers; 2 to 32 are needed", req.count);
   for (std::uint32_t i = 0; i < req.count; ++i) {
     v4l2_buffer buf{};
     buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     buf.memory = V4L2_MEMORY_MMAP;
     buf.index = i;
-    if (xioctl(fd_, VIDIOC_QUERYBUF, &buf) < 0) return fail(std::string("VIDIOC_QUERYBUF: ") + std::strerror(errno));
+    if (xioctl(fd_, VIDIOC_QUERYBUF, &buf) < 0) return fail("VIDIOC_QUERYBUF: %s", std::strerror(errno));
     void* p = ::mmap(nullptr, buf.length, PROT_READ | PROT_WRITE, MAP_SHARED, fd_, buf.m.offset);
-    if (p == MAP_FAILED) return fail(std::string("mmap of a buffer: ") + std::strerror(errno));
+    if (p == MAP_FAILED) return fail("mmap of a buffer: %s", std::strerror(errno));
     maps_[i] = {p, buf.length};
-    if (xioctl(fd_, VIDIOC_QBUF, &buf) < 0) return fail(std::string("VIDIOC_QBUF: ") + std::strerror(errno));
+    mapped_ = i + 1;
+    if (xioctl(fd_, VIDIOC_QBUF, &buf) < 0) return fail("VIDIOC_QBUF: %s", std::strerror(errno));
   }
   int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
-  if (xioctl(fd_, VIDIOC_STREAMON, &type) < 0) return fail(std::string("VIDIOC_STREAMON: ") + std::strerror(errno));
+  if (xioctl(fd_, VIDIOC_STREAMON, &type) < 0) return fail("VIDIOC_STREAMON: %s", std::strerror(errno));
   streaming_ = true;
-  return "";
+  return true;
 }
 
-V4l2Camera::Got V4l2Camera::dequeue(Dequeued& out, std::string& error) noexcept {
+V4l2Camera::Got V4l2Camera::dequeue(Dequeued& out) noexcept {
   if (fd_ < 0) return Got::none;
   v4l2_buffer buf{};
   buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   buf.memory = V4L2_MEMORY_MMAP;
   if (xioctl(fd_, VIDIOC_DQBUF, &buf) < 0) {
     if (errno == EAGAIN) return Got::none;
-    error.assign("VIDIOC_DQBUF: ");
-    error.append(std::strerror(errno));
+    std::snprintf(error_, sizeof error_, "%.100s: VIDIOC_DQBUF: %.100s", device_, std::strerror(errno));
     return Got::lost;
   }
-  if (buf.index >= maps_.size()) {
-    error.assign("VIDIOC_DQBUF gave an unknown buffer");
+  if (buf.index >= mapped_) {
+    std::snprintf(error_, sizeof error_, "%.100s: VIDIOC_DQBUF gave an unknown buffer", device_);
     return Got::lost;
   }
   const Mapping& m = maps_[buf.index];
@@ -174,14 +181,13 @@ V4l2Camera::Got V4l2Camera::dequeue(Dequeued& out, std::string& error) noexcept 
   return Got::frame;
 }
 
-bool V4l2Camera::requeue(int index, std::string& error) noexcept {
+bool V4l2Camera::requeue(int index) noexcept {
   v4l2_buffer buf{};
   buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   buf.memory = V4L2_MEMORY_MMAP;
   buf.index = static_cast<std::uint32_t>(index);
   if (xioctl(fd_, VIDIOC_QBUF, &buf) < 0) {
-    error.assign("VIDIOC_QBUF: ");
-    error.append(std::strerror(errno));
+    std::snprintf(error_, sizeof error_, "%.100s: VIDIOC_QBUF: %.100s", device_, std::strerror(errno));
     return false;
   }
   return true;

@@ -13,7 +13,6 @@ BayesFilter::BayesFilter(std::size_t database_size, const TransitionModel& model
     throw std::invalid_argument("place filter: f and b must be at least 1 and c_f, c_s, c_b positive");
   const std::size_t n = database_size;
   belief_.resize(n);
-  inverse_alpha_.resize(n);
   prefix_.resize(n + 1);
   // α: one for every source, the sum of a row that lies wholly inside the
   // database (n_D ones, plus c - 1 for each band position). A row near an
@@ -23,7 +22,7 @@ BayesFilter::BayesFilter(std::size_t database_size, const TransitionModel& model
   // and the update's η restores the sum.
   const double alpha = static_cast<double>(n) + (model.c_f - 1.0) * (model.f - 1) + (model.c_s - 1.0) +
                        (model.c_b - 1.0) * (model.b - 1);
-  std::fill(inverse_alpha_.begin(), inverse_alpha_.end(), 1.0 / alpha);
+  inverse_alpha_ = 1.0 / alpha;
   reset();
 }
 
@@ -33,7 +32,7 @@ void BayesFilter::predict() noexcept {
   const std::size_t n = belief_.size();
   // prefix_[k] = Σ_{x' < k} Bel(x') / α(x')
   prefix_[0] = 0.0;
-  for (std::size_t i = 0; i < n; ++i) prefix_[i + 1] = prefix_[i] + belief_[i] * inverse_alpha_[i];
+  for (std::size_t i = 0; i < n; ++i) prefix_[i + 1] = prefix_[i] + belief_[i] * inverse_alpha_;
   const double all = prefix_[n];
   const auto band = [&](long from, long to) {  // Σ over x' in [from, to], clipped to the database
     from = std::max(from, 0L);
@@ -43,7 +42,7 @@ void BayesFilter::predict() noexcept {
   const long f = model_.f, b = model_.b;
   for (std::size_t i = 0; i < n; ++i) {
     const long x = static_cast<long>(i);
-    const double own = belief_[i] * inverse_alpha_[i];
+    const double own = belief_[i] * inverse_alpha_;
     // Forward: x - x' in (0, f), the sources x' in [x - f + 1, x - 1]
     // (reversed: [x + 1, x + f - 1]); backward: x' - x in (0, b).
     const double fwd = reversed_ ? band(x + 1, x + f - 1) : band(x - f + 1, x - 1);

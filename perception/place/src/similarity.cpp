@@ -78,30 +78,18 @@ void stretch_rows(Matrix& s) {
 Matrix zca_whiten(const Matrix& s, double epsilon_relative) {
   using MatrixD = Eigen::MatrixXd;
   const Eigen::Index n_q = s.rows();
-  const Eigen::Index n_d = s.cols();
+  if (n_q > s.cols()) return zca_whiten_with(s, s, epsilon_relative);  // Σ is the smaller: Eq. 5.12-5.14 as written
   MatrixD centred = s.cast<double>();
   centred.rowwise() -= centred.colwise().mean();  // Eq. 5.11
   const double rows = static_cast<double>(std::max<Eigen::Index>(n_q, 1));
-  MatrixD out;
-  if (n_q <= n_d) {
-    // Ŝ Ŝᵀ = P M Pᵀ; Σ's non-zero eigenvalues are M / n_Q.
-    const MatrixD gram = centred * centred.transpose();
-    Eigen::SelfAdjointEigenSolver<MatrixD> eig(gram);
-    const Eigen::VectorXd lambda = (eig.eigenvalues().array().max(0.0) / rows).matrix();
-    const double epsilon = epsilon_relative * lambda.sum() / static_cast<double>(n_q);
-    const Eigen::VectorXd g = (lambda.array() + epsilon).rsqrt().matrix();
-    const MatrixD& p = eig.eigenvectors();
-    out = p * (g.asDiagonal() * (p.transpose() * centred));
-  } else {
-    const MatrixD sigma = centred.transpose() * centred / rows;  // Eq. 5.12
-    Eigen::SelfAdjointEigenSolver<MatrixD> eig(sigma);             // Eq. 5.13
-    const Eigen::VectorXd lambda = eig.eigenvalues().array().max(0.0).matrix();
-    const double epsilon = epsilon_relative * lambda.sum() / static_cast<double>(n_d);
-    const Eigen::VectorXd g = (lambda.array() + epsilon).rsqrt().matrix();
-    const MatrixD& u = eig.eigenvectors();
-    out = centred * (u * g.asDiagonal() * u.transpose());  // Eq. 5.14
-  }
-  return out.cast<float>();
+  // Ŝ Ŝᵀ = P M Pᵀ; Σ's non-zero eigenvalues are M / n_Q.
+  const MatrixD gram = centred * centred.transpose();
+  Eigen::SelfAdjointEigenSolver<MatrixD> eig(gram);
+  const Eigen::VectorXd lambda = (eig.eigenvalues().array().max(0.0) / rows).matrix();
+  const double epsilon = epsilon_relative * lambda.sum() / static_cast<double>(n_q);
+  const Eigen::VectorXd g = (lambda.array() + epsilon).rsqrt().matrix();
+  const MatrixD& p = eig.eigenvectors();
+  return (p * (g.asDiagonal() * (p.transpose() * centred))).cast<float>();
 }
 
 Matrix zca_whiten_with(const Matrix& reference, const Matrix& s, double epsilon_relative) {

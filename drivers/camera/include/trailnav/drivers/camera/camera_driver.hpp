@@ -4,16 +4,22 @@
 // converted to grey, reduced to out_width x out_height and published through
 // a mailbox with the kernel's timestamp in host time; counters of frames,
 // frames the kernel dropped (gaps in its sequence numbers), frames marked
-// damaged or not decodable, opens and losses, readable from any thread. Woken
-// by the device's descriptor (a frame ready), not by polling.
+// damaged or not decodable, opens and losses, readable from any thread. Runs
+// periodically (the preset: 30 Hz, at least a camera's frame rate) and takes
+// every frame ready then; it does not watch a descriptor (the device's is
+// opened after the scheduler starts, and a tunnel's readiness per fragment
+// would wake the thread for each of a frame's fragments).
 //
 // With `input: tunnel` the frames come over UDP on loopback instead
 // (image_tunnel.hpp), grey and of the configured size, stamped when their
 // last fragment arrived; health follows them the same way.
 //
-// Opening allocates (the buffers' mappings), and libjpeg decodes MJPEG in
-// pools of its own: the task runs with normal scheduling, like the mapping
-// task, off the real-time threads.
+// The scheduler's threads are all watched by the allocation guard, this one
+// (normal scheduling) too: opening the device, reopening it and reporting
+// errors allocate nothing (v4l2_camera.hpp), nor do GREY and YUYV frames.
+// libjpeg decodes MJPEG in pools it takes from the heap, which the guard
+// counts: on the robot take YUYV or GREY until the decoder's memory is its
+// own (docs/place.md).
 #pragma once
 
 #include <array>
@@ -77,7 +83,6 @@ class CameraDriver final : public Task {
   static Created create(const CameraOptions& options);
 
   void run(const TaskTick& tick) override;
-  int wake_fd() const noexcept override;
   ~CameraDriver() override;
 
   Mailbox<CameraFrame>& frames() noexcept { return frames_; }
@@ -87,8 +92,8 @@ class CameraDriver final : public Task {
  private:
   explicit CameraDriver(const CameraOptions& options);
   void run_tunnel(Nanos now) noexcept;
-  void note_error(const std::string& e) noexcept;
-  void lose(Nanos now, const std::string& why) noexcept;
+  void note_error(const char* e) noexcept;
+  void lose(Nanos now, const char* why) noexcept;
 
   CameraOptions options_;
   V4l2Camera camera_;
@@ -100,7 +105,6 @@ class CameraDriver final : public Task {
   Nanos last_frame_ = 0;
   bool have_sequence_ = false;
   std::uint32_t last_sequence_ = 0;
-  std::string error_;
   CameraStatus local_;
   StatusBoard<CameraStatus> shared_;
 };

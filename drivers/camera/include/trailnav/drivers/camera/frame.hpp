@@ -58,9 +58,12 @@ class FrameConverter {
   char error_[160] = {};
 };
 
-// Area average of a grey image (w x h) onto (ow x oh): each output pixel
-// the mean of the input pixels whose centres fall in it (rounded).
+// Area average of a grey image (w x h, w >= ow, h >= oh) onto (ow x oh):
+// each output pixel the mean of the input pixels whose centres fall in it
+// (rounded). How many fall in each depends on the sizes alone: area_counts()
+// once, then reduce_area() per image with `sums` as scratch (ow x oh each).
+void area_counts(int w, int h, int ow, int oh, std::span<std::uint32_t> counts) noexcept;
 void reduce_area(std::span<const std::uint8_t> in, int w, int h, std::span<std::uint8_t> out, int ow, int oh,
-                 std::span<std::uint32_t> sums, std::span<std::uint32_t> counts) noexcept;
+                 std::span<std::uint32_t> sums, std::span<const std::uint32_t> counts) noexcept;
 
 }  // namespace trailnav::drivers::camera

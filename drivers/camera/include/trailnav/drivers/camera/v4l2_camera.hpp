@@ -3,11 +3,14 @@
 // set from the config and checked against what the device accepted, the
 // kernel's buffers memory-mapped at open (`buffers` of them), streamed, and
 // each filled buffer handed out with the kernel's timestamp and sequence
-// number, then queued again. Everything is allocated by open(); dequeue() and
-// requeue() allocate nothing. Errors are strings that name the device and
-// what it refused.
+// number, then queued again. Nothing is allocated, by open() either (the
+// camera thread is watched by the allocation guard, and a camera that was
+// unplugged is opened again while the daemon runs): the mappings live in a
+// fixed table, errors are written into a fixed buffer (error()) naming the
+// device and what it refused.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -54,9 +57,11 @@ class V4l2Camera {
   V4l2Camera(const V4l2Camera&) = delete;
   V4l2Camera& operator=(const V4l2Camera&) = delete;
 
-  // Opens and configures the device and starts streaming. "" or the error
-  // (the device left closed).
-  std::string open(const CameraOptions& options);
+  // Opens and configures the device and starts streaming. False with error()
+  // set when it cannot (the device left closed).
+  bool open(const CameraOptions& options) noexcept;
+  // What went wrong last (open, dequeue, requeue); "" before.
+  const char* error() const noexcept { return error_; }
   void close() noexcept;
   bool is_open() const noexcept { return fd_ >= 0; }
   int fd() const noexcept { return fd_; }
@@ -66,24 +71,29 @@ class V4l2Camera {
   int height() const noexcept { return height_; }
   int bytes_per_line() const noexcept { return bytes_per_line_; }
   double fps() const noexcept { return fps_; }
-  const std::string& card() const noexcept { return card_; }
+  const char* card() const noexcept { return card_; }
 
   enum class Got : std::uint8_t { frame, none, lost };
   // The next filled buffer, `none` when none is ready, `lost` when the device
-  // failed (unplugged: ENODEV, EIO), with `error` set.
-  Got dequeue(Dequeued& out, std::string& error) noexcept;
-  bool requeue(int index, std::string& error) noexcept;
+  // failed (unplugged: ENODEV, EIO), with error() set.
+  Got dequeue(Dequeued& out) noexcept;
+  bool requeue(int index) noexcept;
 
  private:
   struct Mapping {
     void* start = nullptr;
     std::size_t length = 0;
   };
+  bool fail(const char* format, ...) noexcept __attribute__((format(printf, 2, 3)));
+
   int fd_ = -1;
-  std::vector<Mapping> maps_;
+  std::array<Mapping, 32> maps_{};  // camera.buffers is at most 32
+  std::size_t mapped_ = 0;
   int width_ = 0, height_ = 0, bytes_per_line_ = 0;
   double fps_ = 0.0;
-  std::string card_;
+  char device_[128] = {};
+  char card_[32] = {};
+  char error_[256] = {};
   bool streaming_ = false;
 };
 

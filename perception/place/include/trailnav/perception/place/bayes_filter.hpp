@@ -11,7 +11,7 @@
 //
 // The prediction is O(n_D), not O(n_D²): every position gets the mass of all
 // (the 1 of "elsewhere") plus (c - 1) times the mass of its bands, and a band's
-// mass is a difference of two prefix sums of Bel(x') / α(x').
+// mass is a difference of two prefix sums of Bel(x') / α.
 //
 // `reversed` runs the filter on the time-reversed sequences of §5.2: the
 // database's order reversed too, so a forward step is d < 0 in the original
@@ -62,7 +62,7 @@ class BayesFilter {
   TransitionModel model_;
   bool reversed_;
   std::vector<double> belief_;
-  std::vector<double> inverse_alpha_;  // 1 / α per source (one value today)
+  double inverse_alpha_ = 0.0;  // 1 / α, the same for every source
   std::vector<double> prefix_;         // n_D + 1
 };
 
