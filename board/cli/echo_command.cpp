@@ -146,9 +146,10 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
   } else if (r.type == &trailnav_msgs_msg_dds__PlaceMatch__desc) {
     const auto& m = *static_cast<const trailnav_msgs_msg_dds__PlaceMatch_*>(r.sample);
     std::printf("%s  stamp %.3f  %s: camera frame %u is database image %u (taken %.3f), probability %.3f (peak %.4f), "
-                "step %llu\n",
+                "step %llu, %u frames back, chain %u%s\n",
                 head, stamp_s(m.header.stamp), m.header.frame_id, m.frame_sequence, m.database_index,
-                stamp_s(m.database_stamp), m.probability, m.peak, static_cast<unsigned long long>(m.steps));
+                stamp_s(m.database_stamp), m.probability, m.peak, static_cast<unsigned long long>(m.steps), m.lag_frames,
+                m.chain_length, m.in_sequence ? " (in sequence)" : " (not in a sequence)");
   } else if (r.type == &geographic_msgs_msg_dds__GeoPoseStamped__desc) {
     const auto& g = *static_cast<const geographic_msgs_msg_dds__GeoPoseStamped_*>(r.sample);
     std::printf("%s  stamp %.3f  lat %.7f lon %.7f alt %.2f m\n", head, stamp_s(g.header.stamp), g.pose.position.latitude,

@@ -27,6 +27,7 @@ struct Options {
   bool quiet = false;
   bool float_descriptors = false;
   bool no_seqslam = false;
+  bool no_online = false;
 };
 
 std::string num(double v, int digits) {
@@ -42,6 +43,9 @@ Rgb color_of(const std::string& method) {
   if (method == "filter+seq") return {20, 80, 200};
   if (method == "zca+filter") return {240, 160, 90};
   if (method == "zca+filter+seq") return {210, 60, 20};
+  if (method == "online") return {200, 170, 220};
+  if (method == "online+lag") return {160, 100, 200};
+  if (method == "online+lag+seq") return {100, 30, 150};
   return {40, 160, 60};  // seqslam
 }
 
@@ -53,10 +57,10 @@ int run(Options& o) {
   }
   const auto& s = o.eval.sequence;
   if (s.min_length < 1 || s.row_gap < 1 || s.column_gap < 0 || o.eval.peak_radius < 0 || !(o.eval.zca_epsilon > 0.0) ||
-      o.eval.subsample < 1 || o.eval.max_images < 0) {
+      o.eval.subsample < 1 || o.eval.max_images < 0 || o.eval.online_lag < 0 || o.eval.online_sequence.min_length < 0) {
     std::fprintf(stderr,
                  "%s: --min-sequence and --row-gap must be at least 1, --column-gap and --peak-radius not negative, "
-                 "--zca-epsilon positive, --subsample at least 1\n",
+                 "--zca-epsilon positive, --subsample at least 1, --online-lag and --online-min-sequence not negative\n",
                  who);
     return 2;
   }
@@ -66,6 +70,9 @@ int run(Options& o) {
   }
   o.eval.compact = !o.float_descriptors;
   o.eval.seqslam = !o.no_seqslam;
+  o.eval.online = !o.no_online;
+  o.eval.online_sequence.row_gap = o.eval.sequence.row_gap;
+  o.eval.online_sequence.column_gap = o.eval.sequence.column_gap;
   std::unique_ptr<ProgressBar> bar;
   std::string stage;
   if (!o.quiet) {
@@ -152,9 +159,10 @@ int run(Options& o) {
                   truth ? num(b.precision, 4).c_str() : "null", truth ? num(b.recall, 4).c_str() : "null",
                   truth ? num(b.threshold, 6).c_str() : "null", m.matches.size());
     }
-    std::printf("], \"seconds\": {\"descriptors\": %s, \"similarity\": %s, \"zca\": %s, \"filters\": %s, \"seqslam\": %s}}\n",
+    std::printf("], \"seconds\": {\"descriptors\": %s, \"similarity\": %s, \"zca\": %s, \"filters\": %s, \"seqslam\": %s, "
+                "\"online\": %s}}\n",
                 num(r.seconds_descriptors, 3).c_str(), num(r.seconds_similarity, 3).c_str(), num(r.seconds_zca, 3).c_str(),
-                num(r.seconds_filters, 3).c_str(), num(r.seconds_seqslam, 3).c_str());
+                num(r.seconds_filters, 3).c_str(), num(r.seconds_seqslam, 3).c_str(), num(r.seconds_online, 3).c_str());
     return 0;
   }
   std::printf("place recognition, case %s: %zu database images, %zu queries (%d x %d pixels), HOG of %d-pixel patches, "
@@ -173,8 +181,9 @@ int run(Options& o) {
     std::printf("  %-15s %8.3f %10.3f %8.3f %12.6g %8zu\n", m.method.c_str(), b.f1, b.precision, b.recall, b.threshold,
                 b.matches);
   }
-  std::printf("  seconds: descriptors %.2f, similarities %.2f, ZCA %.2f, filters %.2f, SeqSLAM %.2f\n", r.seconds_descriptors,
-              r.seconds_similarity, r.seconds_zca, r.seconds_filters, r.seconds_seqslam);
+  std::printf("  seconds: descriptors %.2f, similarities %.2f, ZCA %.2f, filters %.2f, SeqSLAM %.2f, online %.2f\n",
+              r.seconds_descriptors, r.seconds_similarity, r.seconds_zca, r.seconds_filters, r.seconds_seqslam,
+              r.seconds_online);
   if (!o.png.empty()) std::printf("  precision-recall curves: %s\n", o.png.c_str());
   return 0;
 }
@@ -246,7 +255,10 @@ void add_place_commands(CLI::App& app) {
       "and per query (Eq. 5.3-5.4) or ZCA-whitened (Eq. 5.11-5.14), the discrete Bayes filter run forward and\n"
       "backward (f = 5, b = 3, c_f = 500, c_s = 100, c_b = 50) and the sequence filter (l_s, g_r = g_c = 5).\n"
       "Methods: raw (best cosine match), filter, filter+seq, zca+filter, zca+filter+seq, and seqslam (SeqSLAM as\n"
-      "Milford and Wyeth published it, for comparison). With ground truth, each method's best F1 and its\n"
+      "Milford and Wyeth published it, for comparison); and the robot's own: online (trailnavd's causal filter,\n"
+      "queries one at a time, ZCA learnt from the database alone), online+lag (each answer given --online-lag\n"
+      "queries later, smoothed over that window) and online+lag+seq (those that pass the online sequence test,\n"
+      "chains of at least --online-min-sequence). With ground truth, each method's best F1 and its\n"
       "precision and recall; --png draws the precision-recall curves. docs/place.md.\n"
       "Ground truth: a CSV of `query,reference[,tolerance]` rows (1-based indices into the sequences as read,\n"
       "after --subsample; OpenSeqSLAM's convention), or `same-index` when frame i of both shows one place.\n"
@@ -288,6 +300,13 @@ void add_place_commands(CLI::App& app) {
                 "Learn ZCA's whitening from the database against itself instead of from the queries (what a robot "
                 "has before it drives)");
   cmd->add_flag("--no-seqslam", o.no_seqslam, "Leave SeqSLAM out");
+  cmd->add_flag("--no-online", o.no_online, "Leave the online methods out");
+  cmd->add_option("--online-lag", e.online_lag, "Queries the online filter's smoothed answer trails the newest (trailnavd's place.lag)")
+      ->capture_default_str();
+  cmd->add_option("--online-min-sequence", e.online_sequence.min_length,
+                  "The online sequence test's l_s: chains through the answer at least this long (trailnavd's "
+                  "place.min_sequence; g_r and g_c as --row-gap and --column-gap)")
+      ->capture_default_str();
   cmd->add_flag("--quiet", o.quiet, "No progress bars");
   cmd->callback([] { std::exit(run(o)); });
 

@@ -147,6 +147,9 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     oc.height = db.height;
     oc.capacity = db.entries.size();
     oc.prior_queries = p.prior_queries;
+    oc.lag = p.lag;
+    oc.sequence = p.sequence;
+    oc.peak_radius = p.peak_radius;
     try {
       d->place_online_ = std::make_unique<perception::place::OnlinePlace>(oc);
     } catch (const std::exception& e) {
@@ -159,9 +162,18 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     d->place_out_ = std::make_unique<Mailbox<perception::place::PlaceSnapshot>>();
     d->place_ = std::make_unique<perception::place::PlaceTask>(db, *d->place_online_, d->camera_->frames(), *d->place_out_,
                                                                p.task);
-    TN_LOG_INFO("place: %s: %zu images of %d x %d frames (%d-pixel patches), %s, poses in frame '%s'", p.database.c_str(),
-                db.entries.size(), db.width, db.height, db.hog.patch,
-                db.whitening.rank > 0 ? "ZCA from the database" : "Eq. 5.3 (no ZCA in the database)", p.frame.c_str());
+    if (p.pose.use != pose::PlaceUse::off) {
+      d->place_pose_in_ = std::make_unique<Mailbox<perception::place::PlaceSnapshot>>();
+      d->place_->set_second_output(d->place_pose_in_.get());
+    }
+    TN_LOG_INFO("place: %s: %zu images of %d x %d frames (%d-pixel patches), %s, poses in frame '%s', answers %d frames "
+                "back in sequences of %d; the pose thread takes them %s",
+                p.database.c_str(), db.entries.size(), db.width, db.height, db.hog.patch,
+                db.whitening.rank > 0 ? "ZCA from the database" : "Eq. 5.3 (no ZCA in the database)", p.frame.c_str(), p.lag,
+                p.sequence.min_length,
+                p.pose.use == pose::PlaceUse::off        ? "never (place.pose_measurement: off)"
+                : p.pose.use == pose::PlaceUse::gps_poor ? "when GPS is poor"
+                                                         : "always");
   }
   // The road network first: the pose's UTM frame must be the network's zone.
   std::optional<pose::PoseEstimatorOptions> pose_options = config.pose;
@@ -175,6 +187,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     d->pose_ = std::make_unique<pose::PoseTask>(*pose_options, d->imu_ ? &d->imu_->readings() : nullptr,
                                                 d->can_ ? &d->can_->readings() : nullptr,
                                                 d->gps_ ? &d->gps_->fixes() : nullptr);
+    if (d->place_pose_in_) d->pose_->set_place_input(d->place_pose_in_.get(), config.place->pose);
   }
   if (config.mapping) {
     // The mapping thread: every pose and every fix the alignment used, in
@@ -696,6 +709,8 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("steps", c.steps);
     if (c.last_index >= 0) m.value("last_index", static_cast<std::uint64_t>(c.last_index));
     m.value("last_probability", c.last_probability, 4);
+    m.value("in_sequence", c.in_sequence);
+    m.value("lag_frames", static_cast<std::uint64_t>(config_.place->lag));
   }
   if (pose_) {
     const pose::PoseTaskStatus s = pose_->status();
@@ -728,6 +743,16 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     if (mapping_) m.value("map_corrections", s.map_corrections);
     m.value("gps_outliers", s.utm_counters.outliers);
     m.value("gps_jumps", s.utm_counters.jumps);
+    if (config_.place && config_.place->pose.use != pose::PlaceUse::off) {
+      // The place task's answers: offered to the alignment (GPS poor and
+      // the answer strong enough), used, gated out.
+      m.value("place_answers", s.place_answers);
+      m.value("place_offered", s.place_offered);
+      m.value("place_used", s.utm_counters.place_used);
+      m.value("place_outliers", s.utm_counters.place_outliers);
+      m.value("place_gps_good", s.place_gps_good);
+      m.value("place_weak", s.place_weak);
+    }
     // IMU and wheels are stamped with their host receive times (offset 0 by
     // construction); GPS fixes at the receiver's UTC when it agrees with the host.
     m.value("gps_fixes_at_utc", s.gps_fixes_at_utc);

@@ -87,6 +87,8 @@ class Daemon {
   // The camera's image tunnel port (input: tunnel; chosen by the kernel when
   // the config says 0); 0 without one.
   std::uint16_t camera_tunnel_port() const noexcept { return camera_ ? camera_->status().tunnel_port : 0; }
+  // The place task's counters (frames taken, answers); zeros without one.
+  perception::place::PlaceCounters place_counters() const noexcept { return place_ ? place_->counters() : perception::place::PlaceCounters{}; }
   DaemonSummary summary() const;
   // Task statistics, one line per task.
   std::string task_report() const;
@@ -114,6 +116,7 @@ class Daemon {
   std::unique_ptr<drivers::camera::CameraDriver> camera_;
   std::unique_ptr<perception::place::OnlinePlace> place_online_;
   std::unique_ptr<Mailbox<perception::place::PlaceSnapshot>> place_out_;
+  std::unique_ptr<Mailbox<perception::place::PlaceSnapshot>> place_pose_in_;  // the pose thread's (place.pose_measurement)
   std::unique_ptr<perception::place::PlaceTask> place_;
   std::unique_ptr<pose::PoseTask> pose_;
   std::unique_ptr<perception::PoseQueue> pose_queue_;

@@ -233,6 +233,17 @@ PlaceSection parse_place(const ConfigNode& n) {
   p.task.position_floor_m = n.number("position_floor_m", 0.0, 1e4, p.task.position_floor_m);
   p.task.yaw_floor_rad = n.number("yaw_floor_deg", 0.0, 180.0, p.task.yaw_floor_rad * 180.0 / 3.14159265358979323846) *
                          3.14159265358979323846 / 180.0;
+  p.lag = static_cast<int>(n.integer("lag", 0, 1000, p.lag));
+  p.sequence.min_length = static_cast<int>(n.integer("min_sequence", 0, 100000, p.sequence.min_length));
+  p.sequence.row_gap = static_cast<int>(n.integer("row_gap", 1, 1000, p.sequence.row_gap));
+  p.sequence.column_gap = static_cast<int>(n.integer("column_gap", 0, 100000, p.sequence.column_gap));
+  p.peak_radius = static_cast<int>(n.integer("peak_radius", 0, 100000, p.peak_radius));
+  const std::string use = n.choice("pose_measurement", {"off", "gps_poor", "always"}, "off");
+  p.pose.use = use == "off" ? pose::PlaceUse::off : use == "gps_poor" ? pose::PlaceUse::gps_poor : pose::PlaceUse::always;
+  p.pose.min_probability = n.number("min_probability", 0.0, 1.0, p.pose.min_probability);
+  p.pose.need_sequence = n.boolean("need_sequence", p.pose.need_sequence);
+  p.pose.gps_poor_after_s = n.number("gps_poor_after_s", 0.0, 3600.0, p.pose.gps_poor_after_s);
+  p.pose.gps_poor_sigma_m = n.number("gps_poor_sigma_m", 0.0, 1e6, p.pose.gps_poor_sigma_m);
   n.reject_unknown_keys();
   return p;
 }
@@ -383,6 +394,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     if (!c.camera) root.fail("place", "the place task takes the camera's frames: add a 'camera' section");
   }
   if (auto n = root.optional_map("pose")) c.pose = parse_pose(*n, c.obstacles_use_pose, c.terrain_use_pose, c.pose_wait);
+  if (c.place && c.place->pose.use != pose::PlaceUse::off && !c.pose)
+    root.fail("place", "place.pose_measurement gives the pose thread the place task's answers: add a 'pose' section, or set it off");
   if (auto n = root.optional_map("obstacles")) {
     c.obstacles = perception::parse_obstacle_config(*n);
     if (!c.lidar) root.fail("obstacles", "the obstacle map needs a lidar: add a 'lidar' section");

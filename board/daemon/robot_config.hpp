@@ -58,6 +58,10 @@ struct PlaceSection {
   perception::place::TransitionModel transition;
   double prior_queries = 10.0;
   perception::place::PlaceTaskOptions task;
+  int lag = 10;  // frames (docs/place.md "On the robot")
+  perception::place::SequenceConfig sequence{10, 5, 5};
+  int peak_radius = 50;
+  pose::PlaceUseOptions pose;  // pose_measurement and its thresholds
 };
 
 struct DdsSection {

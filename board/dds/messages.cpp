@@ -168,6 +168,9 @@ void PlaceMessages::fill(const perception::place::PlaceSnapshot& s) noexcept {
   match_.peak = s.peak;
   match_.frame_sequence = s.frame_sequence;
   match_.steps = s.number;
+  match_.lag_frames = static_cast<std::uint32_t>(s.lag);
+  match_.chain_length = static_cast<std::uint32_t>(s.chain);
+  match_.in_sequence = s.in_sequence;
   pose_.header.stamp = match_.header.stamp;
   pose_.pose.pose.position = {s.x, s.y, 0.0};
   pose_.pose.pose.orientation = to_quaternion(0.0, 0.0, s.yaw);

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "trailnav/drivers/camera/image_file.hpp"
+#include "trailnav/perception/place/online.hpp"
 #include "trailnav/perception/place/similarity.hpp"
 
 namespace trailnav::eval {
@@ -275,7 +276,7 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
     t0 = std::chrono::steady_clock::now();
     s = o.compact ? place::cosine_similarities(cq, cd) : place::cosine_similarities(dq, dd);
     r.seconds_similarity = seconds_since(t0);
-    if (o.zca_from_database) {
+    if (o.zca_from_database || o.online) {
       dd_keep = std::move(dd);
       cd_keep = std::move(cd);
     }
@@ -359,6 +360,53 @@ PlaceEvalReport run_place_eval(const PlaceEvalOptions& o) {
     filtered(l, "zca+filter");
   }
   if (o.progress) o.progress("filters", 1.0);
+  if (o.online) {
+    t0 = std::chrono::steady_clock::now();
+    if (o.progress) o.progress("online filter", 0.0);
+    place::OnlineConfig oc;
+    oc.hog = hog.config();
+    oc.transition = o.transition;
+    oc.width = first.width;
+    oc.height = first.height;
+    oc.capacity = kept.size();
+    oc.lag = o.online_lag;
+    oc.sequence = o.online_sequence;
+    oc.peak_radius = o.peak_radius;
+    place::OnlinePlace online(oc);
+    place::CompactDescriptors codes;
+    if (o.compact) {
+      codes = std::move(cd_keep);
+    } else {
+      std::vector<float> row(static_cast<std::size_t>(len));
+      for (Eigen::Index j = 0; j < dd_keep.rows(); ++j) {
+        for (Eigen::Index k = 0; k < len; ++k) row[static_cast<std::size_t>(k)] = dd_keep(j, k);
+        codes.add(row);
+      }
+    }
+    for (std::size_t j = 0; j < kept.size(); ++j) online.add_database_code(codes.code(j), codes.norms[j]);
+    online.finish_database();
+    if (o.online_zca_rank > 0)
+      online.set_whitening(place::learn_whitening(codes.codes, codes.norms, hog.length(), o.online_zca_rank, o.online_zca_epsilon));
+    std::vector<place::Match> causal, lagged, in_sequence;
+    std::vector<float> row(kept.size());
+    for (Eigen::Index i = 0; i < s.rows(); ++i) {
+      for (std::size_t j = 0; j < kept.size(); ++j) row[j] = s(i, static_cast<Eigen::Index>(j));
+      const place::PlaceEstimate e = online.step_similarities(row);
+      causal.push_back({static_cast<int>(i), e.index, static_cast<float>(e.probability)});
+      const place::LaggedEstimate& l = online.lagged();
+      if (l.valid && l.index >= 0) {
+        const place::Match m{static_cast<int>(l.step), l.index, static_cast<float>(l.probability)};
+        lagged.push_back(m);
+        if (l.in_sequence) in_sequence.push_back(m);
+      }
+      if (o.progress && (i % 64 == 0 || i + 1 == s.rows()))
+        o.progress("online filter", static_cast<double>(i + 1) / static_cast<double>(s.rows()));
+    }
+    add_swept("online", std::move(causal));
+    add_swept("online+lag", std::move(lagged));
+    add_swept("online+lag+seq", std::move(in_sequence));
+    r.seconds_online = seconds_since(t0);
+  }
   if (o.seqslam) {
     t0 = std::chrono::steady_clock::now();
     std::vector<std::vector<float>> pd, pq;

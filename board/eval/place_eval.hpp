@@ -10,7 +10,15 @@
 //   filter+seq      the local peaks of B above p_min kept only in sequences
 //                   (§5.3), p_min swept;
 //   zca+filter, zca+filter+seq   with S̃ = Eq. 5.4(ZCA(S)) (§5.4);
-//   seqslam         SeqSLAM from its paper (seqslam.hpp).
+//   seqslam         SeqSLAM from its paper (seqslam.hpp);
+//   online          the robot's causal filter (perception/place/online.hpp):
+//                   queries one at a time, ZCA learnt from the database
+//                   against itself (as place-map stores it), each query's
+//                   most likely place in the forward belief;
+//   online+lag      the same, the answer for each query given `online_lag`
+//                   queries later from the fixed-lag smoothed belief;
+//   online+lag+seq  those of online+lag that pass the online sequence test.
+//                   (The last `online_lag` queries get no lagged answer.)
 // Each gives a precision-recall curve over its threshold and its best F1.
 //
 // Cases (`case`): `connected`, the query sequence as recorded; and
@@ -50,6 +58,11 @@ struct PlaceEvalOptions {
   bool zca_from_database = false;  // Σ from the database against itself, not from the queries (what a robot has)  // Eq. 5.3, then ZCA, then Eq. 5.4 (the other order, measured)
   bool seqslam = true;
   SeqSlamConfig seqslam_config;
+  bool online = true;
+  int online_lag = 10;
+  perception::place::SequenceConfig online_sequence{10, 5, 5};
+  int online_zca_rank = 200;       // as place-map
+  double online_zca_epsilon = 0.3;
   std::function<void(const std::string& stage, double fraction)> progress;
 };
 
@@ -68,7 +81,7 @@ struct PlaceEvalReport {
   perception::place::GroundTruth truth;
   std::vector<PlaceMethod> methods;
   double seconds_descriptors = 0.0, seconds_similarity = 0.0, seconds_zca = 0.0, seconds_filters = 0.0,
-         seconds_seqslam = 0.0;
+         seconds_seqslam = 0.0, seconds_online = 0.0;
 };
 
 PlaceEvalReport run_place_eval(const PlaceEvalOptions& options);

@@ -74,6 +74,30 @@ void PoseTask::correct(UtmPose& u, Nanos now) noexcept {
   u.yaw = std::remainder(u.yaw + applied_.yaw, 2.0 * 3.14159265358979323846);
 }
 
+bool PoseTask::take_place(const perception::place::PlaceSnapshot& s) noexcept {
+  if (place_use_.use == PlaceUse::off) return false;
+  if (!(s.probability >= place_use_.min_probability) || (place_use_.need_sequence && !s.in_sequence) ||
+      !std::isfinite(s.lat) || !std::isfinite(s.lon)) {
+    ++local_.place_weak;
+    return false;
+  }
+  const UtmAlignment& a = estimator_.alignment();
+  if (place_use_.use == PlaceUse::gps_poor) {
+    const std::uint64_t fixes = a.counters().used;
+    const bool recent = fixes > 0 && s.stamp_ns - a.last_used().time_ns <= seconds_to_nanos(place_use_.gps_poor_after_s);
+    const double sigma = a.utm(estimator_.odometry().pose(), false).sigma_position();
+    if (recent && a.heading_valid() && sigma <= place_use_.gps_poor_sigma_m) {
+      ++local_.place_gps_good;
+      return false;
+    }
+  }
+  // The larger axis of the position covariance.
+  const double tr = s.cov_xx + s.cov_yy, det = s.cov_xx * s.cov_yy - s.cov_xy * s.cov_xy;
+  const double sigma = std::sqrt(std::max(0.0, tr / 2 + std::sqrt(std::max(0.0, tr * tr / 4 - det))));
+  ++local_.place_offered;
+  return estimator_.add_place(s.lat, s.lon, sigma, s.stamp_ns);
+}
+
 void PoseTask::run(const TaskTick& tick) {
   ++local_.runs;
   std::size_t ni = 0;
@@ -166,6 +190,12 @@ void PoseTask::run(const TaskTick& tick) {
         m.rotation = t.z();
         if (!fix_out_->try_push(m)) ++local_.fix_queue_drops;
       }
+    }
+  }
+  if (place_ != nullptr) {
+    if (const perception::place::PlaceSnapshot* ps = place_->try_read()) {
+      ++local_.place_answers;
+      changed = take_place(*ps) || changed;
     }
   }
   if (corrections_ != nullptr) {

@@ -221,16 +221,8 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
     ++counters_.too_uncertain;
     return;
   }
-  if (zone_ == 0) {
-    if (!(fix.lat >= -80.0 && fix.lat <= 84.0)) {
-      ++counters_.no_position;
-      return;
-    }
-    zone_ = GeographicLib::UTMUPS::StandardZone(fix.lat, fix.lon);
-    north_ = fix.lat >= 0.0;
-  }
-  double e = 0.0, nn = 0.0, gamma = 0.0;
-  if (!forward(fix.lat, fix.lon, e, nn, gamma)) {
+  Eigen::Vector2d z;
+  if (!project(fix.lat, fix.lon, z)) {
     ++counters_.no_position;
     return;
   }
@@ -241,7 +233,6 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
     return;
   }
   const Eigen::Vector2d a = antenna_in_odom(p);
-  const Eigen::Vector2d z(e, nn);
   const double alt = finite(fix.alt_hae()) ? fix.alt_hae() : fix.alt_msl;
   if (finite(alt)) {
     last_altitude_ = alt - options_.antenna[2];
@@ -297,6 +288,26 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
     return;
   }
   rejected_count_ = 0;
+  apply(h, nu, s_inv, white, odometry);
+  ++counters_.used;
+  record_used(z, a, p, sigma, time_ns);
+}
+
+bool UtmAlignment::project(double lat, double lon, Eigen::Vector2d& z) noexcept {
+  if (!finite(lat) || !finite(lon)) return false;
+  if (zone_ == 0) {
+    if (!(lat >= -80.0 && lat <= 84.0)) return false;
+    zone_ = GeographicLib::UTMUPS::StandardZone(lat, lon);
+    north_ = lat >= 0.0;
+  }
+  double e = 0.0, n = 0.0, gamma = 0.0;
+  if (!forward(lat, lon, e, n, gamma)) return false;
+  z = {e, n};
+  return true;
+}
+
+void UtmAlignment::apply(const Eigen::Matrix<double, 2, 6>& h, const Eigen::Vector2d& nu, const Eigen::Matrix2d& s_inv,
+                         double white, GyroOdometry& odometry) noexcept {
   const Eigen::Matrix<double, 6, 2> k = cov_ * h.transpose() * s_inv;
   state_ += k * nu;
   state_(2) = wrap_angle(state_(2));
@@ -308,8 +319,43 @@ void UtmAlignment::add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdo
   gyro_bias_applied_ += state_(3);
   state_(3) = 0.0;
   odometry.set_yaw_rate_bias(gyro_bias_applied_);
-  ++counters_.used;
-  record_used(z, a, p, sigma, time_ns);
+}
+
+bool UtmAlignment::add_place(double lat, double lon, double sigma, std::int64_t time_ns, GyroOdometry& odometry) noexcept {
+  ++counters_.place_offered;
+  Eigen::Vector2d z;
+  LocalPose p;
+  if (!(sigma > 0.0) || !finite(sigma) || !project(lat, lon, z) || !odometry.pose_at(time_ns, p) ||
+      odometry.pose().time_ns - time_ns > static_cast<std::int64_t>(options_.max_place_age * 1e9)) {
+    ++counters_.place_refused;
+    return false;
+  }
+  sigma = std::max(sigma, options_.min_sigma);
+  const Eigen::Vector2d a(p.x, p.y);  // the robot's origin
+  if (!aligned_) {
+    if (init_.size() == init_.capacity()) init_.erase(init_.begin());
+    init_.push_back({a, z, sigma, p.distance, time_ns});
+    last_time_ = std::max(last_time_, time_ns);
+    ++counters_.place_used;
+    try_initial_fit();
+    return true;
+  }
+  predict(p);
+  const Eigen::Vector2d ra = rotation(state_(2)) * a;
+  Eigen::Matrix<double, 2, 6> h = Eigen::Matrix<double, 2, 6>::Zero();
+  h(0, 0) = h(1, 1) = 1.0;
+  h(0, 2) = -ra.y();
+  h(1, 2) = ra.x();
+  const Eigen::Vector2d nu = z - (ra + state_.head<2>());
+  const Eigen::Matrix2d s = h * cov_ * h.transpose() + sigma * sigma * Eigen::Matrix2d::Identity();
+  const Eigen::Matrix2d s_inv = s.inverse();
+  if (!(nu.dot(s_inv * nu) <= options_.gate)) {
+    ++counters_.place_outliers;
+    return false;
+  }
+  apply(h, nu, s_inv, sigma, odometry);
+  ++counters_.place_used;
+  return true;
 }
 
 void UtmAlignment::record_used(const Eigen::Vector2d& z, const Eigen::Vector2d& a, const LocalPose& p, double sigma,
@@ -329,7 +375,7 @@ UtmPose UtmAlignment::utm(const LocalPose& local, bool geodetic) const noexcept 
   u.time_ns = local.time_ns;
   u.zone = zone_;
   u.north = north_;
-  if (last_used_.serial == 0) return u;
+  if (last_used_.serial == 0 && !aligned_) return u;  // aligned by place fixes alone: no GPS fix yet
   u.altitude = last_altitude_ + (local.z - last_altitude_z_);
   if (!aligned_) {
     // Position only: the last fix's antenna position, uncertain by its sigma

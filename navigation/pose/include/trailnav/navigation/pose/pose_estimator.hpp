@@ -14,6 +14,7 @@
 #include "trailnav/drivers/imu/imu_driver.hpp"
 #include "trailnav/navigation/pose/gyro_odometry.hpp"
 #include "trailnav/navigation/pose/utm_alignment.hpp"
+#include "trailnav/perception/place/place_snapshot.hpp"
 #include "trailnav/perception/pose_track.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
@@ -61,6 +62,10 @@ class PoseEstimator {
   // The current pose in both frames.
   // `geodetic`: the UTM pose's latitude, longitude and convergence too (UtmAlignment::utm).
   void snapshot(PoseSnapshot& out, bool geodetic = true) const noexcept;
+  // A place fix (UtmAlignment::add_place). True when used.
+  bool add_place(double lat, double lon, double sigma, std::int64_t time_ns) noexcept {
+    return alignment_.add_place(lat, lon, sigma, time_ns, odometry_);
+  }
   // The time a fix is valid for (see PoseEstimatorOptions).
   std::int64_t fix_time(const gps::GpsFix& fix, std::int64_t receive_ns) const noexcept;
 
@@ -98,6 +103,22 @@ struct MapCorrection {
   double x = 0.0, y = 0.0, yaw = 0.0;
 };
 
+// When the pose thread takes the place task's answers as position fixes
+// (config place.pose_measurement, docs/place.md "On the robot"): never;
+// when GPS is poor (no fix used for `gps_poor_after_s` before the answer's
+// time, or the UTM position less certain than `gps_poor_sigma_m`); or
+// always. Only answers with a database position (latitude, longitude), at
+// least `min_probability` within the window and, when `need_sequence`, in
+// a sequence; their standard deviation the larger axis of their covariance.
+enum class PlaceUse { off, gps_poor, always };
+struct PlaceUseOptions {
+  PlaceUse use = PlaceUse::off;
+  double min_probability = 0.3;  // Nordland winter in summer through trailnavd: 82 of 84 answers right (docs/place.md)
+  bool need_sequence = true;
+  double gps_poor_after_s = 2.0;
+  double gps_poor_sigma_m = 5.0;
+};
+
 struct PoseTaskStatus {
   std::uint64_t runs = 0;
   std::uint64_t imu_readings = 0, wheel_readings = 0, gps_fixes = 0;
@@ -105,6 +126,11 @@ struct PoseTaskStatus {
   std::uint64_t pose_queue_drops = 0;  // samples the perception threads' queue had no room for
   std::uint64_t fix_queue_drops = 0;   // used fixes the mapping thread's queue had no room for
   std::uint64_t map_corrections = 0;   // corrections of the online map taken (MapCorrection)
+  // The place task's answers: taken from its mailbox, offered to the
+  // alignment (PlaceUseOptions), and passed over: GPS good, too weak (its
+  // probability, not in a sequence, no database position). The alignment's
+  // counters say how many it used.
+  std::uint64_t place_answers = 0, place_offered = 0, place_gps_good = 0, place_weak = 0;
   // Wheel readings that came before the IMU readings of their time and were
   // held until those came (see PoseTask::run), and those let go without them
   // because the IMU fell silent or the hold was full.
@@ -145,6 +171,11 @@ class PoseTask final : public Task {
   // The mapping thread's corrections, applied to every UTM pose from the
   // newest on. Before the scheduler starts.
   void set_map_correction(Mailbox<MapCorrection>* corrections) noexcept { corrections_ = corrections; }
+  // The place task's answers, used as `options` says. Before the scheduler starts.
+  void set_place_input(Mailbox<perception::place::PlaceSnapshot>* place, const PlaceUseOptions& options) noexcept {
+    place_ = place;
+    place_use_ = options;
+  }
 
   void run(const TaskTick& tick) override;
 
@@ -172,6 +203,9 @@ class PoseTask final : public Task {
   std::size_t pose_outputs_ = 0;
   MappingFixQueue* fix_out_ = nullptr;
   Mailbox<MapCorrection>* corrections_ = nullptr;
+  Mailbox<perception::place::PlaceSnapshot>* place_ = nullptr;
+  PlaceUseOptions place_use_;
+  bool take_place(const perception::place::PlaceSnapshot& s) noexcept;
   // The newest correction, and the one applied: it moves towards the newest
   // at most kCorrectionShift at the robot and kCorrectionTurn, so a solve of
   // the map never makes the UTM pose jump (a planner's path would jump

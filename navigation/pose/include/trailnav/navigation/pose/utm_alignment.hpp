@@ -33,6 +33,13 @@
 // pairs (two passes, residuals beyond 3 sigma dropped) starts the filter.
 // Before that only the position is known (`heading_valid` false).
 //
+// Place fixes (add_place: the camera's place recognition, docs/place.md)
+// are positions of the robot's origin from a database recorded on an earlier
+// drive: the same update without the GPS error states (their error is the
+// database's and the match's, not the receiver's wandering one), gated the
+// same way but never taken as a jump; before the heading is known they join
+// the fixes the initial fit uses.
+//
 // Coordinates are in one UTM zone, chosen from the first fix unless
 // configured, and kept when the robot crosses into the next zone. Headings
 // are grid headings (counter-clockwise from grid east); `convergence` gives
@@ -70,6 +77,7 @@ struct UtmAlignmentOptions {
   int jump_after = 5;                 // outliers in a row that agree: the GPS jumped
   double jump_agreement = 2.0;        // m: how closely those outliers must agree
   double max_fix_age = 1.0;           // s between a fix's time and the newest odometry; older fixes are skipped
+  double max_place_age = 5.0;         // s, the same for place fixes (they come a lag of frames late)
 };
 
 struct UtmAlignmentCounters {
@@ -81,6 +89,9 @@ struct UtmAlignmentCounters {
   std::uint64_t outliers = 0;       // rejected by the gate
   std::uint64_t jumps = 0;          // re-anchored after agreeing outliers
   std::uint64_t initial_fit_rejected = 0;  // buffered fixes the initial fit dropped
+  // Place fixes (add_place): offered, used, rejected by the gate, and
+  // refused (no position, no odometry pose at their time).
+  std::uint64_t place_offered = 0, place_used = 0, place_outliers = 0, place_refused = 0;
 };
 
 struct UtmPose {
@@ -118,6 +129,10 @@ class UtmAlignment {
   // A GPS fix; `time_ns` is the time it is valid for, on the odometry's
   // clock. Hands the gyro bias estimate back to the odometry.
   void add_fix(const gps::GpsFix& fix, std::int64_t time_ns, GyroOdometry& odometry) noexcept;
+  // A position of the robot's origin (WGS84 degrees) with a standard
+  // deviation (m), valid at `time_ns` (which may be up to `max_place_age`
+  // before the newest odometry). True when used.
+  bool add_place(double lat, double lon, double sigma, std::int64_t time_ns, GyroOdometry& odometry) noexcept;
   // The robot's pose in UTM for a local pose.
   // `geodetic`: also latitude, longitude and convergence (one projection);
   // without, a caller that moves the pose first adds them with add_geodetic().
@@ -162,6 +177,11 @@ class UtmAlignment {
   double white_sigma(double fix_sigma) const noexcept;
   double wander_sigma(double fix_sigma) const noexcept;
   void try_initial_fit() noexcept;
+  // The Kalman update for innovation nu, measurement matrix h and white noise.
+  void apply(const Eigen::Matrix<double, 2, 6>& h, const Eigen::Vector2d& nu, const Eigen::Matrix2d& s_inv, double white,
+             GyroOdometry& odometry) noexcept;
+  // The zone from a first position, and the position in it; false outside UTM.
+  bool project(double lat, double lon, Eigen::Vector2d& z) noexcept;
 
   UtmAlignmentOptions options_;
   int zone_ = 0;

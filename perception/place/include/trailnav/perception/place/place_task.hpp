@@ -8,6 +8,10 @@
 // window, plus a floor (the database's own spacing and the camera's offset
 // from where the image was taken are not known better).
 //
+// With a lag L (OnlineConfig::lag) the answer is for the frame L frames
+// back, from the fixed-lag smoothed belief, and says whether it passed the
+// online sequence test; its stamp is that frame's.
+//
 // Runs with normal scheduling (a step over 10,000 images is about a
 // millisecond, docs/place.md) on the camera's thread. Nothing allocated after
 // construction.
@@ -20,24 +24,12 @@
 #include "trailnav/drivers/camera/camera_driver.hpp"
 #include "trailnav/perception/place/database.hpp"
 #include "trailnav/perception/place/online.hpp"
+#include "trailnav/perception/place/place_snapshot.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
 #include "trailnav/runtime/wakeup.hpp"
 
 namespace trailnav::perception::place {
-
-struct PlaceSnapshot {
-  std::int64_t stamp_ns = 0;         // the camera frame's (host time)
-  std::uint32_t frame_sequence = 0;  // the camera's
-  std::uint64_t number = 0;          // steps so far
-  int index = -1;                    // database image
-  double probability = 0.0;          // belief within ±window of it
-  double peak = 0.0;                 // belief of the image itself
-  std::int64_t database_stamp_ns = 0;
-  double x = 0.0, y = 0.0, yaw = 0.0;  // the database's frame
-  double lat = 0.0, lon = 0.0;         // NaN when the database has none
-  double cov_xx = 0.0, cov_xy = 0.0, cov_yy = 0.0, var_yaw = 0.0;
-};
 
 struct PlaceTaskOptions {
   int window = 10;              // database images either side of the peak
@@ -47,7 +39,8 @@ struct PlaceTaskOptions {
 
 struct PlaceCounters {
   std::uint64_t frames = 0;  // camera frames taken
-  std::uint64_t steps = 0;
+  std::uint64_t steps = 0;     // answers published
+  std::uint64_t in_sequence = 0;  // of them, in a sequence
   double last_probability = 0.0;
   int last_index = -1;
 };
@@ -59,6 +52,9 @@ class PlaceTask final : public Task {
             Mailbox<PlaceSnapshot>& out, const PlaceTaskOptions& options);
   void run(const TaskTick& tick) override;
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
+  // Every answer also into this mailbox (the pose thread's). Before the
+  // scheduler starts.
+  void set_second_output(Mailbox<PlaceSnapshot>* out) noexcept { second_out_ = out; }
   PlaceCounters counters() const noexcept;
 
  private:
@@ -66,14 +62,21 @@ class PlaceTask final : public Task {
     std::int64_t t;
     double x, y, yaw, lat, lon;
   };
+  struct Frame {
+    std::int64_t stamp_ns = 0;
+    std::uint32_t sequence = 0;
+  };
   std::vector<Pose> poses_;
+  std::vector<Frame> frames_ring_;  // lag + 1: the frames stepped, by step number
   OnlinePlace& place_;
   Mailbox<drivers::camera::CameraFrame>& frames_;
   Mailbox<PlaceSnapshot>& out_;
   PlaceTaskOptions options_;
   Wakeup* notify_ = nullptr;
+  Mailbox<PlaceSnapshot>* second_out_ = nullptr;
   std::uint64_t steps_ = 0;
-  std::atomic<std::uint64_t> frames_seen_{0}, steps_seen_{0};
+  std::uint64_t in_sequence_ = 0;
+  std::atomic<std::uint64_t> frames_seen_{0}, steps_seen_{0}, in_sequence_seen_{0};
   std::atomic<double> last_probability_{0.0};
   std::atomic<int> last_index_{-1};
 };
