@@ -483,6 +483,30 @@ TEST(RobotConfig, TheCameraAndPlaceSectionsAndTheirChecks) {
   EXPECT_NE(too_big.error.find("out_width"), std::string::npos) << too_big.error;
   const auto format = load("runtime: {realtime: off}\ncamera: {format: rgb24}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
   EXPECT_NE(format.error.find("format"), std::string::npos) << format.error;
+  // The fixed lag, the online sequence test and the pose thread's use of
+  // the answers; defaults as docs/place.md gives them.
+  EXPECT_EQ(c.place->lag, 10);
+  EXPECT_EQ(c.place->sequence.min_length, 10);
+  EXPECT_EQ(c.place->pose.use, pose::PlaceUse::off);
+  const std::string cam = "runtime: {realtime: off}\ncamera: {input: tunnel, width: 64, height: 32}\n";
+  const auto tuned = load(cam +
+                          "place: {database: x.tnplace, lag: 4, min_sequence: 12, row_gap: 3, pose_measurement: gps_poor, "
+                          "min_probability: 0.4, gps_poor_after_s: 5}\nimu: {link: 'udp:127.0.0.1:10111', protocol: line}\n"
+                          "pose: {}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
+  ASSERT_TRUE(tuned.config) << tuned.error;
+  EXPECT_EQ(tuned.config->place->lag, 4);
+  EXPECT_EQ(tuned.config->place->sequence.min_length, 12);
+  EXPECT_EQ(tuned.config->place->sequence.row_gap, 3);
+  EXPECT_EQ(tuned.config->place->pose.use, pose::PlaceUse::gps_poor);
+  EXPECT_DOUBLE_EQ(tuned.config->place->pose.min_probability, 0.4);
+  EXPECT_DOUBLE_EQ(tuned.config->place->pose.gps_poor_after_s, 5.0);
+  const auto no_pose = load(cam + "place: {database: x.tnplace, pose_measurement: always}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
+  EXPECT_NE(no_pose.error.find("add a 'pose' section"), std::string::npos) << no_pose.error;
+  const auto bad_use = load(cam + "place: {database: x.tnplace, pose_measurement: sometimes}\npose: {}\ndds: {domain: 0}\n"
+                                  "tasks: {preset: auto}\n");
+  EXPECT_NE(bad_use.error.find("pose_measurement"), std::string::npos) << bad_use.error;
+  const auto bad_lag = load(cam + "place: {database: x.tnplace, lag: -1}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
+  EXPECT_NE(bad_lag.error.find("lag"), std::string::npos) << bad_lag.error;
 }
 
 }  // namespace

@@ -235,6 +235,147 @@ TEST(UtmAlignment, NoHeadingBeforeTheRobotMovesAndBadFixesAreCounted) {
   EXPECT_EQ(align.counters().no_odometry, 1u);
 }
 
+// Place fixes (the camera's place recognition): where GPS is lost and the
+// gyro's bias changes, they hold the position that odometry alone lets
+// drift; one far off is gated out; and without any GPS they align the
+// odometry frame by themselves.
+TEST(UtmAlignment, PlaceFixesHoldThePositionWhereGpsIsLostAndAlignWithoutIt) {
+  UtmAlignmentOptions o;
+  o.zone = 32;
+  UtmAlignment ref(o);
+  double e0 = 0, n0 = 0, g = 0;
+  ASSERT_TRUE(ref.forward(48.0133, 7.8353, e0, n0, g));
+  const double theta = 0.4;
+  const auto to_utm = [&](double x, double y, double& e, double& n) {
+    e = e0 + std::cos(theta) * x - std::sin(theta) * y;
+    n = n0 + std::sin(theta) * x + std::cos(theta) * y;
+  };
+  // 300 s at 1.5 m/s with slow turns; GPS for the first 60 s (if at all),
+  // then the gyro's bias grows by 0.003 rad/s; place fixes every 2 s after
+  // 60 s (if at all), 2 m of noise, sigma 3 m, and one 400 m off at 200 s.
+  struct Result {
+    double error = 0.0;
+    bool aligned = false;
+    UtmAlignmentCounters counters;
+  };
+  const auto drive = [&](bool gps, bool places) -> Result {
+    GyroOdometry odo;
+    UtmAlignment align(o);
+    std::mt19937 rng(3);
+    std::normal_distribution<double> gps_noise(0.0, 0.3), place_noise(0.0, 2.0);
+    double heading = 0.0, x = 0.0, y = 0.0;
+    for (int k = 0; k <= 30000; ++k) {
+      const double ts = 0.01 * k;
+      const std::int64_t t = kStart + ms(10.0 * k);
+      const double w = 0.05 * std::sin(ts / 20.0);
+      if (k > 0) {
+        const double mid = heading + 0.5 * w * 0.01;
+        x += 1.5 * 0.01 * std::cos(mid);
+        y += 1.5 * 0.01 * std::sin(mid);
+        heading += w * 0.01;
+      }
+      odo.add_wheels(wheels(t, 1.5, w));
+      odo.add_imu(attitude(t, w + (ts > 60.0 ? 0.003 : 0.0)));
+      double e = 0, n = 0;
+      to_utm(x, y, e, n);
+      if (gps && ts <= 60.0 && k % 10 == 0 && k > 0)
+        align.add_fix(fix_at(ref, e + gps_noise(rng), n + gps_noise(rng), t, 0.35), t, odo);
+      if (places && (ts > 60.0 || !gps) && k % 200 == 100) {
+        // Answered a second late, as the place task's lag makes them.
+        double pe = e + place_noise(rng), pn = n + place_noise(rng);
+        if (k == 20100) pe += 400.0;
+        double lat = 0, lon = 0;
+        EXPECT_TRUE(ref.reverse(pe, pn, lat, lon));
+        align.add_place(lat, lon, 3.0, t - ms(1000), odo);
+      }
+    }
+    const UtmPose u = align.utm(odo.pose());
+    double e = 0, n = 0;
+    to_utm(x, y, e, n);
+    return Result{std::hypot(u.easting - e, u.northing - n), align.heading_valid(), align.counters()};
+  };
+  const Result lost = drive(true, false), held = drive(true, true), alone = drive(false, true);
+  std::printf("[ pose ] 240 s without GPS: %.1f m off by odometry alone, %.1f m with place fixes; place fixes alone: %.1f m\n",
+              lost.error, held.error, alone.error);
+  EXPECT_GT(lost.error, 20.0);
+  EXPECT_LT(held.error, 4.0);
+  EXPECT_EQ(held.counters.place_outliers, 1u);  // the one 400 m off
+  EXPECT_GE(held.counters.place_used, 115u);
+  EXPECT_TRUE(alone.aligned);
+  EXPECT_LT(alone.error, 5.0);
+  EXPECT_EQ(alone.counters.used, 0u);
+  // Refused: no position, no sigma, a time the odometry never had.
+  GyroOdometry odo;
+  odo.add_imu(attitude(kStart, 0.0));
+  UtmAlignment a(o);
+  EXPECT_FALSE(a.add_place(std::nan(""), 7.8, 3.0, kStart, odo));
+  EXPECT_FALSE(a.add_place(48.0, 7.8, 0.0, kStart, odo));
+  EXPECT_FALSE(a.add_place(48.0, 7.8, 3.0, kStart - ms(60000), odo));
+  EXPECT_EQ(a.counters().place_refused, 3u);
+  EXPECT_EQ(a.counters().place_offered, 3u);
+}
+
+// The pose task's policy for place answers: with `gps_poor`, passed over
+// while GPS is good, taken once fixes stop; weak ones (probability, not in
+// a sequence) never; `off` takes none.
+TEST(PoseTask, PlaceAnswersAreTakenWhenGpsIsPoorAndTheyAreStrong) {
+  for (const PlaceUse use : {PlaceUse::gps_poor, PlaceUse::off}) {
+    SpscQueue<imu::ImuReading, imu::kImuQueueCapacity> imu_queue;
+    SpscQueue<can::OdometryState, can::kOdometryQueueCapacity> wheel_queue;
+    Mailbox<gps::GpsReading> gps_box;
+    Mailbox<perception::place::PlaceSnapshot> place_box;
+    PoseEstimatorOptions o;
+    o.utm.zone = 32;
+    PoseTask task(o, &imu_queue, &wheel_queue, &gps_box);
+    PlaceUseOptions po;
+    po.use = use;
+    task.set_place_input(&place_box, po);
+    UtmAlignment ref(o.utm);
+    double e0 = 0, n0 = 0, g = 0;
+    ASSERT_TRUE(ref.forward(48.0133, 7.8353, e0, n0, g));
+    const auto place = [&](std::int64_t t, double e, double probability, bool in_sequence) {
+      perception::place::PlaceSnapshot& p = place_box.write_slot();
+      p = {};
+      p.stamp_ns = t;
+      EXPECT_TRUE(ref.reverse(e, n0, p.lat, p.lon));
+      p.probability = probability;
+      p.in_sequence = in_sequence;
+      p.cov_xx = p.cov_yy = 9.0;
+      place_box.publish();
+    };
+    // Grid east at 2 m/s; GPS for 10 s, none after; answers at 5 s (GPS
+    // good), 12 s (weak, then not in a sequence) and 14 s (strong).
+    for (int k = 0; k < 1600; ++k) {
+      const std::int64_t t = kStart + ms(10.0 * k);
+      imu::ImuReading r;
+      r.attitude = attitude(t, 0.0);
+      ASSERT_TRUE(imu_queue.try_push(r));
+      ASSERT_TRUE(wheel_queue.try_push(wheels(t, 2.0, 0.0)));
+      if (k % 10 == 5 && k < 1000) {
+        gps::GpsReading& slot = gps_box.write_slot();
+        slot.fix = fix_at(ref, e0 + 0.02 * (k - 5), n0, t - ms(50), 0.5);
+        slot.receive_ns = t;
+        gps_box.publish();
+      }
+      if (k == 500) place(t - ms(500), e0 + 0.02 * (k - 50), 0.9, true);
+      if (k == 1200) place(t - ms(500), e0 + 0.02 * (k - 50), 0.1, true);
+      if (k == 1250) place(t - ms(500), e0 + 0.02 * (k - 50), 0.9, false);
+      if (k == 1400) place(t - ms(500), e0 + 0.02 * (k - 50), 0.9, true);
+      task.run(TaskTick{static_cast<std::uint64_t>(k), t, t});
+    }
+    const PoseTaskStatus s = task.status();
+    EXPECT_EQ(s.place_answers, 4u);
+    if (use == PlaceUse::off) {
+      EXPECT_EQ(s.place_offered + s.place_gps_good + s.place_weak, 0u);
+      continue;
+    }
+    EXPECT_EQ(s.place_gps_good, 1u);
+    EXPECT_EQ(s.place_weak, 2u);
+    EXPECT_EQ(s.place_offered, 1u);
+    EXPECT_EQ(s.utm_counters.place_used, 1u);
+  }
+}
+
 TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
   ASSERT_TRUE(alloc_guard::hook_installed());
   alloc_guard::set_fatal(false);
@@ -245,6 +386,8 @@ TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
   PoseEstimatorOptions o;
   o.utm.zone = 32;
   PoseTask task(o, &imu_queue, &wheel_queue, &gps_box);
+  Mailbox<perception::place::PlaceSnapshot> place_box;
+  task.set_place_input(&place_box, {PlaceUse::always, 0.3, true, 2.0, 5.0});
   UtmAlignment ref(o.utm);
   double e0 = 0, n0 = 0, g = 0;
   ASSERT_TRUE(ref.forward(48.0133, 7.8353, e0, n0, g));
@@ -266,6 +409,15 @@ TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
       gps_box.publish();
       std::this_thread::sleep_for(std::chrono::milliseconds(8));  // the task takes each fix (10 Hz GPS, 200 Hz task)
     }
+    if (k % 100 == 55) {  // a place answer a second, for 0.5 s before
+      perception::place::PlaceSnapshot& p = place_box.write_slot();
+      p.stamp_ns = t - ms(500);
+      EXPECT_TRUE(ref.reverse(e0 + 0.02 * (k - 50), n0, p.lat, p.lon));
+      p.probability = 0.6;
+      p.in_sequence = true;
+      p.cov_xx = p.cov_yy = 4.0;
+      place_box.publish();
+    }
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(30));
   scheduler.stop();
@@ -277,6 +429,8 @@ TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
   EXPECT_TRUE(s.utm.heading_valid);
   EXPECT_NEAR(s.local.x, 2.0 * 14.99, 0.05);
   EXPECT_NEAR(s.utm.yaw, 0.0, 0.05);  // driving grid east
+  EXPECT_GT(s.place_offered, 5u);
+  EXPECT_GT(s.utm_counters.place_used, 5u);
   test::expect_no_realtime_allocations();
 }
 
