@@ -13,6 +13,8 @@ namespace {
 
 struct SimCliOptions {
   sim::SimOptions sim;
+  std::string season = "summer";
+  std::string camera_size;
   bool quiet = false;
   bool list = false;
 };
@@ -28,6 +30,22 @@ int run_sim(SimCliOptions& o) {
   if (o.sim.out.empty()) {
     std::fprintf(stderr, "trailnav sim: --out DIR is required\n");
     return 2;
+  }
+  if (o.season != "summer" && o.season != "winter") {
+    std::fprintf(stderr, "trailnav sim: --season takes summer or winter, not '%s'\n", o.season.c_str());
+    return 2;
+  }
+  o.sim.season = o.season == "winter" ? sim::Season::winter : sim::Season::summer;
+  if (!o.camera_size.empty()) {
+    int w = 0, h = 0;
+    char end = 0;
+    if (std::sscanf(o.camera_size.c_str(), "%dx%d%c", &w, &h, &end) != 2 || w < 8 || h < 8 || w > 4096 || h > 4096) {
+      std::fprintf(stderr, "trailnav sim: --camera-size takes WIDTHxHEIGHT, 8 to 4096 pixels each, not '%s'\n",
+                   o.camera_size.c_str());
+      return 2;
+    }
+    o.sim.camera_spec.width = w;
+    o.sim.camera_spec.height = h;
   }
   ProgressBar progress("sim", 1.0, "s");
   bool started = false;
@@ -55,6 +73,10 @@ int run_sim(SimCliOptions& o) {
   std::fprintf(stderr, "  gps: %llu NMEA sentences; imu: %llu MTData2 messages; can: %llu frames; gpio: %llu levels\n",
                static_cast<unsigned long long>(r.nmea_sentences), static_cast<unsigned long long>(r.imu_messages),
                static_cast<unsigned long long>(r.can_frames), static_cast<unsigned long long>(r.gpio_levels));
+  if (o.sim.camera)
+    std::fprintf(stderr, "  camera (simulated, %s): %llu frames of %d x %d, %llu rays, rendered in %.2f s\n",
+                 sim::season_name(o.sim.season), static_cast<unsigned long long>(r.camera_frames), o.sim.camera_spec.width,
+                 o.sim.camera_spec.height, static_cast<unsigned long long>(r.camera_rays), r.camera_seconds);
   const double rays_per_s = r.lidar_seconds > 0 ? static_cast<double>(r.rays) / r.lidar_seconds : 0.0;
   std::fprintf(stderr, "  speed: world built in %.2f s; lidar %.2f M rays/s = %.2fx real time; total %.2f s\n",
                r.world_seconds, rays_per_s / 1e6, r.lidar_seconds > 0 ? r.sim_seconds / r.lidar_seconds : 0.0,
@@ -72,6 +94,10 @@ void add_sim_command(CLI::App& app) {
       "wheel odometry per board/sim/trailnav-robot.dbc) plus the ground truth in DIR/truth/ and the\n"
       "OpenStreetMap view in DIR/world.osm (docs/simulator.md). The same seed gives the same bytes.\n"
       "Built-in scenarios: urban, meadow-block, forest-track, mixed-route, junctions (--list).\n"
+      "With --camera, also an image stream of rendered grey frames (simulated: a sky, the terrain classes'\n"
+      "textures, obstacles, sun and shadows; --season winter: snow, an overcast sky, bare trees, fog) for\n"
+      "the place task: `trailnav place-map` on a summer drive, then a winter drive replayed into trailnavd\n"
+      "(docs/place.md).\n"
       "Replay the result with `trailnav replay DIR`.");
   static SimCliOptions o;
   cmd->add_option("--scenario", o.sim.scenario, "Built-in scenario name or a scenario YAML file")->capture_default_str();
@@ -85,6 +111,10 @@ void add_sim_command(CLI::App& app) {
   cmd->add_option("--out", o.sim.out, "Output recording directory");
   cmd->add_flag("--no-lidar", [&](std::int64_t) { o.sim.lidar_packets = false; },
                 "Leave the lidar streams empty (for pose work: GPS, IMU, CAN and GPIO only, much faster)");
+  cmd->add_flag("--camera", o.sim.camera, "Render a camera's frames into the image stream `camera` (simulated)");
+  cmd->add_option("--season", o.season, "The camera's season: summer or winter")->capture_default_str();
+  cmd->add_option("--camera-size", o.camera_size, "Rendered frame size, WIDTHxHEIGHT (default 128x64)");
+  cmd->add_option("--camera-rate", o.sim.camera_spec.rate, "Camera frames per second")->capture_default_str()->check(CLI::Range(0.5, 60.0));
   cmd->add_flag("--list", o.list, "List the built-in scenarios and exit");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([] {

@@ -384,7 +384,8 @@ SimReport run_simulation(const SimOptions& o) {
   fs::create_directories(o.out, ec);
   if (ec) return fail("cannot create " + o.out + ": " + ec.message());
   auto made = recording::RecordingWriter::create(o.out, "simulated: scenario " + s.name + ", seed " +
-                                                            std::to_string(o.seed) + ", lidar " + report.lidar_model);
+                                                            std::to_string(o.seed) + ", lidar " + report.lidar_model +
+                                                            (o.camera ? std::string(", camera (") + season_name(o.season) + ")" : ""));
   if (!made.writer) return fail(made.error);
   recording::RecordingWriter& w = *made.writer;
   const int lidar_stream = w.add_udp_stream("lidar", 2368, report.lidar_model + " data packets");
@@ -519,6 +520,32 @@ SimReport run_simulation(const SimOptions& o) {
       level(off + 0.0031, true);
       level(off + 0.0040, false);
     }
+  }
+
+  // Camera frames (simulated: camera.hpp), each written when its exposure
+  // ends plus a transfer's 20 ms; the winter season's frames are taken half
+  // a period later, so no frame of one season is where one of the other was.
+  if (o.camera) {
+    const auto t_camera = Clock::now();
+    const CameraSpec& cs = o.camera_spec;
+    const int camera_stream =
+        w.add_image_stream("camera", std::string("simulated camera, ") + season_name(o.season) + ", grey " +
+                                         std::to_string(cs.width) + " x " + std::to_string(cs.height) + " at " +
+                                         std::to_string(static_cast<int>(cs.rate)) + " Hz");
+    CameraRenderer camera(*world, cs, o.season, o.seed);
+    std::vector<std::uint8_t> frame(static_cast<std::size_t>(cs.width) * static_cast<std::size_t>(cs.height));
+    const double phase = o.season == Season::winter ? 0.5 / cs.rate : 0.0;
+    const auto frames = static_cast<std::uint64_t>(std::floor((report.sim_seconds - phase) * cs.rate)) + 1;
+    for (std::uint64_t k = 0; k < frames && st; ++k) {
+      const double t = phase + static_cast<double>(k) / cs.rate;
+      camera.render(traj.at(t), k, frame);
+      check(w.write_image(camera_stream, s.start_utc_ns + ns(t + 0.02), static_cast<std::uint32_t>(k), frame, cs.width,
+                          cs.height));
+      ++report.camera_frames;
+      if (o.progress && k % 16 == 0) o.progress(t, report.sim_seconds);
+    }
+    report.camera_rays = camera.rays();
+    report.camera_seconds = seconds_since(t_camera);
   }
 
   // Lidar data and position packets, in the order they leave the sensor.

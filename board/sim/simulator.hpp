@@ -7,6 +7,7 @@
 #include <functional>
 #include <string>
 
+#include "camera.hpp"
 #include "trailnav/drivers/velodyne/model.hpp"
 
 namespace trailnav::sim {
@@ -20,6 +21,9 @@ struct SimOptions {
   std::string out;                 // output directory
   bool truth = true;               // write DIR/truth/
   bool lidar_packets = true;       // false: no lidar streams' packets (GPS, IMU, CAN and GPIO only; fast)
+  bool camera = false;             // an image stream `camera` of rendered frames (camera.hpp; simulated)
+  Season season = Season::summer;
+  CameraSpec camera_spec;
   // Called now and then with the simulated time done and the total.
   std::function<void(double done, double total)> progress;
 };
@@ -42,6 +46,9 @@ struct SimReport {
   std::uint64_t imu_messages = 0;
   std::uint64_t can_frames = 0;
   std::uint64_t gpio_levels = 0;
+  std::uint64_t camera_frames = 0;
+  std::uint64_t camera_rays = 0;
+  double camera_seconds = 0.0;  // wall time to render them
 };
 
 SimReport run_simulation(const SimOptions& options);

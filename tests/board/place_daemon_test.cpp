@@ -24,6 +24,8 @@
 #include "dds.hpp"
 #include "geometry_msgs.h"
 #include "place_map.hpp"
+#include "sim_truth.hpp"
+#include "simulator.hpp"
 #include "robot_config.hpp"
 #include "subscriber.hpp"
 #include "test_data.hpp"
@@ -47,6 +49,18 @@ std::vector<std::uint8_t> nordland(const char* season, int k) {
   char name[96];
   std::snprintf(name, sizeof name, "nordland/%s/images-%05d.png", season, 10 * (k + 1));
   return camera::read_grey_image(test::shared_data(name)).image.pixels;
+}
+
+// One frame through the image tunnel to 127.0.0.1:port.
+void send_frame(int s, std::uint16_t port, const std::vector<std::uint8_t>& px, int w, int h, std::uint32_t sequence) {
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(port);
+  to.sin_addr.s_addr = htonl(0x7F000001u);
+  for (std::size_t i = 0; i < camera::fragment_count(w, h); ++i) {
+    const camera::TunnelFragment f = camera::encode_fragment(px, w, h, sequence, 0, i);
+    ::sendto(s, f.bytes.data(), f.size, 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+  }
 }
 
 }  // namespace
@@ -99,10 +113,6 @@ TEST(PlaceDaemon, WinterFramesThroughTheTunnelAreLocalisedInASummerDatabase) {
   ASSERT_TRUE(matches.subscriber && poses.subscriber);
 
   const int s = ::socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in to{};
-  to.sin_family = AF_INET;
-  to.sin_port = htons(port);
-  to.sin_addr.s_addr = htonl(0x7F000001u);
   // One frame, then the answer it brings (or a second), then the next: the
   // filter sees every frame whatever the machine's load. With the default
   // lag of 10 frames, frame k brings the answer for frame k - 10.
@@ -110,11 +120,7 @@ TEST(PlaceDaemon, WinterFramesThroughTheTunnelAreLocalisedInASummerDatabase) {
   int answered = 0, right = 0, late_right = 0, in_sequence = 0, in_sequence_right = 0, confident = 0, confident_right = 0;
   double last_probability = -1.0;
   for (int k = 0; k < kFrames; ++k) {
-    const std::vector<std::uint8_t> px = nordland("winter", k);
-    for (std::size_t i = 0; i < camera::fragment_count(64, 32); ++i) {
-      const camera::TunnelFragment f = camera::encode_fragment(px, 64, 32, static_cast<std::uint32_t>(k + 1), 0, i);
-      ::sendto(s, f.bytes.data(), f.size, 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
-    }
+    send_frame(s, port, nordland("winter", k), 64, 32, static_cast<std::uint32_t>(k + 1));
     const int answer = k - kLag;
     if (answer < 0) {
       // No answer yet: wait until the task has taken the frame.
@@ -174,5 +180,129 @@ TEST(PlaceDaemon, WinterFramesThroughTheTunnelAreLocalisedInASummerDatabase) {
   EXPECT_GE(confident, 70);
   EXPECT_GE(confident_right, confident * 95 / 100);
   EXPECT_GE(last_probability, 0.0);
+  fs::remove_all(dir);
+}
+
+// The whole path on the simulator (issue 41; simulated truth, simulated
+// camera): a summer drive of the urban scenario with the camera rendered,
+// place-map on it with the true poses, and the winter drive's frames (snow,
+// overcast, bare trees; taken half a frame period later) through the image
+// tunnel into trailnavd at 128 x 64, reduced to 64 x 32 there: the database
+// images trailnavd answers with lie where the winter robot was.
+TEST(PlaceDaemon, ASimulatedWinterDriveIsLocalisedInASimulatedSummerDatabase) {
+  host_clock_start();
+  const fs::path dir = fs::temp_directory_path() / ("trailnav-place-sim-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  for (const sim::Season season : {sim::Season::summer, sim::Season::winter}) {
+    sim::SimOptions so;
+    so.scenario = "urban";
+    so.duration = 60.0;
+    so.lidar_packets = false;
+    so.camera = true;
+    so.camera_spec.rate = 5.0;
+    so.season = season;
+    so.out = (dir / sim::season_name(season)).string();
+    const sim::SimReport r = sim::run_simulation(so);
+    ASSERT_TRUE(r.error.empty()) << r.error;
+    ASSERT_GE(r.camera_frames, 299u);
+  }
+  eval::PlaceMapOptions mo;
+  mo.recording = (dir / "summer").string();
+  const eval::PlaceMapReport map = eval::make_place_map(mo);
+  ASSERT_TRUE(map.error.empty()) << map.error;
+  EXPECT_NE(map.pose_source.find("simulated truth"), std::string::npos);
+  const perception::place::PlaceDatabase& db = map.database;
+  ASSERT_GE(db.entries.size(), 290u);
+  ASSERT_EQ(perception::place::save_place_database(db, (dir / "summer.tnplace").string()), "");
+
+  // The winter frames and where the robot was when each was taken.
+  struct Frame {
+    std::vector<std::uint8_t> pixels;
+    double x = 0.0, y = 0.0;
+  };
+  std::vector<Frame> winter;
+  {
+    auto truth = eval::load_sim_truth((dir / "winter" / "truth").string());
+    ASSERT_TRUE(truth.truth) << truth.error;
+    auto opened = recording::RecordingReader::open((dir / "winter").string());
+    ASSERT_TRUE(opened.reader) << opened.error;
+    while (auto e = opened.reader->next()) {
+      if (e->kind != recording::StreamKind::image) continue;
+      eval::TruthAt at;
+      ASSERT_TRUE(eval::truth_at(truth.truth->trajectory, e->time_ns - 20'000'000, at));
+      winter.push_back({std::vector<std::uint8_t>(e->payload.begin(), e->payload.end()), at.x, at.y});
+      ASSERT_EQ(e->image_width, 128);
+    }
+  }
+  ASSERT_GE(winter.size(), 299u);
+
+  const std::string config = (dir / "robot.yaml").string();
+  std::ofstream(config) << "runtime: {realtime: off, lock_memory: false, log_level: warn, log_sink: stderr}\n"
+                        << "camera: {input: tunnel, tunnel_port: 0, width: 128, height: 64, out_width: 64, out_height: 32}\n"
+                        << "place: {database: summer.tnplace, frame: map}\n"
+                        << "dds: {domain: " << kDomain + 1 << ", cyclone_config: loopback, health_period_s: 0.2}\n"
+                        << "tasks: {preset: auto}\n";
+  RobotConfigResult loaded = load_robot_config(config);
+  ASSERT_TRUE(loaded.config) << loaded.error;
+  auto made = Daemon::create(*loaded.config);
+  ASSERT_TRUE(made.daemon) << made.error;
+  Daemon& daemon = *made.daemon;
+  ASSERT_TRUE(daemon.start());
+  auto domain = dds::Domain::create(kDomain + 1, dds::loopback_config());
+  ASSERT_TRUE(domain.domain) << domain.error;
+  auto matches = dds::Subscriber::create(*domain.domain, "trailnav/place_match", &trailnav_msgs_msg_dds__PlaceMatch__desc, 0);
+  ASSERT_TRUE(matches.subscriber);
+  const int s = ::socket(AF_INET, SOCK_DGRAM, 0);
+  constexpr int kLag = 10;
+  int answered = 0, near = 0, in_sequence = 0, in_sequence_near = 0, confident = 0, confident_near = 0;
+  double worst_in_sequence = 0.0, worst_confident = 0.0;
+  for (std::size_t k = 0; k < winter.size(); ++k) {
+    send_frame(s, daemon.camera_tunnel_port(), winter[k].pixels, 128, 64, static_cast<std::uint32_t>(k + 1));
+    if (k < kLag) {
+      for (int wait = 0; wait < 1000 && daemon.place_counters().frames < k + 1; ++wait)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      continue;
+    }
+    const std::size_t answer = k - kLag;
+    bool got = false;
+    for (int wait = 0; wait < 10 && !got; ++wait) {
+      matches.subscriber->take(0.1, [&](const dds::ReceivedSample& r) {
+        const auto& m = *static_cast<const trailnav_msgs_msg_dds__PlaceMatch_*>(r.sample);
+        if (m.frame_sequence != answer + 1) return;
+        got = true;
+        ++answered;
+        ASSERT_LT(m.database_index, db.entries.size());
+        const perception::place::PlaceEntry& e = db.entries[m.database_index];
+        const double off = std::hypot(e.x - winter[answer].x, e.y - winter[answer].y);
+        near += off <= 5.0 ? 1 : 0;
+        if (m.in_sequence) {
+          ++in_sequence;
+          in_sequence_near += off <= 5.0 ? 1 : 0;
+          worst_in_sequence = std::max(worst_in_sequence, off);
+          if (m.probability >= 0.3) {  // what the pose thread takes by default
+            ++confident;
+            confident_near += off <= 5.0 ? 1 : 0;
+            worst_confident = std::max(worst_confident, off);
+          }
+        }
+      });
+    }
+  }
+  ::close(s);
+  daemon.stop();
+  std::printf("simulated: %d of %zu winter frames answered, %d within 5 m of the summer image's true place; %d in "
+              "sequences, %d within 5 m (worst %.1f m); %d of those with probability >= 0.3, %d within 5 m (worst %.1f m)\n",
+              answered, winter.size() - kLag, near, in_sequence, in_sequence_near, worst_in_sequence, confident,
+              confident_near, worst_confident);
+  // Measured (every run the same: the frames go in one at a time): 246 of
+  // 290 within 5 m; 257 in sequences, 227 within 5 m; 153 with a
+  // probability of at least 0.3 (what the pose thread takes), all within
+  // 2.5 m. The open stretches with nothing but the street alias.
+  EXPECT_EQ(answered, static_cast<int>(winter.size()) - kLag);
+  EXPECT_GE(near, answered * 8 / 10);
+  EXPECT_GE(in_sequence, answered * 8 / 10);
+  EXPECT_GE(in_sequence_near, in_sequence * 8 / 10);
+  EXPECT_GE(confident, 120);
+  EXPECT_GE(confident_near, confident * 97 / 100);
   fs::remove_all(dir);
 }

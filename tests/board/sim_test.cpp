@@ -12,6 +12,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "camera.hpp"
 #include "motion.hpp"
 #include "roads.hpp"
 #include "scenario.hpp"
@@ -464,6 +465,82 @@ TEST(Simulator, EveryBuiltInScenarioBuildsWithJunctionsWhereTheRouteTurns) {
     }
   }
   EXPECT_EQ(checked, 6);
+}
+
+}  // namespace
+
+namespace {
+
+// The simulated camera (camera.hpp): frames rendered from a pose of the
+// urban drive, the same bytes for the same seed; the sky above the horizon
+// and the street below it where a level camera puts them; winter brighter
+// (snow, an overcast sky) and flatter than summer; and the recording's
+// image stream holds every frame, said to be simulated.
+TEST(SimulatedCamera, SkyAboveStreetBelowAndWinterIsAnotherSeason) {
+  const auto loaded = load_scenario("urban");
+  ASSERT_TRUE(loaded.scenario) << loaded.error;
+  const Scenario& s = *loaded.scenario;
+  auto built = build_roads(s, 1);
+  ASSERT_TRUE(built.roads) << built.error;
+  const auto world = World::build(s, *built.roads, 1);
+  const Trajectory traj = drive(s, *built.roads, *world, 20.0, 1);
+  CameraSpec spec;
+  spec.pitch_deg = 0.0;
+  spec.noise = 0.0;
+  const auto frame = [&](Season season, double t, std::uint64_t seed) {
+    CameraRenderer r(*world, spec, season, seed);
+    std::vector<std::uint8_t> px(static_cast<std::size_t>(spec.width * spec.height));
+    r.render(traj.at(t), 7, px);
+    return px;
+  };
+  const std::vector<std::uint8_t> summer = frame(Season::summer, 10.0, 1), winter = frame(Season::winter, 10.0, 1);
+  EXPECT_EQ(summer, frame(Season::summer, 10.0, 1));
+  EXPECT_NE(summer, frame(Season::summer, 12.0, 1));
+  const auto mean_rows = [&](const std::vector<std::uint8_t>& px, int from, int to) {
+    double sum = 0.0;
+    for (int v = from; v < to; ++v)
+      for (int u = 0; u < spec.width; ++u) sum += px[static_cast<std::size_t>(v * spec.width + u)];
+    return sum / ((to - from) * spec.width);
+  };
+  const auto spread = [&](const std::vector<std::uint8_t>& px) {
+    const double m = mean_rows(px, 0, spec.height);
+    double sq = 0.0;
+    for (std::uint8_t p : px) sq += (p - m) * (p - m);
+    return std::sqrt(sq / static_cast<double>(px.size()));
+  };
+  // The top rows are sky (brighter than the street at the bottom, which the
+  // urban drive follows).
+  EXPECT_GT(mean_rows(summer, 0, 6), mean_rows(summer, spec.height - 6, spec.height) + 40.0);
+  EXPECT_GT(mean_rows(winter, spec.height / 2, spec.height), mean_rows(summer, spec.height / 2, spec.height) + 20.0);
+  EXPECT_LT(spread(winter), spread(summer));
+  std::printf("[ camera ] summer mean %.0f, spread %.1f; winter mean %.0f, spread %.1f\n", mean_rows(summer, 0, spec.height),
+              spread(summer), mean_rows(winter, 0, spec.height), spread(winter));
+
+  const std::string dir = temp_dir("camera");
+  SimOptions o;
+  o.scenario = "urban";
+  o.duration = 4.0;
+  o.lidar_packets = false;
+  o.camera = true;
+  o.season = Season::winter;
+  o.out = dir;
+  const SimReport r = run_simulation(o);
+  ASSERT_TRUE(r.error.empty()) << r.error;
+  EXPECT_EQ(r.camera_frames, 40u);  // 10 Hz, half a period late, for 4 s
+  auto opened = recording::RecordingReader::open(dir);
+  ASSERT_TRUE(opened.reader) << opened.error;
+  const int cam = opened.reader->stream_index("camera", recording::StreamKind::image);
+  ASSERT_GE(cam, 0);
+  EXPECT_NE(opened.reader->streams()[static_cast<std::size_t>(cam)].description.find("simulated camera, winter"), std::string::npos);
+  std::size_t images = 0;
+  while (auto e = opened.reader->next()) {
+    if (e->kind != recording::StreamKind::image) continue;
+    EXPECT_EQ(e->image_width, 128);
+    EXPECT_EQ(e->payload.size(), 128u * 64u);
+    ++images;
+  }
+  EXPECT_EQ(images, 40u);
+  fs::remove_all(dir);
 }
 
 }  // namespace
