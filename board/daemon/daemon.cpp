@@ -498,6 +498,12 @@ std::string Daemon::status_line() const {
   return text;
 }
 
+std::optional<Daemon::TaskFigures> Daemon::task_figures(std::string_view name) const {
+  for (std::size_t i = 0; i < scheduler_->task_count(); ++i)
+    if (scheduler_->spec(i).name == name) return TaskFigures{scheduler_->stats(i), nanos_to_seconds(scheduler_->spec(i).budget) * 1e3};
+  return std::nullopt;
+}
+
 std::string Daemon::task_report() const {
   std::string out;
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {

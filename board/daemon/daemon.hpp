@@ -92,6 +92,12 @@ class Daemon {
   DaemonSummary summary() const;
   // Task statistics, one line per task.
   std::string task_report() const;
+  // One task's statistics and its budget (ms); nullopt for a task not in the table.
+  struct TaskFigures {
+    TaskStats stats;
+    double budget_ms = 0.0;
+  };
+  std::optional<TaskFigures> task_figures(std::string_view name) const;
 
  private:
   explicit Daemon(const RobotConfig& config);

@@ -71,13 +71,17 @@ void BM_PlaceStep(benchmark::State& state) {
   state.counters["database_MB"] = static_cast<double>(images * place.bytes_per_image()) / 1e6;
 }
 // The same with ZCA for the robot (a whitening of rank 200, as place-map
-// keeps; random directions: the timing is the same).
+// keeps; random directions: the timing is the same), and with the fixed lag
+// and the online sequence test as trailnavd runs them (lag 10, l_s 10).
+// Arguments: database images, lag.
 void BM_PlaceStepZca(benchmark::State& state) {
   const auto images = static_cast<std::size_t>(state.range(0));
   OnlineConfig config;
   config.width = 64;
   config.height = 32;
   config.capacity = images;
+  config.lag = static_cast<int>(state.range(1));
+  config.sequence = {config.lag > 0 ? 10 : 0, 5, 5};
   OnlinePlace place(config);
   if (!fill_summer(place, images, 1, config.width)) {
     state.SkipWithError("../shared/data/nordland not found (run from the repository's root)");
@@ -98,9 +102,12 @@ void BM_PlaceStepZca(benchmark::State& state) {
     const PlaceEstimate e = place.step(place.describe(winter[k++ % winter.size()], config.width));
     benchmark::DoNotOptimize(e);
   }
-  state.counters["whitening_MB"] = static_cast<double>(images * 201 * 4) / 1e6;
+  state.counters["whitening_MB"] = static_cast<double>(images * (200 + 4)) / 1e6;  // directions as bytes, the means as floats
+  // The lag's ring: a likelihood row (float) and a forward belief (double)
+  // per image and lagged frame, and the smoothed belief.
+  state.counters["lag_MB"] = static_cast<double>(images * ((static_cast<std::size_t>(config.lag) + 1) * 12 + 8)) / 1e6;
 }
-BENCHMARK(BM_PlaceStepZca)->Arg(2400)->Arg(10000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PlaceStepZca)->Args({2400, 0})->Args({10000, 0})->Args({2400, 10})->Args({10000, 10})->Unit(benchmark::kMillisecond);
 
 BENCHMARK(BM_PlaceStep)->Args({2400, 1})->Args({10000, 1})->Args({10000, 2})->Args({10000, 5})->Unit(benchmark::kMillisecond);
 

@@ -466,7 +466,7 @@ TEST(RobotConfig, TheCameraAndPlaceSectionsAndTheirChecks) {
   std::string example = text_of("board/robots/robot-example.yaml");
   for (const char* line : {"# camera:\n", "#   device: ", "#   format: ", "#   width: ", "#   height: ", "#   fps: ",
                            "#   out_width: ", "#   out_height: ", "# place:\n", "#   database: /var/lib/trailnav/route",
-                           "#   frame: map"}) {
+                           "#   frame: map", "#   lag: ", "#   pose_measurement: "}) {
     const std::size_t at = example.find(line);
     ASSERT_NE(at, std::string::npos) << line;
     example.erase(at, 2);
@@ -476,6 +476,7 @@ TEST(RobotConfig, TheCameraAndPlaceSectionsAndTheirChecks) {
   ASSERT_TRUE(robot.config->camera && robot.config->place);
   EXPECT_EQ(robot.config->camera->format, drivers::camera::PixelFormat::yuyv);
   EXPECT_EQ(robot.config->place->database, "/var/lib/trailnav/route.tnplace");
+  EXPECT_EQ(robot.config->place->pose.use, pose::PlaceUse::gps_poor);
   const auto no_camera = load("runtime: {realtime: off}\nplace: {database: x.tnplace}\ndds: {domain: 0}\ntasks: {preset: auto}\n");
   EXPECT_NE(no_camera.error.find("add a 'camera' section"), std::string::npos) << no_camera.error;
   const auto too_big = load("runtime: {realtime: off}\ncamera: {width: 64, height: 32, out_width: 128}\ndds: {domain: 0}\n"

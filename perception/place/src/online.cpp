@@ -100,6 +100,19 @@ bool OnlinePlace::set_whitening(const Whitening& w) {
     return false;
   whitening_ = w;
   projection_.assign(static_cast<std::size_t>(w.rank), 0.0f);
+  // The directions as bytes, each direction scaled by its largest value:
+  // a quarter of the memory a step streams (docs/place.md "ZCA for the robot").
+  const auto k = static_cast<std::size_t>(w.rank);
+  direction_scale_.assign(k, 0.0f);
+  for (std::size_t j = 0; j < count_; ++j)
+    for (std::size_t c = 0; c < k; ++c) direction_scale_[c] = std::max(direction_scale_[c], std::abs(w.directions[j * k + c]));
+  for (float& v : direction_scale_) v = v > 0.0f ? v / 127.0f : 1.0f;
+  directions_q_.resize(count_ * k);
+  for (std::size_t j = 0; j < count_; ++j)
+    for (std::size_t c = 0; c < k; ++c)
+      directions_q_[j * k + c] = static_cast<std::int8_t>(std::lround(w.directions[j * k + c] / direction_scale_[c]));
+  whitening_.directions.clear();
+  whitening_.directions.shrink_to_fit();
   return true;
 }
 
@@ -122,18 +135,26 @@ PlaceEstimate OnlinePlace::advance() noexcept {
   if (whitening_.rank > 0) {
     // q = s - mean; t = Uᵀ q; s̃ = base q + U (gains ⊙ t).
     const auto k = static_cast<std::size_t>(whitening_.rank);
+    // U stored as bytes: U = Q diag(scale); t = scale ⊙ gains ⊙ (Qᵀ q).
     std::fill(projection_.begin(), projection_.end(), 0.0f);
     for (std::size_t j = 0; j < count_; ++j) {
       const float q = row_[j] - whitening_.mean[j];
       row_[j] = q;
-      const float* u = whitening_.directions.data() + j * k;
-      for (std::size_t c = 0; c < k; ++c) projection_[c] += u[c] * q;
+      const std::int8_t* u = directions_q_.data() + j * k;
+      for (std::size_t c = 0; c < k; ++c) projection_[c] += static_cast<float>(u[c]) * q;
     }
-    for (std::size_t c = 0; c < k; ++c) projection_[c] *= whitening_.gains[c];
+    for (std::size_t c = 0; c < k; ++c) projection_[c] *= whitening_.gains[c] * direction_scale_[c] * direction_scale_[c];
     for (std::size_t j = 0; j < count_; ++j) {
-      const float* u = whitening_.directions.data() + j * k;
+      const std::int8_t* u = directions_q_.data() + j * k;
+      // The dot product in eight lanes (the compiler keeps them in one
+      // vector register; a single sum it may not reorder).
+      std::array<float, 8> lanes{};
+      std::size_t c = 0;
+      for (; c + 8 <= k; c += 8)
+        for (std::size_t l = 0; l < 8; ++l) lanes[l] += static_cast<float>(u[c + l]) * projection_[c + l];
       float v = whitening_.base * row_[j];
-      for (std::size_t c = 0; c < k; ++c) v += u[c] * projection_[c];
+      for (; c < k; ++c) v += static_cast<float>(u[c]) * projection_[c];
+      for (const float lane : lanes) v += lane;
       row_[j] = v;
       if (j == 0 || v < lo) lo = v;
       if (j == 0 || v > hi) hi = v;

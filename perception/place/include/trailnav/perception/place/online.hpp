@@ -109,7 +109,8 @@ class OnlinePlace {
   void finish_database() noexcept;
 
   // ZCA instead of Eq. 5.3 (after finish_database(); sizes must match the
-  // database). False when they do not.
+  // database). False when they do not. The directions are kept as bytes
+  // (each direction scaled by its largest value), a quarter of the memory.
   bool set_whitening(const Whitening& w);
 
   // The descriptor of a grey frame (width x height, `stride` bytes a row).
@@ -142,7 +143,9 @@ class OnlinePlace {
   std::vector<float> descriptor_;
   std::vector<std::uint8_t> query_code_;
   std::vector<float> row_;
-  Whitening whitening_;
+  Whitening whitening_;               // its directions kept as bytes below
+  std::vector<std::int8_t> directions_q_;  // n_D x rank
+  std::vector<float> direction_scale_;     // rank
   std::vector<float> projection_;  // rank
   BayesFilter filter_;
 
