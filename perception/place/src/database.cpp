@@ -1,28 +1,19 @@
 #include "trailnav/perception/place/database.hpp"
 
-#include <zlib.h>
-
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 
-#include "trailnav/runtime/atomic_file.hpp"
 #include "trailnav/runtime/le_bytes.hpp"
+#include "trailnav/runtime/sealed_file.hpp"
 
 namespace trailnav::perception::place {
 namespace {
 
 constexpr char kMagic[8] = {'T', 'N', 'P', 'L', 'A', 'C', 'E', '\0'};
 
-std::uint32_t crc_of(std::span<const std::uint8_t> bytes) {
-  return static_cast<std::uint32_t>(crc32(0L, bytes.data(), static_cast<uInt>(bytes.size())));
-}
-
 }  // namespace
 
 std::vector<std::uint8_t> serialize_place_database(const PlaceDatabase& db) {
-  std::vector<std::uint8_t> out(kMagic, kMagic + sizeof kMagic);
-  le::put_u32(out, kPlaceFileVersion);
+  std::vector<std::uint8_t> out = sealed::begin(kMagic, kPlaceFileVersion);
   le::put_u16(out, static_cast<std::uint16_t>(db.width));
   le::put_u16(out, static_cast<std::uint16_t>(db.height));
   le::put_u16(out, static_cast<std::uint16_t>(db.hog.patch));
@@ -51,7 +42,7 @@ std::vector<std::uint8_t> serialize_place_database(const PlaceDatabase& db) {
     for (float v : w.gains) le::put_f32(out, v);
     for (float v : w.directions) le::put_f32(out, v);
   }
-  le::put_u32(out, crc_of(out));
+  sealed::seal(out);
   return out;
 }
 
@@ -62,18 +53,14 @@ LoadedPlaceDatabase parse_place_database(std::span<const std::uint8_t> bytes, st
     r.error = w + ": " + e;
     return r;
   };
-  if (bytes.size() < sizeof kMagic + 8 || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0)
-    return fail("not a trailnav place database (it does not begin with TNPLACE)");
-  const std::span<const std::uint8_t> body = bytes.first(bytes.size() - 4);
-  std::uint32_t stored = 0;
-  le::Reader(bytes.last(4)).u32(stored);
-  le::Reader in(body.subspan(sizeof kMagic));
-  std::uint32_t version = 0;
-  in.u32(version);
+  const sealed::Opened opened = sealed::open(bytes, kMagic, "place database");
+  if (!opened.problem.empty()) return fail(opened.problem);
+  const std::uint32_t version = opened.version;
   if (version != 1 && version != kPlaceFileVersion)
     return fail("version " + std::to_string(version) + ", this trailnav reads version " + std::to_string(kPlaceFileVersion) +
                 " (make the database again with trailnav place-map)");
-  if (crc_of(body) != stored) return fail("the checksum does not match: the file is damaged or cut short");
+  if (!opened.checksum_ok) return fail("the checksum does not match: the file is damaged or cut short");
+  le::Reader in(opened.body);
   PlaceDatabase db;
   std::uint16_t width = 0, height = 0, patch = 0, cells = 0, bins = 0;
   float clip = 0.0f;
@@ -152,18 +139,16 @@ LoadedPlaceDatabase parse_place_database(std::span<const std::uint8_t> bytes, st
 
 LoadedPlaceDatabase load_place_database(const std::string& path) {
   std::vector<std::uint8_t> bytes;
-  if (const int e = read_whole_file(path, bytes); e != 0) {
+  if (std::string e = sealed::load(path, bytes); !e.empty()) {
     LoadedPlaceDatabase r;
-    r.error = path + ": cannot read (" + std::strerror(e) + ")";
+    r.error = std::move(e);
     return r;
   }
   return parse_place_database(bytes, path);
 }
 
 std::string save_place_database(const PlaceDatabase& db, const std::string& path) {
-  const AtomicFile file(path);
-  if (const int e = file.write(serialize_place_database(db)); e != 0) return path + ": cannot write (" + std::strerror(e) + ")";
-  return "";
+  return sealed::save(path, serialize_place_database(db));
 }
 
 }  // namespace trailnav::perception::place

@@ -1,13 +1,9 @@
 #include "trailnav/perception/registration/station_file.hpp"
 
-#include <zlib.h>
-
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 
-#include "trailnav/runtime/atomic_file.hpp"
 #include "trailnav/runtime/le_bytes.hpp"
+#include "trailnav/runtime/sealed_file.hpp"
 
 namespace trailnav::perception::registration {
 
@@ -25,15 +21,11 @@ bool get_string(le::Reader& in, std::string& s, std::size_t max) {
   return in.u16(n) && n <= max && in.bytes(n, s);
 }
 
-std::uint32_t crc_of(std::span<const std::uint8_t> bytes) {
-  return static_cast<std::uint32_t>(crc32(0L, bytes.data(), static_cast<uInt>(bytes.size())));
-}
 
 }  // namespace
 
 std::vector<std::uint8_t> serialize_station(const StationFile& s) {
-  std::vector<std::uint8_t> out(kMagic, kMagic + sizeof kMagic);
-  le::put_u32(out, kStationFileVersion);
+  std::vector<std::uint8_t> out = sealed::begin(kMagic, kStationFileVersion);
   put_string(out, s.name);
   le::put_u32(out, static_cast<std::uint32_t>(s.bodies.size()));
   for (const StationBodyFile& b : s.bodies) {
@@ -50,7 +42,7 @@ std::vector<std::uint8_t> serialize_station(const StationFile& s) {
       le::put_f32(out, p.z());
     }
   }
-  le::put_u32(out, crc_of(out));
+  sealed::seal(out);
   return out;
 }
 
@@ -61,20 +53,14 @@ LoadedStation parse_station(std::span<const std::uint8_t> bytes, std::string_vie
     r.error = w + ": " + e;
     return r;
   };
-  if (bytes.size() < sizeof kMagic + 8 || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) {
-    return fail("not a trailnav station file (it does not begin with TNSTATN)");
-  }
-  const std::span<const std::uint8_t> body = bytes.first(bytes.size() - 4);
-  std::uint32_t stored = 0;
-  le::Reader(bytes.last(4)).u32(stored);
-  le::Reader in(body.subspan(sizeof kMagic));
-  std::uint32_t version = 0;
-  in.u32(version);
-  if (version != kStationFileVersion) {
-    return fail("version " + std::to_string(version) + ", this trailnav reads version " +
+  const sealed::Opened opened = sealed::open(bytes, kMagic, "station file");
+  if (!opened.problem.empty()) return fail(opened.problem);
+  if (opened.version != kStationFileVersion) {
+    return fail("version " + std::to_string(opened.version) + ", this trailnav reads version " +
                 std::to_string(kStationFileVersion) + " (teach the station again)");
   }
-  if (crc_of(body) != stored) return fail("the checksum does not match: the file is damaged or cut short");
+  if (!opened.checksum_ok) return fail("the checksum does not match: the file is damaged or cut short");
+  le::Reader in(opened.body);
   StationFile s;
   if (!get_string(in, s.name, kStationMaxName)) return fail("the station's name is cut short or longer than 64 bytes");
   std::uint32_t nb = 0;
@@ -120,18 +106,14 @@ LoadedStation parse_station(std::span<const std::uint8_t> bytes, std::string_vie
 
 LoadedStation load_station(const std::string& path) {
   std::vector<std::uint8_t> bytes;
-  if (const int e = read_whole_file(path, bytes); e != 0) {
+  if (std::string e = sealed::load(path, bytes); !e.empty()) {
     LoadedStation r;
-    r.error = path + ": cannot read (" + std::strerror(e) + ")";
+    r.error = std::move(e);
     return r;
   }
   return parse_station(bytes, path);
 }
 
-std::string save_station(const StationFile& s, const std::string& path) {
-  const AtomicFile file(path);
-  if (const int e = file.write(serialize_station(s)); e != 0) return path + ": cannot write (" + std::strerror(e) + ")";
-  return "";
-}
+std::string save_station(const StationFile& s, const std::string& path) { return sealed::save(path, serialize_station(s)); }
 
 }  // namespace trailnav::perception::registration
