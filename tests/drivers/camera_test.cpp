@@ -21,6 +21,7 @@
 #include "trailnav/drivers/camera/image_file.hpp"
 #include "trailnav/drivers/camera/image_tunnel.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
+#include "trailnav/runtime/heap_redirect.hpp"
 #include "trailnav/runtime/host_clock.hpp"
 
 namespace trailnav::drivers::camera {
@@ -82,6 +83,44 @@ TEST(CameraFrame, MotionJpegOfARealFrameDecodesToGreyAndBadJpegIsRefused) {
   tjDestroy(enc);
   FrameConverter m(PixelFormat::mjpeg, w, h, 64, 32);
   ASSERT_TRUE(m.convert(bytes, 0)) << m.error();
+  // The decoder's memory comes from the converter's block, not the heap
+  // (where the build can redirect it: not under the sanitizers).
+  alloc_guard::set_fatal(false);
+  alloc_guard::mark_realtime_thread("camera");
+  ASSERT_TRUE(alloc_guard::arm());
+  EXPECT_TRUE(m.convert(bytes, 0)) << m.error();
+  alloc_guard::disarm();
+  alloc_guard::unmark_current_thread();
+  if (heap_redirect::supported()) {
+    EXPECT_EQ(alloc_guard::total_allocations(), 0u);
+  }
+  EXPECT_GT(m.jpeg_memory_peak(), 0u);
+  EXPECT_LT(m.jpeg_memory_peak(), m.jpeg_memory_size());
+  std::printf("[ camera ] MJPEG 128 x 64 (4:2:0): the decoder took %zu of its %zu bytes\n", m.jpeg_memory_peak(),
+              m.jpeg_memory_size());
+  {
+    // The largest need: a progressive JPEG keeps every coefficient of the
+    // frame; 640 x 480 with full-resolution colour (4:4:4).
+    const int bw = 640, bh = 480;
+    std::vector<std::uint8_t> big(static_cast<std::size_t>(bw * bh * 3));
+    for (int y = 0; y < bh; ++y)
+      for (int x = 0; x < bw; ++x)
+        for (int c = 0; c < 3; ++c)
+          big[static_cast<std::size_t>((y * bw + x) * 3 + c)] =
+              static_cast<std::uint8_t>(frame.image.pixels[static_cast<std::size_t>((y / 15) * 64 + x / 10)] + 7 * c);
+    tjhandle penc = tjInitCompress();
+    unsigned char* pj = nullptr;
+    unsigned long psize = 0;
+    ASSERT_EQ(tjCompress2(penc, big.data(), bw, 0, bh, TJPF_RGB, &pj, &psize, TJSAMP_444, 90, TJFLAG_PROGRESSIVE), 0);
+    const std::vector<std::uint8_t> progressive(pj, pj + psize);
+    tjFree(pj);
+    tjDestroy(penc);
+    FrameConverter p(PixelFormat::mjpeg, bw, bh, 64, 32);
+    ASSERT_TRUE(p.convert(progressive, 0)) << p.error();
+    EXPECT_LT(p.jpeg_memory_peak(), p.jpeg_memory_size());
+    std::printf("[ camera ] progressive 640 x 480 (4:4:4): the decoder took %zu of its %zu bytes\n", p.jpeg_memory_peak(),
+                p.jpeg_memory_size());
+  }
   double diff = 0.0;
   for (std::size_t k = 0; k < m.grey().size(); ++k) diff += std::abs(m.grey()[k] - frame.image.pixels[k]);
   EXPECT_LT(diff / static_cast<double>(m.grey().size()), 2.0);  // JPEG's loss, averaged over 2 x 2

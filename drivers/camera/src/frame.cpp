@@ -6,9 +6,55 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <memory>
 #include <stdexcept>
 
+#include "trailnav/runtime/heap_redirect.hpp"
+
 namespace trailnav::drivers::camera {
+
+// A bump allocator over one block: each allocation 16-byte aligned with its
+// size in the 16 bytes before it; freeing does nothing until the next
+// frame empties the whole block.
+class FrameConverter::FrameArena final : public heap_redirect::Redirect {
+ public:
+  explicit FrameArena(std::size_t bytes) : block_(new std::max_align_t[bytes / sizeof(std::max_align_t) + 1]), size_(bytes) {}
+  void* allocate(std::size_t bytes) noexcept override {
+    const std::size_t need = kHeader + ((bytes + 15) & ~std::size_t{15});
+    if (need < bytes || size_ - used_ < need) return nullptr;
+    auto* p = reinterpret_cast<unsigned char*>(block_.get()) + used_;
+    std::memcpy(p, &bytes, sizeof bytes);
+    used_ += need;
+    peak_ = std::max(peak_, used_);
+    return p + kHeader;
+  }
+  void* reallocate(void* p, std::size_t bytes) noexcept override {
+    void* q = allocate(bytes);
+    if (q != nullptr && p != nullptr) std::memcpy(q, p, std::min(bytes, usable_size(p)));
+    return q;
+  }
+  void release(void*) noexcept override {}
+  bool owns(const void* p) const noexcept override {
+    const auto* b = reinterpret_cast<const unsigned char*>(block_.get());
+    const auto* c = static_cast<const unsigned char*>(p);
+    return c >= b && c < b + size_;
+  }
+  std::size_t usable_size(const void* p) const noexcept override {
+    std::size_t n = 0;
+    std::memcpy(&n, static_cast<const unsigned char*>(p) - kHeader, sizeof n);
+    return n;
+  }
+  void empty() noexcept { used_ = 0; }
+  std::size_t peak() const noexcept { return peak_; }
+  std::size_t size() const noexcept { return size_; }
+
+ private:
+  static constexpr std::size_t kHeader = 16;
+  std::unique_ptr<std::max_align_t[]> block_;
+  std::size_t size_;
+  std::size_t used_ = 0, peak_ = 0;
+};
+
 
 const char* pixel_format_name(PixelFormat f) noexcept {
   switch (f) {
@@ -49,13 +95,54 @@ FrameConverter::FrameConverter(PixelFormat format, int width, int height, int ou
   area_counts(width, height, out_width, out_height, counts_);
   out_.resize(out);
   if (format == PixelFormat::mjpeg) {
-    jpeg_ = tjInitDecompress();
-    if (jpeg_ == nullptr) throw std::runtime_error(std::string("camera: libturbojpeg: ") + tjGetErrorStr2(nullptr));
+    tjhandle probe = tjInitDecompress();
+    if (probe == nullptr) throw std::runtime_error(std::string("camera: libturbojpeg: ") + tjGetErrorStr2(nullptr));
+    tjDestroy(probe);
+    // libjpeg-turbo decoding one frame to grey holds its structures (tens of
+    // kilobytes), a row group of each component and, for a progressive
+    // JPEG, the whole frame's coefficients (2 bytes a sample, the chroma at
+    // most as many again): 4 bytes a pixel and 1 MB cover every subsampling.
+    arena_ = std::make_unique<FrameArena>((std::size_t{1} << 20) + 4 * pixels);
   }
 }
 
-FrameConverter::~FrameConverter() {
-  if (jpeg_ != nullptr) tjDestroy(jpeg_);
+FrameConverter::~FrameConverter() = default;
+
+std::size_t FrameConverter::jpeg_memory_peak() const noexcept { return arena_ ? arena_->peak() : 0; }
+std::size_t FrameConverter::jpeg_memory_size() const noexcept { return arena_ ? arena_->size() : 0; }
+
+bool FrameConverter::decode_jpeg(std::span<const std::uint8_t> bytes) noexcept {
+  arena_->empty();
+  // Everything libjpeg takes while the scope lives comes from the block and
+  // is given back by tjDestroy before the scope ends.
+  const heap_redirect::Scope scope(*arena_);
+  tjhandle jpeg = tjInitDecompress();
+  if (jpeg == nullptr) {
+    std::snprintf(error_, sizeof error_, "libturbojpeg could not start a decoder in its %zu bytes", arena_->size());
+    return false;
+  }
+  bool ok = true;
+  int jw = 0, jh = 0, sub = 0, space = 0;
+  auto* data = const_cast<unsigned char*>(bytes.data());  // libturbojpeg 2.1 takes a non-const pointer, reads only
+  const auto size = static_cast<unsigned long>(bytes.size());
+  if (bytes.size() < 4 || tjDecompressHeader3(jpeg, data, size, &jw, &jh, &sub, &space) != 0) {
+    std::snprintf(error_, sizeof error_, "an MJPEG frame of %zu bytes has no readable JPEG header (%s)", bytes.size(),
+                  tjGetErrorStr2(jpeg));
+    ok = false;
+  } else if (jw != width_ || jh != height_) {
+    std::snprintf(error_, sizeof error_, "an MJPEG frame of %d x %d pixels where %d x %d were set", jw, jh, width_, height_);
+    ok = false;
+  } else if (tjDecompress2(jpeg, data, size, full_.data(), width_, width_, height_, TJPF_GRAY, TJFLAG_FASTDCT) != 0) {
+    if (tjGetErrorCode(jpeg) == TJERR_FATAL) {
+      std::snprintf(error_, sizeof error_, "an MJPEG frame of %zu bytes does not decode (%s)", bytes.size(),
+                    tjGetErrorStr2(jpeg));
+      ok = false;
+    } else {
+      ++jpeg_warnings_;
+    }
+  }
+  tjDestroy(jpeg);
+  return ok;
 }
 
 void area_counts(int w, int h, int ow, int oh, std::span<std::uint32_t> counts) noexcept {
@@ -105,30 +192,9 @@ bool FrameConverter::convert(std::span<const std::uint8_t> bytes, int bytes_per_
       }
       break;
     }
-    case PixelFormat::mjpeg: {
-      int jw = 0, jh = 0, sub = 0, space = 0;
-      auto* data = const_cast<unsigned char*>(bytes.data());  // libturbojpeg 2.1 takes a non-const pointer, reads only
-      const auto size = static_cast<unsigned long>(bytes.size());
-      if (bytes.size() < 4 || tjDecompressHeader3(jpeg_, data, size, &jw, &jh, &sub, &space) != 0) {
-        std::snprintf(error_, sizeof error_, "an MJPEG frame of %zu bytes has no readable JPEG header (%s)", bytes.size(),
-                      tjGetErrorStr2(jpeg_));
-        return false;
-      }
-      if (jw != width_ || jh != height_) {
-        std::snprintf(error_, sizeof error_, "an MJPEG frame of %d x %d pixels where %d x %d were set", jw, jh, width_,
-                      height_);
-        return false;
-      }
-      if (tjDecompress2(jpeg_, data, size, full_.data(), width_, width_, height_, TJPF_GRAY, TJFLAG_FASTDCT) != 0) {
-        if (tjGetErrorCode(jpeg_) == TJERR_FATAL) {
-          std::snprintf(error_, sizeof error_, "an MJPEG frame of %zu bytes does not decode (%s)", bytes.size(),
-                        tjGetErrorStr2(jpeg_));
-          return false;
-        }
-        ++jpeg_warnings_;
-      }
+    case PixelFormat::mjpeg:
+      if (!decode_jpeg(bytes)) return false;
       break;
-    }
   }
   if (out_width_ == width_ && out_height_ == height_) {
     std::memcpy(out_.data(), full_.data(), out_.size());

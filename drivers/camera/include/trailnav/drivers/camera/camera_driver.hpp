@@ -16,10 +16,8 @@
 //
 // The scheduler's threads are all watched by the allocation guard, this one
 // (normal scheduling) too: opening the device, reopening it and reporting
-// errors allocate nothing (v4l2_camera.hpp), nor do GREY and YUYV frames.
-// libjpeg decodes MJPEG in pools it takes from the heap, which the guard
-// counts: on the robot take YUYV or GREY until the decoder's memory is its
-// own (docs/place.md).
+// errors allocate nothing (v4l2_camera.hpp), nor do frames: MJPEG's decoder
+// takes its memory from the converter's block (frame.hpp).
 #pragma once
 
 #include <array>

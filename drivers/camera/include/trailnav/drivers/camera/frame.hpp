@@ -2,12 +2,16 @@
 // V4L2 pixel formats trailnav takes (8-bit grey, YUYV 4:2:2 whose Y bytes are
 // the grey image, and Motion-JPEG decoded by libturbojpeg straight to grey),
 // then an area-average reduction to the descriptor's size. Buffers are
-// sized at construction; convert() and reduce() allocate nothing on the
-// grey and YUYV paths (libjpeg's decoder keeps its own pools, so MJPEG is for
-// a thread with normal scheduling: docs/place.md).
+// sized at construction; convert() and reduce() allocate nothing. libjpeg
+// takes its decoder's memory with malloc: each MJPEG frame is decoded by a
+// decoder made for it and destroyed after it, inside a heap redirect
+// (runtime/heap_redirect.hpp) served from a block sized at construction and
+// emptied per frame; builds whose malloc the sanitizers own have no
+// redirect, and there the decoder uses the heap.
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -45,6 +49,10 @@ class FrameConverter {
   // MJPEG frames that decoded with libjpeg's warnings (extraneous bytes,
   // a premature end: the rest of the picture filled in); they are published.
   std::uint64_t jpeg_warnings() const noexcept { return jpeg_warnings_; }
+  // The most of the MJPEG decoder's block one frame used, and its size (bytes).
+  std::size_t jpeg_memory_peak() const noexcept;
+  std::size_t jpeg_memory_size() const noexcept;
+  class FrameArena;
 
  private:
   PixelFormat format_;
@@ -53,8 +61,9 @@ class FrameConverter {
   std::vector<std::uint32_t> sums_;
   std::vector<std::uint32_t> counts_;
   std::vector<std::uint8_t> out_;
-  void* jpeg_ = nullptr;  // tjhandle
+  std::unique_ptr<FrameArena> arena_;  // MJPEG: the decoder's memory
   std::uint64_t jpeg_warnings_ = 0;
+  bool decode_jpeg(std::span<const std::uint8_t> bytes) noexcept;
   char error_[160] = {};
 };
 
