@@ -303,6 +303,11 @@ void add_place_commands(CLI::App& app) {
   cmd->add_flag("--no-online", o.no_online, "Leave the online methods out");
   cmd->add_option("--online-lag", e.online_lag, "Queries the online filter's smoothed answer trails the newest (trailnavd's place.lag)")
       ->capture_default_str();
+  cmd->add_option("--online-zca-rank", e.online_zca_rank,
+                  "The online filter's whitening, learnt from the database as place-map learns it: its largest "
+                  "directions kept (0: Eq. 5.3 with running means instead)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1024));
   cmd->add_option("--online-min-sequence", e.online_sequence.min_length,
                   "The online sequence test's l_s: chains through the answer at least this long (trailnavd's "
                   "place.min_sequence; g_r and g_c as --row-gap and --column-gap)")

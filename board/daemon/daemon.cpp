@@ -753,7 +753,7 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
       // The place task's answers: offered to the alignment (GPS poor and
       // the answer strong enough), used, gated out.
       m.value("place_answers", s.place_answers);
-      m.value("place_offered", s.place_offered);
+      m.value("place_offered", s.utm_counters.place_offered);
       m.value("place_used", s.utm_counters.place_used);
       m.value("place_outliers", s.utm_counters.place_outliers);
       m.value("place_gps_good", s.place_gps_good);

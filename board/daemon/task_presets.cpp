@@ -113,8 +113,8 @@ constexpr double kDemonstrationNeedMs = 1.53;
 // sequence test, 600 frames at 10 Hz
 // (`TRAILNAV_LONG_TESTS=1 build/release/bin/trailnav_place_daemon_tests
 // --gtest_filter='*WholeSummer*'`, 2026-12-05): 7.37 ms (p99 2.95 ms; one
-// step alone in the benchmark 2.09 ms: in the daemon each step streams 12 MB
-// of codes and whitening from memory next to the other threads, and the
+// step alone in the benchmark 2.09 ms: in the daemon each step reads about 14 MB
+// of codes, whitening and the lag's ring next to the other threads, and the
 // largest runs are the VM's stalls). A larger database needs a larger budget
 // (tasks.change).
 constexpr double kCameraNeedMs = 0.87;

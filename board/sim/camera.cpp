@@ -108,9 +108,9 @@ double CameraRenderer::shade(const Vec3& origin, const Vec3& dir, std::uint64_t 
 
 void CameraRenderer::render(const PoseSample& p, std::uint64_t index, std::span<std::uint8_t> out) const noexcept {
   const int w = spec_.width, h = spec_.height;
-  const Eigen::Matrix3d r = rotation(p.roll, p.pitch, p.yaw) *
-                            Eigen::AngleAxisd(spec_.pitch_deg * kPi / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  const Vec3 origin = p.p + rotation(p.roll, p.pitch, p.yaw) * spec_.mount;
+  const Eigen::Matrix3d body = rotation(p.roll, p.pitch, p.yaw);
+  const Eigen::Matrix3d r = body * Eigen::AngleAxisd(spec_.pitch_deg * kPi / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const Vec3 origin = p.p + body * spec_.mount;
   const double f = 0.5 * w / std::tan(0.5 * spec_.hfov_deg * kPi / 180.0);
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {

@@ -41,6 +41,18 @@ can::OdometryState wheels(std::int64_t t, double speed, double yaw_rate) {
   return w;
 }
 
+// The true planar motion of a drive's simulated robot: one step of dt at
+// speed v and turn rate w (the midpoint heading).
+struct PlanarTruth {
+  double heading = 0.0, x = 0.0, y = 0.0;
+  void step(double v, double w, double dt) noexcept {
+    const double mid = heading + 0.5 * w * dt;
+    x += v * dt * std::cos(mid);
+    y += v * dt * std::sin(mid);
+    heading += w * dt;
+  }
+};
+
 gps::GpsFix fix_at(const UtmAlignment& ref, double e, double n, std::int64_t t, double sigma) {
   double lat = 0, lon = 0;
   EXPECT_TRUE(ref.reverse(e, n, lat, lon));
@@ -170,17 +182,13 @@ TEST(UtmAlignment, FindsTheTransformDespiteOutliersAndFollowsAJump) {
   UtmAlignment align(o);
   std::mt19937 rng(7);
   std::normal_distribution<double> noise(0.0, 0.3);
-  double heading = 0.0, x = 0.0, y = 0.0;  // the truth, in the odometry frame
+  PlanarTruth truth;  // in the odometry frame
   for (int k = 0; k <= 12000; ++k) {  // 120 s at 100 Hz: straight, a quarter turn, straight
     const double ts = 0.01 * k;
     const std::int64_t t = kStart + ms(10.0 * k);
     const double w = ts > 40 && ts < 50 ? kPi / 20 : 0.0;
-    if (k > 0) {
-      const double mid = heading + 0.5 * w * 0.01;
-      x += 1.2 * 0.01 * std::cos(mid);
-      y += 1.2 * 0.01 * std::sin(mid);
-      heading += w * 0.01;
-    }
+    if (k > 0) truth.step(1.2, w, 0.01);
+    const double heading = truth.heading, x = truth.x, y = truth.y;
     odo.add_wheels(wheels(t, 1.2, w));
     odo.add_imu(attitude(t, w + 0.002));  // a gyro bias the GPS must find
     if (k % 10 == 0 && k > 0) {
@@ -199,11 +207,11 @@ TEST(UtmAlignment, FindsTheTransformDespiteOutliersAndFollowsAJump) {
   EXPECT_NEAR(align.gyro_bias(), 0.002, 0.0005);
   // The robot's UTM position now: the truth plus the jump the GPS made.
   const UtmPose u = align.utm(odo.pose());
-  const double te = e0 + std::cos(theta) * x - std::sin(theta) * y;
-  const double tn = n0 + std::sin(theta) * x + std::cos(theta) * y + 8.0;
+  const double te = e0 + std::cos(theta) * truth.x - std::sin(theta) * truth.y;
+  const double tn = n0 + std::sin(theta) * truth.x + std::cos(theta) * truth.y + 8.0;
   EXPECT_NEAR(u.easting, te, 0.5);
   EXPECT_NEAR(u.northing, tn, 0.5);
-  EXPECT_NEAR(std::remainder(u.yaw - (heading + theta), 2 * kPi), 0.0, 0.02);
+  EXPECT_NEAR(std::remainder(u.yaw - (truth.heading + theta), 2 * kPi), 0.0, 0.02);
   EXPECT_GT(u.sigma_position(), 0.05);
   EXPECT_LT(u.sigma_position(), 2.0);
   EXPECT_NEAR(u.latitude, 48.0133, 0.01);
@@ -263,17 +271,13 @@ TEST(UtmAlignment, PlaceFixesHoldThePositionWhereGpsIsLostAndAlignWithoutIt) {
     UtmAlignment align(o);
     std::mt19937 rng(3);
     std::normal_distribution<double> gps_noise(0.0, 0.3), place_noise(0.0, 2.0);
-    double heading = 0.0, x = 0.0, y = 0.0;
+    PlanarTruth truth;
     for (int k = 0; k <= 30000; ++k) {
       const double ts = 0.01 * k;
       const std::int64_t t = kStart + ms(10.0 * k);
       const double w = 0.05 * std::sin(ts / 20.0);
-      if (k > 0) {
-        const double mid = heading + 0.5 * w * 0.01;
-        x += 1.5 * 0.01 * std::cos(mid);
-        y += 1.5 * 0.01 * std::sin(mid);
-        heading += w * 0.01;
-      }
+      if (k > 0) truth.step(1.5, w, 0.01);
+      const double x = truth.x, y = truth.y;
       odo.add_wheels(wheels(t, 1.5, w));
       odo.add_imu(attitude(t, w + (ts > 60.0 ? 0.003 : 0.0)));
       double e = 0, n = 0;
@@ -291,7 +295,7 @@ TEST(UtmAlignment, PlaceFixesHoldThePositionWhereGpsIsLostAndAlignWithoutIt) {
     }
     const UtmPose u = align.utm(odo.pose());
     double e = 0, n = 0;
-    to_utm(x, y, e, n);
+    to_utm(truth.x, truth.y, e, n);
     return Result{std::hypot(u.easting - e, u.northing - n), align.heading_valid(), align.counters()};
   };
   const Result lost = drive(true, false), held = drive(true, true), alone = drive(false, true);
@@ -366,12 +370,12 @@ TEST(PoseTask, PlaceAnswersAreTakenWhenGpsIsPoorAndTheyAreStrong) {
     const PoseTaskStatus s = task.status();
     EXPECT_EQ(s.place_answers, 4u);
     if (use == PlaceUse::off) {
-      EXPECT_EQ(s.place_offered + s.place_gps_good + s.place_weak, 0u);
+      EXPECT_EQ(s.utm_counters.place_offered + s.place_gps_good + s.place_weak, 0u);
       continue;
     }
     EXPECT_EQ(s.place_gps_good, 1u);
     EXPECT_EQ(s.place_weak, 2u);
-    EXPECT_EQ(s.place_offered, 1u);
+    EXPECT_EQ(s.utm_counters.place_offered, 1u);
     EXPECT_EQ(s.utm_counters.place_used, 1u);
   }
 }
@@ -429,7 +433,7 @@ TEST(PoseTask, ArmedTaskNeverTouchesTheHeap) {
   EXPECT_TRUE(s.utm.heading_valid);
   EXPECT_NEAR(s.local.x, 2.0 * 14.99, 0.05);
   EXPECT_NEAR(s.utm.yaw, 0.0, 0.05);  // driving grid east
-  EXPECT_GT(s.place_offered, 5u);
+  EXPECT_GT(s.utm_counters.place_offered, 5u);
   EXPECT_GT(s.utm_counters.place_used, 5u);
   test::expect_no_realtime_allocations();
 }

@@ -9,52 +9,10 @@
 #include <memory>
 #include <stdexcept>
 
+#include "trailnav/runtime/arena.hpp"
 #include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::drivers::camera {
-
-// A bump allocator over one block: each allocation 16-byte aligned with its
-// size in the 16 bytes before it; freeing does nothing until the next
-// frame empties the whole block.
-class FrameConverter::FrameArena final : public heap_redirect::Redirect {
- public:
-  explicit FrameArena(std::size_t bytes) : block_(new std::max_align_t[bytes / sizeof(std::max_align_t) + 1]), size_(bytes) {}
-  void* allocate(std::size_t bytes) noexcept override {
-    const std::size_t need = kHeader + ((bytes + 15) & ~std::size_t{15});
-    if (need < bytes || size_ - used_ < need) return nullptr;
-    auto* p = reinterpret_cast<unsigned char*>(block_.get()) + used_;
-    std::memcpy(p, &bytes, sizeof bytes);
-    used_ += need;
-    peak_ = std::max(peak_, used_);
-    return p + kHeader;
-  }
-  void* reallocate(void* p, std::size_t bytes) noexcept override {
-    void* q = allocate(bytes);
-    if (q != nullptr && p != nullptr) std::memcpy(q, p, std::min(bytes, usable_size(p)));
-    return q;
-  }
-  void release(void*) noexcept override {}
-  bool owns(const void* p) const noexcept override {
-    const auto* b = reinterpret_cast<const unsigned char*>(block_.get());
-    const auto* c = static_cast<const unsigned char*>(p);
-    return c >= b && c < b + size_;
-  }
-  std::size_t usable_size(const void* p) const noexcept override {
-    std::size_t n = 0;
-    std::memcpy(&n, static_cast<const unsigned char*>(p) - kHeader, sizeof n);
-    return n;
-  }
-  void empty() noexcept { used_ = 0; }
-  std::size_t peak() const noexcept { return peak_; }
-  std::size_t size() const noexcept { return size_; }
-
- private:
-  static constexpr std::size_t kHeader = 16;
-  std::unique_ptr<std::max_align_t[]> block_;
-  std::size_t size_;
-  std::size_t used_ = 0, peak_ = 0;
-};
-
 
 const char* pixel_format_name(PixelFormat f) noexcept {
   switch (f) {
@@ -102,23 +60,23 @@ FrameConverter::FrameConverter(PixelFormat format, int width, int height, int ou
     // kilobytes), a row group of each component and, for a progressive
     // JPEG, the whole frame's coefficients (2 bytes a sample, the chroma at
     // most as many again): 4 bytes a pixel and 1 MB cover every subsampling.
-    arena_ = std::make_unique<FrameArena>((std::size_t{1} << 20) + 4 * pixels);
+    arena_ = std::make_unique<Arena>((std::size_t{1} << 20) + 4 * pixels);
   }
 }
 
 FrameConverter::~FrameConverter() = default;
 
-std::size_t FrameConverter::jpeg_memory_peak() const noexcept { return arena_ ? arena_->peak() : 0; }
-std::size_t FrameConverter::jpeg_memory_size() const noexcept { return arena_ ? arena_->size() : 0; }
+std::size_t FrameConverter::jpeg_memory_peak() const noexcept { return arena_ ? arena_->high_water() : 0; }
+std::size_t FrameConverter::jpeg_memory_size() const noexcept { return arena_ ? arena_->capacity() : 0; }
 
 bool FrameConverter::decode_jpeg(std::span<const std::uint8_t> bytes) noexcept {
-  arena_->empty();
-  // Everything libjpeg takes while the scope lives comes from the block and
+  // Everything libjpeg takes while the scope lives comes from the arena and
   // is given back by tjDestroy before the scope ends.
-  const heap_redirect::Scope scope(*arena_);
+  heap_redirect::ArenaRedirect redirect(*arena_);
+  const heap_redirect::Scope scope(redirect);
   tjhandle jpeg = tjInitDecompress();
   if (jpeg == nullptr) {
-    std::snprintf(error_, sizeof error_, "libturbojpeg could not start a decoder in its %zu bytes", arena_->size());
+    std::snprintf(error_, sizeof error_, "libturbojpeg could not start a decoder in its %zu bytes", arena_->capacity());
     return false;
   }
   bool ok = true;

@@ -92,10 +92,7 @@ bool PoseTask::take_place(const perception::place::PlaceSnapshot& s) noexcept {
     }
   }
   // The larger axis of the position covariance.
-  const double tr = s.cov_xx + s.cov_yy, det = s.cov_xx * s.cov_yy - s.cov_xy * s.cov_xy;
-  const double sigma = std::sqrt(std::max(0.0, tr / 2 + std::sqrt(std::max(0.0, tr * tr / 4 - det))));
-  ++local_.place_offered;
-  return estimator_.add_place(s.lat, s.lon, sigma, s.stamp_ns);
+  return estimator_.add_place(s.lat, s.lon, larger_sigma(s.cov_xx, s.cov_xy, s.cov_yy), s.stamp_ns);
 }
 
 void PoseTask::run(const TaskTick& tick) {

@@ -26,11 +26,14 @@ bool finite(double v) noexcept { return std::isfinite(v); }
 
 }  // namespace
 
-double UtmPose::sigma_position() const noexcept {
-  const Eigen::Matrix2d p = covariance.topLeftCorner<2, 2>();
-  const double tr = p.trace(), det = p.determinant();
+double larger_sigma(double xx, double xy, double yy) noexcept {
+  const double tr = xx + yy, det = xx * yy - xy * xy;
   const double disc = std::sqrt(std::max(0.0, tr * tr / 4 - det));
   return std::sqrt(std::max(0.0, tr / 2 + disc));
+}
+
+double UtmPose::sigma_position() const noexcept {
+  return larger_sigma(covariance(0, 0), covariance(0, 1), covariance(1, 1));
 }
 
 UtmAlignment::UtmAlignment(const UtmAlignmentOptions& options) : options_(options), zone_(options.zone) {

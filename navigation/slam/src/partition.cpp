@@ -14,18 +14,6 @@ namespace {
 
 // METIS takes its workspace with malloc: inside partition_graph the calling
 // thread's malloc is served from the caller's arena (runtime/heap_redirect).
-class ArenaRedirect final : public heap_redirect::Redirect {
- public:
-  explicit ArenaRedirect(Arena& arena) noexcept : arena_(arena) {}
-  void* allocate(std::size_t bytes) noexcept override { return arena_.allocate(bytes); }
-  void* reallocate(void* p, std::size_t bytes) noexcept override { return arena_.reallocate(p, bytes); }
-  void release(void* p) noexcept override { arena_.release(p); }
-  bool owns(const void* p) const noexcept override { return arena_.owns(p); }
-  std::size_t usable_size(const void* p) const noexcept override { return arena_.usable_size(p); }
-
- private:
-  Arena& arena_;
-};
 
 struct Adjacency {
   explicit Adjacency(std::pmr::memory_resource* r) : start(r), neighbours(r) {}
@@ -76,7 +64,7 @@ PartitionResult partition_graph(const PoseGraph<Pose>& graph, int max_part, std:
     options[METIS_OPTION_CONTIG] = 1;
     options[METIS_OPTION_NUMBERING] = 0;
     std::pmr::vector<idx_t> out(n, scratch);
-    std::optional<ArenaRedirect> redirect;
+    std::optional<heap_redirect::ArenaRedirect> redirect;
     std::optional<heap_redirect::Scope> scope;
     if (workspace != nullptr) {
       redirect.emplace(*workspace);

@@ -23,6 +23,8 @@
 
 #include <cstddef>
 
+#include "trailnav/runtime/arena.hpp"
+
 namespace trailnav::heap_redirect {
 
 class Redirect {
@@ -35,6 +37,21 @@ class Redirect {
 
  protected:
   ~Redirect() = default;
+};
+
+// A redirect served from an Arena (runtime/arena.hpp: first fit, freed
+// blocks merged, its high-water mark the most a scope took).
+class ArenaRedirect final : public Redirect {
+ public:
+  explicit ArenaRedirect(Arena& arena) noexcept : arena_(arena) {}
+  void* allocate(std::size_t bytes) noexcept override { return arena_.allocate(bytes); }
+  void* reallocate(void* p, std::size_t bytes) noexcept override { return arena_.reallocate(p, bytes); }
+  void release(void* p) noexcept override { arena_.release(p); }
+  bool owns(const void* p) const noexcept override { return arena_.owns(p); }
+  std::size_t usable_size(const void* p) const noexcept override { return arena_.usable_size(p); }
+
+ private:
+  Arena& arena_;
 };
 
 bool supported() noexcept;

@@ -5,8 +5,8 @@
 // sized at construction; convert() and reduce() allocate nothing. libjpeg
 // takes its decoder's memory with malloc: each MJPEG frame is decoded by a
 // decoder made for it and destroyed after it, inside a heap redirect
-// (runtime/heap_redirect.hpp) served from a block sized at construction and
-// emptied per frame; builds whose malloc the sanitizers own have no
+// (runtime/heap_redirect.hpp) served from an arena sized at construction
+// (runtime/arena.hpp), which tjDestroy leaves empty again; builds whose malloc the sanitizers own have no
 // redirect, and there the decoder uses the heap.
 #pragma once
 
@@ -16,6 +16,10 @@
 #include <string>
 #include <string_view>
 #include <vector>
+
+namespace trailnav {
+class Arena;
+}  // namespace trailnav
 
 namespace trailnav::drivers::camera {
 
@@ -52,7 +56,6 @@ class FrameConverter {
   // The most of the MJPEG decoder's block one frame used, and its size (bytes).
   std::size_t jpeg_memory_peak() const noexcept;
   std::size_t jpeg_memory_size() const noexcept;
-  class FrameArena;
 
  private:
   PixelFormat format_;
@@ -61,7 +64,7 @@ class FrameConverter {
   std::vector<std::uint32_t> sums_;
   std::vector<std::uint32_t> counts_;
   std::vector<std::uint8_t> out_;
-  std::unique_ptr<FrameArena> arena_;  // MJPEG: the decoder's memory
+  std::unique_ptr<Arena> arena_;  // MJPEG: the decoder's memory
   std::uint64_t jpeg_warnings_ = 0;
   bool decode_jpeg(std::span<const std::uint8_t> bytes) noexcept;
   char error_[160] = {};

@@ -126,11 +126,11 @@ struct PoseTaskStatus {
   std::uint64_t pose_queue_drops = 0;  // samples the perception threads' queue had no room for
   std::uint64_t fix_queue_drops = 0;   // used fixes the mapping thread's queue had no room for
   std::uint64_t map_corrections = 0;   // corrections of the online map taken (MapCorrection)
-  // The place task's answers: taken from its mailbox, offered to the
-  // alignment (PlaceUseOptions), and passed over: GPS good, too weak (its
-  // probability, not in a sequence, no database position). The alignment's
-  // counters say how many it used.
-  std::uint64_t place_answers = 0, place_offered = 0, place_gps_good = 0, place_weak = 0;
+  // The place task's answers: taken from its mailbox, and passed over: GPS
+  // good, too weak (its probability, not in a sequence, no database
+  // position). The alignment's counters (utm_counters.place_*) say how many
+  // were offered to it and what became of them.
+  std::uint64_t place_answers = 0, place_gps_good = 0, place_weak = 0;
   // Wheel readings that came before the IMU readings of their time and were
   // held until those came (see PoseTask::run), and those let go without them
   // because the IMU fell silent or the hold was full.

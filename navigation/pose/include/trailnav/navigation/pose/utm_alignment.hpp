@@ -94,6 +94,10 @@ struct UtmAlignmentCounters {
   std::uint64_t place_offered = 0, place_used = 0, place_outliers = 0, place_refused = 0;
 };
 
+// The standard deviation along the larger axis of a 2-D covariance
+// [xx xy; xy yy]: the square root of its larger eigenvalue.
+double larger_sigma(double xx, double xy, double yy) noexcept;
+
 struct UtmPose {
   bool position_valid = false;
   bool heading_valid = false;

@@ -12,6 +12,8 @@
 // most max_part.
 #pragma once
 
+#include "trailnav/navigation/slam/arena.hpp"
+
 #include <cstdint>
 #include <memory_resource>
 #include <string>
@@ -21,7 +23,6 @@
 
 namespace trailnav::slam {
 
-class Arena;
 
 struct PartitionResult {
   bool ok = false;

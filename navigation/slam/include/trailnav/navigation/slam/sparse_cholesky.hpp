@@ -7,13 +7,14 @@
 // and then factorised and solved for new values as often as needed.
 #pragma once
 
+#include "trailnav/navigation/slam/arena.hpp"
+
 #include <cstddef>
 #include <span>
 #include <string>
 
 namespace trailnav::slam {
 
-class Arena;
 
 // Supernodal factors pay on large graphs but run CHOLMOD's OpenMP regions
 // (threads, and libgomp's own malloc); simplicial ones stay on the calling

@@ -1,9 +1,9 @@
-#include "trailnav/navigation/slam/arena.hpp"
+#include "trailnav/runtime/arena.hpp"
 
 #include <algorithm>
 #include <cstring>
 
-namespace trailnav::slam {
+namespace trailnav {
 
 // Each block starts with its header; blocks tile the storage, so the next
 // block is at `size` bytes on and the previous one at `previous_size` back.
@@ -121,4 +121,4 @@ void* Arena::reallocate(void* p, std::size_t bytes) noexcept {
   return q;
 }
 
-}  // namespace trailnav::slam
+}  // namespace trailnav
