@@ -482,18 +482,34 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
   const float* step = cloud.step_height.data();
   const float* sine = cloud.sin_incline.data();
   const float* height = pipeline.ground_height().empty() ? nullptr : pipeline.ground_height().data();
+  // Without a terrain map every point takes one class: its models' answer
+  // straight from the tables, without a look for its cell.
+  const bool one_class = terrain.adaptive_map() == nullptr;
+  const int the_class = static_cast<int>(terrain.fallback());
+  const perception::ObstacleModels& models = pipeline.models();
   auto from_fate = [&](std::int32_t fate, ScanPointAnswer& a) {
     a.probability = kNan;
     if (fate >= 0) {
       const auto k = static_cast<std::size_t>(fate);
       const perception::PointState st = state[k];
       if (st == perception::PointState::measured || st == perception::PointState::flat) {
-        const auto ans = pipeline.answer(terrain, k);
-        a.probability = ans.smooth;
+        bool obstacle;
+        float p;
+        if (one_class) {
+          const bool measured = st == perception::PointState::measured;
+          const float s = measured ? step[k] : 0.0f, si = measured ? sine[k] : 0.0f;
+          p = models.smooth(the_class, s, si);
+          obstacle = dirac ? models.dirac(the_class, s, si) : p > 0.5f;
+        } else {
+          const auto ans = pipeline.answer(terrain, k);
+          p = ans.smooth;
+          obstacle = dirac ? ans.dirac : ans.smooth > 0.5f;
+        }
+        a.probability = p;
         a.step_height = step[k];
         a.sin_incline = sine[k];
         if (height != nullptr) a.height = height[k];
-        a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
+        a.obstacle = obstacle ? 1 : 0;
         return;
       }
       a.code = AnswerCode::isolated;
@@ -597,6 +613,11 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
   }
   perception::ObstaclePipeline& pipeline = *made.pipeline;
   const bool answers = options.on_scan_answers && source.scan_cloud() != nullptr;
+  // A point-cloud file has no pose stream: its points go straight into the
+  // pipeline, unless something reads the range images.
+  const bool direct = source.scan_cloud() != nullptr && !options.through_range_images &&
+                      options.terrain != TerrainMode::estimated && !options.on_revolution;
+  source.take_scans_without_images(direct);
   if (answers) pipeline.keep_point_fates();
   std::vector<ScanPointAnswer> scan_answers;
 
@@ -673,7 +694,11 @@ ObstacleRunReport run_obstacles(const ObstacleRunOptions& options) {
     ++report.revolutions;
     if (options.on_revolution) options.on_revolution(image);
     auto t0 = SteadyClock::now();
-    pipeline.align(image, poses ? &*poses : nullptr);
+    if (direct) {
+      pipeline.align_scan(*source.scan_cells());
+    } else {
+      pipeline.align(image, poses ? &*poses : nullptr);
+    }
     align_ms += ms_since(t0);
     t0 = SteadyClock::now();
     pipeline.features();

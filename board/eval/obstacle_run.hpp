@@ -154,6 +154,12 @@ struct ObstacleRunOptions {
   // A simulated recording's true trajectory as the pose stream; false: no
   // pose stream (fixed orientation, the map stays where it started).
   bool truth_poses = true;
+  // Point-cloud files go from their points straight into the pipeline
+  // (ObstaclePipeline::align_scan) unless their terrain is estimated (the
+  // terrain analysis reads range images) or on_revolution wants the
+  // images; true: through a range image always, as recordings go (the same
+  // answers: a test compares them).
+  bool through_range_images = false;
 };
 
 // Scores of one map against the truth, summed over the scored snapshots.

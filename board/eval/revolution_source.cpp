@@ -63,6 +63,8 @@ struct RevolutionSource::Impl {
   cloud::PointCloud cloud;
   cloud::CloudScratch scratch;
   std::vector<cloud::PointPlace> places;
+  bool without_images = false;
+  std::optional<cloud::ScanCells> cells;  // without_images: the file's, inside on_image
   cloud::CloudImageStats stats, totals;
   std::string file;
   int lidar_stream = -1;
@@ -89,6 +91,10 @@ std::span<const cloud::PointPlace> RevolutionSource::scan_places() const noexcep
   return {impl_->places.data(), std::min(impl_->places.size(), impl_->cloud.size)};
 }
 const std::string& RevolutionSource::scan_file() const noexcept { return impl_->file; }
+void RevolutionSource::take_scans_without_images(bool on) noexcept { impl_->without_images = on && impl_->clouds; }
+const cloud::ScanCells* RevolutionSource::scan_cells() const noexcept {
+  return impl_->cells ? &*impl_->cells : nullptr;
+}
 const cloud::CloudImageStats& RevolutionSource::cloud_totals() const noexcept { return impl_->totals; }
 
 std::optional<std::array<float, 6>> RevolutionSource::self_box() const noexcept {
@@ -206,9 +212,15 @@ std::string RevolutionSource::run(const std::function<bool(const vel::RangeImage
       im.file = im.inputs[i];
       if (Status st = cloud::load_cloud(im.file, im.cloud, im.scratch); !st) return st.message();
       if (im.places.size() < im.cloud.size) im.places.resize(im.cloud.capacity());
-      im.imager->fill(im.cloud, image, im.stats, im.places);
+      if (im.without_images) {
+        im.cells = im.imager->index(im.cloud, im.stats, im.places);
+      } else {
+        im.imager->fill(im.cloud, image, im.stats, im.places);
+      }
       im.totals += im.stats;
-      if (!on_image(image)) break;
+      const bool more = on_image(image);
+      im.cells.reset();
+      if (!more) break;
       if (progress) progress(static_cast<double>(i + 1) / static_cast<double>(im.inputs.size()));
     }
     return {};

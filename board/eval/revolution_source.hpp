@@ -76,6 +76,12 @@ class RevolutionSource {
   const cloud::PointCloud* scan_cloud() const noexcept;
   std::span<const cloud::PointPlace> scan_places() const noexcept;
   const std::string& scan_file() const noexcept;
+  // Point-cloud inputs: each file's points by cell (cloud::CloudImager::
+  // index()) instead of a range image, for a caller that takes them straight
+  // from the cloud (ObstaclePipeline::align_scan); on_image then gets an
+  // image that holds nothing, and scan_cells() the file's cells inside it.
+  void take_scans_without_images(bool on) noexcept;
+  const cloud::ScanCells* scan_cells() const noexcept;
   // Every file's counts summed.
   const cloud::CloudImageStats& cloud_totals() const noexcept;
 

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <iterator>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "trailnav/drivers/cloud/cloud_file.hpp"
@@ -96,6 +97,22 @@ void BM_CloudImage(benchmark::State& state) {
 // order 0: rows from the elevation; 1: from the sensor's order (KITTI's
 // files); lanes: points at a time for the polar coordinates (8: AVX2 where
 // the CPU has it).
+// The same placement without the image: each cell's first point by its index.
+void BM_CloudIndex(benchmark::State& state) {
+  PointCloud cloud(130000);
+  CloudScratch scratch;
+  if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
+  CloudImager imager(*ring_layout_preset("HDL-64E"), 2, CloudImageOptions{255.0f, 0.1, RingSource::order});
+  std::vector<PointPlace> places(130000);
+  CloudImageStats stats;
+  for (auto _ : state) {
+    const ScanCells cells = imager.index(cloud, stats, places);
+    benchmark::DoNotOptimize(cells.first);
+  }
+  state.counters["points"] = static_cast<double>(stats.points);
+}
+BENCHMARK(BM_CloudIndex)->Unit(benchmark::kMillisecond);
+
 BENCHMARK(BM_CloudImage)
     ->ArgNames({"layers", "order", "lanes"})
     ->Args({1, 0, 8})
@@ -128,20 +145,35 @@ void BM_ScanToAnswers(benchmark::State& state) {
   made.pipeline->keep_point_fates();
   std::vector<trailnav::eval::ScanPointAnswer> answers(130000);
   const bool map = state.range(0) != 0;
+  const bool through_image = state.range(1) != 0;
   CloudImageStats stats;
   for (auto _ : state) {
     if (!read_cloud(scan_bytes(), CloudFormat::kitti_bin, "scan", cloud, scratch)) throw std::runtime_error("read");
-    imager.fill(cloud, image, stats, places);
-    made.pipeline->align(image, nullptr);
+    if (through_image) {
+      imager.fill(cloud, image, stats, places);
+      made.pipeline->align(image, nullptr);
+    } else {
+      made.pipeline->align_scan(imager.index(cloud, stats, places));
+    }
     made.pipeline->features();
     if (map) made.pipeline->update_maps(nullptr);
     trailnav::eval::answer_scan_points(cloud, {places.data(), cloud.size}, *made.pipeline, nullptr, answers);
     benchmark::DoNotOptimize(answers.data());
   }
-  state.SetLabel(map ? "kitti-car.yaml, with the map" : "kitti-car.yaml, per-point answers");
+  state.SetLabel(std::string(map ? "kitti-car.yaml, with the map" : "kitti-car.yaml, per-point answers") +
+                 (through_image ? ", through a range image" : ""));
   state.counters["points"] = static_cast<double>(cloud.size);
 }
-BENCHMARK(BM_ScanToAnswers)->ArgName("map")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+// image 0: the file's points straight into the pipeline (CloudImager::index,
+// ObstaclePipeline::align_scan), what `trailnav obstacles` does with a
+// point-cloud file; 1: through a range image (fill, align), the way the
+// daemon takes a PointCloud2.
+BENCHMARK(BM_ScanToAnswers)
+    ->ArgNames({"map", "image"})
+    ->Args({0, 0})
+    ->Args({1, 0})
+    ->Args({0, 1})
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -142,6 +142,57 @@ TEST(PointAnswers, TheKittiCarsSettingsMatchPatchworkPlusPlusOnTheLabelledScan) 
   EXPECT_GE(s.recall(), 0.85);
 }
 
+// A point-cloud file goes straight from its points into the pipeline
+// (CloudImager::index, ObstaclePipeline::align_scan); through a range image
+// (fill, align) it gives the same answer for every point, bit for bit, with
+// the KITTI car's settings and with the defaults, and the same counters.
+TEST(PointAnswers, StraightFromThePointsOrThroughARangeImageTheSameAnswers) {
+  auto loaded = perception::load_obstacle_config("board/robots/kitti-car.yaml");
+  ASSERT_TRUE(loaded.config) << loaded.error;
+  for (const bool car : {true, false}) {
+    SCOPED_TRACE(car ? "kitti-car.yaml" : "defaults");
+    Answered by[2];
+    for (int through : {0, 1}) {
+      ObstacleRunOptions o;
+      o.inputs = {test::shared_data("semantickitti/000000.bin")};
+      if (car) o.config = *loaded.config;
+      o.through_range_images = through != 0;
+      o.on_scan_answers = [&](const ScanAnswers& s) { by[through].answers.assign(s.answers.begin(), s.answers.end()); };
+      by[through].report = run_obstacles(o);
+      ASSERT_TRUE(by[through].report.error.empty()) << by[through].report.error;
+    }
+    ASSERT_EQ(by[0].answers.size(), 123389u);
+    ASSERT_EQ(by[1].answers.size(), by[0].answers.size());
+    std::size_t differ = 0, obstacles = 0;
+    for (std::size_t i = 0; i < by[0].answers.size(); ++i) {
+      const ScanPointAnswer& a = by[0].answers[i];
+      const ScanPointAnswer& b = by[1].answers[i];
+      obstacles += a.obstacle == 1 ? 1u : 0u;
+      const bool same = a.obstacle == b.obstacle && a.code == b.code &&
+                        std::memcmp(&a.probability, &b.probability, sizeof(float)) == 0 &&
+                        std::memcmp(&a.step_height, &b.step_height, sizeof(float)) == 0 &&
+                        std::memcmp(&a.sin_incline, &b.sin_incline, sizeof(float)) == 0 &&
+                        std::memcmp(&a.height, &b.height, sizeof(float)) == 0;
+      differ += same ? 0u : 1u;
+    }
+    EXPECT_EQ(differ, 0u);
+    EXPECT_GT(obstacles, 10000u);  // (the answers are not all one thing)
+    const auto& ca = by[0].report.counters;
+    const auto& cb = by[1].report.counters;
+    EXPECT_EQ(ca.align.points, cb.align.points);
+    EXPECT_EQ(ca.align.out_of_range, cb.align.out_of_range);
+    EXPECT_EQ(ca.align.self_hits, cb.align.self_hits);
+    EXPECT_EQ(ca.align.collisions, cb.align.collisions);
+    EXPECT_EQ(ca.align.beyond_spread, cb.align.beyond_spread);
+    EXPECT_EQ(ca.features.measured, cb.features.measured);
+    EXPECT_EQ(ca.features.flat, cb.features.flat);
+    EXPECT_EQ(ca.features.isolated, cb.features.isolated);
+    EXPECT_EQ(by[0].report.cloud_points.placed, by[1].report.cloud_points.placed);
+    EXPECT_EQ(by[0].report.cloud_points.second, by[1].report.cloud_points.second);
+    EXPECT_EQ(by[0].report.cloud_points.collisions, by[1].report.cloud_points.collisions);
+  }
+}
+
 // Writes the scan's points as a binary PCD and an ASCII PLY.
 void write_copies(const cloud::PointCloud& c, const std::string& pcd, const std::string& ply) {
   std::ofstream p(pcd, std::ios::binary);

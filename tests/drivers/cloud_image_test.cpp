@@ -401,15 +401,70 @@ TEST(CloudImage, FillingTouchesNoHeap) {
   velodyne::RangeImage image(imager.shape());
   CloudImageStats st;
   imager.fill(c, image, st);  // first touch of the image's pages
+  std::vector<PointPlace> places(c.size);
+  imager.index(c, st, places);  // (its per-point intensities sized here)
   alloc_guard::set_fatal(false);
   alloc_guard::mark_realtime_thread("cloud");
   ASSERT_TRUE(alloc_guard::arm());
   imager.fill(c, image, st);
   imager.fill(c, image, st);
+  const ScanCells cells = imager.index(c, st, places);
+  imager.fill(c, image, st, places);
   alloc_guard::disarm();
   alloc_guard::unmark_current_thread();
   EXPECT_EQ(alloc_guard::total_allocations(), 0u);
   EXPECT_GT(st.placed, 0u);
+  EXPECT_NE(cells.first, nullptr);
+}
+
+// index() places every point as fill() does (the same places and counts),
+// and each cell's first point is the one fill() wrote into layer 0.
+TEST(CloudImage, TheCellsIndexHoldsWhatTheImageHolds) {
+  PointCloud c;
+  CloudScratch s;
+  ASSERT_TRUE(load_cloud(test::shared_data("semantickitti/000000.bin"), c, s));
+  for (const RingSource rings : {RingSource::order, RingSource::elevation}) {
+    CloudImager imager(*ring_layout_preset("HDL-64E"), 2, {255.0f, 0.1, rings});
+    velodyne::RangeImage image(imager.shape());
+    std::vector<PointPlace> by_fill(c.size), by_index(c.size);
+    CloudImageStats fs, is;
+    imager.fill(c, image, fs, by_fill);
+    const ScanCells cells = imager.index(c, is, by_index);
+    EXPECT_EQ(fs.placed, is.placed);
+    EXPECT_EQ(fs.second, is.second);
+    EXPECT_EQ(fs.collisions, is.collisions);
+    EXPECT_EQ(fs.invalid, is.invalid);
+    EXPECT_EQ(fs.bad_ring, is.bad_ring);
+    EXPECT_EQ(fs.inferred, is.inferred);
+    EXPECT_GT(is.second, 1000u);  // (the scan has crowded cells)
+    std::size_t places_differ = 0;
+    for (std::size_t i = 0; i < c.size; ++i) {
+      const PointPlace& a = by_fill[i];
+      const PointPlace& b = by_index[i];
+      places_differ += a.row == b.row && a.column == b.column && a.outcome == b.outcome && a.apart == b.apart ? 0u : 1u;
+    }
+    EXPECT_EQ(places_differ, 0u);
+    std::size_t cells_differ = 0, held = 0;
+    for (int r = 0; r < cells.rings; ++r) {
+      for (int col = 0; col < cells.columns; ++col) {
+        const std::int32_t k = cells.first[static_cast<std::size_t>(r) * static_cast<std::size_t>(cells.columns) +
+                                           static_cast<std::size_t>(col)];
+        const velodyne::RangeCell& cell = image.at(0, r, col);
+        if (k < 0) {
+          cells_differ += cell.valid() ? 1u : 0u;
+          continue;
+        }
+        ++held;
+        const auto i = static_cast<std::size_t>(k);
+        const bool same = cell.valid() && cell.x == cells.x[i] && cell.y == cells.y[i] && cell.z == cells.z[i] &&
+                          cell.distance == cells.distance[i] && cell.azimuth == cells.azimuth[i] &&
+                          cell.intensity == cells.intensity[i];
+        cells_differ += same ? 0u : 1u;
+      }
+    }
+    EXPECT_EQ(cells_differ, 0u);
+    EXPECT_EQ(held, is.placed);
+  }
 }
 
 }  // namespace

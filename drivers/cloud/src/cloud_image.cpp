@@ -286,7 +286,8 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
       sweep_row_(layout.elevation_deg.size() + 1),
       sweep_order_(layout.elevation_deg.size() + 1),
       held_(layout.elevation_deg.size() * static_cast<std::size_t>(std::max(layout.columns, 0))),
-      held_before_(held_.size()) {
+      held_before_(held_.size()),
+      first_(held_.size(), -1) {
   // Rows: the rings sorted by elevation (row 0 the lowest).
   std::vector<int> order(static_cast<std::size_t>(rings_));
   std::iota(order.begin(), order.end(), 0);
@@ -333,37 +334,14 @@ int CloudImager::row_of_elevation(float z, float horizontal) const noexcept {
   return row_of_sine(d > 0.0f ? z / d : 0.0f);
 }
 
-void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st,
-                       std::span<PointPlace> places, std::int64_t start_ns) noexcept {
-  st = CloudImageStats{};
-  const std::uint64_t sequence = image.sequence;
-  // The image this imager filled last, untouched since (its sequence as
-  // left): only the cells that held a point then and hold none now are
-  // cleared, after pass 3 (the rest are overwritten whole); any other image
-  // is cleared whole. Sweeping the whole image (8.8 MB for KITTI's two
-  // layers) was a third of the fill.
-  const bool known = &image == last_image_ && sequence == last_sequence_ && image.columns() == columns_ &&
-                     image.layers() == layers_;
-  if (known) {
-    image.begin(columns_);
-  } else {
-    image.reset(columns_);
-    std::fill(held_.begin(), held_.end(), std::uint8_t{0});
-  }
-  held_.swap(held_before_);
-  image.mark_received(0, columns_);
-  image.sequence = sequence + 1;
-  image.start_ns = start_ns;
-  image.end_ns = start_ns + static_cast<std::int64_t>(options_.period_s * 1e9);
-  image.rpm = 60.0 / options_.period_s;
+// Passes 1 and 2 of fill() and index(): each point's distance, sin(elevation),
+// azimuth, column and row (or kBadRing). True when the rows came from the
+// elevation.
+bool CloudImager::locate(const PointCloud& c, CloudImageStats& st) noexcept {
   const auto cols = static_cast<float>(columns_);
   const float to_column = cols / static_cast<float>(kTwoPi);
-  // A point without a time of its own: its azimuth's share of the revolution.
-  const auto seconds_per_rad = static_cast<float>(options_.period_s / kTwoPi);
   const std::size_t n = c.size;
   st.points = n;
-  // Times relative to the cloud's first (a file may hold absolute ones).
-  const double t0 = first_time(c);
   const bool use_field = options_.rings == RingSource::field || (options_.rings == RingSource::automatic && c.has_ring);
   const bool use_order = options_.rings == RingSource::order;
   if (distance_.size() < n) {
@@ -500,10 +478,42 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   } else {
     for (std::size_t i = 0; i < n; ++i) row[i] = static_cast<std::int16_t>(row_of_sine(sine_[i]));
   }
+  return !use_order && !use_field;
+}
+
+void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st,
+                       std::span<PointPlace> places, std::int64_t start_ns) noexcept {
+  st = CloudImageStats{};
+  const std::uint64_t sequence = image.sequence;
+  // The image this imager filled last, untouched since (its sequence as
+  // left): only the cells that held a point then and hold none now are
+  // cleared, after pass 3 (the rest are overwritten whole); any other image
+  // is cleared whole. Sweeping the whole image (8.8 MB for KITTI's two
+  // layers) was a third of the fill.
+  const bool known = &image == last_image_ && sequence == last_sequence_ && image.columns() == columns_ &&
+                     image.layers() == layers_;
+  if (known) {
+    image.begin(columns_);
+  } else {
+    image.reset(columns_);
+    std::fill(held_.begin(), held_.end(), std::uint8_t{0});
+  }
+  held_.swap(held_before_);
+  image.mark_received(0, columns_);
+  image.sequence = sequence + 1;
+  image.start_ns = start_ns;
+  image.end_ns = start_ns + static_cast<std::int64_t>(options_.period_s * 1e9);
+  image.rpm = 60.0 / options_.period_s;
+  // A point without a time of its own: its azimuth's share of the revolution.
+  const auto seconds_per_rad = static_cast<float>(options_.period_s / kTwoPi);
+  const std::size_t n = c.size;
+  // Times relative to the cloud's first (a file may hold absolute ones).
+  const double t0 = first_time(c);
+  const bool inferred = locate(c, st);
+  const std::int16_t* row = row_.data();
   // Pass 3: into the image, in the cloud's order (the first point of a
   // cell in layer 0, the second in layer 1, the rest counted).
   const bool trace = places.size() >= n && n > 0;
-  const bool inferred = !use_order && !use_field;
   std::uint64_t invalid = 0, bad_ring = 0, collisions = 0, second = 0, placed = 0;
   std::fill(held_.begin(), held_.end(), std::uint8_t{0});
   std::uint8_t* held = held_.data();
@@ -582,6 +592,87 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   image.finish();
   image.points = static_cast<int>(st.placed + st.second);
   last_sequence_ = image.sequence;
+}
+
+ScanCells CloudImager::index(const PointCloud& c, CloudImageStats& st, std::span<PointPlace> places) noexcept {
+  st = CloudImageStats{};
+  const std::size_t n = c.size;
+  const bool inferred = locate(c, st);
+  if (intensity_.size() < n) intensity_.resize(c.capacity());
+  {
+    const float scale = options_.intensity_scale;
+    const float* in = c.intensity.data();
+    float* out = intensity_.data();
+    for (std::size_t i = 0; i < n; ++i) out[i] = std::clamp(in[i] * scale, 0.0f, 255.0f);
+  }
+  // Pass 3 as fill() places the points (the first of a cell, a second while
+  // the layers last, the rest counted), with the cell's first point's
+  // index where fill() writes the point.
+  const std::int16_t* row = row_.data();
+  const bool trace = places.size() >= n && n > 0;
+  std::uint64_t invalid = 0, bad_ring = 0, collisions = 0, second = 0, placed = 0;
+  std::fill(held_.begin(), held_.end(), std::uint8_t{0});
+  std::fill(first_.begin(), first_.end(), std::int32_t{-1});
+  std::uint8_t* held = held_.data();
+  std::int32_t* first = first_.data();
+  const float* distance = distance_.data();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float d = distance[i];
+    const int r = row[i];
+    const int col = column_[i];
+    PlaceOutcome outcome;
+    float apart = 0.0f;
+    if (!has_return(d)) {
+      outcome = PlaceOutcome::invalid;
+      ++invalid;
+    } else if (r < 0) {
+      outcome = PlaceOutcome::bad_ring;
+      ++bad_ring;
+    } else {
+      const std::size_t cell = static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(col);
+      std::uint8_t& count = held[cell];
+      if (count == 0) {
+        first[cell] = static_cast<std::int32_t>(i);
+        outcome = PlaceOutcome::placed;
+        ++placed;
+        count = 1;
+      } else if (count < layers_) {
+        apart = std::fabs(d - distance[first[cell]]);
+        outcome = PlaceOutcome::second;
+        ++second;
+        count = 2;
+      } else {
+        outcome = PlaceOutcome::collision;
+        ++collisions;
+      }
+    }
+    if (trace) {
+      places[i] = outcome == PlaceOutcome::invalid || outcome == PlaceOutcome::bad_ring
+                      ? PointPlace{0, 0, outcome}
+                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome, apart};
+    }
+  }
+  // The next fill() clears its image whole (this one's counts are not its).
+  last_image_ = nullptr;
+  st.invalid = invalid;
+  st.bad_ring = bad_ring;
+  st.collisions = collisions;
+  st.second = second;
+  st.placed = placed;
+  if (inferred) st.inferred = n - invalid;
+  ScanCells cells;
+  cells.rings = rings_;
+  cells.columns = columns_;
+  cells.sequence = ++scans_;
+  cells.end_ns = static_cast<std::int64_t>(options_.period_s * 1e9);
+  cells.first = first_.data();
+  cells.x = c.x.data();
+  cells.y = c.y.data();
+  cells.z = c.z.data();
+  cells.distance = distance_.data();
+  cells.azimuth = azimuth_.data();
+  cells.intensity = intensity_.data();
+  return cells;
 }
 
 }  // namespace trailnav::cloud

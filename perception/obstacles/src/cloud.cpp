@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstdlib>
 #include <numbers>
 
 #include "trailnav/perception/cloud.hpp"
@@ -105,25 +106,30 @@ CloudAligner::CloudAligner(const MountParams& mount, const FeatureParams& featur
 }
 
 void CloudAligner::begin(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {
-  columns_ = std::min(image.columns(), out.shape().max_columns);
+  begin_at(image.columns(), image.start_ns, image.clock_offset_ns, image.azimuth_spread, image.reference_start_ns(), poses,
+           out);
+}
+
+void CloudAligner::begin_at(int columns, std::int64_t start_ns, std::int64_t clock_offset_ns, double azimuth_spread,
+                            std::int64_t reference_start_ns, const PoseTrack* poses, RevolutionCloud& out) noexcept {
+  columns_ = std::min(columns, out.shape().max_columns);
   // Only what the assembler sets when the revolution begins: the rest (its
   // sequence, its end) is the lidar task's to write until it is complete.
   out.reset(columns_);
   if (fates_ != nullptr) std::fill(fates_, fates_ + fate_size_, kFateNoReturn);
   out.sequence = 0;
-  out.time_ns = image.start_ns;  // finish() sets the end
-  out.start_ns = image.start_ns;
-  out.clock_offset_ns = image.clock_offset_ns;
+  out.time_ns = start_ns;  // finish() sets the end
+  out.start_ns = start_ns;
+  out.clock_offset_ns = clock_offset_ns;
   out.full_turn = true;
   moving_ = poses != nullptr && poses->size() > 0;
-  spread_columns_ =
-      static_cast<int>(std::ceil(image.azimuth_spread * columns_ / (2.0 * std::numbers::pi))) + 1;
+  spread_columns_ = static_cast<int>(std::ceil(azimuth_spread * columns_ / (2.0 * std::numbers::pi))) + 1;
 
   // The reference: the sensor at the revolution's first firing.
   Pose start{};
   if (moving_) {
     // Poses are on the reference clock (docs/dds.md, "One clock").
-    poses->at(image.reference_start_ns(), start);
+    poses->at(reference_start_ns, start);
   } else {
     start.roll = fixed_roll_;
     start.pitch = fixed_pitch_;
@@ -150,48 +156,31 @@ void CloudAligner::set_robot(const Pose& p, RevolutionCloud& out) noexcept {
   out.robot_pitch = p.pitch;
 }
 
-void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTrack* poses, int first, int end,
-                                 RevolutionCloud& out) noexcept {
-  const int columns = columns_;
-  first = std::max(first, 0);
-  end = std::min(end, columns);
-  if (first >= end) return;
-  const int rings = std::min(image.rings(), out.rings());
+void CloudAligner::set_column_transform(const Pose& p, float* t, const RevolutionCloud& out) const noexcept {
   double mount_r[9];
   for (int i = 0; i < 9; ++i) mount_r[i] = static_cast<double>(mount_r_[i]);
   const double mt[3] = {mount_t_[0], mount_t_[1], mount_t_[2]};
+  double r[9];
+  rotation(p.roll, p.pitch, p.yaw, r);
+  double rt[9];
+  multiply(r, mount_r, rt);
+  for (int i = 0; i < 9; ++i) t[i] = static_cast<float>(rt[i]);
+  t[9] = static_cast<float>(p.x + r[0] * mt[0] + r[1] * mt[1] + r[2] * mt[2] - out.ref_x);
+  t[10] = static_cast<float>(p.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2] - out.ref_y);
+  t[11] = static_cast<float>(p.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2] - out.ref_z);
+}
 
-  // Each column's sensor -> reference transform (rotation row-major, then
-  // translation), computed once per column from the pose at its firing;
-  // the points are then read ring by ring, the order both the range image
-  // and the cloud are stored in.
-  float* const xf = out.column_transforms.data();
-  auto set_transform = [&](const Pose& p, float* t) {
-    double r[9];
-    rotation(p.roll, p.pitch, p.yaw, r);
-    double rt[9];
-    multiply(r, mount_r, rt);
-    for (int i = 0; i < 9; ++i) t[i] = static_cast<float>(rt[i]);
-    t[9] = static_cast<float>(p.x + r[0] * mt[0] + r[1] * mt[1] + r[2] * mt[2] - out.ref_x);
-    t[10] = static_cast<float>(p.y + r[3] * mt[0] + r[4] * mt[1] + r[5] * mt[2] - out.ref_y);
-    t[11] = static_cast<float>(p.z + r[6] * mt[0] + r[7] * mt[1] + r[8] * mt[2] - out.ref_z);
-  };
-  for (int c = first; c < end; ++c) {
-    float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
-    if (image.column_state(c) != velodyne::ColumnState::received) continue;
-    if (moving_) {
-      Pose p{};
-      if (poses->at(image.column_time_ns(c) + image.clock_offset_ns, p) == PoseLookup::interpolated) {
-        ++counters_.pose_interpolated;
-      } else {
-        ++counters_.pose_clamped;
-      }
-      set_transform(p, t);
-    } else {
-      set_transform(fixed_pose_, t);
-    }
-  }
+namespace {
+// A firing's point as place_rows() takes it (a range image's cell, or a
+// scan's point).
+struct CellPoint {
+  float x, y, z, distance, azimuth, intensity;
+};
+}  // namespace
 
+template <class Fetch>
+void CloudAligner::place_rows(int rings, int first, int end, double cut_azimuth, Fetch&& fetch,
+                              RevolutionCloud& out) noexcept {
   // Each point goes to the column of its own azimuth: lasers with a
   // rotation correction (the HDL-64E's are several degrees) fire in one
   // column but point into another, and the features need the rings'
@@ -199,8 +188,10 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
   // spread_columns_ from its firing's column (RangeImage::azimuth_spread),
   // so that a column's points are all there once the firings that far
   // past it are (trailnavd works on a revolution while it arrives).
+  const int columns = columns_;
+  const float* const xf = out.column_transforms.data();
   const double columns_per_rad = columns / (2.0 * std::numbers::pi);
-  const auto cut = static_cast<float>(image.cut_azimuth);
+  const auto cut = static_cast<float>(cut_azimuth);
   const float min_r = min_range_;
   const float max_r = max_range_;
   const int spread = spread_columns_;
@@ -208,7 +199,6 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
   std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0, beyond = 0;
   const int fate_rows = fate_stride_ > 0 ? static_cast<int>(fate_size_ / static_cast<std::size_t>(fate_stride_)) : 0;
   for (int i = 0; i < rings; ++i) {
-    const velodyne::RangeCell* row = image.row(0, i).data();
     const std::size_t base = out.index(i, 0);
     PointState* st = out.state.data() + base;
     float* ox = (smoothing ? out.aligned_x : out.x).data() + base;
@@ -220,8 +210,8 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
         fates_ != nullptr && i < fate_rows ? fates_ + static_cast<std::size_t>(i) * static_cast<std::size_t>(fate_stride_)
                                            : nullptr;
     for (int c = first; c < end; ++c) {
-      const velodyne::RangeCell& cell = row[c];
-      if (!cell.valid() || image.column_state(c) != velodyne::ColumnState::received) continue;
+      CellPoint cell;
+      if (!fetch(i, c, cell)) continue;
       ++points;
       if (cell.distance < min_r || cell.distance > max_r) {
         ++out_of_range;
@@ -266,6 +256,136 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
   counters_.collisions += collisions;
   counters_.self_hits += self_hits;
   counters_.beyond_spread += beyond;
+}
+
+void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTrack* poses, int first, int end,
+                                 RevolutionCloud& out) noexcept {
+  first = std::max(first, 0);
+  end = std::min(end, columns_);
+  if (first >= end) return;
+  // Each column's sensor -> reference transform, computed once per column
+  // from the pose at its firing; the points are then read ring by ring, the
+  // order both the range image and the cloud are stored in.
+  float* const xf = out.column_transforms.data();
+  for (int c = first; c < end; ++c) {
+    float* t = xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
+    if (image.column_state(c) != velodyne::ColumnState::received) continue;
+    if (moving_) {
+      Pose p{};
+      if (poses->at(image.column_time_ns(c) + image.clock_offset_ns, p) == PoseLookup::interpolated) {
+        ++counters_.pose_interpolated;
+      } else {
+        ++counters_.pose_clamped;
+      }
+      set_column_transform(p, t, out);
+    } else {
+      set_column_transform(fixed_pose_, t, out);
+    }
+  }
+  const int rings = std::min(image.rings(), out.rings());
+  place_rows(
+      rings, first, end, image.cut_azimuth,
+      [&image](int ring, int c, CellPoint& p) {
+        const velodyne::RangeCell& cell = image.row(0, ring)[static_cast<std::size_t>(c)];
+        if (!cell.valid() || image.column_state(c) != velodyne::ColumnState::received) return false;
+        p = CellPoint{cell.x, cell.y, cell.z, cell.distance, cell.azimuth, cell.intensity};
+        return true;
+      },
+      out);
+}
+
+void CloudAligner::align_scan(const cloud::ScanCells& scan, RevolutionCloud& out) noexcept {
+  // As align(image, nullptr) over the image fill() makes: it starts at 0
+  // with no azimuth spread, every column received, no cut.
+  begin_at(scan.columns, 0, 0, 0.0, 0, nullptr, out);
+  float* const xf = out.column_transforms.data();
+  if (columns_ > 0) set_column_transform(fixed_pose_, xf, out);
+  for (int c = 1; c < columns_; ++c) {
+    std::copy_n(xf, RevolutionCloud::kTransformFloats, xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats);
+  }
+  const int rings = std::min(scan.rings, out.rings());
+  const int columns = columns_;
+  const auto stride = static_cast<std::size_t>(scan.columns);
+  // place_rows()'s tests, in its order, for the cells' points: first what
+  // depends on the point alone (range, self box, the column of its
+  // azimuth; a point's firing column is its cell's, and every transform is
+  // the same), then, cell by cell in place_rows()'s order, whether its
+  // column is taken.
+  const double columns_per_rad = columns / (2.0 * std::numbers::pi);
+  const float min_r = min_range_, max_r = max_range_;
+  const float t[12] = {xf[0], xf[1], xf[2], xf[3], xf[4], xf[5], xf[6], xf[7], xf[8], xf[9], xf[10], xf[11]};
+  const bool self = self_filter_;
+  const std::array<float, 6> box = self_box_;
+  const int spread = spread_columns_;
+  const bool smoothing = out.shape().features;
+  const int fate_rows = fate_stride_ > 0 ? static_cast<int>(fate_size_ / static_cast<std::size_t>(fate_stride_)) : 0;
+  std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0, beyond = 0;
+  const float* __restrict px = scan.x;
+  const float* __restrict py = scan.y;
+  const float* __restrict pz = scan.z;
+  const float* __restrict pd = scan.distance;
+  const float* __restrict pa = scan.azimuth;
+  const float* __restrict pi = scan.intensity;
+  for (int i = 0; i < rings; ++i) {
+    const std::int32_t* __restrict first = scan.first + static_cast<std::size_t>(i) * stride;
+    const std::size_t base = out.index(i, 0);
+    PointState* __restrict st = out.state.data() + base;
+    float* __restrict ox = (smoothing ? out.aligned_x : out.x).data() + base;
+    float* __restrict oy = (smoothing ? out.aligned_y : out.y).data() + base;
+    float* __restrict oz = (smoothing ? out.aligned_z : out.z).data() + base;
+    float* __restrict orange = out.range.data() + base;
+    float* __restrict ointensity = out.intensity.data() + base;
+    std::int32_t* __restrict fate =
+        fates_ != nullptr && i < fate_rows ? fates_ + static_cast<std::size_t>(i) * static_cast<std::size_t>(fate_stride_)
+                                           : nullptr;
+    const int fate_end = fate != nullptr ? std::min(columns, fate_stride_) : 0;
+    for (int c = 0; c < columns; ++c) {
+      const std::int32_t index = first[c];
+      if (index < 0) continue;
+      const auto k = static_cast<std::size_t>(index);
+      ++points;
+      const float d = pd[k];
+      const float x = px[k], y = py[k], z = pz[k];
+      std::int32_t outcome;
+      if (d < min_r || d > max_r) {
+        ++out_of_range;
+        outcome = kFateOutOfRange;
+      } else if (self && x >= box[0] && x <= box[1] && y >= box[2] && y <= box[3] && z >= box[4] && z <= box[5]) {
+        ++self_hits;
+        outcome = kFateSelf;
+      } else {
+        double rel = static_cast<double>(pa[k]);
+        if (rel < 0.0) rel += 2.0 * std::numbers::pi;
+        const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
+        int apart = std::abs(target - c);
+        apart = std::min(apart, columns - apart);
+        if (apart > spread) {
+          ++beyond;
+          outcome = kFateBeyondSpread;
+        } else if (st[target] != PointState::none) {
+          ++collisions;
+          outcome = kFateCollision;
+        } else {
+          const auto q = static_cast<std::size_t>(target);
+          outcome = static_cast<std::int32_t>(base + q);
+          ox[q] = t[0] * x + t[1] * y + t[2] * z + t[9];
+          oy[q] = t[3] * x + t[4] * y + t[5] * z + t[10];
+          oz[q] = t[6] * x + t[7] * y + t[8] * z + t[11];
+          orange[q] = d;
+          ointensity[q] = pi[k];
+          st[q] = PointState::valid;
+        }
+      }
+      if (c < fate_end) fate[c] = outcome;
+    }
+  }
+  counters_.points += points;
+  counters_.out_of_range += out_of_range;
+  counters_.collisions += collisions;
+  counters_.self_hits += self_hits;
+  counters_.beyond_spread += beyond;
+  out.sequence = scan.sequence;
+  out.time_ns = scan.end_ns;
 }
 
 void CloudAligner::finish(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept {

@@ -81,14 +81,13 @@ void GroundGrid::build(const RevolutionCloud& cloud) noexcept {
       if (out[j] < 0) continue;
       first_cell = std::min(first_cell, out[j]);
       last_cell = std::max(last_cell, out[j]);
+      // The two lowest so far, without a branch (which way a point goes
+      // is not predictable): a new lowest pushes the old one to second.
       Lowest& l = low_[static_cast<std::size_t>(out[j])];
       const float h = z[j];
-      if (h < l.first) {
-        l.second = l.first;
-        l.first = h;
-      } else if (h < l.second) {
-        l.second = h;
-      }
+      const float first = l.first, second = l.second;
+      l.second = std::min(second, std::max(first, h));
+      l.first = std::min(first, h);
     }
   }
   // ground = min over |dx| + |dy| <= taps of low2 + slope * cell * (|dx| + |dy|):

@@ -32,6 +32,12 @@ ObstacleModels::ObstacleModels(const std::array<ClassParams, kTerrainClasses>& c
           static_cast<float>(std::sqrt(1.0 - std::exp(-static_cast<double>(c.beta) * s)));
     }
   }
+  step_one_.resize(static_cast<std::size_t>(kTerrainClasses) * kStepBins);
+  incline_one_.resize(static_cast<std::size_t>(kTerrainClasses) * kSinBins);
+  for (std::size_t t = 0; t < classes.size(); ++t) {
+    for (std::size_t i = 0; i < kStepBins; ++i) step_one_[t * kStepBins + i] = step_[i * kClassStride + t];
+    for (std::size_t i = 0; i < kSinBins; ++i) incline_one_[t * kSinBins + i] = incline_[i * kClassStride + t];
+  }
   const float prior = logit(map.prior);
   for (int i = 0; i < kLogitBins; ++i) {
     const float p = std::clamp(static_cast<float>(i) / static_cast<float>(kLogitBins - 1), map.measurement_min, map.measurement_max);

@@ -177,6 +177,13 @@ void ObstaclePipeline::align(const velodyne::RangeImage& image, const PoseTrack*
   aligner_.finish(image, poses, cloud_);
 }
 
+void ObstaclePipeline::align_scan(const cloud::ScanCells& scan) noexcept {
+  ++revolutions_;
+  aligner_.align_scan(scan, cloud_);
+  start_blocks(cloud_.columns());
+  aligned_blocks_ = blocks_;
+}
+
 void ObstaclePipeline::features() noexcept {
   // Every column at once: the same bits as block by block (smooth_rings(),
   // compute_features()).
@@ -214,25 +221,6 @@ PipelineCounters ObstaclePipeline::counters() const noexcept {
   c.map = map().counters();
   if (ground_) c.ground = ground_->counters();
   return c;
-}
-
-ObstaclePipeline::PointAnswer ObstaclePipeline::answer(const TerrainSource& terrain, std::size_t k) const noexcept {
-  const RevolutionCloud& c = cloud_;
-  const bool measured = c.state[k] == PointState::measured;
-  return answer_at(terrain, c.x[k], c.y[k], measured ? c.step_height[k] : 0.0f, measured ? c.sin_incline[k] : 0.0f);
-}
-
-ObstaclePipeline::PointAnswer ObstaclePipeline::answer_at(const TerrainSource& terrain, float x, float y, float step,
-                                                          float sin_incline) const noexcept {
-  PointAnswer a;
-  const RevolutionCloud& c = cloud_;
-  const TerrainCell* cell = terrain.known_cell(c.ref_x + static_cast<double>(x), c.ref_y + static_cast<double>(y));
-  a.terrain = cell != nullptr ? cell->best : terrain.fallback();
-  a.terrain_known = cell != nullptr;
-  const int cls = static_cast<int>(a.terrain);
-  a.dirac = models_.dirac(cls, step, sin_incline);
-  a.smooth = models_.smooth(cls, step, sin_incline);
-  return a;
 }
 
 }  // namespace trailnav::perception

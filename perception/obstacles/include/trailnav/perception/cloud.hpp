@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "trailnav/drivers/cloud/cloud_image.hpp"
 #include "trailnav/drivers/velodyne/range_image.hpp"
 #include "trailnav/perception/obstacle_config.hpp"
 #include "trailnav/perception/pose_track.hpp"
@@ -181,6 +182,13 @@ class CloudAligner {
   void align_columns(const velodyne::RangeImage& image, const PoseTrack* poses, int first, int end,
                      RevolutionCloud& out) noexcept;
   void finish(const velodyne::RangeImage& image, const PoseTrack* poses, RevolutionCloud& out) noexcept;
+  // A point-cloud file's scan straight from its cells (cloud::CloudImager::
+  // index()), without a range image, at the fixed orientation (a scan has
+  // no pose history): the same points, bits, fates and counters as align()
+  // without poses over the image CloudImager::fill() makes of that cloud
+  // (test), at about a third of the time of fill() and align() together.
+  void align_scan(const cloud::ScanCells& scan, RevolutionCloud& out) noexcept;
+
   // Of the revolution begun: how many columns a point may land from its
   // firing's column, either way (from RangeImage::azimuth_spread).
   int spread_columns() const noexcept { return spread_columns_; }
@@ -198,6 +206,16 @@ class CloudAligner {
 
  private:
   static void set_robot(const Pose& p, RevolutionCloud& out) noexcept;
+  // begin() from what a revolution's start needs.
+  void begin_at(int columns, std::int64_t start_ns, std::int64_t clock_offset_ns, double azimuth_spread,
+                std::int64_t reference_start_ns, const PoseTrack* poses, RevolutionCloud& out) noexcept;
+  // A column's sensor -> reference transform (`t`: kTransformFloats) at pose p.
+  void set_column_transform(const Pose& p, float* t, const RevolutionCloud& out) const noexcept;
+  // Columns [first, end) of the first `rings` rings into `out`, each point
+  // to the column of its azimuth; fetch(ring, column, CellPoint&) gives a
+  // firing's point, false where there is none (defined in cloud.cpp).
+  template <class Fetch>
+  void place_rows(int rings, int first, int end, double cut_azimuth, Fetch&& fetch, RevolutionCloud& out) noexcept;
 
   float mount_r_[9];  // sensor -> robot
   float mount_t_[3];

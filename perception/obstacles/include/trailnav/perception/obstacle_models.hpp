@@ -37,9 +37,13 @@ class ObstacleModels {
   bool dirac(int cls, float step_height, float sin_incline) const noexcept {
     return step_height > max_step_[static_cast<std::size_t>(cls)] && sin_incline > max_sin_[static_cast<std::size_t>(cls)];
   }
-  // Eq. 7.12 from the tables.
+  // Eq. 7.12 from the tables: one class's own copy of them (24 KB, which
+  // stays in the first-level cache where one class answers many points in
+  // a row; the interleaved ones below are for P_C's sum over the classes).
   float smooth(int cls, float step_height, float sin_incline) const noexcept {
-    return step_part(cls, step_index(step_height)) * incline_part(cls, sin_index(sin_incline));
+    const auto c = static_cast<std::size_t>(cls);
+    return step_one_[c * kStepBins + static_cast<std::size_t>(step_index(step_height))] *
+           incline_one_[c * kSinBins + static_cast<std::size_t>(sin_index(sin_incline))];
   }
   // Eq. 7.12 evaluated directly.
   static float smooth_exact(const ClassParams& c, float step_height, float sin_incline) noexcept;
@@ -76,6 +80,8 @@ class ObstacleModels {
   std::array<float, kTerrainClasses> top_hold_s_{};
   std::vector<float> step_;
   std::vector<float> incline_;
+  std::vector<float> step_one_;     // class-major: [class * kStepBins + bin]
+  std::vector<float> incline_one_;  // [class * kSinBins + bin]
   std::vector<float> increment_;
 };
 

@@ -66,6 +66,10 @@ class ObstaclePipeline {
   // The stages on their own (process() runs them in order, block by block),
   // for benchmarks and the offline timings; the same bits as process().
   void align(const velodyne::RangeImage& image, const PoseTrack* poses) noexcept;
+  // A point-cloud file's scan straight from its cells, without a range
+  // image (CloudAligner::align_scan): the same as align(image, nullptr) over
+  // the image CloudImager::fill() makes of that cloud.
+  void align_scan(const cloud::ScanCells& scan) noexcept;
   void features() noexcept;
   void update_maps(const TerrainClassMap* terrain) noexcept;
   // Where update_maps(terrain) takes each point's terrain class from.
@@ -153,5 +157,25 @@ struct ObstaclePipeline::Created {
   std::unique_ptr<ObstaclePipeline> pipeline;
   std::string error;
 };
+
+// (Here, for the offline tools' loops over every point to inline them.)
+inline ObstaclePipeline::PointAnswer ObstaclePipeline::answer(const TerrainSource& terrain, std::size_t k) const noexcept {
+  const RevolutionCloud& c = cloud_;
+  const bool measured = c.state[k] == PointState::measured;
+  return answer_at(terrain, c.x[k], c.y[k], measured ? c.step_height[k] : 0.0f, measured ? c.sin_incline[k] : 0.0f);
+}
+
+inline ObstaclePipeline::PointAnswer ObstaclePipeline::answer_at(const TerrainSource& terrain, float x, float y, float step,
+                                                          float sin_incline) const noexcept {
+  PointAnswer a;
+  const RevolutionCloud& c = cloud_;
+  const TerrainCell* cell = terrain.known_cell(c.ref_x + static_cast<double>(x), c.ref_y + static_cast<double>(y));
+  a.terrain = cell != nullptr ? cell->best : terrain.fallback();
+  a.terrain_known = cell != nullptr;
+  const int cls = static_cast<int>(a.terrain);
+  a.dirac = models_.dirac(cls, step, sin_incline);
+  a.smooth = models_.smooth(cls, step, sin_incline);
+  return a;
+}
 
 }  // namespace trailnav::perception
