@@ -117,7 +117,7 @@ build/release/bin/trailnav obstacles "$scan" --config board/robots/kitti-car.yam
 peer_ms=() ours_ms=() ours_map_ms=()
 for r in $(seq 1 "$reps"); do
   peer_ms+=("$(taskset -c "$cpu" "$work/patchwork_answers" "$scan" "$work/patchwork.answers" 20)")
-  line=$(taskset -c "$cpu" build/release/bin/trailnav_cloud_bench --benchmark_filter='BM_ScanToAnswers' \
+  line=$(taskset -c "$cpu" build/release/bin/trailnav_cloud_bench --benchmark_filter='BM_ScanToAnswers/map:./image:0' \
          --benchmark_format=csv 2>/dev/null | grep 'BM_ScanToAnswers')
   ours_ms+=("$(echo "$line" | awk -F, '/map:0/ {printf "%.3f", $3}')")
   ours_map_ms+=("$(echo "$line" | awk -F, '/map:1/ {printf "%.3f", $3}')")

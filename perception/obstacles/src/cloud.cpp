@@ -178,7 +178,7 @@ struct CellPoint {
 };
 }  // namespace
 
-template <class Fetch>
+template <bool kOneTransform, class Fetch>
 void CloudAligner::place_rows(int rings, int first, int end, double cut_azimuth, Fetch&& fetch,
                               RevolutionCloud& out) noexcept {
   // Each point goes to the column of its own azimuth: lasers with a
@@ -188,67 +188,72 @@ void CloudAligner::place_rows(int rings, int first, int end, double cut_azimuth,
   // spread_columns_ from its firing's column (RangeImage::azimuth_spread),
   // so that a column's points are all there once the firings that far
   // past it are (trailnavd works on a revolution while it arrives).
+  // kOneTransform: every column's transform is the first's (a scan without
+  // poses), kept in registers.
   const int columns = columns_;
   const float* const xf = out.column_transforms.data();
+  float one[RevolutionCloud::kTransformFloats];
+  std::copy_n(xf, RevolutionCloud::kTransformFloats, one);
   const double columns_per_rad = columns / (2.0 * std::numbers::pi);
   const auto cut = static_cast<float>(cut_azimuth);
   const float min_r = min_range_;
   const float max_r = max_range_;
+  const bool self = self_filter_;
+  const std::array<float, 6> box = self_box_;
   const int spread = spread_columns_;
   const bool smoothing = out.shape().features;
   std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0, beyond = 0;
   const int fate_rows = fate_stride_ > 0 ? static_cast<int>(fate_size_ / static_cast<std::size_t>(fate_stride_)) : 0;
   for (int i = 0; i < rings; ++i) {
     const std::size_t base = out.index(i, 0);
-    PointState* st = out.state.data() + base;
-    float* ox = (smoothing ? out.aligned_x : out.x).data() + base;
-    float* oy = (smoothing ? out.aligned_y : out.y).data() + base;
-    float* oz = (smoothing ? out.aligned_z : out.z).data() + base;
-    float* orange = out.range.data() + base;
-    float* ointensity = out.intensity.data() + base;
-    std::int32_t* fate =
+    PointState* __restrict st = out.state.data() + base;
+    float* __restrict ox = (smoothing ? out.aligned_x : out.x).data() + base;
+    float* __restrict oy = (smoothing ? out.aligned_y : out.y).data() + base;
+    float* __restrict oz = (smoothing ? out.aligned_z : out.z).data() + base;
+    float* __restrict orange = out.range.data() + base;
+    float* __restrict ointensity = out.intensity.data() + base;
+    std::int32_t* __restrict fate =
         fates_ != nullptr && i < fate_rows ? fates_ + static_cast<std::size_t>(i) * static_cast<std::size_t>(fate_stride_)
                                            : nullptr;
+    const int fate_end = fate != nullptr ? fate_stride_ : 0;
     for (int c = first; c < end; ++c) {
       CellPoint cell;
       if (!fetch(i, c, cell)) continue;
       ++points;
+      std::int32_t outcome;
       if (cell.distance < min_r || cell.distance > max_r) {
         ++out_of_range;
-        if (fate != nullptr && c < fate_stride_) fate[c] = kFateOutOfRange;
-        continue;
-      }
-      if (self_filter_ && cell.x >= self_box_[0] && cell.x <= self_box_[1] && cell.y >= self_box_[2] &&
-          cell.y <= self_box_[3] && cell.z >= self_box_[4] && cell.z <= self_box_[5]) {
+        outcome = kFateOutOfRange;
+      } else if (self && cell.x >= box[0] && cell.x <= box[1] && cell.y >= box[2] && cell.y <= box[3] &&
+                 cell.z >= box[4] && cell.z <= box[5]) {
         ++self_hits;
-        if (fate != nullptr && c < fate_stride_) fate[c] = kFateSelf;
-        continue;
+        outcome = kFateSelf;
+      } else {
+        double rel = static_cast<double>(cell.azimuth - cut);
+        if (rel < 0.0) rel += 2.0 * std::numbers::pi;
+        const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
+        int apart = std::abs(target - c);
+        apart = std::min(apart, columns - apart);
+        const auto k = static_cast<std::size_t>(target);
+        if (apart > spread) {
+          ++beyond;
+          outcome = kFateBeyondSpread;
+        } else if (st[k] != PointState::none) {
+          ++collisions;
+          outcome = kFateCollision;
+        } else {
+          outcome = static_cast<std::int32_t>(base + k);
+          const float* t = kOneTransform ? one : xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats;
+          const RevolutionCloud::Point q = RevolutionCloud::transform(t, cell.x, cell.y, cell.z);
+          ox[k] = q.x;
+          oy[k] = q.y;
+          oz[k] = q.z;
+          orange[k] = cell.distance;
+          ointensity[k] = cell.intensity;
+          st[k] = PointState::valid;
+        }
       }
-      double rel = static_cast<double>(cell.azimuth - cut);
-      if (rel < 0.0) rel += 2.0 * std::numbers::pi;
-      const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
-      int apart = std::abs(target - c);
-      apart = std::min(apart, columns - apart);
-      if (apart > spread) {
-        ++beyond;
-        if (fate != nullptr && c < fate_stride_) fate[c] = kFateBeyondSpread;
-        continue;
-      }
-      const auto k = static_cast<std::size_t>(target);
-      if (st[k] != PointState::none) {
-        ++collisions;
-        if (fate != nullptr && c < fate_stride_) fate[c] = kFateCollision;
-        continue;
-      }
-      if (fate != nullptr && c < fate_stride_) fate[c] = static_cast<std::int32_t>(base + k);
-      const RevolutionCloud::Point q = RevolutionCloud::transform(
-          xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats, cell.x, cell.y, cell.z);
-      ox[k] = q.x;
-      oy[k] = q.y;
-      oz[k] = q.z;
-      orange[k] = cell.distance;
-      ointensity[k] = cell.intensity;
-      st[k] = PointState::valid;
+      if (c < fate_end) fate[c] = outcome;
     }
   }
   counters_.points += points;
@@ -283,7 +288,7 @@ void CloudAligner::align_columns(const velodyne::RangeImage& image, const PoseTr
     }
   }
   const int rings = std::min(image.rings(), out.rings());
-  place_rows(
+  place_rows<false>(
       rings, first, end, image.cut_azimuth,
       [&image](int ring, int c, CellPoint& p) {
         const velodyne::RangeCell& cell = image.row(0, ring)[static_cast<std::size_t>(c)];
@@ -304,86 +309,24 @@ void CloudAligner::align_scan(const cloud::ScanCells& scan, RevolutionCloud& out
     std::copy_n(xf, RevolutionCloud::kTransformFloats, xf + static_cast<std::size_t>(c) * RevolutionCloud::kTransformFloats);
   }
   const int rings = std::min(scan.rings, out.rings());
-  const int columns = columns_;
   const auto stride = static_cast<std::size_t>(scan.columns);
-  // place_rows()'s tests, in its order, for the cells' points: first what
-  // depends on the point alone (range, self box, the column of its
-  // azimuth; a point's firing column is its cell's, and every transform is
-  // the same), then, cell by cell in place_rows()'s order, whether its
-  // column is taken.
-  const double columns_per_rad = columns / (2.0 * std::numbers::pi);
-  const float min_r = min_range_, max_r = max_range_;
-  const float t[12] = {xf[0], xf[1], xf[2], xf[3], xf[4], xf[5], xf[6], xf[7], xf[8], xf[9], xf[10], xf[11]};
-  const bool self = self_filter_;
-  const std::array<float, 6> box = self_box_;
-  const int spread = spread_columns_;
-  const bool smoothing = out.shape().features;
-  const int fate_rows = fate_stride_ > 0 ? static_cast<int>(fate_size_ / static_cast<std::size_t>(fate_stride_)) : 0;
-  std::uint64_t points = 0, out_of_range = 0, collisions = 0, self_hits = 0, beyond = 0;
   const float* __restrict px = scan.x;
   const float* __restrict py = scan.y;
   const float* __restrict pz = scan.z;
   const float* __restrict pd = scan.distance;
   const float* __restrict pa = scan.azimuth;
   const float* __restrict pi = scan.intensity;
-  for (int i = 0; i < rings; ++i) {
-    const std::int32_t* __restrict first = scan.first + static_cast<std::size_t>(i) * stride;
-    const std::size_t base = out.index(i, 0);
-    PointState* __restrict st = out.state.data() + base;
-    float* __restrict ox = (smoothing ? out.aligned_x : out.x).data() + base;
-    float* __restrict oy = (smoothing ? out.aligned_y : out.y).data() + base;
-    float* __restrict oz = (smoothing ? out.aligned_z : out.z).data() + base;
-    float* __restrict orange = out.range.data() + base;
-    float* __restrict ointensity = out.intensity.data() + base;
-    std::int32_t* __restrict fate =
-        fates_ != nullptr && i < fate_rows ? fates_ + static_cast<std::size_t>(i) * static_cast<std::size_t>(fate_stride_)
-                                           : nullptr;
-    const int fate_end = fate != nullptr ? std::min(columns, fate_stride_) : 0;
-    for (int c = 0; c < columns; ++c) {
-      const std::int32_t index = first[c];
-      if (index < 0) continue;
-      const auto k = static_cast<std::size_t>(index);
-      ++points;
-      const float d = pd[k];
-      const float x = px[k], y = py[k], z = pz[k];
-      std::int32_t outcome;
-      if (d < min_r || d > max_r) {
-        ++out_of_range;
-        outcome = kFateOutOfRange;
-      } else if (self && x >= box[0] && x <= box[1] && y >= box[2] && y <= box[3] && z >= box[4] && z <= box[5]) {
-        ++self_hits;
-        outcome = kFateSelf;
-      } else {
-        double rel = static_cast<double>(pa[k]);
-        if (rel < 0.0) rel += 2.0 * std::numbers::pi;
-        const int target = std::min(columns - 1, static_cast<int>(rel * columns_per_rad));
-        int apart = std::abs(target - c);
-        apart = std::min(apart, columns - apart);
-        if (apart > spread) {
-          ++beyond;
-          outcome = kFateBeyondSpread;
-        } else if (st[target] != PointState::none) {
-          ++collisions;
-          outcome = kFateCollision;
-        } else {
-          const auto q = static_cast<std::size_t>(target);
-          outcome = static_cast<std::int32_t>(base + q);
-          ox[q] = t[0] * x + t[1] * y + t[2] * z + t[9];
-          oy[q] = t[3] * x + t[4] * y + t[5] * z + t[10];
-          oz[q] = t[6] * x + t[7] * y + t[8] * z + t[11];
-          orange[q] = d;
-          ointensity[q] = pi[k];
-          st[q] = PointState::valid;
-        }
-      }
-      if (c < fate_end) fate[c] = outcome;
-    }
-  }
-  counters_.points += points;
-  counters_.out_of_range += out_of_range;
-  counters_.collisions += collisions;
-  counters_.self_hits += self_hits;
-  counters_.beyond_spread += beyond;
+  const std::int32_t* __restrict firsts = scan.first;
+  place_rows<true>(
+      rings, 0, columns_, 0.0,
+      [=](int ring, int c, CellPoint& p) {
+        const std::int32_t k = firsts[static_cast<std::size_t>(ring) * stride + static_cast<std::size_t>(c)];
+        if (k < 0) return false;
+        const auto i = static_cast<std::size_t>(k);
+        p = CellPoint{px[i], py[i], pz[i], pd[i], pa[i], pi[i]};
+        return true;
+      },
+      out);
   out.sequence = scan.sequence;
   out.time_ns = scan.end_ns;
 }

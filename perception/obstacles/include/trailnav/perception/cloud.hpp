@@ -214,7 +214,8 @@ class CloudAligner {
   // Columns [first, end) of the first `rings` rings into `out`, each point
   // to the column of its azimuth; fetch(ring, column, CellPoint&) gives a
   // firing's point, false where there is none (defined in cloud.cpp).
-  template <class Fetch>
+  // kOneTransform: every column has the first one's transform.
+  template <bool kOneTransform, class Fetch>
   void place_rows(int rings, int first, int end, double cut_azimuth, Fetch&& fetch, RevolutionCloud& out) noexcept;
 
   float mount_r_[9];  // sensor -> robot
