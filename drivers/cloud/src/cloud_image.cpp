@@ -481,6 +481,68 @@ bool CloudImager::locate(const PointCloud& c, CloudImageStats& st) noexcept {
   return !use_order && !use_field;
 }
 
+// Pass 3 of fill() and index(): each point's cell and layer, in the cloud's
+// order (the first point of a cell in layer 0, the second in layer 1 while
+// there are two layers, the rest counted), with `places` and the counts.
+// first(i, row, column, cell) takes a cell's first point (cell: row *
+// columns + column); second(i, row, column, cell) its second and returns the
+// first one's distance.
+template <class First, class Second>
+void CloudImager::place_points(const PointCloud& c, bool inferred, CloudImageStats& st, std::span<PointPlace> places,
+                               First&& first, Second&& second) noexcept {
+  const std::size_t n = c.size;
+  const std::int16_t* row = row_.data();
+  const bool trace = places.size() >= n && n > 0;
+  std::uint64_t invalid = 0, bad_ring = 0, collisions = 0, seconds = 0, placed = 0;
+  std::fill(held_.begin(), held_.end(), std::uint8_t{0});
+  std::uint8_t* held = held_.data();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float d = distance_[i];
+    const int r = row[i];
+    const int col = column_[i];
+    PlaceOutcome outcome;
+    float apart = 0.0f;
+    if (!has_return(d)) {
+      outcome = PlaceOutcome::invalid;
+      ++invalid;
+    } else if (r < 0) {
+      outcome = PlaceOutcome::bad_ring;
+      ++bad_ring;
+    } else {
+      // How many points the cell holds, from the small table (reading an
+      // image's cell itself waited on memory: the image is megabytes).
+      const std::size_t cell = static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(col);
+      std::uint8_t& count = held[cell];
+      if (count == 0) {
+        first(i, r, col, cell);
+        outcome = PlaceOutcome::placed;
+        ++placed;
+        count = 1;
+      } else if (count < layers_) {
+        apart = std::fabs(d - second(i, r, col, cell));
+        outcome = PlaceOutcome::second;
+        ++seconds;
+        count = 2;
+      } else {
+        outcome = PlaceOutcome::collision;
+        ++collisions;
+      }
+    }
+    if (trace) {
+      places[i] = outcome == PlaceOutcome::invalid || outcome == PlaceOutcome::bad_ring
+                      ? PointPlace{0, 0, outcome}
+                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome, apart};
+    }
+  }
+  st.invalid = invalid;
+  st.bad_ring = bad_ring;
+  st.collisions = collisions;
+  st.second = seconds;
+  st.placed = placed;
+  // Rows found from the elevation: every point with a return.
+  if (inferred) st.inferred = n - invalid;
+}
+
 void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudImageStats& st,
                        std::span<PointPlace> places, std::int64_t start_ns) noexcept {
   st = CloudImageStats{};
@@ -506,66 +568,29 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
   image.rpm = 60.0 / options_.period_s;
   // A point without a time of its own: its azimuth's share of the revolution.
   const auto seconds_per_rad = static_cast<float>(options_.period_s / kTwoPi);
-  const std::size_t n = c.size;
   // Times relative to the cloud's first (a file may hold absolute ones).
   const double t0 = first_time(c);
   const bool inferred = locate(c, st);
-  const std::int16_t* row = row_.data();
-  // Pass 3: into the image, in the cloud's order (the first point of a
-  // cell in layer 0, the second in layer 1, the rest counted).
-  const bool trace = places.size() >= n && n > 0;
-  std::uint64_t invalid = 0, bad_ring = 0, collisions = 0, second = 0, placed = 0;
-  std::fill(held_.begin(), held_.end(), std::uint8_t{0});
-  std::uint8_t* held = held_.data();
-  for (std::size_t i = 0; i < n; ++i) {
-    const float d = distance_[i];
-    const int r = row[i];
-    const int col = column_[i];
-    PlaceOutcome outcome;
-    velodyne::RangeCell* cell = nullptr;
-    float apart = 0.0f;
-    if (!has_return(d)) {
-      outcome = PlaceOutcome::invalid;
-      ++invalid;
-    } else if (r < 0) {
-      outcome = PlaceOutcome::bad_ring;
-      ++bad_ring;
-    } else {
-      // How many points the cell holds, from the small table (reading the
-      // cell itself waited on memory: the image is megabytes).
-      std::uint8_t& count = held[static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(col)];
-      if (count == 0) {
-        cell = &image.at(0, r, col);
-        outcome = PlaceOutcome::placed;
-        ++placed;
-        count = 1;
-      } else if (count < layers_) {
-        apart = std::fabs(d - image.at(0, r, col).distance);
-        cell = &image.at(1, r, col);
-        outcome = PlaceOutcome::second;
-        ++second;
-        count = 2;
-      } else {
-        outcome = PlaceOutcome::collision;
-        ++collisions;
-      }
-    }
-    if (trace) {
-      places[i] = outcome == PlaceOutcome::invalid || outcome == PlaceOutcome::bad_ring
-                      ? PointPlace{0, 0, outcome}
-                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome, apart};
-    }
-    if (cell == nullptr) continue;
+  // Pass 3: into the image.
+  const auto write = [&](std::size_t i, velodyne::RangeCell& cell) {
     const float az = azimuth_[i];
-    *cell = velodyne::RangeCell{c.x[i],
-                                c.y[i],
-                                c.z[i],
-                                d,
-                                az,
-                                c.has_time ? static_cast<float>(c.time[i] - t0) : az * seconds_per_rad,
-                                std::clamp(c.intensity[i] * options_.intensity_scale, 0.0f, 255.0f),
-                                velodyne::ReturnKind::strongest};
-  }
+    cell = velodyne::RangeCell{c.x[i],
+                               c.y[i],
+                               c.z[i],
+                               distance_[i],
+                               az,
+                               c.has_time ? static_cast<float>(c.time[i] - t0) : az * seconds_per_rad,
+                               std::clamp(c.intensity[i] * options_.intensity_scale, 0.0f, 255.0f),
+                               velodyne::ReturnKind::strongest};
+  };
+  place_points(
+      c, inferred, st, places, [&](std::size_t i, int r, int col, std::size_t) { write(i, image.at(0, r, col)); },
+      [&](std::size_t i, int r, int col, std::size_t) {
+        const float first_distance = image.at(0, r, col).distance;
+        write(i, image.at(1, r, col));
+        return first_distance;
+      });
+  const std::uint8_t* held = held_.data();
   // The cells that held a point in the last fill and hold none now (all
   // were cleared when this image was not the last one).
   {
@@ -582,13 +607,6 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
     }
   }
   last_image_ = &image;
-  st.invalid = invalid;
-  st.bad_ring = bad_ring;
-  st.collisions = collisions;
-  st.second = second;
-  st.placed = placed;
-  // Rows found from the elevation: every point with a return.
-  if (inferred) st.inferred = n - invalid;
   image.finish();
   image.points = static_cast<int>(st.placed + st.second);
   last_sequence_ = image.sequence;
@@ -605,61 +623,17 @@ ScanCells CloudImager::index(const PointCloud& c, CloudImageStats& st, std::span
     float* out = intensity_.data();
     for (std::size_t i = 0; i < n; ++i) out[i] = std::clamp(in[i] * scale, 0.0f, 255.0f);
   }
-  // Pass 3 as fill() places the points (the first of a cell, a second while
-  // the layers last, the rest counted), with the cell's first point's
+  // Pass 3 as fill() places the points, with the cell's first point's
   // index where fill() writes the point.
-  const std::int16_t* row = row_.data();
-  const bool trace = places.size() >= n && n > 0;
-  std::uint64_t invalid = 0, bad_ring = 0, collisions = 0, second = 0, placed = 0;
-  std::fill(held_.begin(), held_.end(), std::uint8_t{0});
   std::fill(first_.begin(), first_.end(), std::int32_t{-1});
-  std::uint8_t* held = held_.data();
   std::int32_t* first = first_.data();
   const float* distance = distance_.data();
-  for (std::size_t i = 0; i < n; ++i) {
-    const float d = distance[i];
-    const int r = row[i];
-    const int col = column_[i];
-    PlaceOutcome outcome;
-    float apart = 0.0f;
-    if (!has_return(d)) {
-      outcome = PlaceOutcome::invalid;
-      ++invalid;
-    } else if (r < 0) {
-      outcome = PlaceOutcome::bad_ring;
-      ++bad_ring;
-    } else {
-      const std::size_t cell = static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(col);
-      std::uint8_t& count = held[cell];
-      if (count == 0) {
-        first[cell] = static_cast<std::int32_t>(i);
-        outcome = PlaceOutcome::placed;
-        ++placed;
-        count = 1;
-      } else if (count < layers_) {
-        apart = std::fabs(d - distance[first[cell]]);
-        outcome = PlaceOutcome::second;
-        ++second;
-        count = 2;
-      } else {
-        outcome = PlaceOutcome::collision;
-        ++collisions;
-      }
-    }
-    if (trace) {
-      places[i] = outcome == PlaceOutcome::invalid || outcome == PlaceOutcome::bad_ring
-                      ? PointPlace{0, 0, outcome}
-                      : PointPlace{static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(col), outcome, apart};
-    }
-  }
+  place_points(
+      c, inferred, st, places,
+      [first](std::size_t i, int, int, std::size_t cell) { first[cell] = static_cast<std::int32_t>(i); },
+      [first, distance](std::size_t, int, int, std::size_t cell) { return distance[first[cell]]; });
   // The next fill() clears its image whole (this one's counts are not its).
   last_image_ = nullptr;
-  st.invalid = invalid;
-  st.bad_ring = bad_ring;
-  st.collisions = collisions;
-  st.second = second;
-  st.placed = placed;
-  if (inferred) st.inferred = n - invalid;
   ScanCells cells;
   cells.rings = rings_;
   cells.columns = columns_;

@@ -164,6 +164,9 @@ class CloudImager {
 
  private:
   bool locate(const PointCloud& cloud, CloudImageStats& stats) noexcept;
+  template <class First, class Second>
+  void place_points(const PointCloud& cloud, bool inferred, CloudImageStats& stats, std::span<PointPlace> places,
+                    First&& first, Second&& second) noexcept;
   int rings_;
   int columns_;
   int layers_;
