@@ -496,16 +496,13 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
         bool obstacle;
         float p;
         if (one_class) {
-          // A flat point (step 0) is no obstacle and its P is 0 (Eq. 7.12's
-          // first factor): the tables are looked up for measured points only.
-          if (st == perception::PointState::measured) {
-            const float s = step[k], si = sine[k];
-            p = models.smooth(the_class, s, si);
-            obstacle = dirac ? models.dirac(the_class, s, si) : p > 0.5f;
-          } else {
-            p = 0.0f;
-            obstacle = false;
-          }
+          // A flat point is a step of 0 (no obstacle, P 0 by Eq. 7.12's
+          // first factor): selects, not a branch (which points are flat is
+          // not predictable), and its table look-ups hit bin 0.
+          const bool measured = st == perception::PointState::measured;
+          const float s = measured ? step[k] : 0.0f, si = measured ? sine[k] : 0.0f;
+          p = models.smooth(the_class, s, si);
+          obstacle = dirac ? models.dirac(the_class, s, si) : p > 0.5f;
         } else {
           const auto ans = pipeline.answer(terrain, k);
           p = ans.smooth;
