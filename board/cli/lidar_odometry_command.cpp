@@ -101,17 +101,24 @@ int run_lidar(const Options& o) {
       std::fprintf(stderr, "%s: cannot write %s\n", who, o.poses_out.c_str());
       return 1;
     }
-    std::fprintf(out, "timestamp,x,y,z,yaw,ref_x,ref_y,ref_z,ref_yaw\n");
+    std::fprintf(out, "timestamp,x,y,z,yaw,ref_x,ref_y,ref_z,ref_yaw,weakest,strongest,weak_x,weak_y,weak_z\n");
     for (std::size_t i = 0; i < r.estimate.size(); ++i) {
       const Eigen::Isometry3d& e = r.estimate[i];
       std::fprintf(out, "%.6f,%.4f,%.4f,%.4f,%.5f", static_cast<double>(r.times_ns[i]) * 1e-9, e.translation().x(),
                    e.translation().y(), e.translation().z(), std::atan2(e.linear()(1, 0), e.linear()(0, 0)));
       if (i < r.reference.size()) {
         const Eigen::Isometry3d& f = r.reference[i];
-        std::fprintf(out, ",%.4f,%.4f,%.4f,%.5f\n", f.translation().x(), f.translation().y(), f.translation().z(),
+        std::fprintf(out, ",%.4f,%.4f,%.4f,%.5f", f.translation().x(), f.translation().y(), f.translation().z(),
                      std::atan2(f.linear()(1, 0), f.linear()(0, 0)));
       } else {
-        std::fprintf(out, ",,,,\n");
+        std::fprintf(out, ",,,,");
+      }
+      if (i < r.conditioning.size()) {
+        const auto& k = r.conditioning[i];
+        std::fprintf(out, ",%.4g,%.4g,%.3f,%.3f,%.3f\n", k.weakest, k.strongest, k.direction.x(), k.direction.y(),
+                     k.direction.z());
+      } else {
+        std::fprintf(out, ",,,,,\n");
       }
     }
     std::fclose(out);
@@ -290,7 +297,7 @@ void add_lidar_odometry_command(CLI::App& app) {
   cmd->add_flag("--no-deskew", o.no_deskew, "A lidar input's revolutions as they are, without motion compensation");
   cmd->add_option("--max-iterations", o.max_iterations, "GICP iterations per scan at most")->capture_default_str();
   cmd->add_option("--max-scans", o.max_scans, "Use only the first N scans (0: all)")->capture_default_str();
-  cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (timestamp,x,y,theta,ref_x,ref_y,ref_theta)");
+  cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (CARMEN: timestamp,x,y,theta,ref_x,ref_y,ref_theta; a lidar: timestamp,x,y,z,yaw,ref_x,ref_y,ref_z,ref_yaw and how well the registration pinned the translation: weakest,strongest (the largest and smallest eigenvalues of its covariance's translation block) and weak_x,weak_y,weak_z (the direction of the largest; a straight street between flat sides leaves its length unpinned))");
   cmd->add_flag("--no-prediction", o.no_prediction, "Start each registration at the last pose instead of the last motion repeated");
   cmd->add_flag("--one-start", o.one_start,
                 "Register from the prediction only (by default a second registration starts at the last pose when the "

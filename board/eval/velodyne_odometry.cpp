@@ -107,6 +107,9 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
       report.reference.push_back(ref);
     }
     report.estimate.push_back(start * pose);
+    report.conditioning.push_back(odometry.last_conditioning());
+    // (Into the reference's frame, as the estimate.)
+    report.conditioning.back().direction = start.linear() * report.conditioning.back().direction;
     report.times_ns.push_back(at);
     ++report.revolutions;
     return true;

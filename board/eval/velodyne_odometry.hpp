@@ -43,6 +43,8 @@ struct VelodyneOdometryReport {
   std::vector<std::int64_t> times_ns;  // each revolution's last firing
   std::vector<Eigen::Isometry3d> estimate;  // the lidar's pose at each, odometry frame (the first: the reference's)
   std::vector<Eigen::Isometry3d> reference;  // the same from the simulated truth; empty without one
+  // Each revolution's registration (LidarOdometry::last_conditioning()).
+  std::vector<perception::registration::LidarOdometry::Conditioning> conditioning;
   perception::registration::RelativePoseError rpe;
   double path_m = 0.0;       // along the reference
   double end_error_m = 0.0;  // NaN without a reference

@@ -1,5 +1,7 @@
 #include "trailnav/perception/registration/odometry.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -75,6 +77,16 @@ Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan) {
     // Rejected: the last pose stands (no motion extrapolated from a scan
     // that could not be placed).
     pose = plausible ? r.transform : last_;
+    conditioning_ = Conditioning{};
+    if (plausible) {
+      // The translation block, from the scan's frame into the odometry frame.
+      const Eigen::Matrix3d rot = r.transform.linear();
+      const Eigen::Matrix3d c = rot * r.covariance.block<3, 3>(3, 3) * rot.transpose();
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (c + c.transpose()));
+      conditioning_.weakest = eig.eigenvalues()(2);
+      conditioning_.strongest = eig.eigenvalues()(0);
+      conditioning_.direction = eig.eigenvectors().col(2);
+    }
   }
   previous_ = counters_.scans > 1 ? last_ : pose;
   last_ = pose;

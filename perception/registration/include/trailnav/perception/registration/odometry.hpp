@@ -55,6 +55,19 @@ class LidarOdometry {
   // former's frame): what the constant-velocity prediction repeats, and
   // what de-skewing the next scan assumes (the identity before two scans).
   Eigen::Isometry3d last_motion() const noexcept { return previous_.inverse() * last_; }
+  // How well the last scan's registration pinned its translation: the
+  // largest and smallest eigenvalues of the translation block of its
+  // covariance (the inverse of the objective's Hessian, (ω, v) order; m²
+  // per unit of the objective) and the direction of the largest, in the
+  // odometry frame. A ratio of many orders of magnitude is a direction the
+  // scene does not constrain (a straight street between flat sides: along
+  // it). Zeros before the second scan and for a rejected one.
+  struct Conditioning {
+    double weakest = 0.0;
+    double strongest = 0.0;
+    Eigen::Vector3d direction = Eigen::Vector3d::Zero();
+  };
+  const Conditioning& last_conditioning() const noexcept { return conditioning_; }
 
  private:
   void rebuild_map();
@@ -78,6 +91,7 @@ class LidarOdometry {
   Eigen::Isometry3d previous_ = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d last_keyframe_ = Eigen::Isometry3d::Identity();
   OdometryCounters counters_;
+  Conditioning conditioning_;
 };
 
 // Motion compensation of a spinning lidar's scan (de-skewing): a point
