@@ -41,6 +41,7 @@ struct Options {
   bool no_prediction = false;
   bool one_start = false;
   bool no_deskew = false;
+  bool wheel_prior = false;
   std::string calibration;
   // Which of the tuning options the user gave (the 3D input has its own
   // defaults; the command's callback reads them off the parser).
@@ -73,6 +74,7 @@ int run_lidar(const Options& o) {
   }
   v.calibration = o.calibration;
   v.deskew = !o.no_deskew;
+  v.wheel_prior = o.wheel_prior;
   v.max_revolutions = o.max_scans;
   reg::OdometryConfig& config = v.odometry;
   config.planar = false;
@@ -124,22 +126,28 @@ int run_lidar(const Options& o) {
     std::fclose(out);
   }
   const bool ref = !r.reference.empty();
+  const bool wheels = ref && !r.wheels.empty();
   const auto& c = r.counters;
   if (o.report == "json") {
     std::printf(
-        "{\"input\": \"%s\", \"lidar\": \"%s\", \"scans\": %zu, \"points\": %zu, \"deskew\": %s, \"path_m\": %s, "
+        "{\"input\": \"%s\", \"lidar\": \"%s\", \"scans\": %zu, \"points\": %zu, \"deskew\": %s, \"wheel_prior\": %s, \"path_m\": %s, "
         "\"keyframes\": %llu, \"not_converged\": %llu, \"second_start\": %llu, \"rejected\": %llu, "
         "\"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, \"segments\": %zu, \"end_error_m\": %s, "
+        "\"prior_kept\": %llu, \"rpe_wheels_translation_percent\": %s, \"rpe_wheels_rotation_deg_per_100m\": %s, "
         "\"ms_per_scan\": %s}\n",
-        o.input.c_str(), r.lidar.c_str(), r.revolutions, r.points, v.deskew ? "true" : "false", num(r.path_m, 3).c_str(),
+        o.input.c_str(), r.lidar.c_str(), r.revolutions, r.points, v.deskew ? "true" : "false",
+        v.wheel_prior ? "true" : "false", num(r.path_m, 3).c_str(),
         static_cast<unsigned long long>(c.keyframes), static_cast<unsigned long long>(c.not_converged),
         static_cast<unsigned long long>(c.second_start), static_cast<unsigned long long>(c.rejected),
         ref ? num(r.rpe.translation_percent, 4).c_str() : "null", ref ? num(r.rpe.rotation_deg_per_100m, 4).c_str() : "null",
-        r.rpe.segments, num(r.end_error_m, 3).c_str(), num(r.ms_per_revolution, 3).c_str());
+        r.rpe.segments, num(r.end_error_m, 3).c_str(), static_cast<unsigned long long>(c.prior_kept),
+        wheels ? num(r.rpe_wheels.translation_percent, 4).c_str() : "null",
+        wheels ? num(r.rpe_wheels.rotation_deg_per_100m, 4).c_str() : "null", num(r.ms_per_revolution, 3).c_str());
     return 0;
   }
-  std::printf("lidar odometry (%s revolutions, %s, scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n",
-              r.lidar.c_str(), v.deskew ? "de-skewed" : "not de-skewed", config.local_scans,
+  std::printf("lidar odometry (%s revolutions, %s, %s, scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n",
+              r.lidar.c_str(), v.deskew ? "de-skewed" : "not de-skewed",
+              v.wheel_prior ? "predicted by the wheels and IMU" : "constant velocity", config.local_scans,
               static_cast<double>(config.voxel), o.input.c_str());
   std::printf("  %zu revolutions, %zu points, %.1f m of %s path, %llu keyframes, %llu not converged, %llu answers from the "
               "second start, %llu rejected\n",
@@ -150,6 +158,12 @@ int run_lidar(const Options& o) {
     std::printf("  relative pose error per 10 m against the simulated truth (%zu segments): %.3f %% translation, "
                 "%.3f deg/100 m; end point %.2f m off\n",
                 r.rpe.segments, r.rpe.translation_percent, r.rpe.rotation_deg_per_100m, r.end_error_m);
+    if (wheels) {
+      std::printf("  the wheels and IMU alone: %.3f %% translation, %.3f deg/100 m; %llu scans took their motion where "
+                  "the scene pinned it weakly\n",
+                  r.rpe_wheels.translation_percent, r.rpe_wheels.rotation_deg_per_100m,
+                  static_cast<unsigned long long>(c.prior_kept));
+    }
   } else {
     std::printf("  no reference poses (not a simulated recording): no relative pose error\n");
   }
@@ -295,6 +309,10 @@ void add_lidar_odometry_command(CLI::App& app) {
   cmd->add_option("--calibration", o.calibration,
                   "A lidar input's calibration (a file, or builtin); default: the recording's or the model's");
   cmd->add_flag("--no-deskew", o.no_deskew, "A lidar input's revolutions as they are, without motion compensation");
+  cmd->add_flag("--wheel-prior", o.wheel_prior,
+                "A simulated recording's wheel and IMU odometry (its CAN and IMU streams through the pose estimator, as "
+                "trailnavd's pose thread) predicts each registration and de-skews each revolution, instead of the last "
+                "motion repeated: what pins the motion where the scene does not (a straight street across an open square)");
   cmd->add_option("--max-iterations", o.max_iterations, "GICP iterations per scan at most")->capture_default_str();
   cmd->add_option("--max-scans", o.max_scans, "Use only the first N scans (0: all)")->capture_default_str();
   cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (CARMEN: timestamp,x,y,theta,ref_x,ref_y,ref_theta; a lidar: timestamp,x,y,z,yaw,ref_x,ref_y,ref_z,ref_yaw and how well the registration pinned the translation: weakest,strongest (the largest and smallest eigenvalues of its covariance's translation block) and weak_x,weak_y,weak_z (the direction of the largest; a straight street between flat sides leaves its length unpinned))");

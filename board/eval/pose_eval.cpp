@@ -126,6 +126,7 @@ PoseEvalResult evaluate_pose(const std::string& recording, const PoseEvalOptions
         Sample smp;
         smp.t = a.time_ns;
         const pose::LocalPose& p = estimator.odometry().pose();
+        if (options.on_odometry) options.on_odometry(p);
         smp.ex = p.x;
         smp.ey = p.y;
         smp.eyaw = p.yaw;

@@ -30,6 +30,9 @@ struct PoseEvalOptions {
   // Called with the estimate at every IMU sample once the heading is known
   // (the subgoal evaluation takes the robot's UTM pose from it).
   std::function<void(const pose::UtmPose&)> on_utm;
+  // Called with the odometry-frame pose (wheels and IMU, as the pose
+  // thread's) at every IMU sample (lidar odometry's wheel prior takes it).
+  std::function<void(const pose::LocalPose&)> on_odometry;
 };
 
 struct PoseSegmentRow {

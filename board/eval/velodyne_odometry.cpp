@@ -7,6 +7,7 @@
 
 #include "motion.hpp"
 #include "revolution_source.hpp"
+#include "pose_eval.hpp"
 #include "sim_truth.hpp"
 #include "trailnav/perception/pose_track.hpp"
 
@@ -47,6 +48,26 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
     const auto m = source.mount_translation();
     mount.translation() = Eigen::Vector3d(m[0], m[1], m[2]);
   }
+  // The wheel prior: the recording's odometry-frame poses at every IMU sample.
+  std::optional<perception::PoseTrack> wheels;
+  if (options.wheel_prior) {
+    if (!source.truth()) {
+      report.error = "--wheel-prior needs a simulated recording (a directory with truth/, CAN and IMU streams)";
+      return report;
+    }
+    std::vector<perception::Pose> samples;
+    PoseEvalOptions po;
+    po.on_odometry = [&](const pose::LocalPose& p) {
+      samples.push_back({p.time_ns, p.x, p.y, p.z, p.roll, p.pitch, p.yaw, p.translation_valid});
+    };
+    const PoseEvalResult pr = evaluate_pose(options.input, po);
+    if (!pr.error.empty()) {
+      report.error = "--wheel-prior: " + pr.error;
+      return report;
+    }
+    wheels.emplace(samples.size() + 1);
+    for (const perception::Pose& p : samples) wheels->push(p);
+  }
   reg::OdometryConfig config = options.odometry;
   const velodyne::RangeImageShape shape = source.shape();
   config.max_points = static_cast<std::size_t>(shape.rings) * static_cast<std::size_t>(shape.max_columns);
@@ -56,6 +77,7 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
   points.reserve(config.max_points);
   fraction.reserve(config.max_points);
   Eigen::Isometry3d start = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d wheel_start = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d smoothed = Eigen::Isometry3d::Identity();
   double busy_s = 0.0;
   const auto on_image = [&](const velodyne::RangeImage& image) -> bool {
@@ -78,10 +100,23 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
         fraction.push_back(s);
       }
     }
-    // The motion over this revolution, taken to be the last one's (the
+    // The wheels' motion of the lidar since the last revolution's end.
+    const std::int64_t at = image.end_ns + image.clock_offset_ns;
+    std::optional<Eigen::Isometry3d> measured;
+    if (wheels && report.revolutions >= 1) {
+      perception::Pose a, b;
+      wheels->at(report.times_ns.back(), a);
+      wheels->at(at, b);
+      measured = mount.inverse() * isometry_of(a).inverse() * isometry_of(b) * mount;
+    }
+    // The motion over this revolution: the wheels', or the last one's (the
     // revolutions follow each other without a gap).
-    if (options.deskew && report.revolutions >= 2) reg::deskew(points, fraction, smoothed);
-    const Eigen::Isometry3d pose = odometry.add(points);
+    if (options.deskew && measured) {
+      reg::deskew(points, fraction, *measured);
+    } else if (options.deskew && report.revolutions >= 2) {
+      reg::deskew(points, fraction, smoothed);
+    }
+    const Eigen::Isometry3d pose = odometry.add(points, measured ? &*measured : nullptr);
     if (report.revolutions >= 1) {
       // The motion de-skewing assumes: the scan-to-scan motions smoothed
       // (translation and rotation vector, each new one weighing
@@ -98,7 +133,6 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
     }
     busy_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     report.points += points.size();
-    const std::int64_t at = image.end_ns + image.clock_offset_ns;
     if (truth) {
       perception::Pose p;
       truth->at(at, p);
@@ -107,6 +141,13 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
       report.reference.push_back(ref);
     }
     report.estimate.push_back(start * pose);
+    if (wheels) {
+      perception::Pose w;
+      wheels->at(at, w);
+      const Eigen::Isometry3d lidar = isometry_of(w) * mount;
+      if (report.revolutions == 0) wheel_start = lidar;
+      report.wheels.push_back(start * wheel_start.inverse() * lidar);
+    }
     report.conditioning.push_back(odometry.last_conditioning());
     // (Into the reference's frame, as the estimate.)
     report.conditioning.back().direction = start.linear() * report.conditioning.back().direction;
@@ -126,6 +167,7 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
   report.ms_per_revolution = 1000.0 * busy_s / static_cast<double>(report.revolutions);
   if (!report.reference.empty()) {
     report.rpe = reg::relative_pose_error(report.reference, report.estimate, 10.0);
+    if (!report.wheels.empty()) report.rpe_wheels = reg::relative_pose_error(report.reference, report.wheels, 10.0);
     report.path_m = reg::path_length(report.reference);
     report.end_error_m = (report.estimate.back().translation() - report.reference.back().translation()).norm();
   } else {

@@ -31,6 +31,12 @@ struct VelodyneOdometryOptions {
   float min_range = 2.0f;   // m: nearer returns are the robot and its mast
   float max_range = 80.0f;  // m
   bool deskew = true;
+  // A recording's wheel and IMU odometry (its CAN and IMU streams through the
+  // pose estimator, as trailnavd's pose thread runs them: evaluate_pose)
+  // predicts each registration and de-skews each revolution, instead of the
+  // last motion repeated. Needs a simulated recording (the pose evaluation
+  // reads its truth).
+  bool wheel_prior = false;
   long max_revolutions = 0;  // 0: all
   std::function<void(double)> progress;
 };
@@ -46,6 +52,10 @@ struct VelodyneOdometryReport {
   // Each revolution's registration (LidarOdometry::last_conditioning()).
   std::vector<perception::registration::LidarOdometry::Conditioning> conditioning;
   perception::registration::RelativePoseError rpe;
+  // wheel_prior: the wheels' and IMU's odometry alone, moved to the lidar
+  // and started at the reference's first pose, and its error per 10 m.
+  std::vector<Eigen::Isometry3d> wheels;
+  perception::registration::RelativePoseError rpe_wheels;
   double path_m = 0.0;       // along the reference
   double end_error_m = 0.0;  // NaN without a reference
   double ms_per_revolution = 0.0;  // registration and de-skew, not decoding

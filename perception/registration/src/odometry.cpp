@@ -43,13 +43,15 @@ void LidarOdometry::rebuild_map() {
   have_map_ = map_.cloud.size() >= 6;
 }
 
-Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan) {
+Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan, const Eigen::Isometry3d* motion) {
   ++counters_.scans;
   filter_.filter(scan.first(std::min(scan.size(), config_.max_points)), config_.voxel, scan_);
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   if (counters_.scans > 1 && have_map_) {
-    // Constant velocity: the last motion again.
-    const Eigen::Isometry3d predicted = config_.constant_velocity ? last_ * (previous_.inverse() * last_) : last_;
+    // A measured motion, or constant velocity: the last motion again.
+    const Eigen::Isometry3d predicted = motion != nullptr              ? last_ * *motion
+                                        : config_.constant_velocity ? last_ * (previous_.inverse() * last_)
+                                                                    : last_;
     prepare_source(scan_, covariances_, scan_tree_, scan_normals_);
     GicpResult r = gicp_.align(scan_, map_, predicted);
     counters_.iterations += static_cast<std::uint64_t>(r.iterations);
@@ -58,7 +60,7 @@ Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan) {
     // and GICP can settle in a wrong minimum beside it. The answer with the
     // smaller truncated cost (unassociated points at the gate) is taken.
     const Eigen::Isometry3d extrapolated = last_.inverse() * predicted;
-    if (config_.two_starts && (extrapolated.translation().norm() > 0.02 ||
+    if (config_.two_starts && motion == nullptr && (extrapolated.translation().norm() > 0.02 ||
                                Eigen::AngleAxisd(extrapolated.linear()).angle() > 0.01)) {
       const GicpResult s = gicp_.align(scan_, map_, last_);
       counters_.iterations += static_cast<std::uint64_t>(s.iterations);
@@ -68,25 +70,53 @@ Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan) {
       }
     }
     if (!r.converged) ++counters_.not_converged;
+    conditioning_ = Conditioning{};
+    if (r.transform.matrix().allFinite() && r.covariance.allFinite()) {
+      // The covariance is of a perturbation (ω, v) of the odometry frame
+      // about its origin: x + ω × x + v. The sensor's own translation is
+      // v' = v + ω × t (t its position), so Cov(v') = J Σ Jᵀ, J = [−[t]×, I].
+      const Eigen::Vector3d t = r.transform.translation();
+      Eigen::Matrix3d tx;
+      tx << 0.0, -t.z(), t.y(), t.z(), 0.0, -t.x(), -t.y(), t.x(), 0.0;
+      Eigen::Matrix<double, 3, 6> j;
+      j << -tx, Eigen::Matrix3d::Identity();
+      const Eigen::Matrix3d c = j * r.covariance * j.transpose();
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (c + c.transpose()));
+      conditioning_.weakest = eig.eigenvalues()(2);
+      conditioning_.strongest = eig.eigenvalues()(0);
+      conditioning_.direction = eig.eigenvectors().col(2);
+      // With a measured motion: in a direction the scan pins weak_ratio
+      // times less than its best one, the measured motion stands (the
+      // registration's answer there is the scene's bias, not a measurement:
+      // on flat ground the rings move with the sensor and pull it back).
+      if (motion != nullptr && config_.weak_ratio > 0.0 && eig.eigenvalues()(0) > 0.0) {
+        Eigen::Vector3d d = r.transform.translation() - predicted.translation();
+        bool kept = false;
+        for (int k = 1; k < 3; ++k) {
+          if (eig.eigenvalues()(k) > config_.weak_ratio * eig.eigenvalues()(0)) {
+            const Eigen::Vector3d e = eig.eigenvectors().col(k);
+            d -= e * e.dot(d);
+            kept = true;
+          }
+        }
+        if (kept) {
+          r.transform.translation() = predicted.translation() + d;
+          ++counters_.prior_kept;
+        }
+      }
+    }
     // A registration that lost its associations or ran away from the
     // prediction is not taken.
     const Eigen::Isometry3d jump = predicted.inverse() * r.transform;
     const bool plausible = r.transform.matrix().allFinite() && r.correspondences >= 6 &&
                            jump.translation().norm() < kMaxJump && Eigen::AngleAxisd(jump.linear()).angle() < kMaxTurn;
-    if (!plausible) ++counters_.rejected;
-    // Rejected: the last pose stands (no motion extrapolated from a scan
-    // that could not be placed).
-    pose = plausible ? r.transform : last_;
-    conditioning_ = Conditioning{};
-    if (plausible) {
-      // The translation block, from the scan's frame into the odometry frame.
-      const Eigen::Matrix3d rot = r.transform.linear();
-      const Eigen::Matrix3d c = rot * r.covariance.block<3, 3>(3, 3) * rot.transpose();
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (c + c.transpose()));
-      conditioning_.weakest = eig.eigenvalues()(2);
-      conditioning_.strongest = eig.eigenvalues()(0);
-      conditioning_.direction = eig.eigenvectors().col(2);
+    if (!plausible) {
+      ++counters_.rejected;
+      conditioning_ = Conditioning{};
     }
+    // Rejected: the measured motion, or else the last pose stands (no
+    // motion extrapolated from a scan that could not be placed).
+    pose = plausible ? r.transform : motion != nullptr ? predicted : last_;
   }
   previous_ = counters_.scans > 1 ? last_ : pose;
   last_ = pose;

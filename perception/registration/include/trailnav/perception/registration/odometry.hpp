@@ -31,6 +31,10 @@ struct OdometryConfig {
   bool planar = false;
   bool constant_velocity = true;  // predict the last motion again; false: the last pose
   bool two_starts = true;         // also start from the last pose; keep the better answer
+  // With a measured motion (add()'s `motion`): a direction of the sensor's
+  // translation whose covariance eigenvalue is more than this many times the
+  // smallest takes the measured motion instead of the registration's (0: never).
+  double weak_ratio = 100.0;
   std::size_t max_points = 200'000;  // per scan before filtering
 };
 
@@ -41,6 +45,7 @@ struct OdometryCounters {
   std::uint64_t iterations = 0;
   std::uint64_t second_start = 0;  // scans whose answer came from the start at the last pose
   std::uint64_t rejected = 0;  // results 1 m or 0.5 rad from the prediction, or without associations: the last pose kept
+  std::uint64_t prior_kept = 0;  // scans with a weakly pinned direction that took the measured motion there
 };
 
 class LidarOdometry {
@@ -48,18 +53,22 @@ class LidarOdometry {
   explicit LidarOdometry(const OdometryConfig& config);
 
   // One scan in the sensor's frame; returns its pose in the odometry frame
-  // (the first scan's pose is the identity).
-  Eigen::Isometry3d add(std::span<const Point> scan);
+  // (the first scan's pose is the identity). `motion`: the sensor's motion
+  // since the last scan as another sensor measured it (wheels and IMU), the
+  // registration's start instead of the constant-velocity prediction (and
+  // no second start: a measured motion does not overshoot a stopping turn
+  // as the repeated one does). Where the scene leaves a direction unpinned
+  // (a straight street between flat sides) the answer stays near it.
+  Eigen::Isometry3d add(std::span<const Point> scan, const Eigen::Isometry3d* motion = nullptr);
   const OdometryCounters& counters() const noexcept { return counters_; }
   // The motion from the scan before the last to the last one (in the
   // former's frame): what the constant-velocity prediction repeats, and
   // what de-skewing the next scan assumes (the identity before two scans).
   Eigen::Isometry3d last_motion() const noexcept { return previous_.inverse() * last_; }
   // How well the last scan's registration pinned its translation: the
-  // largest and smallest eigenvalues of the translation block of its
-  // covariance (the inverse of the objective's Hessian, (ω, v) order; m²
-  // per unit of the objective) and the direction of the largest, in the
-  // odometry frame. A ratio of many orders of magnitude is a direction the
+  // largest and smallest eigenvalues of the covariance (the inverse of the
+  // objective's Hessian; m² per unit of the objective) of the sensor's
+  // position, and the direction of the largest, in the odometry frame. A ratio of many orders of magnitude is a direction the
   // scene does not constrain (a straight street between flat sides: along
   // it). Zeros before the second scan and for a rejected one.
   struct Conditioning {
