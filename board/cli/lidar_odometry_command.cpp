@@ -315,7 +315,7 @@ void add_lidar_odometry_command(CLI::App& app) {
                 "motion repeated: what pins the motion where the scene does not (a straight street across an open square)");
   cmd->add_option("--max-iterations", o.max_iterations, "GICP iterations per scan at most")->capture_default_str();
   cmd->add_option("--max-scans", o.max_scans, "Use only the first N scans (0: all)")->capture_default_str();
-  cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (CARMEN: timestamp,x,y,theta,ref_x,ref_y,ref_theta; a lidar: timestamp,x,y,z,yaw,ref_x,ref_y,ref_z,ref_yaw and how well the registration pinned the translation: weakest,strongest (the largest and smallest eigenvalues of its covariance's translation block) and weak_x,weak_y,weak_z (the direction of the largest; a straight street between flat sides leaves its length unpinned))");
+  cmd->add_option("--poses-out", o.poses_out, "CSV of every scan's estimated and reference pose (CARMEN: timestamp,x,y,theta,ref_x,ref_y,ref_theta; a lidar: timestamp,x,y,z,yaw,ref_x,ref_y,ref_z,ref_yaw and how well the registration pinned the translation: weakest,strongest (the largest and smallest eigenvalues of the covariance of the sensor's position) and weak_x,weak_y,weak_z (the direction of the largest; a straight street between flat sides leaves its length unpinned))");
   cmd->add_flag("--no-prediction", o.no_prediction, "Start each registration at the last pose instead of the last motion repeated");
   cmd->add_flag("--one-start", o.one_start,
                 "Register from the prediction only (by default a second registration starts at the last pose when the "
