@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "simulator.hpp"
@@ -32,27 +33,43 @@ double median_ratio(const eval::VelodyneOdometryReport& r) {
   std::nth_element(ratios.begin(), ratios.begin() + static_cast<std::ptrdiff_t>(ratios.size() / 2), ratios.end());
   return ratios[ratios.size() / 2];
 }
+
+// A simulated drive written to a fresh directory (removed with the object).
+struct SimulatedDrive {
+  fs::path dir;
+  std::string error;
+  SimulatedDrive(const std::string& scenario, int seed, double seconds) {
+    dir = fs::temp_directory_path() / ("trailnav-velodyne-odometry-" + scenario + "-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    sim::SimOptions so;
+    so.scenario = scenario;
+    so.seed = static_cast<std::uint64_t>(seed);
+    so.duration = seconds;
+    so.out = dir.string();
+    error = sim::run_simulation(so).error;
+  }
+  ~SimulatedDrive() { fs::remove_all(dir); }
+};
+
+// The 3D input's settings (the tool's defaults for a lidar).
+eval::VelodyneOdometryOptions lidar_options(const fs::path& dir) {
+  eval::VelodyneOdometryOptions o;
+  o.input = dir.string();
+  o.odometry.voxel = 0.25f;
+  o.odometry.local_scans = 10;
+  o.odometry.keyframe_distance = 1.0;
+  o.odometry.gicp.max_correspondence_distance = 1.0f;
+  return o;
+}
 }  // namespace
 
 TEST(VelodyneOdometry, ASimulatedDriveAgainstItsTruthAndDeskewingHelps) {
-  const fs::path dir = fs::temp_directory_path() / ("trailnav-velodyne-odometry-" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  sim::SimOptions so;
-  so.scenario = "urban";
-  so.seed = 1;
-  so.duration = 30.0;
-  so.out = dir.string();
-  const sim::SimReport sr = sim::run_simulation(so);
-  ASSERT_EQ(sr.error, "");
+  const SimulatedDrive drive("urban", 1, 30.0);
+  ASSERT_EQ(drive.error, "");
   double rpe[2] = {0.0, 0.0};
   for (const bool deskew : {true, false}) {
-    eval::VelodyneOdometryOptions o;
-    o.input = dir.string();
+    eval::VelodyneOdometryOptions o = lidar_options(drive.dir);
     o.deskew = deskew;
-    o.odometry.voxel = 0.25f;
-    o.odometry.local_scans = 10;
-    o.odometry.keyframe_distance = 1.0;
-    o.odometry.gicp.max_correspondence_distance = 1.0f;
     const eval::VelodyneOdometryReport r = eval::run_velodyne_odometry(o);
     ASSERT_EQ(r.error, "");
     std::printf("[ lidar odometry ] %s: %zu revolutions, %.1f m, %.3f %% and %.3f deg/100 m per 10 m, end %.2f m off, "
@@ -74,13 +91,8 @@ TEST(VelodyneOdometry, ASimulatedDriveAgainstItsTruthAndDeskewingHelps) {
   EXPECT_LT(rpe[0], rpe[1]) << "de-skewing should help on a drive";
   {
     // With the wheels' and IMU's motion as the prior: better than they are alone.
-    eval::VelodyneOdometryOptions o;
-    o.input = dir.string();
+    eval::VelodyneOdometryOptions o = lidar_options(drive.dir);
     o.wheel_prior = true;
-    o.odometry.voxel = 0.25f;
-    o.odometry.local_scans = 10;
-    o.odometry.keyframe_distance = 1.0;
-    o.odometry.gicp.max_correspondence_distance = 1.0f;
     const eval::VelodyneOdometryReport r = eval::run_velodyne_odometry(o);
     ASSERT_EQ(r.error, "");
     std::printf("[ lidar odometry ] urban with the wheel prior: %.3f %% and %.3f deg/100 m (wheels alone %.3f %%, %.3f deg/100 m)\n",
@@ -90,7 +102,6 @@ TEST(VelodyneOdometry, ASimulatedDriveAgainstItsTruthAndDeskewingHelps) {
     EXPECT_LT(r.rpe.translation_percent, r.rpe_wheels.translation_percent);
     EXPECT_LT(r.rpe.rotation_deg_per_100m, r.rpe_wheels.rotation_deg_per_100m);
   }
-  fs::remove_all(dir);
 }
 
 // Why lidar odometry fails at the start of `mixed-route` (docs/registration.md):
@@ -99,21 +110,9 @@ TEST(VelodyneOdometry, ASimulatedDriveAgainstItsTruthAndDeskewingHelps) {
 // street hundreds of times less than across it (urban: tens), and the
 // estimate falls behind. The conditioning says so, scan by scan.
 TEST(VelodyneOdometry, AStraightStreetAcrossAnOpenSquareLeavesItsLengthUnpinned) {
-  const fs::path dir = fs::temp_directory_path() / ("trailnav-velodyne-degenerate-" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  sim::SimOptions so;
-  so.scenario = "mixed-route";
-  so.seed = 2;
-  so.duration = 8.0;
-  so.out = dir.string();
-  const sim::SimReport sr = sim::run_simulation(so);
-  ASSERT_EQ(sr.error, "");
-  eval::VelodyneOdometryOptions o;
-  o.input = dir.string();
-  o.odometry.voxel = 0.25f;
-  o.odometry.local_scans = 10;
-  o.odometry.keyframe_distance = 1.0;
-  o.odometry.gicp.max_correspondence_distance = 1.0f;
+  const SimulatedDrive drive("mixed-route", 2, 8.0);
+  ASSERT_EQ(drive.error, "");
+  eval::VelodyneOdometryOptions o = lidar_options(drive.dir);
   const eval::VelodyneOdometryReport r = eval::run_velodyne_odometry(o);
   ASSERT_EQ(r.error, "");
   ASSERT_GT(r.revolutions, 70u);
@@ -148,7 +147,6 @@ TEST(VelodyneOdometry, AStraightStreetAcrossAnOpenSquareLeavesItsLengthUnpinned)
   EXPECT_EQ(w.wheels.size(), w.revolutions);
   EXPECT_LT(w.end_error_m, 0.5);
   EXPECT_GT(w.counters.prior_kept, w.revolutions / 2);
-  fs::remove_all(dir);
 }
 
 // A sequence of point-cloud files, a revolution each: the two consecutive
