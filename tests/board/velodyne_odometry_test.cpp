@@ -171,6 +171,10 @@ TEST(VelodyneOdometry, ASequenceOfKittiScans) {
   EXPECT_LT(step.translation().x(), 1.5);
   EXPECT_LT(std::abs(step.translation().y()), 0.1);
   EXPECT_LT(Eigen::AngleAxisd(step.linear()).angle(), 0.02);
+  // Scans have no wheels to take a prior from: refused, naming what it needs.
+  o.wheel_prior = true;
+  EXPECT_NE(eval::run_velodyne_odometry(o).error.find("--wheel-prior needs a simulated recording"), std::string::npos);
+  o.wheel_prior = false;
   // One file alone is not a sequence.
   o.inputs = {"../shared/data/kitti/000000.bin"};
   EXPECT_NE(eval::run_velodyne_odometry(o).error.find("at least 2 are needed"), std::string::npos);
