@@ -286,8 +286,7 @@ CloudImager::CloudImager(const RingLayout& layout, int layers, CloudImageOptions
       sweep_row_(layout.elevation_deg.size() + 1),
       sweep_order_(layout.elevation_deg.size() + 1),
       held_(layout.elevation_deg.size() * static_cast<std::size_t>(std::max(layout.columns, 0))),
-      held_before_(held_.size()),
-      first_(held_.size(), -1) {
+      held_before_(held_.size()) {
   // Rows: the rings sorted by elevation (row 0 the lowest).
   std::vector<int> order(static_cast<std::size_t>(rings_));
   std::iota(order.begin(), order.end(), 0);
@@ -580,7 +579,7 @@ void CloudImager::fill(const PointCloud& c, velodyne::RangeImage& image, CloudIm
                                distance_[i],
                                az,
                                c.has_time ? static_cast<float>(c.time[i] - t0) : az * seconds_per_rad,
-                               std::clamp(c.intensity[i] * options_.intensity_scale, 0.0f, 255.0f),
+                               scaled_intensity(c.intensity[i]),
                                velodyne::ReturnKind::strongest};
   };
   place_points(
@@ -616,13 +615,11 @@ ScanCells CloudImager::index(const PointCloud& c, CloudImageStats& st, std::span
   st = CloudImageStats{};
   const std::size_t n = c.size;
   const bool inferred = locate(c, st);
+  // Sized on the first call (an imager that only fills images, trailnavd's,
+  // never holds them).
   if (intensity_.size() < n) intensity_.resize(c.capacity());
-  {
-    const float scale = options_.intensity_scale;
-    const float* in = c.intensity.data();
-    float* out = intensity_.data();
-    for (std::size_t i = 0; i < n; ++i) out[i] = std::clamp(in[i] * scale, 0.0f, 255.0f);
-  }
+  if (first_.size() != held_.size()) first_.resize(held_.size());
+  for (std::size_t i = 0; i < n; ++i) intensity_[i] = scaled_intensity(c.intensity[i]);
   // Pass 3 as fill() places the points, with the cell's first point's
   // index where fill() writes the point.
   std::fill(first_.begin(), first_.end(), std::int32_t{-1});

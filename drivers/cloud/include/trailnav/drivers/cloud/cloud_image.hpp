@@ -10,6 +10,7 @@
 // (a few arrays per point, sized then).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -164,6 +165,8 @@ class CloudImager {
 
  private:
   bool locate(const PointCloud& cloud, CloudImageStats& stats) noexcept;
+  // A file's intensity as a cell holds it: scaled to 0..255.
+  float scaled_intensity(float v) const noexcept { return std::clamp(v * options_.intensity_scale, 0.0f, 255.0f); }
   template <class First, class Second>
   void place_points(const PointCloud& cloud, bool inferred, CloudImageStats& stats, std::span<PointPlace> places,
                     First&& first, Second&& second) noexcept;
@@ -194,7 +197,8 @@ class CloudImager {
   std::vector<PassPlace> pass_places_;
   // Points in each cell (row * columns + column) this fill and the last.
   std::vector<std::uint8_t> held_, held_before_;
-  // index(): each cell's first point, and each point's scaled intensity.
+  // index(): each cell's first point, and each point's scaled intensity
+  // (sized by its first call).
   std::vector<std::int32_t> first_;
   std::vector<float> intensity_;
   std::uint64_t scans_ = 0;
