@@ -77,7 +77,7 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
   points.reserve(config.max_points);
   fraction.reserve(config.max_points);
   Eigen::Isometry3d start = Eigen::Isometry3d::Identity();
-  Eigen::Isometry3d wheel_start = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d wheel_start = Eigen::Isometry3d::Identity(), wheel_last = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d smoothed = Eigen::Isometry3d::Identity();
   double busy_s = 0.0;
   const auto on_image = [&](const velodyne::RangeImage& image) -> bool {
@@ -100,14 +100,17 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
         fraction.push_back(s);
       }
     }
-    // The wheels' motion of the lidar since the last revolution's end.
+    // The lidar's pose by the wheels at this revolution's end, and its
+    // motion since the last one's.
     const std::int64_t at = image.end_ns + image.clock_offset_ns;
     std::optional<Eigen::Isometry3d> measured;
-    if (wheels && report.revolutions >= 1) {
-      perception::Pose a, b;
-      wheels->at(report.times_ns.back(), a);
-      wheels->at(at, b);
-      measured = mount.inverse() * isometry_of(a).inverse() * isometry_of(b) * mount;
+    if (wheels) {
+      perception::Pose w;
+      wheels->at(at, w);
+      const Eigen::Isometry3d lidar = isometry_of(w) * mount;
+      if (report.revolutions == 0) wheel_start = lidar;
+      if (report.revolutions >= 1) measured = wheel_last.inverse() * lidar;
+      wheel_last = lidar;
     }
     // The motion over this revolution: the wheels', or the last one's (the
     // revolutions follow each other without a gap).
@@ -141,13 +144,7 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
       report.reference.push_back(ref);
     }
     report.estimate.push_back(start * pose);
-    if (wheels) {
-      perception::Pose w;
-      wheels->at(at, w);
-      const Eigen::Isometry3d lidar = isometry_of(w) * mount;
-      if (report.revolutions == 0) wheel_start = lidar;
-      report.wheels.push_back(start * wheel_start.inverse() * lidar);
-    }
+    if (wheels) report.wheels.push_back(start * wheel_start.inverse() * wheel_last);
     report.conditioning.push_back(odometry.last_conditioning());
     // (Into the reference's frame, as the estimate.)
     report.conditioning.back().direction = start.linear() * report.conditioning.back().direction;

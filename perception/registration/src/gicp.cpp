@@ -23,14 +23,6 @@ const char* check_gicp_config(const GicpConfig& c) noexcept {
 
 namespace detail {
 
-namespace {
-Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
-  return m;
-}
-}  // namespace
-
 bool usable(const GicpConfig& config, const Cloud& source, std::size_t n, const Target& target) noexcept {
   if (target.tree.size() == 0 || n == 0) return false;
   if (config.metric == Metric::plane_to_plane) {

@@ -10,6 +10,13 @@
 
 namespace trailnav::perception::registration::detail {
 
+// [v]×: the cross product with v as a matrix.
+inline Eigen::Matrix3d skew(const Eigen::Vector3d& v) noexcept {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return m;
+}
+
 // The longest step of one iteration (see step()).
 inline constexpr double kMaxStepRotation = 0.2;     // rad
 inline constexpr double kMaxStepTranslation = 0.5;  // m

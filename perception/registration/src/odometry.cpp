@@ -2,6 +2,8 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "gicp_terms.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -75,11 +77,8 @@ Eigen::Isometry3d LidarOdometry::add(std::span<const Point> scan, const Eigen::I
       // The covariance is of a perturbation (ω, v) of the odometry frame
       // about its origin: x + ω × x + v. The sensor's own translation is
       // v' = v + ω × t (t its position), so Cov(v') = J Σ Jᵀ, J = [−[t]×, I].
-      const Eigen::Vector3d t = r.transform.translation();
-      Eigen::Matrix3d tx;
-      tx << 0.0, -t.z(), t.y(), t.z(), 0.0, -t.x(), -t.y(), t.x(), 0.0;
       Eigen::Matrix<double, 3, 6> j;
-      j << -tx, Eigen::Matrix3d::Identity();
+      j << -detail::skew(r.transform.translation()), Eigen::Matrix3d::Identity();
       const Eigen::Matrix3d c = j * r.covariance * j.transpose();
       const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (c + c.transpose()));
       conditioning_.weakest = eig.eigenvalues()(2);

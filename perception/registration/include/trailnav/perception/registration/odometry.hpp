@@ -44,7 +44,9 @@ struct OdometryCounters {
   std::uint64_t not_converged = 0;  // registrations that hit max_iterations or lost their associations
   std::uint64_t iterations = 0;
   std::uint64_t second_start = 0;  // scans whose answer came from the start at the last pose
-  std::uint64_t rejected = 0;  // results 1 m or 0.5 rad from the prediction, or without associations: the last pose kept
+  // Results 1 m or 0.5 rad from the prediction, or without associations:
+  // the measured motion taken when add() was given one, else the last pose kept.
+  std::uint64_t rejected = 0;
   std::uint64_t prior_kept = 0;  // scans with a weakly pinned direction that took the measured motion there
 };
 
@@ -68,9 +70,10 @@ class LidarOdometry {
   // How well the last scan's registration pinned its translation: the
   // largest and smallest eigenvalues of the covariance (the inverse of the
   // objective's Hessian; m² per unit of the objective) of the sensor's
-  // position, and the direction of the largest, in the odometry frame. A ratio of many orders of magnitude is a direction the
-  // scene does not constrain (a straight street between flat sides: along
-  // it). Zeros before the second scan and for a rejected one.
+  // position, and the direction of the largest, in the odometry frame. A
+  // ratio in the hundreds is a direction the scene hardly constrains (a
+  // straight street across an open square: along it, about 500; streets
+  // with buildings 30-70). Zeros before the second scan and for a rejected one.
   struct Conditioning {
     double weakest = 0.0;
     double strongest = 0.0;
