@@ -40,9 +40,11 @@ void window_means_one(const std::int64_t* lo, const std::int64_t* hi, int n, dou
 #if defined(__GNUC__) && defined(__x86_64__)
 // Four at a time, compiled for AVX2 (called only where the CPU has it).
 // AVX2 has no int64 -> double conversion; a difference below 2^51 in
-// magnitude (a window of eleven points would need 10^7 m to reach it)
-// converts exactly by the usual trick: added to the bits of 1.5 * 2^52,
-// whose ulp is 1, then 1.5 * 2^52 taken away again as a double.
+// magnitude converts exactly by the usual trick: added to the bits of
+// 1.5 * 2^52, whose ulp is 1, then 1.5 * 2^52 taken away again as a
+// double. A window's sum is 2^24 times at most 2 * half + 1 coordinates of
+// a revolution (metres from its reference point, within max_range): far
+// below 2^51 for any window a config allows.
 __attribute__((target("avx2"))) void window_means_avx2(const std::int64_t* lo, const std::int64_t* hi, int n,
                                                        double scale, float* out) noexcept {
   const __m256i magic_bits = _mm256_set1_epi64x(0x4338000000000000LL);
@@ -139,36 +141,38 @@ void smooth_rings(RevolutionCloud& cloud, const FeatureParams& params, int first
             sy[q] = ay;
             sz[q] = az;
           }
+          // Near the segment's ends a symmetric window, narrowed so the
+          // average stays centred on the point, one point at a time.
+          const auto narrowed = [&](int j0, int j1) {
+            for (int j = j0; j < j1; ++j) {
+              const int w = std::min({half, j - a, b - 1 - j});
+              if (w == 0) {
+                qx[j] = px[j];
+                qy[j] = py[j];
+                qz[j] = pz[j];
+                continue;
+              }
+              const auto wa = static_cast<std::size_t>(j - w - lo);
+              const auto wb = static_cast<std::size_t>(j + w + 1 - lo);
+              const double scale = kFixedUnit / static_cast<double>(2 * w + 1);
+              qx[j] = static_cast<float>(static_cast<double>(sx[wb] - sx[wa]) * scale);
+              qy[j] = static_cast<float>(static_cast<double>(sy[wb] - sy[wa]) * scale);
+              qz[j] = static_cast<float>(static_cast<double>(sz[wb] - sz[wa]) * scale);
+            }
+          };
           // Where the whole window fits (most points): the means of a run.
           const int m0 = std::max(from, a + half), m1 = std::min(to, b - half);
           if (m0 < m1) {
+            narrowed(from, m0);
             const double scale = kFixedUnit / static_cast<double>(2 * half + 1);
             const auto wa = static_cast<std::size_t>(m0 - half - lo);
             const auto wb = static_cast<std::size_t>(m0 + half + 1 - lo);
             window_means(sx + wa, sx + wb, m1 - m0, scale, qx + m0);
             window_means(sy + wa, sy + wb, m1 - m0, scale, qy + m0);
             window_means(sz + wa, sz + wb, m1 - m0, scale, qz + m0);
-          }
-          for (int j = from; j < to; ++j) {
-            if (j == m0 && m0 < m1) {
-              j = m1 - 1;
-              continue;
-            }
-            // A symmetric window, narrowed near the segment's ends so the
-            // average stays centred on the point.
-            const int w = std::min({half, j - a, b - 1 - j});
-            if (w == 0) {
-              qx[j] = px[j];
-              qy[j] = py[j];
-              qz[j] = pz[j];
-              continue;
-            }
-            const auto wa = static_cast<std::size_t>(j - w - lo);
-            const auto wb = static_cast<std::size_t>(j + w + 1 - lo);
-            const double scale = kFixedUnit / static_cast<double>(2 * w + 1);
-            qx[j] = static_cast<float>(static_cast<double>(sx[wb] - sx[wa]) * scale);
-            qy[j] = static_cast<float>(static_cast<double>(sy[wb] - sy[wa]) * scale);
-            qz[j] = static_cast<float>(static_cast<double>(sz[wb] - sz[wa]) * scale);
+            narrowed(m1, to);
+          } else {
+            narrowed(from, to);
           }
         }
       }
