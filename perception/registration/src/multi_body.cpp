@@ -203,7 +203,9 @@ int MultiBodyGicp::align(const Cloud& query, std::span<const Target* const> bodi
     if (all_converged) break;
   }
   for (std::size_t k = 0; k < nb; ++k) {
-    if (out[k].observed) out[k].covariance = detail::covariance_of(h_[k]);
+    if (!out[k].observed) continue;
+    out[k].covariance = detail::covariance_of(h_[k]);
+    out[k].information = h_[k];
   }
   return iterations;
 }

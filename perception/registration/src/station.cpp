@@ -384,6 +384,15 @@ Eigen::Isometry3d StationLocaliser::add(std::span<const Point> scan, const Eigen
   return pose_;
 }
 
+void StationLocaliser::correct(const Eigen::Isometry3d& pose) {
+  const Eigen::Isometry3f shift = (pose * pose_.inverse()).cast<float>();
+  const std::size_t held = std::min(count_, ring_.size());
+  for (std::size_t j = 0; j < held; ++j) {
+    for (Point& p : ring_[j]) p = shift * p;
+  }
+  pose_ = pose;
+}
+
 void StationLocaliser::local_model(Cloud& out) {
   merged_.clear();
   const Eigen::Isometry3f to_robot = pose_.inverse().cast<float>();

@@ -30,6 +30,10 @@ namespace trailnav::perception::registration {
 struct BodyResult {
   Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();  // query -> object's reference frame
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  // The final normal matrix H = Σ Jᵀ M J itself ((ω, v) order): a planar
+  // problem's is singular out of the plane, and its (ω_z, v_x, v_y) block
+  // inverted is the in-plane covariance (station_task.cpp).
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
   std::size_t correspondences = 0;  // query points associated with it in the last iteration
   bool converged = false;           // its last update below the thresholds
   bool observed = false;            // at least 6 associations in the last iteration

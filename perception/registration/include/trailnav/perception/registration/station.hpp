@@ -136,6 +136,11 @@ class StationLocaliser {
   Eigen::Isometry3d add(std::span<const Point> scan, const Eigen::Isometry3d& odometry);
   // The local model against the surroundings and every object at once.
   StationFix localise();
+  // Moves the local model so that the current pose becomes `pose` (station
+  // frame): after localise(), the surroundings' answer re-anchors a visit
+  // that goes on for longer than its local model, so that its scan-to-scan
+  // drift does not add up.
+  void correct(const Eigen::Isometry3d& pose);
   // One body only: the whole reference as one rigid body (for comparison:
   // chapter 4's reason to be).
   GicpResult localise_single();

@@ -1,0 +1,238 @@
+#include "trailnav/perception/registration/station_task.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <new>
+
+#include <Eigen/LU>
+
+#include "trailnav/runtime/heap_redirect.hpp"
+
+namespace trailnav::perception::registration {
+
+namespace {
+
+double yaw_of(const Eigen::Isometry3d& t) noexcept { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
+
+Eigen::Isometry3d planar(double x, double y, double yaw) noexcept {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  t.translation() = Eigen::Vector3d(x, y, 0.0);
+  return t;
+}
+
+// The pose's covariance in (x, y, yaw). GICP's normal matrix H is the
+// information of the left perturbation δ = (ω, v), T ← exp(δ)·T; a planar
+// problem's is singular out of the plane, so the in-plane block for
+// s = (ω_z, v_x, v_y) is inverted on its own (the covariance given the
+// plane). To first order the position moves by ω × t + v and the heading
+// by ω_z:
+//   [x, y, yaw] = J s,  J = [[−t_y, 1, 0], [t_x, 0, 1], [1, 0, 0]],
+// and Σ = σ̂² J H_ss⁻¹ Jᵀ. H weighs each residual by M as if the laser's
+// error were 1 m (point-to-plane: M = n nᵀ), so it is scaled by the a
+// posteriori variance of the residuals, σ̂² = E / (n − 3) (E: the body's
+// share of the objective at its n final associations). A block that cannot
+// be inverted (too few associations in some direction) gives −1 on the
+// diagonal: unknown.
+std::array<double, 9> planar_covariance(const Eigen::Matrix<double, 6, 6>& h, const Eigen::Vector3d& t,
+                                        double error, std::size_t n) noexcept {
+  constexpr int idx[3] = {2, 3, 4};  // ω_z, v_x, v_y
+  Eigen::Matrix3d hs;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) hs(i, j) = h(idx[i], idx[j]);
+  }
+  std::array<double, 9> a{};
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(hs);
+  if (!lu.isInvertible() || n <= 3) {
+    a[0] = a[4] = a[8] = -1.0;
+    return a;
+  }
+  Eigen::Matrix3d jac;
+  jac << -t.y(), 1.0, 0.0, t.x(), 0.0, 1.0, 1.0, 0.0, 0.0;
+  const double variance = error / static_cast<double>(n - 3);
+  const Eigen::Matrix3d out = variance * (jac * lu.inverse() * jac.transpose());
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) a[static_cast<std::size_t>(3 * i + j)] = out(i, j);
+  }
+  return a;
+}
+
+}  // namespace
+
+void band_scan(const velodyne::RangeImage& image, const RingBand& band, PlanarScan& out) noexcept {
+  out.points.clear();
+  out.dropped = 0;
+  out.stamp_ns = image.reference_end_ns();
+  const std::size_t capacity = out.points.capacity();
+  const int first = std::max(0, band.first_ring), last = std::min(image.rings() - 1, band.last_ring);
+  for (int r = first; r <= last; ++r) {
+    for (int col = 0; col < image.columns(); ++col) {
+      const velodyne::RangeCell& cell = image.at(0, r, col);
+      if (!cell.valid() || cell.distance < band.min_range || cell.distance > band.max_range) continue;
+      if (out.points.size() == capacity) {
+        ++out.dropped;
+        continue;
+      }
+      const Eigen::Vector3f p = band.mount * Eigen::Vector3f(cell.x, cell.y, cell.z);
+      out.points.emplace_back(p.x(), p.y(), 0.0f);
+    }
+  }
+}
+
+StationTask::StationTask(const Station& station, const StationConfig& config, const StationTaskOptions& options,
+                         Mailbox<PlanarScan>* scans, PoseQueue* poses, Mailbox<StationSnapshot>& out)
+    : station_(station),
+      config_(config),
+      options_(options),
+      scans_(scans),
+      poses_(poses),
+      out_(out),
+      band_scan_(config.max_points),
+      arena_(options.arena_bytes),
+      track_(kPoseQueueCapacity) {
+  localiser_.emplace(station, config);
+  c_.arena_capacity = arena_.capacity();
+}
+
+StationTask::~StationTask() {
+  // Whatever the localiser holds from the arena (its local model's k-d
+  // tree) goes back there, not to the heap.
+  heap_redirect::ArenaRedirect redirect(arena_);
+  const heap_redirect::Scope scope(redirect);
+  localiser_.reset();
+}
+
+Eigen::Isometry3d StationTask::motion(std::int64_t stamp_ns) noexcept {
+  if (poses_ != nullptr) {
+    track_.drain(*poses_);
+    Pose now;
+    if (track_.at(stamp_ns, now) != PoseLookup::empty) {
+      const bool had = have_last_pose_;
+      const Pose before = last_pose_;
+      last_pose_ = now;
+      have_last_pose_ = true;
+      if (had) return planar(before.x, before.y, before.yaw).inverse() * planar(now.x, now.y, now.yaw);
+    }
+  }
+  ++c_.without_odometry;
+  return last_step_;
+}
+
+void StationTask::run(const TaskTick&) {
+  const PlanarScan* scan = nullptr;
+  if (revolutions_ != nullptr) {
+    if (const velodyne::RangeImage* image = revolutions_->try_read()) {
+      band_scan(*image, band_, band_scan_);
+      band_scan_.sequence = c_.scans + 1;
+      scan = &band_scan_;
+    }
+  } else if (scans_ != nullptr) {
+    scan = scans_->try_read();
+  }
+  if (scan == nullptr) return;
+  step(*scan);
+  scans_seen_.store(c_.scans, std::memory_order_relaxed);
+  fixes_seen_.store(c_.fixes, std::memory_order_relaxed);
+  lost_seen_.store(c_.lost, std::memory_order_relaxed);
+  visits_seen_.store(c_.visits, std::memory_order_relaxed);
+  without_odometry_seen_.store(c_.without_odometry, std::memory_order_relaxed);
+  arena_failures_seen_.store(c_.arena_failures, std::memory_order_relaxed);
+  dropped_seen_.store(c_.dropped_points, std::memory_order_relaxed);
+  high_water_seen_.store(arena_.high_water(), std::memory_order_relaxed);
+}
+
+void StationTask::step(const PlanarScan& scan) noexcept {
+  ++c_.scans;
+  c_.dropped_points += scan.dropped;
+  const bool silent = in_visit_ && scan.stamp_ns - last_stamp_ns_ > static_cast<std::int64_t>(options_.silence_s * 1e9);
+  last_stamp_ns_ = scan.stamp_ns;
+  heap_redirect::ArenaRedirect redirect(arena_);
+  const heap_redirect::Scope scope(redirect);
+  try {
+    StationLocaliser& loc = *localiser_;
+    if (!in_visit_ || silent) {
+      loc.begin(options_.start);
+      in_visit_ = true;
+      have_last_pose_ = false;
+      last_step_ = Eigen::Isometry3d::Identity();
+      since_fix_ = 0;
+      ++c_.visits;
+      if (poses_ != nullptr) {  // the odometry's pose at the first scan
+        track_.drain(*poses_);
+        have_last_pose_ = track_.at(scan.stamp_ns, last_pose_) != PoseLookup::empty;
+      }
+      last_registered_ = loc.add(scan.points, Eigen::Isometry3d::Identity());
+    } else {
+      const Eigen::Isometry3d before = last_registered_;
+      last_registered_ = loc.add(scan.points, motion(scan.stamp_ns));
+      last_step_ = before.inverse() * last_registered_;
+    }
+    ++since_fix_;
+    if (loc.scans() < static_cast<std::size_t>(config_.local_scans) || since_fix_ < options_.every) return;
+    since_fix_ = 0;
+    const StationFix fix = loc.localise();
+    if (!fix.bodies[0].observed) {
+      ++c_.lost;
+    } else {
+      // The surroundings' answer is the robot's pose in the station frame.
+      loc.correct(fix.bodies[0].transform);
+      last_registered_ = fix.bodies[0].transform;
+    }
+    publish(fix, scan);
+  } catch (const std::bad_alloc&) {
+    // The arena could not serve a k-d tree: the scan is lost, and the
+    // visit begins again from the next one (its local model may be half-built).
+    ++c_.arena_failures;
+    in_visit_ = false;
+  }
+}
+
+void StationTask::publish(const StationFix& fix, const PlanarScan& scan) noexcept {
+  StationSnapshot& s = out_.write_slot();
+  ++c_.fixes;
+  s.stamp_ns = scan.stamp_ns;
+  s.number = c_.fixes;
+  s.scan_sequence = scan.sequence;
+  s.visit = c_.visits;
+  s.local_points = fix.local_points;
+  s.iterations = fix.iterations;
+  const std::size_t n = std::min(s.bodies.size(), fix.bodies.size());
+  for (std::size_t k = 0; k < n; ++k) {
+    const BodyResult& b = fix.bodies[k];
+    StationBodyFix& o = s.bodies[k];
+    const Eigen::Vector3d t = b.transform.translation();
+    o.x = t.x();
+    o.y = t.y();
+    o.yaw = yaw_of(b.transform);
+    o.covariance = planar_covariance(b.information, t, b.error, b.correspondences);
+    o.correspondences = static_cast<std::uint32_t>(b.correspondences);
+    o.observed = b.observed;
+    o.fitness = b.fitness;
+    if (k == 0) {
+      o.moved_x = o.moved_y = o.turned = 0.0;
+    } else {
+      const Eigen::Isometry3d m = fix.moved(k);
+      o.moved_x = m.translation().x();
+      o.moved_y = m.translation().y();
+      o.turned = yaw_of(m);
+    }
+  }
+  out_.publish();
+  if (notify_ != nullptr) notify_->notify();
+}
+
+StationCounters StationTask::counters() const noexcept {
+  StationCounters c;
+  c.scans = scans_seen_.load(std::memory_order_relaxed);
+  c.fixes = fixes_seen_.load(std::memory_order_relaxed);
+  c.lost = lost_seen_.load(std::memory_order_relaxed);
+  c.visits = visits_seen_.load(std::memory_order_relaxed);
+  c.without_odometry = without_odometry_seen_.load(std::memory_order_relaxed);
+  c.arena_failures = arena_failures_seen_.load(std::memory_order_relaxed);
+  c.dropped_points = dropped_seen_.load(std::memory_order_relaxed);
+  c.arena_high_water = high_water_seen_.load(std::memory_order_relaxed);
+  c.arena_capacity = c_.arena_capacity;
+  return c;
+}
+
+}  // namespace trailnav::perception::registration
