@@ -150,6 +150,23 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
                 head, stamp_s(m.header.stamp), m.header.frame_id, m.frame_sequence, m.database_index,
                 stamp_s(m.database_stamp), m.probability, m.peak, static_cast<unsigned long long>(m.steps), m.lag_frames,
                 m.chain_length, m.in_sequence ? " (in sequence)" : " (not in a sequence)");
+  } else if (r.type == &trailnav_msgs_msg_dds__StationFix__desc) {
+    const auto& f = *static_cast<const trailnav_msgs_msg_dds__StationFix_*>(r.sample);
+    std::printf("%s  stamp %.3f  %s '%s' fix %llu (visit %llu, %u local points): robot x %.3f y %.3f m, yaw %.2f deg%s\n", head,
+                stamp_s(f.header.stamp), f.header.frame_id, f.station, static_cast<unsigned long long>(f.fix_number),
+                static_cast<unsigned long long>(f.visit), f.local_points, f.robot_x, f.robot_y, f.robot_yaw * 180.0 / M_PI,
+                f.surroundings_observed ? "" : " (surroundings not observed)");
+    for (std::uint32_t k = 0; k < f.objects._length; ++k) {
+      const auto& o = f.objects._buffer[k];
+      std::printf("    %s (%s): centre moved %.1f mm, turned %.2f deg, %u associations%s\n", o.name, o.frame_id,
+                  o.centre_moved * 1e3, o.turned * 180.0 / M_PI, o.correspondences, o.observed ? "" : " (not observed)");
+    }
+  } else if (r.type == &sensor_msgs_msg_dds__LaserScan__desc) {
+    const auto& l = *static_cast<const sensor_msgs_msg_dds__LaserScan_*>(r.sample);
+    std::printf("%s  stamp %.3f  %s: %u beams from %.1f to %.1f deg, ranges %.2f-%.2f m\n", head, stamp_s(l.header.stamp),
+                l.header.frame_id, l.ranges._length, static_cast<double>(l.angle_min) * 180.0 / M_PI,
+                static_cast<double>(l.angle_max) * 180.0 / M_PI, static_cast<double>(l.range_min),
+                static_cast<double>(l.range_max));
   } else if (r.type == &geographic_msgs_msg_dds__GeoPoseStamped__desc) {
     const auto& g = *static_cast<const geographic_msgs_msg_dds__GeoPoseStamped_*>(r.sample);
     std::printf("%s  stamp %.3f  lat %.7f lon %.7f alt %.2f m\n", head, stamp_s(g.header.stamp), g.pose.position.latitude,
@@ -286,7 +303,8 @@ void add_echo_command(CLI::App& app) {
                                  "Topics: trailnav/obstacle_map, trailnav/terrain_map, trailnav/terrain_cost, trailnav/traversability, trailnav/pose, "
                                  "trailnav/utm_pose, trailnav/fix, trailnav/subgoal, trailnav/subgoal_path, "
                                  "trailnav/navigation_status, tf, tf_static, odom, diagnostics, and when configured "
-                                 "trailnav/obstacle_map_coarse and trailnav/points; and the order topics "
+                                 "trailnav/obstacle_map_coarse, trailnav/points, trailnav/place_match, trailnav/place_pose, "
+                                 "trailnav/station and trailnav/station/<body>; and the order topics "
                                  "trailnav/goal, trailnav/geo_goal, trailnav/cancel (docs/dds.md). Exit 1 when nothing arrived.");
   cmd->add_option("topic", o->topic, "Topic name without the rt/ prefix, e.g. trailnav/obstacle_map")->required();
   cmd->add_option("--png", o->png_dir, "Save every map (obstacle map, terrain map, cost layers) as DIR/<topic>-<n>.png");

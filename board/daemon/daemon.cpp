@@ -1,5 +1,6 @@
 #include "daemon.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -207,6 +208,66 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       d->pose_->set_map_correction(d->map_corrections_.get());
     }
   }
+  if (config.station) {
+    // The station: its file, its bodies' covariances and trees now; the
+    // task's arena and the localiser's buffers in its constructor below.
+    namespace reg = perception::registration;
+    const StationSection& sc = *config.station;
+    auto loaded = reg::load_station(sc.file);
+    if (!loaded.station) return fail("station: " + loaded.error);
+    reg::BuiltStation built = reg::station_from_file(*loaded.station, sc.config);
+    if (!built.error.empty()) return fail("station: " + sc.file + ": " + built.error);
+    for (const std::string& name : built.station.names) {
+      // Each body's name becomes a topic (trailnav/station/<name>) and a frame.
+      const bool usable = !name.empty() && std::all_of(name.begin(), name.end(), [](char ch) {
+        return (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '_';
+      });
+      if (!usable) {
+        return fail("station: " + sc.file + ": body '" + name + "': its name names a DDS topic and a frame, so it may " +
+                    "hold only letters, digits and '_' (teach it again with another name in the objects' YAML)");
+      }
+    }
+    d->station_ = std::move(built.station);
+    d->station_name_ = loaded.station->name;
+    d->station_out_ = std::make_unique<Mailbox<reg::StationSnapshot>>(d->station_->bodies.size());
+    if (sc.input == StationSection::Input::laserscan) {
+      d->station_scans_ = std::make_unique<Mailbox<reg::PlanarScan>>(sc.config.max_points);
+    }
+    if (d->pose_ && sc.use_pose) {
+      d->station_poses_ = std::make_unique<perception::PoseQueue>();
+      d->pose_->add_pose_output(d->station_poses_.get());
+    }
+    d->station_task_ = std::make_unique<reg::StationTask>(*d->station_, sc.config, sc.task, d->station_scans_.get(),
+                                                          d->station_poses_.get(), *d->station_out_);
+    if (sc.input == StationSection::Input::velodyne) {
+      reg::RingBand band = sc.band;
+      if (!sc.band_mount_given && config.obstacles) {
+        // The lidar's own mount, as the obstacle map takes it.
+        constexpr double kDeg = 3.14159265358979323846 / 180.0;
+        const perception::MountParams& m = config.obstacles->mount;
+        const Eigen::Matrix3d r = (Eigen::AngleAxisd(m.rotation_deg[2] * kDeg, Eigen::Vector3d::UnitZ()) *
+                                   Eigen::AngleAxisd(m.rotation_deg[1] * kDeg, Eigen::Vector3d::UnitY()) *
+                                   Eigen::AngleAxisd(m.rotation_deg[0] * kDeg, Eigen::Vector3d::UnitX()))
+                                      .toRotationMatrix();
+        band.mount.linear() = r.cast<float>();
+        band.mount.translation() = Eigen::Vector3f(static_cast<float>(m.translation[0]),
+                                                   static_cast<float>(m.translation[1]),
+                                                   static_cast<float>(m.translation[2]));
+      }
+      // The last of the lidar's revolution readers (robot_config.cpp counts it).
+      const std::size_t reader = static_cast<std::size_t>(config.lidar->driver.revolution_readers - 1);
+      d->station_task_->set_revolutions(&d->lidar_revolutions(reader), band);
+    }
+    std::size_t points = 0;
+    for (std::size_t k = 0; k < d->station_->bodies.size(); ++k) points += d->station_->bodies[k].cloud.size();
+    TN_LOG_INFO("station: %s ('%s'): %zu bodies, %zu reference points; planar scans from %s; a visit begins at (%.2f, "
+                "%.2f) in the frame '%s', a fix every %d scan(s) once %d are in; odometry between scans %s",
+                sc.file.c_str(), d->station_name_.c_str(), d->station_->bodies.size(), points,
+                sc.input == StationSection::Input::laserscan ? dds::ros_topic(sc.laser.topic).c_str()
+                                                             : "the Velodyne's ring band",
+                sc.task.start.translation().x(), sc.task.start.translation().y(), sc.frame.c_str(), sc.task.every,
+                sc.config.local_scans, d->station_poses_ ? "from the pose thread" : "from the last step (constant velocity)");
+  }
   if (config.obstacles) {
     const velodyne::RangeImageShape shape = d->lidar_shape();
     auto made = perception::ObstaclePipeline::create(*config.obstacles, shape);
@@ -322,6 +383,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   inputs.navigation = d->navigation_out_.get();
   inputs.mapping = d->mapping_out_.get();
   inputs.place = d->place_out_.get();
+  inputs.station = d->station_out_.get();
   if (d->obstacles_ && config.dds.publisher.points_rate_hz > 0.0) {
     // Viewers' points: every point a revolution can have, allocated now.
     const velodyne::RangeImageShape shape = d->lidar_shape();
@@ -338,6 +400,11 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   inputs.health = [self](dds::DiagnosticsMessage& m, Nanos now) { self->fill_health(m, now); };
   dds::PublisherOptions popt = config.dds.publisher;
   if (config.place) popt.place_frame = config.place->frame;
+  if (d->station_) {
+    popt.station_name = d->station_name_;
+    popt.station_frame = config.station->frame;
+    popt.station_bodies = d->station_->names;
+  }
   // tf_static: where each sensor sits on the robot (the config's mounts).
   constexpr double kDeg = 3.14159265358979323846 / 180.0;
   if (config.lidar) {
@@ -379,6 +446,12 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   if (d->navigation_) d->navigation_->set_notify(&d->publisher_->wakeup());
   if (d->mapping_) d->mapping_->set_notify(&d->publisher_->wakeup());
   if (d->place_) d->place_->set_notify(&d->publisher_->wakeup());
+  if (d->station_task_) d->station_task_->set_notify(&d->publisher_->wakeup());
+  if (d->station_scans_) {
+    auto reader = dds::LaserScanReader::create(*d->domain_, config.station->laser, *d->station_scans_);
+    if (!reader.reader) return fail("station: " + reader.error);
+    d->scan_reader_ = std::move(reader.reader);
+  }
 
   // The task table, in a fixed order.
   auto add = [&](const char* name, Task* task, TaskEvent* event) -> bool {
@@ -396,7 +469,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       !add("obstacles", d->obstacles_.get(), &d->revolution_event_) || !add("terrain", d->terrain_.get(), nullptr) ||
       !add("navigation", d->navigation_.get(), nullptr) || !add("mapping", d->mapping_.get(), nullptr) ||
       !add("demonstration", d->trav_training_.get(), nullptr) || !add("camera", d->camera_.get(), nullptr) ||
-      !add("place", d->place_.get(), nullptr)) {
+      !add("place", d->place_.get(), nullptr) || !add("station", d->station_task_.get(), nullptr)) {
     return result;
   }
   d->last_runs_.assign(d->scheduler_->task_count(), 0);
@@ -408,6 +481,7 @@ Status Daemon::start() {
   publisher_->start();
   if (command_reader_) command_reader_->start();
   if (cloud_reader_) cloud_reader_->start();
+  if (scan_reader_) scan_reader_->start();
   if (Status st = scheduler_->start(); !st) {
     publisher_->stop();
     return st;
@@ -423,6 +497,7 @@ void Daemon::stop() {
   if (gpio_) gpio_->set_ready(false);
   if (command_reader_) command_reader_->stop();
   if (cloud_reader_) cloud_reader_->stop();
+  if (scan_reader_) scan_reader_->stop();
   const bool was_running = scheduler_ && scheduler_->running();
   if (was_running) scheduler_->stop();
   if (was_running && trav_trainer_) {
@@ -704,6 +779,29 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     if (tunnel) {
       m.value("tunnel_incomplete", s.counters.tunnel.incomplete);
       m.value("tunnel_malformed", s.counters.tunnel.malformed);
+    }
+  }
+  if (station_task_) {
+    const perception::registration::StationCounters c = station_task_->counters();
+    const char* text = c.scans == 0 ? "no scan yet" : c.fixes == 0 ? "filling the local model" : "localising";
+    const bool bad = c.arena_failures > 0 || (c.fixes > 0 && c.lost == c.fixes);
+    m.begin(bad ? L::error : (c.fixes == 0 || c.lost > 0 ? L::warn : L::ok), "trailnavd: station", text,
+            config_.station->file);
+    m.value("scans", c.scans);
+    m.value("fixes", c.fixes);
+    m.value("lost", c.lost);
+    m.value("visits", c.visits);
+    m.value("without_odometry", c.without_odometry);
+    m.value("arena_failures", c.arena_failures);
+    m.value("dropped_points", c.dropped_points);
+    m.value("arena_high_water_kb", static_cast<std::uint64_t>(c.arena_high_water / 1024));
+    m.value("arena_kb", static_cast<std::uint64_t>(c.arena_capacity / 1024));
+    if (scan_reader_) {
+      const dds::LaserScanStats l = scan_reader_->stats();
+      m.value("laser_scans", l.messages);
+      m.value("laser_refused", l.refused);
+      m.value("laser_last_error", l.last_error);
+      m.value("laser_returns", l.returns);
     }
   }
   if (place_) {

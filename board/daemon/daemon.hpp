@@ -11,6 +11,9 @@
 //                                            constraints, SMF solves (docs/slam.md)
 //   demonstration                         -- task on normal scheduling: the traversability
 //                                            model trained from a driven demonstration, saved
+//   station                               -- task on normal scheduling: planar scans against a
+//                                            taught station, a pose per object (chapter 4)
+//   laser scan reader                     -- plain thread: sensor_msgs/LaserScan in (station.input: laserscan)
 //   publisher                             -- plain thread, the only one that writes to DDS
 //   command reader                        -- plain thread: goals and cancels in (DDS readers),
 //                                            queued for the navigation task
@@ -40,6 +43,7 @@
 #include "trailnav/perception/place/place_task.hpp"
 #include "trailnav/perception/obstacle_task.hpp"
 #include "trailnav/perception/random_forest.hpp"
+#include "trailnav/perception/registration/station_task.hpp"
 #include "trailnav/perception/terrain_task.hpp"
 #include "trailnav/perception/trav_online.hpp"
 #include "trailnav/runtime/broadcast.hpp"
@@ -89,6 +93,10 @@ class Daemon {
   std::uint16_t camera_tunnel_port() const noexcept { return camera_ ? camera_->status().tunnel_port : 0; }
   // The place task's counters (frames taken, answers); zeros without one.
   perception::place::PlaceCounters place_counters() const noexcept { return place_ ? place_->counters() : perception::place::PlaceCounters{}; }
+  // The station task's counters; zeros without one.
+  perception::registration::StationCounters station_counters() const noexcept {
+    return station_task_ ? station_task_->counters() : perception::registration::StationCounters{};
+  }
   DaemonSummary summary() const;
   // Task statistics, one line per task.
   std::string task_report() const;
@@ -154,6 +162,13 @@ class Daemon {
   std::unique_ptr<Mailbox<slam::MappingSnapshot>> mapping_out_;
   std::unique_ptr<Mailbox<pose::MapCorrection>> map_corrections_;  // mapping thread -> pose thread
   std::unique_ptr<slam::MappingTask> mapping_;
+  // The station: its bodies (the task keeps a reference), scans in, fixes out.
+  std::optional<perception::registration::Station> station_;
+  std::string station_name_;
+  std::unique_ptr<Mailbox<perception::registration::PlanarScan>> station_scans_;
+  std::unique_ptr<Mailbox<perception::registration::StationSnapshot>> station_out_;
+  std::unique_ptr<perception::PoseQueue> station_poses_;
+  std::unique_ptr<perception::registration::StationTask> station_task_;
   std::unique_ptr<dds::Domain> domain_;
   std::unique_ptr<dds::DdsPublisher> publisher_;
   std::unique_ptr<nav::NavCommandQueue> commands_;
@@ -161,6 +176,8 @@ class Daemon {
   std::unique_ptr<dds::CommandReader> command_reader_;
   // lidar.input: pointcloud2 (else lidar_). After domain_: its readers go before the domain does.
   std::unique_ptr<dds::CloudReader> cloud_reader_;
+  // station.input: laserscan. After domain_, as the cloud reader.
+  std::unique_ptr<dds::LaserScanReader> scan_reader_;
   std::vector<std::uint64_t> last_runs_;
   // Set on the main thread after the publisher has started; its health reads it.
   std::atomic<bool> armed_{false};

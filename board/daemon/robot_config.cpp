@@ -248,6 +248,62 @@ PlaceSection parse_place(const ConfigNode& n) {
   return p;
 }
 
+StationSection parse_station(const ConfigNode& n) {
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  StationSection st;
+  st.file = resolve(n, n.string("file"));
+  if (st.file.empty()) n.fail("file", "a station file (trailnav station teach --out) is needed");
+  st.input = n.choice("input", {"laserscan", "velodyne"}, "laserscan") == "velodyne" ? StationSection::Input::velodyne
+                                                                                    : StationSection::Input::laserscan;
+  st.frame = n.string("frame", st.frame);
+  if (st.frame.empty()) n.fail("frame", "an empty frame name");
+  st.config.local_scans = static_cast<int>(n.integer("local_scans", 1, 100, st.config.local_scans));
+  st.config.max_points = static_cast<std::size_t>(n.integer("max_points", 16, 65536, static_cast<long long>(st.config.max_points)));
+  st.task.every = static_cast<int>(n.integer("every", 1, 1000, st.task.every));
+  st.task.silence_s = n.number("silence_s", 0.05, 3600.0, st.task.silence_s);
+  st.task.arena_bytes = static_cast<std::size_t>(n.integer("arena_mb", 1, 4096, static_cast<long long>(st.task.arena_bytes >> 20))) << 20;
+  st.use_pose = n.boolean("use_pose", st.use_pose);
+  if (n.has("start")) {
+    const auto v = n.number_list("start", -1e6, 1e6);
+    if (v.size() != 3) n.fail("start", "needs [x, y, yaw_deg]: the robot's pose in the station frame where a visit begins");
+    st.task.start = Eigen::Isometry3d::Identity();
+    st.task.start.linear() = Eigen::AngleAxisd(v[2] * kDeg, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    st.task.start.translation() = Eigen::Vector3d(v[0], v[1], 0.0);
+  }
+  std::array<double, 3> mount{0.0, 0.0, 0.0};
+  if (n.has("mount")) {
+    const auto v = n.number_list("mount", -100.0, 360.0);
+    if (v.size() != 3) n.fail("mount", "needs [x, y, yaw_deg]: the scanner's place on the robot");
+    mount = {v[0], v[1], v[2]};
+    st.band_mount_given = true;
+  }
+  const double min_range = n.number("min_range", 0.0, 1000.0, 0.3);
+  const double max_range = n.number("max_range", 0.1, 1000.0, 20.0);
+  if (max_range <= min_range) n.fail("max_range", "must be larger than min_range");
+  if (st.input == StationSection::Input::laserscan) {
+    st.laser.topic = n.string("topic", st.laser.topic);
+    if (st.laser.topic.empty()) n.fail("topic", "an empty topic name");
+    st.laser.max_beams = st.config.max_points;
+    st.laser.max_range = static_cast<float>(max_range);
+    st.laser.mount_x = mount[0];
+    st.laser.mount_y = mount[1];
+    st.laser.mount_yaw = mount[2] * kDeg;
+  } else {
+    const auto rings = n.has("rings") ? n.number_list("rings", 0.0, 255.0) : std::vector<double>{7.0, 8.0};
+    if (rings.size() != 2 || rings[1] < rings[0]) n.fail("rings", "needs [first, last]: the band of rings flattened into the plane");
+    st.band.first_ring = static_cast<int>(rings[0]);
+    st.band.last_ring = static_cast<int>(rings[1]);
+    st.band.min_range = static_cast<float>(min_range);
+    st.band.max_range = static_cast<float>(max_range);
+    st.band.mount = Eigen::Isometry3f::Identity();
+    st.band.mount.linear() = Eigen::AngleAxisf(static_cast<float>(mount[2] * kDeg), Eigen::Vector3f::UnitZ()).toRotationMatrix();
+    st.band.mount.translation() = Eigen::Vector3f(static_cast<float>(mount[0]), static_cast<float>(mount[1]), 0.0f);
+  }
+  if (const std::string e = perception::registration::check_station_config(st.config); !e.empty()) n.fail("local_scans", e);
+  n.reject_unknown_keys();
+  return st;
+}
+
 pose::PoseEstimatorOptions parse_pose(const ConfigNode& n, bool& feed_obstacles, bool& feed_terrain,
                                       perception::PoseWait& wait) {
   pose::PoseEstimatorOptions o;
@@ -452,12 +508,28 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
     if (!c.pose) root.fail("mapping", "the map is built from the pose thread's odometry: add a 'pose' section");
     c.mapping = parse_mapping(*n, c.gps.has_value(), *c.pose);
   }
+  if (auto n = root.optional_map("station")) {
+    c.station = parse_station(*n);
+    if (c.station->input == StationSection::Input::velodyne) {
+      if (!c.lidar || c.lidar->cloud) {
+        root.fail("station", "input: velodyne flattens a band of the Velodyne's rings: add a 'lidar' section with "
+                             "Velodyne packets (or take input: laserscan)");
+      }
+      const int rings = velodyne::model_info(c.lidar->model).lasers;
+      if (c.station->band.last_ring >= rings) {
+        n->fail("rings", "ring " + std::to_string(c.station->band.last_ring) + " is beyond the " +
+                             std::string(velodyne::model_info(c.lidar->model).name) + "'s " + std::to_string(rings) +
+                             " rings (0 to " + std::to_string(rings - 1) + ")");
+      }
+    }
+  }
   // The terrain thread reads the revolutions itself only without the
   // obstacle thread, or when the two register with different poses (else it
   // takes the obstacle thread's aligned points: RobotConfig::terrain_shares_alignment()).
   if (c.lidar) {
     c.lidar->driver.revolution_readers =
-        std::max(1, (c.obstacles ? 1 : 0) + (c.terrain && !c.terrain_shares_alignment() ? 1 : 0));
+        std::max(1, (c.obstacles ? 1 : 0) + (c.terrain && !c.terrain_shares_alignment() ? 1 : 0) +
+                        (c.station && c.station->input == StationSection::Input::velodyne ? 1 : 0));
     // The obstacle thread, working on each revolution while it arrives, is
     // woken every quarter turn (every 1/32 in the last quarter, and at its
     // end) with the lidar's progress: each wake-up costs more than the work
@@ -489,7 +561,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                         {"mapping", c.mapping.has_value(), TaskKind::periodic},
                         {"demonstration", c.traversability && c.traversability->demonstration, TaskKind::periodic},
                         {"camera", c.camera.has_value(), TaskKind::periodic},
-                        {"place", c.place.has_value(), TaskKind::periodic}};
+                        {"place", c.place.has_value(), TaskKind::periodic},
+                        {"station", c.station.has_value(), TaskKind::periodic}};
   if (root.is_map("tasks")) {
     // A preset: the measured table of a lidar model, for the parts configured.
     const ConfigNode t = root.map("tasks");
@@ -526,7 +599,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
                                   [&](const Part& p) { return p.configured && t.name == p.name; });
     if (!used) {
       root.fail("tasks", "task '" + t.name + "' has nothing to run: its section is missing, or it is not one of "
-                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping, demonstration, camera, place");
+                         "lidar, gps, imu, can, gpio, pose, obstacles, terrain, navigation, mapping, demonstration, camera, place, station");
     }
   }
   root.reject_unknown_keys();

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "cloud_reader.hpp"
+#include "scan_reader.hpp"
 #include "commands.hpp"
 #include "publisher.hpp"
 #include "trailnav/drivers/camera/camera_driver.hpp"
@@ -64,6 +65,20 @@ struct PlaceSection {
   pose::PlaceUseOptions pose;  // pose_measurement and its thresholds
 };
 
+// The station task (docs/registration.md "In trailnavd"): a taught station
+// file, where its planar scans come from, and where a visit begins.
+struct StationSection {
+  std::string file;  // trailnav station teach --out
+  enum class Input { laserscan, velodyne } input = Input::laserscan;
+  dds::LaserScanOptions laser;                    // input: laserscan (topic, max_range, mount)
+  perception::registration::RingBand band;        // input: velodyne (rings, ranges, mount)
+  bool band_mount_given = false;                  // else the lidar's mount (obstacles.mount)
+  perception::registration::StationConfig config; // local_scans, max_points
+  perception::registration::StationTaskOptions task;  // start, every, silence_s, arena
+  std::string frame = "station";
+  bool use_pose = true;  // the pose thread's odometry between scans, when there is a 'pose' section
+};
+
 struct DdsSection {
   std::uint32_t domain = 0;
   std::string cyclone_config;  // file; empty: the built-in loopback configuration
@@ -97,6 +112,7 @@ struct RobotConfig {
   perception::PoseWait pose_wait;  // how the obstacle and terrain threads wait for a late pose
   std::optional<nav::NavigationSection> navigation;
   std::optional<slam::MappingOptions> mapping;  // online mapping (docs/slam.md "Online mapping")
+  std::optional<StationSection> station;        // localisation relative to moved objects (chapter 4)
   DdsSection dds;
 
   // The terrain thread registers the points the obstacle thread aligned

@@ -185,6 +185,76 @@ void PlaceMessages::fill(const perception::place::PlaceSnapshot& s) noexcept {
   pose_.pose.covariance[35] = s.var_yaw;
 }
 
+// --- Station ---
+
+StationMessages::StationMessages(std::string_view station, std::string_view frame,
+                                 const std::vector<std::string>& body_names)
+    : names_(body_names.size()),
+      frames_(body_names.size()),
+      objects_(body_names.empty() ? 0 : body_names.size() - 1),
+      poses_(body_names.size()) {
+  station_.set(station);
+  frame_.set(frame);
+  fix_.header.frame_id = frame_.c_str();
+  fix_.station = station_.c_str();
+  for (std::size_t k = 0; k < body_names.size(); ++k) {
+    names_[k].set(body_names[k]);
+    frames_[k].set(k == 0 ? std::string(frame) : std::string(frame) + "/" + body_names[k]);
+    poses_[k] = {};
+    poses_[k].header.frame_id = frames_[k].c_str();
+    poses_[k].pose.pose.orientation.w = 1.0;
+    if (k > 0) {
+      objects_[k - 1] = {};
+      objects_[k - 1].name = names_[k].c_str();
+      objects_[k - 1].frame_id = frames_[k].c_str();
+    }
+  }
+  fix_.objects._buffer = objects_.data();
+  fix_.objects._length = fix_.objects._maximum = static_cast<std::uint32_t>(objects_.size());
+  fix_.objects._release = false;
+}
+
+void StationMessages::fill(const perception::registration::StationSnapshot& s) noexcept {
+  fix_.header.stamp = to_time(s.stamp_ns);
+  fix_.fix_number = s.number;
+  fix_.visit = s.visit;
+  fix_.local_points = static_cast<std::uint32_t>(s.local_points);
+  const std::size_t n = std::min(s.bodies.size(), poses_.size());
+  if (n > 0) {
+    const perception::registration::StationBodyFix& w = s.bodies[0];
+    fix_.surroundings_observed = w.observed;
+    fix_.robot_x = w.x;
+    fix_.robot_y = w.y;
+    fix_.robot_yaw = w.yaw;
+  }
+  for (std::size_t k = 0; k < n; ++k) {
+    const perception::registration::StationBodyFix& b = s.bodies[k];
+    geometry_msgs_msg_dds__PoseWithCovarianceStamped_& p = poses_[k];
+    p.header.stamp = fix_.header.stamp;
+    p.pose.pose.position = {b.x, b.y, 0.0};
+    p.pose.pose.orientation = to_quaternion(0.0, 0.0, b.yaw);
+    // Row-major 6 x 6 over (x, y, z, roll, pitch, yaw): the measured x, y
+    // and yaw block, the rest not measured.
+    std::fill(std::begin(p.pose.covariance), std::end(p.pose.covariance), 0.0);
+    constexpr int at[3] = {0, 1, 5};
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        p.pose.covariance[6 * at[i] + at[j]] = b.covariance[static_cast<std::size_t>(3 * i + j)];
+      }
+    }
+    p.pose.covariance[14] = p.pose.covariance[21] = p.pose.covariance[28] = 1e6;
+    if (k == 0) continue;
+    trailnav_msgs_msg_dds__StationObject_& o = objects_[k - 1];
+    o.observed = b.observed;
+    o.correspondences = b.correspondences;
+    o.fitness = b.fitness;
+    o.moved_x = b.moved_x;
+    o.moved_y = b.moved_y;
+    o.turned = b.turned;
+    o.centre_moved = b.centre_moved;
+  }
+}
+
 UtmFixMessages::UtmFixMessages(std::string_view fix_frame_id) {
   fix_frame_.set(fix_frame_id);
   utm_frame_.set("utm");

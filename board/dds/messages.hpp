@@ -21,6 +21,7 @@
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"
 #include "trailnav/perception/place/place_task.hpp"
+#include "trailnav/perception/registration/station_task.hpp"
 #include "trailnav/perception/terrain_class_map.hpp"
 #include "trailnav_msgs.h"
 
@@ -141,6 +142,31 @@ class PlaceMessages {
   FixedString<64> frame_;
   trailnav_msgs_msg_dds__PlaceMatch_ match_{};
   geometry_msgs_msg_dds__PoseWithCovarianceStamped_ pose_{};
+};
+
+// The station task's answer (docs/registration.md "In trailnavd"):
+// trailnav_msgs/StationFix in the station frame, and per body a
+// geometry_msgs/PoseWithCovarianceStamped of the robot in that body's frame
+// (the surroundings': the station frame; an object's: <frame>/<name>, the
+// station frame as that object now lies), z, roll and pitch not measured
+// (variance 1e6). Names are cut to 63 characters, frames to 135.
+class StationMessages {
+ public:
+  StationMessages(std::string_view station, std::string_view frame, const std::vector<std::string>& body_names);
+  StationMessages(const StationMessages&) = delete;
+  StationMessages& operator=(const StationMessages&) = delete;
+  void fill(const perception::registration::StationSnapshot& s) noexcept;
+  trailnav_msgs_msg_dds__StationFix_& fix() noexcept { return fix_; }
+  geometry_msgs_msg_dds__PoseWithCovarianceStamped_& pose(std::size_t body) noexcept { return poses_[body]; }
+  std::size_t bodies() const noexcept { return poses_.size(); }
+
+ private:
+  FixedString<64> station_, frame_;
+  std::vector<FixedString<64>> names_;     // per body
+  std::vector<FixedString<136>> frames_;  // per body
+  std::vector<trailnav_msgs_msg_dds__StationObject_> objects_;  // bodies 1..
+  std::vector<geometry_msgs_msg_dds__PoseWithCovarianceStamped_> poses_;
+  trailnav_msgs_msg_dds__StationFix_ fix_{};
 };
 
 // A rigid transform parent -> child as REP 105 and tf2 mean it: the child

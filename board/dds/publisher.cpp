@@ -88,6 +88,16 @@ DdsPublisher::Created DdsPublisher::create(const Domain& domain, Clock& clock, c
     make(p->place_match_writer_, trailnav_msgs_msg_dds__PlaceMatch__desc, options.topics.place_match, {true, 1});
     make(p->place_pose_writer_, geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc, options.topics.place_pose, {true, 1});
   }
+  if (p->inputs_.station != nullptr) {
+    // Reliable, keep last 1: the newest fix, as the pose topics.
+    p->station_msg_.emplace(options.station_name, options.station_frame, options.station_bodies);
+    make(p->station_writer_, trailnav_msgs_msg_dds__StationFix__desc, options.topics.station_fix, {true, 1});
+    p->station_pose_writers_.resize(options.station_bodies.size());
+    for (std::size_t k = 0; k < options.station_bodies.size(); ++k) {
+      make(p->station_pose_writers_[k], geometry_msgs_msg_dds__PoseWithCovarianceStamped__desc,
+           options.topics.station_pose_prefix + options.station_bodies[k], {true, 1});
+    }
+  }
   make(p->health_writer_, diagnostic_msgs_msg_dds__DiagnosticArray__desc, options.topics.health, {true, 4});
   if (options.publish_tf) {
     // As ROS 2's tf2 does: rt/tf reliable, volatile, keep last 100;
@@ -137,6 +147,7 @@ PublisherStats DdsPublisher::stats() const noexcept {
   s.point_clouds = point_clouds_.load(std::memory_order_relaxed);
   s.keyframe_paths = keyframe_paths_.load(std::memory_order_relaxed);
   s.place_matches = place_matches_.load(std::memory_order_relaxed);
+  s.station_fixes = station_fixes_.load(std::memory_order_relaxed);
   s.lidar_stale = lidar_stale_.load(std::memory_order_relaxed);
   return s;
 }
@@ -162,6 +173,7 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
   if (points_writer_) health_msg_.value("point_clouds", s.point_clouds);
   if (keyframe_path_writer_) health_msg_.value("keyframe_paths", s.keyframe_paths);
   if (place_match_writer_) health_msg_.value("place_matches", s.place_matches);
+  if (station_writer_) health_msg_.value("station_fixes", s.station_fixes);
   if (tf_writer_) {
     health_msg_.value("tf_messages", s.transforms);
     health_msg_.value("odometry", s.odometry);
@@ -373,6 +385,16 @@ void DdsPublisher::loop() noexcept {
         const bool a = place_match_writer_->write(&place_msg_->match());
         const bool b = place_pose_writer_->write(&place_msg_->pose());
         count(a && b, place_matches_);
+      }
+    }
+    if (station_writer_) {
+      if (const perception::registration::StationSnapshot* ss = inputs_.station->try_read()) {
+        station_msg_->fill(*ss);
+        bool ok = station_writer_->write(&station_msg_->fix());
+        for (std::size_t k = 0; k < station_pose_writers_.size(); ++k) {
+          ok = station_pose_writers_[k]->write(&station_msg_->pose(k)) && ok;
+        }
+        count(ok, station_fixes_);
       }
     }
     if (keyframe_path_writer_) {

@@ -59,6 +59,10 @@ struct TopicNames {
   std::string keyframe_path = "trailnav/keyframe_path";  // the mapping thread's optimised keyframes
   std::string place_match = "trailnav/place_match";      // trailnav_msgs/PlaceMatch
   std::string place_pose = "trailnav/place_pose";        // geometry_msgs/PoseWithCovarianceStamped
+  std::string station_fix = "trailnav/station";          // trailnav_msgs/StationFix
+  // geometry_msgs/PoseWithCovarianceStamped per body of the station: this and its name
+  // (trailnav/station/surroundings, trailnav/station/<object>).
+  std::string station_pose_prefix = "trailnav/station/";
 };
 
 // REP 105 frame names (docs/dds.md, "Frames"). `map`: the frame of the GPS
@@ -82,6 +86,10 @@ struct PublisherOptions {
   std::string odom_frame = "odom";
   std::string fix_frame = "gps";        // the GPS antenna's frame (NavSatFix)
   std::string place_frame = "map";      // the place database's poses (PlaceMatch, the place pose)
+  // The station (trailnavd sets them from the station file and station.frame).
+  std::string station_name;
+  std::string station_frame = "station";
+  std::vector<std::string> station_bodies;  // [0]: surroundings
   FrameNames frames;
   bool publish_tf = true;               // rt/tf, rt/tf_static and odometry
   // Each obstacle map's own odom -> base_link (the pose it was placed with, at
@@ -120,6 +128,8 @@ struct PublisherInputs {
   Mailbox<slam::MappingSnapshot>* mapping = nullptr;
   // The place task's answers, may be null.
   Mailbox<perception::place::PlaceSnapshot>* place = nullptr;
+  // The station task's fixes, may be null (PublisherOptions::station_bodies names their bodies).
+  Mailbox<perception::registration::StationSnapshot>* station = nullptr;
   // The navigation task's answer to each order (a status each), may be null.
   nav::NavStatusQueue* navigation_answers = nullptr;
   // Fills the health statuses (called on the publisher thread before each health sample).
@@ -134,6 +144,7 @@ struct PublisherStats {
   std::uint64_t point_clouds = 0;
   std::uint64_t keyframe_paths = 0;  // the mapping thread's paths
   std::uint64_t place_matches = 0;   // PlaceMatch samples (each with its place pose)
+  std::uint64_t station_fixes = 0;   // StationFix samples (each with a pose per body)
   std::uint64_t traversability_maps = 0;
   bool lidar_stale = false;
 };
@@ -190,6 +201,10 @@ class DdsPublisher {
   std::unique_ptr<Writer> place_match_writer_, place_pose_writer_;
   std::optional<PlaceMessages> place_msg_;
   std::atomic<std::uint64_t> place_matches_{0};
+  std::unique_ptr<Writer> station_writer_;
+  std::vector<std::unique_ptr<Writer>> station_pose_writers_;
+  std::optional<StationMessages> station_msg_;
+  std::atomic<std::uint64_t> station_fixes_{0};
   std::unique_ptr<Writer> keyframe_path_writer_;
   std::optional<PathMessage> keyframe_path_msg_;
   struct OdomParent {

@@ -57,7 +57,8 @@ const dds_topic_descriptor_t* known_type(const std::string& name) noexcept {
       &trailnav_msgs_msg_dds__TerrainClassMap__desc, &tf2_msgs_msg_dds__TFMessage__desc,
       &nav_msgs_msg_dds__Odometry__desc,            &trailnav_msgs_msg_dds__NavigationStatus__desc,
       &geographic_msgs_msg_dds__GeoPoseStamped__desc, &std_msgs_msg_dds__Empty__desc,
-      &sensor_msgs_msg_dds__PointCloud2__desc,      &trailnav_msgs_msg_dds__PlaceMatch__desc};
+      &sensor_msgs_msg_dds__PointCloud2__desc,      &trailnav_msgs_msg_dds__PlaceMatch__desc,
+      &trailnav_msgs_msg_dds__StationFix__desc,     &sensor_msgs_msg_dds__LaserScan__desc};
   for (const dds_topic_descriptor_t* t : kTypes) {
     if (name == t->m_typename) return t;
   }

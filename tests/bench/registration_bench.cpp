@@ -18,6 +18,7 @@
 #include "trailnav/perception/registration/gicp.hpp"
 #include "trailnav/perception/registration/multi_body.hpp"
 #include "trailnav/perception/registration/station.hpp"
+#include "trailnav/perception/registration/station_task.hpp"
 #include "station_world.hpp"
 
 #include "registration_data.hpp"
@@ -167,6 +168,58 @@ void BM_StationVisit(benchmark::State& state) {
   state.counters["local_points"] = static_cast<double>(local);
 }
 BENCHMARK(BM_StationVisit)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// One run of trailnavd's station task (station_task.hpp) with its local
+// model full: the newest scan registered onto the previous nine, the
+// multi-body fix of the ten against the surroundings and the box, the
+// snapshot written, its k-d trees in the task's arena: the figure behind
+// the station row of the task presets (board/daemon/task_presets.cpp).
+void BM_StationTaskRun(benchmark::State& state) {
+  namespace st = trailnav::sim::station;
+  const st::World w = st::thesis_world();
+  std::vector<st::Pose2> taught;
+  for (const auto& o : w.objects) taught.push_back(o.pose);
+  std::vector<st::Segment> seg = w.walls;
+  const auto os = st::object_segments(w, taught);
+  seg.insert(seg.end(), os.begin(), os.end());
+  const st::ObjectShape& box = w.objects[0];
+  const st::LaserConfig laser;
+  const st::Drive teach = st::teach_drive(box, 16, 1);
+  std::vector<StationScan> scans(teach.truth.size());
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    scans[i].points = st::cast(seg, teach.truth[i], laser, 100 + i);
+    scans[i].pose = st::to_isometry(teach.truth[i]);
+  }
+  const StationConfig config;
+  const StationObject marked{"box", {box.mark.begin(), box.mark.end()}};
+  const BuiltStation built = build_station(scans, std::span<const StationObject>(&marked, 1), config);
+  if (!built.error.empty()) throw std::runtime_error(built.error);
+  // Standing at the box: the same place scanned again and again (new noise each time).
+  const st::Drive visit = st::visit_drive(box, 2, 2);
+  std::vector<std::vector<Point>> visit_scans;
+  for (std::size_t i = 0; i < 32; ++i) visit_scans.push_back(st::cast(seg, visit.truth.back(), laser, 300 + i));
+  trailnav::Mailbox<PlanarScan> in(config.max_points);
+  trailnav::Mailbox<StationSnapshot> out(built.station.bodies.size());
+  StationTaskOptions options;
+  options.start = st::to_isometry(visit.truth.back());
+  options.silence_s = 1e6;
+  StationTask task(built.station, config, options, &in, nullptr, out);
+  std::int64_t stamp = 0;
+  std::size_t i = 0;
+  auto feed = [&] {
+    PlanarScan& s = in.write_slot();
+    s.points.assign(visit_scans[i % visit_scans.size()].begin(), visit_scans[i % visit_scans.size()].end());
+    s.stamp_ns = stamp += 100'000'000;
+    in.publish();
+    ++i;
+    task.run({});
+  };
+  for (int k = 0; k < config.local_scans; ++k) feed();  // the local model full
+  for (auto _ : state) feed();
+  state.counters["fixes"] = static_cast<double>(task.counters().fixes);
+  state.counters["arena_kB"] = static_cast<double>(task.counters().arena_high_water) / 1024.0;
+}
+BENCHMARK(BM_StationTaskRun)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

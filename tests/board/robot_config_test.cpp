@@ -381,7 +381,7 @@ TEST(RobotConfig, ThePresetsSensorsShareAThreadAndAChangedRateMustLeaveIt) {
 TEST(RobotConfig, EveryPresetsBudgetIsItsNeedWithTheStatedMargin) {
   for (const auto model : {velodyne::Model::vlp16, velodyne::Model::vlp32c, velodyne::Model::hdl32e, velodyne::Model::hdl64e}) {
     const auto rows = daemon::task_preset(model);
-    ASSERT_EQ(rows.size(), 13u);  // the eleven and the camera and place tasks
+    ASSERT_EQ(rows.size(), 14u);  // the eleven and the camera, place and station tasks
     for (const daemon::PresetRow& r : rows) {
       const double cap = r.kind == TaskKind::periodic ? 0.9 * 1000.0 / r.rate_hz : 1e9;
       const double expected = std::min(cap, std::max(1.0, std::ceil(r.need_ms * 15.0 - 1e-9) / 10.0));
@@ -511,3 +511,40 @@ TEST(RobotConfig, TheCameraAndPlaceSectionsAndTheirChecks) {
 }
 
 }  // namespace
+
+// The station section (docs/registration.md "In trailnavd"): the robot
+// example's, commented out, as a robot would uncomment it; the task preset's
+// row for it; the laser's mount and a visit's start read in their units.
+TEST(RobotConfig, TheStationSectionAsTheRobotExampleGivesIt) {
+  std::string example = text_of("board/robots/robot-example.yaml");
+  const std::size_t section = example.find("# station:\n");
+  ASSERT_NE(section, std::string::npos);
+  for (const char* line : {"# station:\n", "#   file: ", "#   input: ", "#   topic: ", "#   mount: ", "#   start: ",
+                           "#   local_scans: "}) {
+    const std::size_t at = example.find(line, section);
+    ASSERT_NE(at, std::string::npos) << line;
+    example.erase(at, 2);
+  }
+  const auto robot = load(example);
+  ASSERT_TRUE(robot.config) << robot.error;
+  ASSERT_TRUE(robot.config->station.has_value());
+  const daemon::StationSection& s = *robot.config->station;
+  EXPECT_EQ(s.file, "/var/lib/trailnav/dock.tnstation");
+  EXPECT_EQ(s.input, daemon::StationSection::Input::laserscan);
+  EXPECT_EQ(s.laser.topic, "scan");
+  EXPECT_DOUBLE_EQ(s.laser.mount_x, 0.25);
+  EXPECT_NEAR(s.task.start.translation().x(), 1.5, 1e-12);
+  EXPECT_NEAR(std::atan2(s.task.start.linear()(1, 0), s.task.start.linear()(0, 0)), 3.14159265358979, 1e-9);
+  EXPECT_EQ(s.config.local_scans, 10);
+  const auto task = std::find_if(robot.config->tasks.begin(), robot.config->tasks.end(),
+                                 [](const TaskSpec& t) { return t.name == "station"; });
+  ASSERT_NE(task, robot.config->tasks.end());
+  EXPECT_EQ(task->priority, 0);  // normal scheduling: its registrations take what the real-time threads leave
+  EXPECT_DOUBLE_EQ(task->rate_hz, 10.0);
+  // Without the section the table has no such row, and a row without the section is refused.
+  const auto bench = daemon::load_robot_config("board/robots/bench.yaml");
+  ASSERT_TRUE(bench.config) << bench.error;
+  EXPECT_FALSE(bench.config->station.has_value());
+  const std::string e = load_error(std::string(kMinimal) + "  - {name: station, kind: periodic, rate_hz: 10, budget_ms: 50}\n");
+  EXPECT_NE(e.find("task 'station' has nothing to run"), std::string::npos) << e;
+}

@@ -91,6 +91,32 @@ StationTask::StationTask(const Station& station, const StationConfig& config, co
       arena_(options.arena_bytes),
       track_(kPoseQueueCapacity) {
   localiser_.emplace(station, config);
+  // Each object's centre: that of the polygon it was marked by (its area's
+  // centroid: the user drew it around the whole object, where the taught
+  // points are only the faces the teach-in saw); else its points' mean.
+  for (std::size_t k = 0; k < station.bodies.size(); ++k) {
+    const std::vector<Eigen::Vector2d>* poly = k < station.polygons.size() ? &station.polygons[k] : nullptr;
+    double area = 0.0;
+    Eigen::Vector2d c = Eigen::Vector2d::Zero();
+    if (poly != nullptr && poly->size() >= 3) {
+      for (std::size_t i = 0; i < poly->size(); ++i) {
+        const Eigen::Vector2d& a = (*poly)[i];
+        const Eigen::Vector2d& b = (*poly)[(i + 1) % poly->size()];
+        const double cross = a.x() * b.y() - b.x() * a.y();
+        area += cross;
+        c += cross * (a + b);
+      }
+    }
+    if (std::abs(area) > 1e-12) {
+      c /= 3.0 * area;
+      centres_.emplace_back(c.x(), c.y(), 0.0);
+      continue;
+    }
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const Point& p : station.bodies[k].cloud.points) sum += p.cast<double>();
+    const auto n = station.bodies[k].cloud.points.size();
+    centres_.push_back(n == 0 ? sum : Eigen::Vector3d(sum / static_cast<double>(n)));
+  }
   c_.arena_capacity = arena_.capacity();
 }
 
@@ -209,12 +235,13 @@ void StationTask::publish(const StationFix& fix, const PlanarScan& scan) noexcep
     o.observed = b.observed;
     o.fitness = b.fitness;
     if (k == 0) {
-      o.moved_x = o.moved_y = o.turned = 0.0;
+      o.moved_x = o.moved_y = o.turned = o.centre_moved = 0.0;
     } else {
       const Eigen::Isometry3d m = fix.moved(k);
       o.moved_x = m.translation().x();
       o.moved_y = m.translation().y();
       o.turned = yaw_of(m);
+      o.centre_moved = k < centres_.size() ? (m * centres_[k] - centres_[k]).head<2>().norm() : 0.0;
     }
   }
   out_.publish();

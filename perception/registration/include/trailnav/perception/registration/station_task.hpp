@@ -72,7 +72,7 @@ struct StationTaskOptions {
   Eigen::Isometry3d start = Eigen::Isometry3d::Identity();  // a visit's first pose, station frame
   int every = 1;             // scans between two localisations once the local model is full
   double silence_s = 2.0;    // a gap in the scans this long ends a visit; the next scan begins one
-  std::size_t arena_bytes = std::size_t{64} << 20;  // the k-d trees' and answers' memory
+  std::size_t arena_bytes = std::size_t{16} << 20;  // the k-d trees' and answers' memory (the thesis box used 367 kB)
 };
 
 // Per body, in the snapshot.
@@ -82,6 +82,7 @@ struct StationBodyFix {
   // the final normal matrix), taken from the left perturbation to the pose.
   std::array<double, 9> covariance{};
   double moved_x = 0.0, moved_y = 0.0, turned = 0.0;  // the object's motion since the teach-in (station frame); 0 for body 0
+  double centre_moved = 0.0;  // m, how far its centre (its polygon's centroid) went by that motion
   std::uint32_t correspondences = 0;
   bool observed = false;
   double fitness = 0.0;  // m², mean squared distance of its associations
@@ -146,6 +147,7 @@ class StationTask final : public Task {
   PlanarScan band_scan_;
   Wakeup* notify_ = nullptr;
   Arena arena_;
+  std::vector<Eigen::Vector3d> centres_;  // per body: its polygon's centroid, else its points' mean (station frame)
   std::optional<StationLocaliser> localiser_;
   PoseTrack track_;
   bool in_visit_ = false;

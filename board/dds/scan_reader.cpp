@@ -1,0 +1,161 @@
+#include "scan_reader.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+#include "trailnav/runtime/host_clock.hpp"
+
+namespace trailnav::dds {
+
+namespace {
+
+std::string number(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", v);
+  return text;
+}
+
+}  // namespace
+
+Status read_laser_scan(const sensor_msgs_msg_dds__LaserScan_& m, const LaserScanOptions& o, std::string_view what,
+                       perception::registration::PlanarScan& out) noexcept {
+  const std::string who(what);
+  const std::uint32_t n = m.ranges._length;
+  if (n == 0 || m.ranges._buffer == nullptr) return Status::error(who + ": a scan without beams");
+  if (n > o.max_beams || n > out.points.capacity()) {
+    return Status::error(who + ": " + std::to_string(n) + " beams; the input takes at most " +
+                         std::to_string(std::min(o.max_beams, out.points.capacity())) + " (station.max_points)");
+  }
+  if (!std::isfinite(m.angle_min) || !std::isfinite(m.angle_max) || !std::isfinite(m.angle_increment) ||
+      m.angle_increment == 0.0f) {
+    return Status::error(who + ": angle_min " + number(m.angle_min) + ", angle_max " + number(m.angle_max) +
+                         ", angle_increment " + number(m.angle_increment) + ": the angles must be finite and the "
+                         "increment not zero");
+  }
+  // The last beam's angle as the message says it, and as its beams put it;
+  // drivers differ by one beam (whether angle_max is the last beam's or one
+  // past it), more is a message that does not describe its own beams.
+  const double last = static_cast<double>(m.angle_min) + static_cast<double>(n - 1) * static_cast<double>(m.angle_increment);
+  if (std::abs(last - static_cast<double>(m.angle_max)) > 1.01 * std::abs(static_cast<double>(m.angle_increment)) + 1e-6) {
+    return Status::error(who + ": " + std::to_string(n) + " beams from angle_min " + number(m.angle_min) + " by " +
+                         number(m.angle_increment) + " rad end at " + number(last) + ", but angle_max is " +
+                         number(m.angle_max));
+  }
+  if (!std::isfinite(m.range_min) || !std::isfinite(m.range_max) || m.range_min < 0.0f || m.range_max <= m.range_min) {
+    return Status::error(who + ": range_min " + number(m.range_min) + ", range_max " + number(m.range_max) +
+                         ": not a range window");
+  }
+  const float far = o.max_range > 0.0f ? std::min(o.max_range, m.range_max) : m.range_max;
+  const double c = std::cos(o.mount_yaw), s = std::sin(o.mount_yaw);
+  out.points.clear();
+  out.dropped = 0;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const float r = m.ranges._buffer[i];
+    if (!std::isfinite(r) || r < m.range_min || r > far) continue;  // no return (ROS: outside the window)
+    const double a = static_cast<double>(m.angle_min) + static_cast<double>(i) * static_cast<double>(m.angle_increment);
+    const double lx = static_cast<double>(r) * std::cos(a), ly = static_cast<double>(r) * std::sin(a);
+    out.points.emplace_back(static_cast<float>(o.mount_x + c * lx - s * ly), static_cast<float>(o.mount_y + s * lx + c * ly),
+                            0.0f);
+  }
+  const std::int64_t stamp =
+      static_cast<std::int64_t>(m.header.stamp.sec) * 1'000'000'000 + static_cast<std::int64_t>(m.header.stamp.nanosec);
+  const double sweep = std::isfinite(m.time_increment) && m.time_increment > 0.0f
+                           ? static_cast<double>(n - 1) * static_cast<double>(m.time_increment)
+                           : 0.0;
+  out.stamp_ns = host_from_realtime(stamp) + static_cast<std::int64_t>(sweep * 1e9);
+  return Status::ok();
+}
+
+LaserScanReader::LaserScanReader(const LaserScanOptions& options, Mailbox<perception::registration::PlanarScan>& out)
+    : options_(options), out_(out), name_(ros_topic(options.topic)) {}
+
+LaserScanReader::Created LaserScanReader::create(const Domain& domain, const LaserScanOptions& options,
+                                                 Mailbox<perception::registration::PlanarScan>& out) {
+  Created result;
+  std::unique_ptr<LaserScanReader> r(new LaserScanReader(options, out));
+  // Sensor data: best effort is what laser drivers offer (SensorDataQoS),
+  // and a best-effort reader matches reliable writers too; only the newest kept.
+  dds_qos_t* q = dds_create_qos();
+  dds_qset_reliability(q, DDS_RELIABILITY_BEST_EFFORT, 0);
+  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 1);
+  r->topic_ = dds_create_topic(domain.participant(), &sensor_msgs_msg_dds__LaserScan__desc, r->name_.c_str(), nullptr,
+                               nullptr);
+  if (r->topic_ < 0) {
+    result.error = "topic " + r->name_ + ": " + dds_strretcode(r->topic_);
+    r->topic_ = 0;
+    dds_delete_qos(q);
+    return result;
+  }
+  r->reader_ = dds_create_reader(domain.participant(), r->topic_, q, nullptr);
+  dds_delete_qos(q);
+  if (r->reader_ < 0) {
+    result.error = "reader on " + r->name_ + ": " + dds_strretcode(r->reader_);
+    r->reader_ = 0;
+    return result;
+  }
+  r->waitset_ = dds_create_waitset(domain.participant());
+  dds_set_status_mask(r->reader_, DDS_DATA_AVAILABLE_STATUS);
+  dds_waitset_attach(r->waitset_, r->reader_, r->reader_);
+  result.reader = std::move(r);
+  return result;
+}
+
+LaserScanReader::~LaserScanReader() {
+  stop();
+  dds_sample_free(&sample_, &sensor_msgs_msg_dds__LaserScan__desc, DDS_FREE_CONTENTS);
+  for (dds_entity_t e : {waitset_, reader_, topic_}) {
+    if (e > 0) dds_delete(e);
+  }
+}
+
+void LaserScanReader::start() {
+  if (running_.exchange(true)) return;
+  thread_ = std::thread([this] { loop(); });
+}
+
+void LaserScanReader::stop() {
+  if (!running_.exchange(false)) return;
+  if (waitset_ > 0) dds_waitset_set_trigger(waitset_, true);
+  if (thread_.joinable()) thread_.join();
+}
+
+LaserScanStats LaserScanReader::stats() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stats_;
+}
+
+void LaserScanReader::handle(const sensor_msgs_msg_dds__LaserScan_& m, std::int64_t receive_ns) noexcept {
+  perception::registration::PlanarScan& scan = out_.write_slot();
+  const Status st = read_laser_scan(m, options_, name_, scan);
+  if (st) {
+    scan.sequence = ++sequence_;
+    out_.publish();
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.messages;
+  stats_.last_receive_ns = receive_ns;
+  if (!st) {
+    ++stats_.refused;
+    stats_.last_error = st.message();
+    return;
+  }
+  ++stats_.handed;
+  stats_.beams += m.ranges._length;
+  stats_.returns += scan.points.size();
+}
+
+void LaserScanReader::loop() noexcept {
+  while (running_.load(std::memory_order_acquire)) {
+    dds_attach_t triggered[1];
+    dds_waitset_wait(waitset_, triggered, 1, DDS_MSECS(200));
+    if (!running_.load(std::memory_order_acquire)) break;
+    dds_sample_info_t info;
+    void* one[1] = {&sample_};
+    while (dds_take(reader_, one, &info, 1, 1) == 1) {
+      if (!info.valid_data) continue;
+      handle(sample_, host_now_ns());
+    }
+  }
+}
+
+}  // namespace trailnav::dds
