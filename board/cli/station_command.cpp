@@ -5,15 +5,21 @@
 // relative to the object (mean, std, max) for the multi-body registration
 // and for one GICP over the whole reference. docs/registration.md.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <memory>
+#include <optional>
 #include <string>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 
 #include "commands.hpp"
+#include "dds.hpp"
+#include "sensor_msgs.h"
 #include "figure.hpp"
 #include "station_eval.hpp"
 #include "terminal.hpp"
@@ -518,6 +524,114 @@ int run_locate(const LocateOptions& o) {
 
 }  // namespace
 
+// `trailnav station play`: a recording's 2D scans out as sensor_msgs/LaserScan,
+// what a safety laser's ROS 2 driver sends to a trailnavd whose station input
+// is `laserscan`: the bench's way to run the station task on a real log.
+struct PlayOptions {
+  std::string log;
+  long from = 0, to = -1;
+  std::string topic = "scan";
+  std::string frame = "laser";
+  double rate = 0.0;   // scans a second; 0: the log's own timing
+  double speed = 1.0;  // with the log's timing: faster or slower
+  float max_range = 20.0f;
+  std::uint32_t domain = 0;
+  std::string cyclone_config;
+  double wait = 10.0;  // s for a reader to match
+  bool quiet = false;
+};
+
+int run_play(const PlayOptions& o) {
+  const reg::FlaserLog log = reg::read_flaser_log(o.log, o.from, o.to);
+  if (!log.error.empty()) {
+    std::fprintf(stderr, "trailnav station play: %s\n", log.error.c_str());
+    return 1;
+  }
+  if (log.scans.empty()) {
+    std::fprintf(stderr, "trailnav station play: %s: no FLASER scans numbered %ld to %ld%s%s\n", o.log.c_str(), o.from, o.to,
+                 log.first_error.empty() ? "" : "; the first refused: ", log.first_error.c_str());
+    return 1;
+  }
+  std::string xml = dds::loopback_config();
+  if (!o.cyclone_config.empty()) {
+    auto text = dds::read_cyclone_config(o.cyclone_config);
+    if (!text.error.empty()) {
+      std::fprintf(stderr, "trailnav station play: %s\n", text.error.c_str());
+      return 2;
+    }
+    xml = text.xml;
+  }
+  auto domain = dds::Domain::create(o.domain, xml);
+  if (!domain.domain) {
+    std::fprintf(stderr, "trailnav station play: %s\n", domain.error.c_str());
+    return 1;
+  }
+  // Best effort, keep last 1: a laser driver's sensor-data QoS.
+  auto writer = dds::Writer::create(*domain.domain, sensor_msgs_msg_dds__LaserScan__desc, o.topic, {false, 1});
+  if (!writer.writer) {
+    std::fprintf(stderr, "trailnav station play: %s\n", writer.error.c_str());
+    return 1;
+  }
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait);
+  for (;;) {
+    dds_publication_matched_status_t m{};
+    dds_get_publication_matched_status(writer.writer->handle(), &m);
+    if (m.current_count > 0) break;
+    if (std::chrono::steady_clock::now() >= until) {
+      std::fprintf(stderr, "trailnav station play: no reader on %s after %.0f s (is trailnavd running with "
+                           "station.input: laserscan and station.topic: %s, on DDS domain %u?)\n",
+                   writer.writer->topic().c_str(), o.wait, o.topic.c_str(), o.domain);
+      return 1;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::vector<float> ranges;
+  char frame[64];
+  std::snprintf(frame, sizeof frame, "%s", o.frame.c_str());
+  sensor_msgs_msg_dds__LaserScan_ msg{};
+  msg.header.frame_id = frame;
+  std::optional<ProgressBar> progress;
+  if (!o.quiet) progress.emplace("trailnav station play", static_cast<double>(log.scans.size()), "scans");
+  auto next = std::chrono::steady_clock::now();
+  for (std::size_t i = 0; i < log.scans.size(); ++i) {
+    const reg::LaserScan2& scan = log.scans[i];
+    const std::size_t n = scan.ranges.size();
+    // The log's beams (carmen.hpp): 181 and 361 from -90 deg to +90 deg, 180
+    // and 360 by 180/n deg from -90 deg; at or beyond the range no return.
+    const double step = n % 2 == 1 ? M_PI / static_cast<double>(n - 1) : M_PI / static_cast<double>(n);
+    ranges.assign(scan.ranges.begin(), scan.ranges.end());
+    for (float& r : ranges) {
+      if (!(r < o.max_range)) r = std::numeric_limits<float>::infinity();
+    }
+    msg.angle_min = static_cast<float>(-M_PI / 2.0);
+    msg.angle_increment = static_cast<float>(step);
+    msg.angle_max = static_cast<float>(-M_PI / 2.0 + static_cast<double>(n - 1) * step);
+    msg.range_min = 0.05f;
+    msg.range_max = o.max_range;
+    msg.ranges._buffer = ranges.data();
+    msg.ranges._length = msg.ranges._maximum = static_cast<std::uint32_t>(n);
+    msg.ranges._release = false;
+    const std::int64_t stamp =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+    msg.header.stamp.sec = static_cast<std::int32_t>(stamp / 1'000'000'000);
+    msg.header.stamp.nanosec = static_cast<std::uint32_t>(stamp % 1'000'000'000);
+    if (!writer.writer->write(&msg)) {
+      std::fprintf(stderr, "trailnav station play: writing scan %zu failed\n", i);
+      return 1;
+    }
+    if (progress) progress->update(static_cast<double>(i + 1));
+    if (i + 1 == log.scans.size()) break;
+    const double gap = o.rate > 0.0 ? 1.0 / o.rate
+                                    : std::clamp((log.scans[i + 1].timestamp - scan.timestamp) / o.speed, 0.0, 10.0);
+    next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(gap));
+    std::this_thread::sleep_until(next);
+  }
+  if (progress) progress->finish();
+  std::printf("%zu scans sent on %s (FLASER %ld to %ld of %s)\n", log.scans.size(), writer.writer->topic().c_str(), o.from,
+              o.from + static_cast<long>(log.scans.size()) - 1, o.log.c_str());
+  return 0;
+}
+
 void add_station_commands(CLI::App& app) {
   auto* station = app.add_subcommand(
       "station",
@@ -557,6 +671,26 @@ void add_station_commands(CLI::App& app) {
   locate->add_option("--report", l.report, "json: robot {x, y, yaw_deg}, bodies[] {name, observed, correspondences, moved_x, moved_y (its centre's shift, m), turned_deg}");
   locate->add_option("--png", l.png, "A picture: the station, the visit placed by the surroundings, the objects moved as estimated");
   locate->callback([] { std::exit(run_locate(l)); });
+  static PlayOptions p;
+  auto* play = station->add_subcommand(
+      "play",
+      "Sends a recording's 2D scans as sensor_msgs/LaserScan over DDS (loopback only unless --cyclone-config says\n"
+      "otherwise), as a safety laser's ROS 2 driver would: the bench's way to run trailnavd's station task\n"
+      "(station.input: laserscan) on a real log. Waits for trailnavd's reader, then paces the scans by the log's\n"
+      "own times (or --rate). Recordings: CARMEN logs (FLASER lines; plain or gzip).");
+  play->add_option("recording", p.log, "CARMEN log (.log or .log.gz)")->required();
+  play->add_option("--from", p.from, "First FLASER scan (0: the log's first)")->capture_default_str();
+  play->add_option("--to", p.to, "Last FLASER scan (-1: the log's last)")->capture_default_str();
+  play->add_option("--topic", p.topic, "Topic without the rt/ prefix (trailnavd's station.topic)")->capture_default_str();
+  play->add_option("--frame", p.frame, "header.frame_id of the scans")->capture_default_str();
+  play->add_option("--rate", p.rate, "Scans a second (0: the log's own timing)")->capture_default_str()->check(CLI::Range(0.0, 1000.0));
+  play->add_option("--speed", p.speed, "With the log's timing: this many times as fast")->capture_default_str()->check(CLI::Range(0.01, 100.0));
+  play->add_option("--max-range", p.max_range, "Ranges at or beyond are sent as no return (m)")->capture_default_str()->check(CLI::Range(0.1, 1000.0));
+  play->add_option("--domain", p.domain, "DDS domain id")->capture_default_str()->check(CLI::Range(0, 232));
+  play->add_option("--cyclone-config", p.cyclone_config, "Cyclone DDS XML configuration (default: loopback only: interface lo, no multicast)");
+  play->add_option("--wait", p.wait, "Seconds to wait for a reader")->capture_default_str()->check(CLI::PositiveNumber);
+  play->add_flag("--quiet", p.quiet, "No progress bar");
+  play->callback([] { std::exit(run_play(p)); });
   static Options o;
   auto* ev = station->add_subcommand(
       "eval",
