@@ -18,6 +18,7 @@
 #include "terminal.hpp"
 #include "trailnav/perception/registration/carmen.hpp"
 #include "trailnav/perception/registration/odometry.hpp"
+#include "loop_eval.hpp"
 #include "velodyne_odometry.hpp"
 
 namespace trailnav::cli {
@@ -42,6 +43,8 @@ struct Options {
   bool one_start = false;
   bool no_deskew = false;
   bool wheel_prior = false;
+  bool loops = false;
+  double loop_radius = 0.0, loop_min_path = 0.0, loop_max_rms = 0.0;  // 0: the defaults
   std::string calibration;
   // Which of the tuning options the user gave (the 3D input has its own
   // defaults; the command's callback reads them off the parser).
@@ -250,15 +253,51 @@ int run(const Options& o) {
   const double path = reg::path_length(reference);
   const double end_error = (estimate.back().translation() - reference.back().translation()).norm();
   const auto& c = odometry.counters();
+  // Loop closures over the odometry's keyframes, the graph solved by SMF.
+  std::string loops_json;
+  eval::LoopEvalResult lr;
+  if (o.loops) {
+    eval::LoopEvalOptions lo = eval::default_loop_eval_options();
+    if (o.loop_radius > 0.0) lo.loops.search_radius = o.loop_radius;
+    if (o.loop_min_path > 0.0) lo.loops.min_path = o.loop_min_path;
+    if (o.loop_max_rms > 0.0) lo.loops.max_rms = o.loop_max_rms;
+    std::unique_ptr<ProgressBar> lbar;
+    if (!o.quiet) {
+      lbar = std::make_unique<ProgressBar>("loop closures", 1.0, "");
+      lo.progress = [&](double f) { lbar->update(f); };
+    }
+    lr = eval::evaluate_loops(scans, estimate, lo);
+    if (lbar) lbar->finish();
+    if (!lr.error.empty()) {
+      std::fprintf(stderr, "%s: %s\n", who, lr.error.c_str());
+      return 2;
+    }
+    const reg::LoopCounters& l = lr.counters;
+    char text[1200];
+    std::snprintf(text, sizeof text,
+                  ", \"loops\": {\"keyframes\": %zu, \"candidates\": %llu, \"accepted\": %llu, \"false\": %zu, "
+                  "\"rejected_overlap\": %llu, \"rejected_rms\": %llu, \"rejected_jump\": %llu, \"not_converged\": %llu, "
+                  "\"optimisations\": %d, \"solve_ms_max\": %s, \"rpe_translation_percent\": [%s, %s], "
+                  "\"rpe_rotation_deg_per_100m\": [%s, %s], \"end_error_m\": [%s, %s], \"ate_rmse_m\": [%s, %s]}",
+                  lr.keyframes, static_cast<unsigned long long>(l.candidates), static_cast<unsigned long long>(l.accepted),
+                  lr.false_closures, static_cast<unsigned long long>(l.low_overlap),
+                  static_cast<unsigned long long>(l.high_rms), static_cast<unsigned long long>(l.jumped),
+                  static_cast<unsigned long long>(l.not_converged), lr.optimisations, num(lr.solve_ms_max, 2).c_str(),
+                  num(lr.rpe_odometry.translation_percent, 4).c_str(), num(lr.rpe_loops.translation_percent, 4).c_str(),
+                  num(lr.rpe_odometry.rotation_deg_per_100m, 4).c_str(), num(lr.rpe_loops.rotation_deg_per_100m, 4).c_str(),
+                  num(lr.end_odometry_m, 3).c_str(), num(lr.end_loops_m, 3).c_str(), num(lr.ate_odometry_m, 3).c_str(),
+                  num(lr.ate_loops_m, 3).c_str());
+    loops_json = text;
+  }
   if (o.report == "json") {
     std::printf(
         "{\"input\": \"%s\", \"scans\": %zu, \"refused_lines\": %ld, \"returns_dropped\": %zu, \"path_m\": %s, \"keyframes\": %llu, "
         "\"not_converged\": %llu, \"second_start\": %llu, \"rejected\": %llu, \"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, "
-        "\"segments\": %zu, \"end_error_m\": %s, \"ms_per_scan\": %s}\n",
+        "\"segments\": %zu, \"end_error_m\": %s, \"ms_per_scan\": %s%s}\n",
         o.input.c_str(), scans.size(), refused, no_room, num(path, 3).c_str(), static_cast<unsigned long long>(c.keyframes),
         static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.second_start),
         static_cast<unsigned long long>(c.rejected), num(rpe.translation_percent, 4).c_str(), num(rpe.rotation_deg_per_100m, 4).c_str(), rpe.segments,
-        num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str());
+        num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str(), loops_json.c_str());
     return 0;
   }
   std::printf("lidar odometry (scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n", o.local_scans,
@@ -273,6 +312,21 @@ int run(const Options& o) {
   std::printf("  relative pose error per 10 m against the log's poses (%zu segments): %.3f %% translation, %.3f deg/100 m\n",
               rpe.segments, rpe.translation_percent, rpe.rotation_deg_per_100m);
   std::printf("  end point %.2f m from the log's; %.2f ms a scan\n", end_error, 1000.0 * seconds / static_cast<double>(scans.size()));
+  if (o.loops) {
+    const reg::LoopCounters& l = lr.counters;
+    std::printf("loop closures over %zu keyframes (every %.1f m or %.2f rad): %llu candidates verified by GICP, %llu "
+                "accepted (%zu false against the log's poses), rejected: %llu overlap, %llu RMS, %llu jump, %llu not "
+                "converged; %d SMF solves (the longest %.1f ms)\n",
+                lr.keyframes, eval::default_loop_eval_options().keyframes.spacing_m,
+                eval::default_loop_eval_options().keyframes.spacing_rad, static_cast<unsigned long long>(l.candidates),
+                static_cast<unsigned long long>(l.accepted), lr.false_closures, static_cast<unsigned long long>(l.low_overlap),
+                static_cast<unsigned long long>(l.high_rms), static_cast<unsigned long long>(l.jumped),
+                static_cast<unsigned long long>(l.not_converged), lr.optimisations, lr.solve_ms_max);
+    std::printf("  keyframes, odometry -> with loops: RPE %.3f %% -> %.3f %%, %.2f -> %.2f deg/100 m; end %.2f -> %.2f m; "
+                "absolute RMS %.2f -> %.2f m\n",
+                lr.rpe_odometry.translation_percent, lr.rpe_loops.translation_percent, lr.rpe_odometry.rotation_deg_per_100m,
+                lr.rpe_loops.rotation_deg_per_100m, lr.end_odometry_m, lr.end_loops_m, lr.ate_odometry_m, lr.ate_loops_m);
+  }
   return 0;
 }
 
@@ -320,6 +374,13 @@ void add_lidar_odometry_command(CLI::App& app) {
   cmd->add_flag("--one-start", o.one_start,
                 "Register from the prediction only (by default a second registration starts at the last pose when the "
                 "prediction moved away from it, and the answer with the smaller truncated cost is kept)");
+  cmd->add_flag("--loops", o.loops,
+                "CARMEN: also close loops: keyframes every metre in a pose graph, each new one registered by GICP onto "
+                "earlier ones the map puts near it (verified by overlap, RMS and the jump from the map's guess), the "
+                "graph solved by SMF after each closure; reports the keyframes' errors before and after (JSON \"loops\")");
+  cmd->add_option("--loop-radius", o.loop_radius, "Candidates within this of the new keyframe by the map's poses (m; default 4)");
+  cmd->add_option("--loop-min-path", o.loop_min_path, "Driving between a candidate and the new keyframe at least (m; default 15)");
+  cmd->add_option("--loop-max-rms", o.loop_max_rms, "A closure's associations' RMS distance at most (m; default 0.08)");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([=] {
     o.set_voxel = voxel->count() > 0;

@@ -122,7 +122,31 @@ GicpResult Gicp::align(const Cloud& source, const Target& target, const Eigen::I
   r.correspondences = out[0].correspondences;
   r.fitness = out[0].fitness;
   r.error = out[0].error;
+  r.information = out[0].information;
   return r;
+}
+
+std::array<double, 9> planar_pose_covariance(const Eigen::Matrix<double, 6, 6>& h, const Eigen::Vector3d& t, double error,
+                                             std::size_t n) noexcept {
+  constexpr int idx[3] = {2, 3, 4};  // ω_z, v_x, v_y
+  Eigen::Matrix3d hs;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) hs(i, j) = h(idx[i], idx[j]);
+  }
+  std::array<double, 9> a{};
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(hs);
+  if (!lu.isInvertible() || n <= 3) {
+    a[0] = a[4] = a[8] = -1.0;
+    return a;
+  }
+  Eigen::Matrix3d jac;
+  jac << -t.y(), 1.0, 0.0, t.x(), 0.0, 1.0, 1.0, 0.0, 0.0;
+  const double variance = error / static_cast<double>(n - 3);
+  const Eigen::Matrix3d out = variance * (jac * lu.inverse() * jac.transpose());
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) a[static_cast<std::size_t>(3 * i + j)] = out(i, j);
+  }
+  return a;
 }
 
 void prepare_target(Target& target, CovarianceEstimator& covariances) {

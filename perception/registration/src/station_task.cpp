@@ -4,8 +4,6 @@
 #include <cmath>
 #include <new>
 
-#include <Eigen/LU>
-
 #include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::perception::registration {
@@ -19,42 +17,6 @@ Eigen::Isometry3d planar(double x, double y, double yaw) noexcept {
   t.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   t.translation() = Eigen::Vector3d(x, y, 0.0);
   return t;
-}
-
-// The pose's covariance in (x, y, yaw). GICP's normal matrix H is the
-// information of the left perturbation δ = (ω, v), T ← exp(δ)·T; a planar
-// problem's is singular out of the plane, so the in-plane block for
-// s = (ω_z, v_x, v_y) is inverted on its own (the covariance given the
-// plane). To first order the position moves by ω × t + v and the heading
-// by ω_z:
-//   [x, y, yaw] = J s,  J = [[−t_y, 1, 0], [t_x, 0, 1], [1, 0, 0]],
-// and Σ = σ̂² J H_ss⁻¹ Jᵀ. H weighs each residual by M as if the laser's
-// error were 1 m (point-to-plane: M = n nᵀ), so it is scaled by the a
-// posteriori variance of the residuals, σ̂² = E / (n − 3) (E: the body's
-// share of the objective at its n final associations). A block that cannot
-// be inverted (too few associations in some direction) gives −1 on the
-// diagonal: unknown.
-std::array<double, 9> planar_covariance(const Eigen::Matrix<double, 6, 6>& h, const Eigen::Vector3d& t,
-                                        double error, std::size_t n) noexcept {
-  constexpr int idx[3] = {2, 3, 4};  // ω_z, v_x, v_y
-  Eigen::Matrix3d hs;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) hs(i, j) = h(idx[i], idx[j]);
-  }
-  std::array<double, 9> a{};
-  const Eigen::FullPivLU<Eigen::Matrix3d> lu(hs);
-  if (!lu.isInvertible() || n <= 3) {
-    a[0] = a[4] = a[8] = -1.0;
-    return a;
-  }
-  Eigen::Matrix3d jac;
-  jac << -t.y(), 1.0, 0.0, t.x(), 0.0, 1.0, 1.0, 0.0, 0.0;
-  const double variance = error / static_cast<double>(n - 3);
-  const Eigen::Matrix3d out = variance * (jac * lu.inverse() * jac.transpose());
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) a[static_cast<std::size_t>(3 * i + j)] = out(i, j);
-  }
-  return a;
 }
 
 }  // namespace
@@ -230,7 +192,7 @@ void StationTask::publish(const StationFix& fix, const PlanarScan& scan) noexcep
     o.x = t.x();
     o.y = t.y();
     o.yaw = yaw_of(b.transform);
-    o.covariance = planar_covariance(b.information, t, b.error, b.correspondences);
+    o.covariance = planar_pose_covariance(b.information, t, b.error, b.correspondences);
     o.correspondences = static_cast<std::uint32_t>(b.correspondences);
     o.observed = b.observed;
     o.fitness = b.fitness;

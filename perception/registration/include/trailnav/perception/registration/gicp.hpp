@@ -25,6 +25,7 @@
 // registration never touches the heap.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -58,7 +59,23 @@ struct GicpResult {
   std::size_t correspondences = 0;  // in the last iteration
   double fitness = 0.0;             // mean squared Euclidean distance of the last associations, m²
   double error = 0.0;               // the objective (Eq. 2.10) at the last associations
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();  // the final normal matrix H, (ω, v)
 };
+
+// A planar registration's covariance in (x, y, yaw), row-major 3 × 3, of a
+// result T = (t, R) with normal matrix H (GicpResult::information), objective
+// E at n associations. H is the information of the left perturbation
+// δ = (ω, v), T ← exp(δ)·T; a planar problem's is singular out of the plane,
+// so the in-plane block for s = (ω_z, v_x, v_y) is inverted on its own (the
+// covariance given the plane). To first order the position moves by
+// ω × t + v and the heading by ω_z:
+//   [x, y, yaw] = J s,  J = [[−t_y, 1, 0], [t_x, 0, 1], [1, 0, 0]],
+// and Σ = σ̂² J H_ss⁻¹ Jᵀ. H weighs each residual as if the sensor's error
+// were 1 m (point-to-plane: M = n nᵀ), so it is scaled by the residuals' a
+// posteriori variance σ̂² = E / (n − 3). A block that cannot be inverted, or
+// n ≤ 3, gives −1 on the diagonal: unknown.
+std::array<double, 9> planar_pose_covariance(const Eigen::Matrix<double, 6, 6>& information, const Eigen::Vector3d& t,
+                                             double error, std::size_t n) noexcept;
 
 // One target: its points, covariances (and normals for point-to-plane) and
 // its tree, built once.
