@@ -59,12 +59,65 @@ std::string num(double value, int digits) {
   return b;
 }
 
+// The loop closures' options from the command line over a default.
+eval::LoopEvalOptions loop_options(const Options& o, eval::LoopEvalOptions lo);
+
+// The loop closures' JSON member (", \"loops\": {...}") and text lines.
+std::string loops_json(const eval::LoopEvalResult& lr) {
+  const perception::registration::LoopCounters& l = lr.counters;
+  const bool ref = !lr.reference.empty();
+  auto pair = [&](double a, double b, int digits) {
+    return ref ? "[" + num(a, digits) + ", " + num(b, digits) + "]" : std::string("null");
+  };
+  char text[1400];
+  std::snprintf(text, sizeof text,
+                ", \"loops\": {\"keyframes\": %zu, \"candidates\": %llu, \"accepted\": %llu, \"false\": %s, "
+                "\"rejected_overlap\": %llu, \"rejected_rms\": %llu, \"rejected_jump\": %llu, \"not_converged\": %llu, "
+                "\"optimisations\": %d, \"solve_ms_max\": %s, \"close_ms_max\": %s, \"rpe_translation_percent\": %s, "
+                "\"rpe_rotation_deg_per_100m\": %s, \"end_error_m\": %s, \"ate_rmse_m\": %s}",
+                lr.keyframes, static_cast<unsigned long long>(l.candidates), static_cast<unsigned long long>(l.accepted),
+                ref ? std::to_string(lr.false_closures).c_str() : "null", static_cast<unsigned long long>(l.low_overlap),
+                static_cast<unsigned long long>(l.high_rms), static_cast<unsigned long long>(l.jumped),
+                static_cast<unsigned long long>(l.not_converged), lr.optimisations, num(lr.solve_ms_max, 2).c_str(),
+                num(lr.close_ms_max, 2).c_str(),
+                pair(lr.rpe_odometry.translation_percent, lr.rpe_loops.translation_percent, 4).c_str(),
+                pair(lr.rpe_odometry.rotation_deg_per_100m, lr.rpe_loops.rotation_deg_per_100m, 4).c_str(),
+                pair(lr.end_odometry_m, lr.end_loops_m, 3).c_str(), pair(lr.ate_odometry_m, lr.ate_loops_m, 3).c_str());
+  return text;
+}
+
+void print_loops(const eval::LoopEvalResult& lr, const eval::LoopEvalOptions& lo) {
+  const perception::registration::LoopCounters& l = lr.counters;
+  std::printf("loop closures over %zu keyframes (every %.1f m or %.2f rad): %llu candidates verified by GICP, %llu "
+              "accepted",
+              lr.keyframes, lo.keyframes.spacing_m, lo.keyframes.spacing_rad, static_cast<unsigned long long>(l.candidates),
+              static_cast<unsigned long long>(l.accepted));
+  if (!lr.reference.empty()) std::printf(" (%zu false against the reference poses)", lr.false_closures);
+  std::printf(", rejected: %llu overlap, %llu RMS, %llu jump, %llu not converged; %d SMF solves (the longest %.1f ms), "
+              "the longest search and verification %.1f ms\n",
+              static_cast<unsigned long long>(l.low_overlap), static_cast<unsigned long long>(l.high_rms),
+              static_cast<unsigned long long>(l.jumped), static_cast<unsigned long long>(l.not_converged), lr.optimisations,
+              lr.solve_ms_max, lr.close_ms_max);
+  if (lr.reference.empty()) return;
+  std::printf("  keyframes, odometry -> with loops: RPE %.3f %% -> %.3f %%, %.2f -> %.2f deg/100 m; end %.2f -> %.2f m; "
+              "absolute RMS %.2f -> %.2f m\n",
+              lr.rpe_odometry.translation_percent, lr.rpe_loops.translation_percent, lr.rpe_odometry.rotation_deg_per_100m,
+              lr.rpe_loops.rotation_deg_per_100m, lr.end_odometry_m, lr.end_loops_m, lr.ate_odometry_m, lr.ate_loops_m);
+}
+
 // A spinning lidar's recording or capture: a directory, or a capture file.
 bool is_lidar_input(const std::string& input) {
   namespace fs = std::filesystem;
   if (fs::is_directory(input)) return true;
   const std::string ext = fs::path(input).extension().string();
   return ext == ".pcap" || ext == ".pcapng" || ext == ".bin" || ext == ".pcd" || ext == ".ply";
+}
+
+eval::LoopEvalOptions loop_options(const Options& o, eval::LoopEvalOptions lo) {
+  if (o.loop_radius > 0.0) lo.loops.search_radius = o.loop_radius;
+  if (o.loop_min_path > 0.0) lo.loops.min_path = o.loop_min_path;
+  if (o.loop_max_rms > 0.0) lo.loops.max_rms = o.loop_max_rms;
+  return lo;
 }
 
 int run_lidar(const Options& o) {
@@ -94,7 +147,23 @@ int run_lidar(const Options& o) {
     bar = std::make_unique<ProgressBar>("lidar odometry", 100.0, "%");
     v.progress = [&](double f) { bar->update(100.0 * f); };
   }
+  // Loop closures as the revolutions come (their clouds are not kept).
+  const eval::LoopEvalOptions lo = loop_options(o, eval::default_loop_eval_options_3d());
+  std::unique_ptr<eval::LoopMapper> mapper;
+  if (o.loops) {
+    mapper = std::make_unique<eval::LoopMapper>(lo);
+    if (!mapper->error().empty()) {
+      std::fprintf(stderr, "%s: %s\n", who, mapper->error().c_str());
+      return 2;
+    }
+    v.on_revolution = [&](const Eigen::Isometry3d& estimate, const Eigen::Isometry3d* reference,
+                          std::span<const reg::Point> points) {
+      mapper->add(estimate, reference, [&](std::vector<reg::Point>& cloud) { cloud.assign(points.begin(), points.end()); });
+    };
+  }
   const eval::VelodyneOdometryReport r = eval::run_velodyne_odometry(v);
+  eval::LoopEvalResult lr;
+  if (mapper) lr = mapper->finish();
   if (bar) bar->finish();
   if (!r.error.empty()) {
     std::fprintf(stderr, "%s: %s\n", who, r.error.c_str());
@@ -137,7 +206,7 @@ int run_lidar(const Options& o) {
         "\"keyframes\": %llu, \"not_converged\": %llu, \"second_start\": %llu, \"rejected\": %llu, "
         "\"rpe_translation_percent\": %s, \"rpe_rotation_deg_per_100m\": %s, \"segments\": %zu, \"end_error_m\": %s, "
         "\"prior_kept\": %llu, \"rpe_wheels_translation_percent\": %s, \"rpe_wheels_rotation_deg_per_100m\": %s, "
-        "\"ms_per_scan\": %s}\n",
+        "\"ms_per_scan\": %s%s}\n",
         o.input.c_str(), r.lidar.c_str(), r.revolutions, r.points, v.deskew ? "true" : "false",
         v.wheel_prior ? "true" : "false", num(r.path_m, 3).c_str(),
         static_cast<unsigned long long>(c.keyframes), static_cast<unsigned long long>(c.not_converged),
@@ -145,7 +214,8 @@ int run_lidar(const Options& o) {
         ref ? num(r.rpe.translation_percent, 4).c_str() : "null", ref ? num(r.rpe.rotation_deg_per_100m, 4).c_str() : "null",
         r.rpe.segments, num(r.end_error_m, 3).c_str(), static_cast<unsigned long long>(c.prior_kept),
         wheels ? num(r.rpe_wheels.translation_percent, 4).c_str() : "null",
-        wheels ? num(r.rpe_wheels.rotation_deg_per_100m, 4).c_str() : "null", num(r.ms_per_revolution, 3).c_str());
+        wheels ? num(r.rpe_wheels.rotation_deg_per_100m, 4).c_str() : "null", num(r.ms_per_revolution, 3).c_str(),
+        mapper ? loops_json(lr).c_str() : "");
     return 0;
   }
   std::printf("lidar odometry (%s revolutions, %s, %s, scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n",
@@ -171,6 +241,7 @@ int run_lidar(const Options& o) {
     std::printf("  no reference poses (not a simulated recording): no relative pose error\n");
   }
   std::printf("  %.2f ms a revolution (de-skew and registration)\n", r.ms_per_revolution);
+  if (mapper) print_loops(lr, lo);
   return 0;
 }
 
@@ -254,40 +325,23 @@ int run(const Options& o) {
   const double end_error = (estimate.back().translation() - reference.back().translation()).norm();
   const auto& c = odometry.counters();
   // Loop closures over the odometry's keyframes, the graph solved by SMF.
-  std::string loops_json;
+  std::string loops;
   eval::LoopEvalResult lr;
+  const eval::LoopEvalOptions lo = loop_options(o, eval::default_loop_eval_options());
   if (o.loops) {
-    eval::LoopEvalOptions lo = eval::default_loop_eval_options();
-    if (o.loop_radius > 0.0) lo.loops.search_radius = o.loop_radius;
-    if (o.loop_min_path > 0.0) lo.loops.min_path = o.loop_min_path;
-    if (o.loop_max_rms > 0.0) lo.loops.max_rms = o.loop_max_rms;
     std::unique_ptr<ProgressBar> lbar;
+    eval::LoopEvalOptions with_bar = lo;
     if (!o.quiet) {
       lbar = std::make_unique<ProgressBar>("loop closures", 1.0, "");
-      lo.progress = [&](double f) { lbar->update(f); };
+      with_bar.progress = [&](double f) { lbar->update(f); };
     }
-    lr = eval::evaluate_loops(scans, estimate, lo);
+    lr = eval::evaluate_loops(scans, estimate, with_bar);
     if (lbar) lbar->finish();
     if (!lr.error.empty()) {
       std::fprintf(stderr, "%s: %s\n", who, lr.error.c_str());
       return 2;
     }
-    const reg::LoopCounters& l = lr.counters;
-    char text[1200];
-    std::snprintf(text, sizeof text,
-                  ", \"loops\": {\"keyframes\": %zu, \"candidates\": %llu, \"accepted\": %llu, \"false\": %zu, "
-                  "\"rejected_overlap\": %llu, \"rejected_rms\": %llu, \"rejected_jump\": %llu, \"not_converged\": %llu, "
-                  "\"optimisations\": %d, \"solve_ms_max\": %s, \"rpe_translation_percent\": [%s, %s], "
-                  "\"rpe_rotation_deg_per_100m\": [%s, %s], \"end_error_m\": [%s, %s], \"ate_rmse_m\": [%s, %s]}",
-                  lr.keyframes, static_cast<unsigned long long>(l.candidates), static_cast<unsigned long long>(l.accepted),
-                  lr.false_closures, static_cast<unsigned long long>(l.low_overlap),
-                  static_cast<unsigned long long>(l.high_rms), static_cast<unsigned long long>(l.jumped),
-                  static_cast<unsigned long long>(l.not_converged), lr.optimisations, num(lr.solve_ms_max, 2).c_str(),
-                  num(lr.rpe_odometry.translation_percent, 4).c_str(), num(lr.rpe_loops.translation_percent, 4).c_str(),
-                  num(lr.rpe_odometry.rotation_deg_per_100m, 4).c_str(), num(lr.rpe_loops.rotation_deg_per_100m, 4).c_str(),
-                  num(lr.end_odometry_m, 3).c_str(), num(lr.end_loops_m, 3).c_str(), num(lr.ate_odometry_m, 3).c_str(),
-                  num(lr.ate_loops_m, 3).c_str());
-    loops_json = text;
+    loops = loops_json(lr);
   }
   if (o.report == "json") {
     std::printf(
@@ -297,7 +351,7 @@ int run(const Options& o) {
         o.input.c_str(), scans.size(), refused, no_room, num(path, 3).c_str(), static_cast<unsigned long long>(c.keyframes),
         static_cast<unsigned long long>(c.not_converged), static_cast<unsigned long long>(c.second_start),
         static_cast<unsigned long long>(c.rejected), num(rpe.translation_percent, 4).c_str(), num(rpe.rotation_deg_per_100m, 4).c_str(), rpe.segments,
-        num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str(), loops_json.c_str());
+        num(end_error, 3).c_str(), num(1000.0 * seconds / static_cast<double>(scans.size()), 3).c_str(), loops.c_str());
     return 0;
   }
   std::printf("lidar odometry (scan to the last %d keyframes, GICP, voxel %.2f m) over %s\n", o.local_scans,
@@ -312,21 +366,7 @@ int run(const Options& o) {
   std::printf("  relative pose error per 10 m against the log's poses (%zu segments): %.3f %% translation, %.3f deg/100 m\n",
               rpe.segments, rpe.translation_percent, rpe.rotation_deg_per_100m);
   std::printf("  end point %.2f m from the log's; %.2f ms a scan\n", end_error, 1000.0 * seconds / static_cast<double>(scans.size()));
-  if (o.loops) {
-    const reg::LoopCounters& l = lr.counters;
-    std::printf("loop closures over %zu keyframes (every %.1f m or %.2f rad): %llu candidates verified by GICP, %llu "
-                "accepted (%zu false against the log's poses), rejected: %llu overlap, %llu RMS, %llu jump, %llu not "
-                "converged; %d SMF solves (the longest %.1f ms)\n",
-                lr.keyframes, eval::default_loop_eval_options().keyframes.spacing_m,
-                eval::default_loop_eval_options().keyframes.spacing_rad, static_cast<unsigned long long>(l.candidates),
-                static_cast<unsigned long long>(l.accepted), lr.false_closures, static_cast<unsigned long long>(l.low_overlap),
-                static_cast<unsigned long long>(l.high_rms), static_cast<unsigned long long>(l.jumped),
-                static_cast<unsigned long long>(l.not_converged), lr.optimisations, lr.solve_ms_max);
-    std::printf("  keyframes, odometry -> with loops: RPE %.3f %% -> %.3f %%, %.2f -> %.2f deg/100 m; end %.2f -> %.2f m; "
-                "absolute RMS %.2f -> %.2f m\n",
-                lr.rpe_odometry.translation_percent, lr.rpe_loops.translation_percent, lr.rpe_odometry.rotation_deg_per_100m,
-                lr.rpe_loops.rotation_deg_per_100m, lr.end_odometry_m, lr.end_loops_m, lr.ate_odometry_m, lr.ate_loops_m);
-  }
+  if (o.loops) print_loops(lr, lo);
   return 0;
 }
 
@@ -375,12 +415,12 @@ void add_lidar_odometry_command(CLI::App& app) {
                 "Register from the prediction only (by default a second registration starts at the last pose when the "
                 "prediction moved away from it, and the answer with the smaller truncated cost is kept)");
   cmd->add_flag("--loops", o.loops,
-                "CARMEN: also close loops: keyframes every metre in a pose graph, each new one registered by GICP onto "
+                "Also close loops: keyframes (a CARMEN log's every metre, a lidar's every 2 m) in a pose graph, each new one registered by GICP onto "
                 "earlier ones the map puts near it (verified by overlap, RMS and the jump from the map's guess), the "
                 "graph solved by SMF after each closure; reports the keyframes' errors before and after (JSON \"loops\")");
-  cmd->add_option("--loop-radius", o.loop_radius, "Candidates within this of the new keyframe by the map's poses (m; default 4)");
-  cmd->add_option("--loop-min-path", o.loop_min_path, "Driving between a candidate and the new keyframe at least (m; default 15)");
-  cmd->add_option("--loop-max-rms", o.loop_max_rms, "A closure's associations' RMS distance at most (m; default 0.08)");
+  cmd->add_option("--loop-radius", o.loop_radius, "Candidates within this of the new keyframe by the map's poses (m; default 4, a lidar's 8)");
+  cmd->add_option("--loop-min-path", o.loop_min_path, "Driving between a candidate and the new keyframe at least (m; default 15, a lidar's 25)");
+  cmd->add_option("--loop-max-rms", o.loop_max_rms, "A closure's points' RMS distance from the surfaces they joined (along their normals) at most (m; default 0.04, a lidar's 0.1)");
   cmd->add_flag("--quiet", o.quiet, "No progress bar");
   cmd->callback([=] {
     o.set_voxel = voxel->count() > 0;

@@ -144,6 +144,7 @@ VelodyneOdometryReport run_velodyne_odometry(const VelodyneOdometryOptions& opti
       report.reference.push_back(ref);
     }
     report.estimate.push_back(start * pose);
+    if (options.on_revolution) options.on_revolution(report.estimate.back(), truth ? &report.reference.back() : nullptr, points);
     if (wheels) report.wheels.push_back(start * wheel_start.inverse() * wheel_last);
     report.conditioning.push_back(odometry.last_conditioning());
     // (Into the reference's frame, as the estimate.)

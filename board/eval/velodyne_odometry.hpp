@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,12 @@ struct VelodyneOdometryOptions {
   bool wheel_prior = false;
   long max_revolutions = 0;  // 0: all
   std::function<void(double)> progress;
+  // After each revolution: its estimated pose (the reference's frame), its
+  // reference pose (nullptr without a truth) and its points as registered
+  // (the sensor's frame, de-skewed): what the loop closures take.
+  std::function<void(const Eigen::Isometry3d& estimate, const Eigen::Isometry3d* reference,
+                     std::span<const perception::registration::Point> points)>
+      on_revolution;
 };
 
 struct VelodyneOdometryReport {

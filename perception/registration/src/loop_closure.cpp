@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 namespace trailnav::perception::registration {
@@ -39,11 +40,11 @@ LoopCloser::LoopCloser(const LoopClosureConfig& config)
       pool_(config.capacity * config.max_points),
       sizes_(config.capacity, 0),
       path_(config.capacity, 0.0),
-      filter_(config.max_points * 8),
+      filter_(config.max_input_points > 0 ? config.max_input_points : config.max_points * 8),
       covariances_(config.neighbours, 1e-3f, config.planar),
       gicp_(config.gicp, config.max_points),
       fine_(fine_gate(config), config.max_points) {
-  filtered_.points.reserve(config.max_points * 8);
+  filtered_.points.reserve(config.max_input_points > 0 ? config.max_input_points : config.max_points * 8);
   target_.cloud.points.reserve(config.max_points);
   source_.points.reserve(config.max_points);
   candidates_.reserve(config.capacity);
@@ -114,7 +115,26 @@ std::optional<LoopClosure> LoopCloser::verify(std::size_t from, std::size_t to, 
   lc.to = to;
   lc.measurement = r.transform;
   lc.overlap = static_cast<double>(r.correspondences) / static_cast<double>(source_.size());
-  lc.rms = std::sqrt(r.fitness);
+  // The RMS distance along the target's normals (point to plane): a wrong
+  // place leaves its points off the surfaces, where the distance between
+  // two samplings of the same surface (a 3D voxel grid's, up to its size
+  // apart) would not tell the two apart.
+  const float gate = static_cast<float>(3.0 * config_.max_rms);
+  const Eigen::Isometry3f tf = r.transform.cast<float>();
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (const Point& p : source_.points) {
+    const Point q = tf * p;
+    std::uint32_t j = 0;
+    float d2 = 0.0f;
+    if (!target_.tree.nearest(q, j, d2) || d2 > gate * gate) continue;
+    const Point& normal = target_.normals[j];
+    const double d = normal.isZero() ? std::sqrt(static_cast<double>(d2))
+                                     : static_cast<double>(normal.dot(q - target_.cloud.points[j]));
+    sum += d * d;
+    ++n;
+  }
+  lc.rms = n > 0 ? std::sqrt(sum / static_cast<double>(n)) : std::numeric_limits<double>::infinity();
   const Eigen::Isometry3d jump = guess.inverse() * r.transform;
   lc.jump_m = jump.translation().head<2>().norm();
   lc.jump_rad = std::abs(yaw_of(jump));

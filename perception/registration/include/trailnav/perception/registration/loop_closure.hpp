@@ -9,7 +9,8 @@
 //
 //   - a second pass from the first's answer with a gate of 3 × `max_rms`
 //     associates at least `min_overlap` of the new cloud's points,
-//   - the associations' RMS distance is at most `max_rms` (a wrong place
+//   - the RMS distance of the associated points from the candidate's
+//     surfaces (along their normals) is at most `max_rms` (a wrong place
 //     aligns its walls only in part), and
 //   - its answer lies within `max_jump_m` / `max_jump_rad` of the guess
 //     (the map is off by its drift, not by anything).
@@ -45,6 +46,7 @@ struct LoopClosureConfig {
   GicpConfig gicp{Metric::plane_to_plane, 60, 1.0f, 2e-5, 5e-5, 0.0};
   float voxel = 0.1f;             // m, a keyframe's cloud
   std::size_t max_points = 1500;  // per keyframe after the filter (evenly thinned beyond)
+  std::size_t max_input_points = 0;  // a keyframe's cloud before the filter at most (0: 8 × max_points)
   int neighbours = 15;            // k for the covariances
   bool planar = true;             // 2D scans (z = 0)
   std::size_t capacity = 5000;    // keyframes
@@ -52,7 +54,7 @@ struct LoopClosureConfig {
   double min_path = 15.0;         // m driven between them
   int max_candidates = 2;         // tried per keyframe, nearest first
   double min_overlap = 0.6;       // share of the new cloud's points associated
-  double max_rms = 0.08;          // m
+  double max_rms = 0.04;          // m, point to plane (the fine pass's gate: 3 times this)
   double max_jump_m = 2.0, max_jump_rad = 0.35;
   double sigma_floor_m = 0.05, sigma_floor_rad = 0.01;  // added to the edge's σ
 };
