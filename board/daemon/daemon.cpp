@@ -62,6 +62,17 @@ std::string navigation_summary(const nav::NavigationSection& n, const osm::RoadG
 
 Daemon::Daemon(const RobotConfig& config) : config_(config) {}
 
+// The lidar's revolution readers, in the order robot_config.cpp counts them:
+// the obstacle thread's, the terrain thread's (when it does not share the
+// obstacle thread's alignment), the station's ring band, the mapping's loop closures.
+std::size_t Daemon::revolution_reader(ReaderOf who) const noexcept {
+  const RobotConfig& c = config_;
+  std::size_t i = (c.obstacles ? 1u : 0u) + (c.terrain && !c.terrain_shares_alignment() ? 1u : 0u);
+  if (who == ReaderOf::station) return i;
+  if (c.station && c.station->input == StationSection::Input::velodyne) ++i;
+  return i;  // ReaderOf::mapping
+}
+
 Daemon::~Daemon() { stop(); }
 
 Daemon::Created Daemon::create(const RobotConfig& config) {
@@ -202,6 +213,26 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     }
     d->mapping_out_ = std::make_unique<Mailbox<slam::MappingSnapshot>>(m.keyframes.max_keyframes);
     d->mapping_ = std::make_unique<slam::MappingTask>(m, *d->mapping_poses_, d->mapping_fixes_.get(), *d->mapping_out_);
+    if (m.loops) {
+      // The keyframes' clouds: the lidar's revolutions in the robot frame (the obstacle map's mount).
+      Eigen::Isometry3f mount = Eigen::Isometry3f::Identity();
+      if (config.obstacles) {
+        constexpr double kDeg = 3.14159265358979323846 / 180.0;
+        const perception::MountParams& mp = config.obstacles->mount;
+        mount.linear() = (Eigen::AngleAxisd(mp.rotation_deg[2] * kDeg, Eigen::Vector3d::UnitZ()) *
+                          Eigen::AngleAxisd(mp.rotation_deg[1] * kDeg, Eigen::Vector3d::UnitY()) *
+                          Eigen::AngleAxisd(mp.rotation_deg[0] * kDeg, Eigen::Vector3d::UnitX()))
+                             .toRotationMatrix()
+                             .cast<float>();
+        mount.translation() = Eigen::Vector3f(static_cast<float>(mp.translation[0]), static_cast<float>(mp.translation[1]),
+                                              static_cast<float>(mp.translation[2]));
+      }
+      d->mapping_->set_revolutions(&d->lidar_revolutions(d->revolution_reader(ReaderOf::mapping)), mount, 2.0f, 60.0f);
+      TN_LOG_INFO("mapping: loop closures from the lidar's revolutions (voxel %.2f m, %zu points a keyframe, "
+                  "candidates within %.1f m and %.0f m of driving back, %.0f MB for the clouds)",
+                  static_cast<double>(m.loops->voxel), m.loops->max_points, m.loops->search_radius, m.loops->min_path,
+                  static_cast<double>(m.keyframes.max_keyframes * m.loops->max_points * sizeof(perception::registration::Point)) / 1e6);
+    }
     if (m.use_gps) {
       d->map_corrections_ = std::make_unique<Mailbox<pose::MapCorrection>>();
       d->mapping_->set_corrections(d->map_corrections_.get());
@@ -254,9 +285,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                    static_cast<float>(m.translation[1]),
                                                    static_cast<float>(m.translation[2]));
       }
-      // The last of the lidar's revolution readers (robot_config.cpp counts it).
-      const std::size_t reader = static_cast<std::size_t>(config.lidar->driver.revolution_readers - 1);
-      d->station_task_->set_revolutions(&d->lidar_revolutions(reader), band);
+      d->station_task_->set_revolutions(&d->lidar_revolutions(d->revolution_reader(ReaderOf::station)), band);
     }
     std::size_t points = 0;
     for (std::size_t k = 0; k < d->station_->bodies.size(); ++k) points += d->station_->bodies[k].cloud.size();
@@ -996,6 +1025,20 @@ void Daemon::fill_health(dds::DiagnosticsMessage& m, Nanos now) const {
     m.value("poses_before_start", s.poses_before_start);
     m.value("fixes", s.fixes);
     if (pose_) m.value("fix_queue_drops", pose_->status().fix_queue_drops);
+    if (config_.mapping->loops) {
+      // Loop closures: the verifications and why they were refused.
+      m.value("loop_candidates", s.loops.candidates);
+      m.value("loop_accepted", s.loops.accepted);
+      m.value("loop_rejected_overlap", s.loops.low_overlap);
+      m.value("loop_rejected_rms", s.loops.high_rms);
+      m.value("loop_rejected_jump", s.loops.jumped);
+      m.value("loop_not_converged", s.loops.not_converged);
+      m.value("loop_no_cloud", s.loop_no_cloud);
+      m.value("loop_arena_failures", s.loop_arena_failures);
+      m.value("loop_ms_max", s.loop_ms_max, 1);
+      m.value("loop_memory_high_water_bytes", static_cast<std::uint64_t>(s.loop_arena_high_water));
+      m.value("loop_memory_reserved_bytes", static_cast<std::uint64_t>(s.loop_arena_capacity));
+    }
   }
   for (std::size_t i = 0; i < scheduler_->task_count(); ++i) {
     const TaskStats st = scheduler_->stats(i);

@@ -425,6 +425,33 @@ slam::MappingOptions parse_mapping(const ConfigNode& n, bool has_gps, const pose
                       "second parent: keep use_gps true");
   }
   if (const std::string e = slam::check_mapping_options(o); !e.empty()) n.fail("max_keyframes", e);
+  if (auto l = n.optional_map("loops")) {
+    // Loop closures from the lidar's revolutions (docs/slam.md "Loop
+    // closures"): 3D clouds at 0.3 m, candidates within 8 m of the map's
+    // pose and 25 m of driving back, verified by GICP.
+    perception::registration::LoopClosureConfig lc;
+    lc.planar = false;
+    lc.voxel = static_cast<float>(l->number("voxel_m", 0.05, 5.0, 0.3));
+    lc.max_points = static_cast<std::size_t>(l->integer("points", 100, 100000, 4000));
+    lc.neighbours = static_cast<int>(l->integer("neighbours", 5, 64, 20));
+    lc.search_radius = l->number("radius_m", 0.5, 1000.0, 8.0);
+    lc.min_path = l->number("min_path_m", 0.0, 100000.0, 25.0);
+    lc.max_candidates = static_cast<int>(l->integer("candidates", 1, 100, lc.max_candidates));
+    lc.min_overlap = l->number("min_overlap", 0.01, 1.0, 0.5);
+    lc.max_rms = l->number("max_rms_m", 0.005, 2.0, 0.1);
+    lc.max_jump_m = l->number("max_jump_m", 0.01, 100.0, lc.max_jump_m);
+    lc.max_jump_rad = l->number("max_jump_deg", 0.1, 180.0, lc.max_jump_rad * 180.0 / 3.14159265358979323846) *
+                      3.14159265358979323846 / 180.0;
+    lc.sigma_floor_m = l->number("sigma_floor_m", 1e-4, 10.0, lc.sigma_floor_m);
+    lc.sigma_floor_rad = l->number("sigma_floor_deg", 1e-3, 90.0, lc.sigma_floor_rad * 180.0 / 3.14159265358979323846) *
+                         3.14159265358979323846 / 180.0;
+    lc.capacity = o.keyframes.max_keyframes;
+    o.loop_max_gap = l->number("max_gap_s", 0.05, 10.0, o.loop_max_gap);
+    o.loop_arena_bytes = static_cast<std::size_t>(l->integer("arena_mb", 1, 4096, static_cast<std::int64_t>(o.loop_arena_bytes >> 20))) << 20;
+    if (const std::string e = perception::registration::check_loop_closure_config(lc); !e.empty()) n.fail("loops", e);
+    l->reject_unknown_keys();
+    o.loops = lc;
+  }
   n.reject_unknown_keys();
   return o;
 }
@@ -507,6 +534,10 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   if (auto n = root.optional_map("mapping")) {
     if (!c.pose) root.fail("mapping", "the map is built from the pose thread's odometry: add a 'pose' section");
     c.mapping = parse_mapping(*n, c.gps.has_value(), *c.pose);
+    if (c.mapping->loops && (!c.lidar || c.lidar->cloud)) {
+      n->fail("loops", "loop closures register the Velodyne's revolutions at the keyframes: add a 'lidar' section with "
+                       "Velodyne packets");
+    }
   }
   if (auto n = root.optional_map("station")) {
     c.station = parse_station(*n);
@@ -529,7 +560,8 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   if (c.lidar) {
     c.lidar->driver.revolution_readers =
         std::max(1, (c.obstacles ? 1 : 0) + (c.terrain && !c.terrain_shares_alignment() ? 1 : 0) +
-                        (c.station && c.station->input == StationSection::Input::velodyne ? 1 : 0));
+                        (c.station && c.station->input == StationSection::Input::velodyne ? 1 : 0) +
+                        (c.mapping && c.mapping->loops ? 1 : 0));
     // The obstacle thread, working on each revolution while it arrives, is
     // woken every quarter turn (every 1/32 in the last quarter, and at its
     // end) with the lidar's progress: each wake-up costs more than the work

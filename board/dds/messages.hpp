@@ -311,8 +311,8 @@ class TerrainClassMapMessage {
 // of up to kValues key/value pairs, strings cut to their buffers.
 class DiagnosticsMessage {
  public:
-  static constexpr std::size_t kStatuses = 24;
-  static constexpr std::size_t kValues = 24;
+  static constexpr std::size_t kStatuses = 40;
+  static constexpr std::size_t kValues = 40;
   enum Level : std::uint8_t { ok = 0, warn = 1, error = 2, stale = 3 };
 
   DiagnosticsMessage();

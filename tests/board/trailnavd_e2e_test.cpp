@@ -156,7 +156,7 @@ using Orders = std::function<void(double elapsed_s, const dds::Domain& domain)>;
 
 DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool navigation = false,
                      const std::string& scenario = "urban", const Orders& orders = {}, const std::string& dds_yaml = "",
-                     const std::string& lidar = "VLP-16", bool preset_tasks = false) {
+                     const std::string& lidar = "VLP-16", bool preset_tasks = false, const std::string& mapping_yaml = "") {
   DaemonRun out;
   test::BenchDaemonOptions bo;
   bo.lidar = lidar;
@@ -174,6 +174,7 @@ DaemonRun run_daemon(double seconds, const std::string& tag, bool realtime, bool
   // pseudo-terminals, as do the drivers' own.
   bo.serial_over_udp = navigation;
   bo.mapping = navigation;
+  bo.mapping_yaml = mapping_yaml;
   std::string error;
   const auto bench = test::BenchDaemon::start(TRAILNAVD_BINARY, bo, error);
   EXPECT_TRUE(bench) << error;
@@ -1046,6 +1047,37 @@ TEST(Trailnavd, SixtySecondsAtTheLidarRate) {
   const DaemonRun r = run_daemon(60.0, "long", true, false, "urban", {}, "", "VLP-16", true);
   report(r, "60 s");
   expect_sixty_clean_seconds(r);
+}
+
+// Loop closures in the mapping thread (issue 40, docs/slam.md "Loop
+// closures"): the lap round a block (`block-loop`, 74 s), replayed at real
+// time with navigation and mapping, the mapping's `loops` on: the keyframes
+// at the lap's end are registered onto those at its start by GICP, the
+// closures join the graph beside the GPS fixes, and no task touches the heap
+// (the verifications' k-d trees come from the mapping's arena). Run with
+// TRAILNAV_LONG_TESTS=1 (outside CI: a minute and a quarter of replay).
+TEST(Trailnavd, ALapRoundABlockClosesItsLoopsInTheMappingThread) {
+  if (std::getenv("TRAILNAV_LONG_TESTS") == nullptr) GTEST_SKIP() << "set TRAILNAV_LONG_TESTS=1 (benchmarks)";
+  const DaemonRun r = run_daemon(72.0, "loops", false, true, "block-loop", {}, "", "VLP-16", false, ", loops: {}");
+  const auto& m = r.mapping_health;
+  auto value = [&](const char* key) { return m.count(key) ? std::stod(m.at(key)) : -1.0; };
+  const eval::CommonOffset split = eval::split_common_offset(r.keyframe_errors);
+  std::printf("[ trailnavd loops ] %zu keyframe paths, the last one's %zu keyframes %.2f m mean and %.2f m max off the "
+              "truth (the GPS bias taken out); loops: %.0f candidates, %.0f accepted (%.0f overlap, %.0f RMS, %.0f jump "
+              "refused, %.0f keyframes without a cloud), the longest %.1f ms, memory %.0f of %.0f bytes; %llu real-time "
+              "allocations\n",
+              r.keyframe_paths, split.count, split.mean, split.max, value("loop_candidates"), value("loop_accepted"),
+              value("loop_rejected_overlap"), value("loop_rejected_rms"), value("loop_rejected_jump"), value("loop_no_cloud"),
+              value("loop_ms_max"), value("loop_memory_high_water_bytes"), value("loop_memory_reserved_bytes"),
+              static_cast<unsigned long long>(number_before(r.stderr_text, "real-time allocations")));
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_GE(value("loop_accepted"), 1.0);
+  EXPECT_EQ(value("loop_arena_failures"), 0.0);
+  EXPECT_LE(value("loop_no_cloud"), 2.0);
+  EXPECT_GE(value("loop_closures"), value("loop_accepted"));
+  EXPECT_EQ(value("failures"), 0.0);
+  EXPECT_LT(split.mean, 1.0);
+  EXPECT_EQ(number_before(r.stderr_text, "real-time allocations"), 0u);
 }
 
 // Issue 42's acceptance with the thesis' lidar: a 60 s drive of street, dirt

@@ -204,7 +204,7 @@ std::unique_ptr<BenchDaemon> BenchDaemon::start(const std::string& daemon_binary
       std::snprintf(goal, sizeof goal, "[%.8f, %.8f]", b->truth_.trajectory.back().lat, b->truth_.trajectory.back().lon);
       c << "navigation: {osm: " << so.out << "/world.osm, goal: " << goal << "}\n";
     }
-    if (options.mapping) c << "mapping: {optimize_period_s: 2.0}\n";
+    if (options.mapping) c << "mapping: {optimize_period_s: 2.0" << options.mapping_yaml << "}\n";
     c << options.extra_yaml;
   }
 

@@ -49,8 +49,10 @@ struct BenchDaemonOptions {
   // The task table of the lidar's preset (`tasks: {preset: auto}`, as the
   // shipped configs) instead of the tests' own generous one.
   bool preset_tasks = false;
-  // The online mapping task (a `mapping` section, re-optimised every 2 s).
+  // The online mapping task (a `mapping` section, re-optimised every 2 s),
+  // with more keys inside its braces (e.g. ", loops: {}").
   bool mapping = false;
+  std::string mapping_yaml;
   // The pose moves the obstacle and terrain maps (as with navigation, without it).
   bool feed_pose = false;
   // A `traversability:` section (its flow mapping, e.g. "{model: /x.tntrav}");

@@ -3,6 +3,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <new>
+
+#include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::slam {
 
@@ -67,11 +70,31 @@ MappingTask::MappingTask(const MappingOptions& options, perception::PoseQueue& p
       keyframe_time_(graph_.capacity().vertices, 0),
       backup_(graph_.capacity().vertices) {
   if (!options_.use_gps) local_.state = MappingState::mapping;
+  if (options_.loops) {
+    perception::registration::LoopClosureConfig lc = *options_.loops;
+    lc.capacity = options_.keyframes.max_keyframes;  // a cloud for every keyframe the graph can hold
+    loops_ = std::make_unique<perception::registration::LoopCloser>(lc);
+    loop_arena_ = std::make_unique<Arena>(options_.loop_arena_bytes);
+    recent_ = std::make_unique<perception::PoseTrack>(perception::kPoseQueueCapacity);
+    cloud_.reserve(lc.max_input_points > 0 ? lc.max_input_points : lc.max_points * 8);
+    estimates_.reserve(lc.capacity);
+    local_.loop_arena_capacity = loop_arena_->capacity();
+  }
   local_.capacity_vertices = graph_.capacity().vertices;
   local_.capacity_edges = graph_.capacity().edges;
   local_.hierarchy_capacity = solver_.hierarchy_arena().capacity();
   local_.part_capacity = part_arena_->capacity();
   shared_.post(local_);
+}
+
+MappingTask::~MappingTask() {
+  // What the loop closer holds from its arena (the last verification's
+  // k-d tree and normals) goes back there, not to the heap.
+  if (loop_arena_) {
+    heap_redirect::ArenaRedirect redirect(*loop_arena_);
+    const heap_redirect::Scope scope(redirect);
+    loops_.reset();
+  }
 }
 
 Se2 MappingTask::correction() const noexcept {
@@ -99,6 +122,12 @@ void MappingTask::take_pose(const perception::Pose& p) {
     started_ = true;  // the map is the odometry frame at start: start_transform_ is the identity
   }
   const Se2 o{p.x, p.y, p.yaw};
+  if (loops_) {
+    recent_->push(p);
+    if (have_last_) path_ += std::hypot(o.x - last_pose_.x, o.y - last_pose_.y);
+    last_pose_ = o;
+    have_last_ = true;
+  }
   if (graph_.keyframe_count() == 0) graph_.place_first(start_transform_ * o);
   switch (graph_.on_odometry(o)) {
     case KeyframeGraph::Added::keyframe: {
@@ -106,11 +135,114 @@ void MappingTask::take_pose(const perception::Pose& p) {
       keyframe_odometry_[k] = o;
       keyframe_time_[k] = p.t_ns;
       alignment_at_keyframe_ = alignment_;
+      if (loops_) {
+        // It waits for a revolution; a full queue lets its oldest go without a cloud.
+        if (waiting_count_ == waiting_.size()) {
+          ++local_.loop_no_cloud;
+          loops_->add_keyframe({}, waiting_[0].path);
+          for (std::size_t i = 1; i < waiting_count_; ++i) waiting_[i - 1] = waiting_[i];
+          --waiting_count_;
+        }
+        waiting_[waiting_count_++] = {p.t_ns, o, path_};
+      }
       break;
     }
     case KeyframeGraph::Added::full: local_.state = MappingState::full; break;
     case KeyframeGraph::Added::none: break;
   }
+}
+
+void MappingTask::take_revolution(const velodyne::RangeImage& image) {
+  const std::int64_t r = image.reference_end_ns();
+  perception::Pose at;
+  if (waiting_count_ == 0) return;
+  const perception::PoseLookup found = recent_->at(r, at);
+  // The robot's odometry at the revolution's end: a revolution newer than
+  // the poses taken (by more than a few of the pose thread's periods) waits
+  // for the next run's, not placed where the robot was before it.
+  if (found == perception::PoseLookup::empty ||
+      (found == perception::PoseLookup::after_last && r - recent_->newest().t_ns > 50'000'000)) {
+    return;
+  }
+  const Se2 robot_at_r{at.x, at.y, at.yaw};
+  const std::int64_t gap = static_cast<std::int64_t>(options_.loop_max_gap * 1e9);
+  std::size_t taken = 0;
+  while (taken < waiting_count_) {
+    const Waiting& w = waiting_[taken];
+    if (w.t_ns - r > gap) break;  // the revolution is too old for it (and for the ones after)
+    if (r - w.t_ns > gap) {       // too late for this keyframe: it goes without a cloud
+      ++local_.loop_no_cloud;
+      loops_->add_keyframe({}, w.path);
+      ++taken;
+      continue;
+    }
+    // The revolution's points in the keyframe's frame: the mount, then the
+    // odometry from the keyframe to the revolution's end.
+    const Se2 rel = w.odometry.inverse() * robot_at_r;
+    Eigen::Isometry3f t = Eigen::Isometry3f::Identity();
+    t.linear() = Eigen::AngleAxisf(static_cast<float>(rel.theta), Eigen::Vector3f::UnitZ()).toRotationMatrix();
+    t.translation() = Eigen::Vector3f(static_cast<float>(rel.x), static_cast<float>(rel.y), 0.0f);
+    const Eigen::Isometry3f to_keyframe = t * mount_;
+    cloud_.clear();
+    for (int ring = 0; ring < image.rings(); ++ring) {
+      for (const velodyne::RangeCell& c : image.row(0, ring)) {
+        if (!c.valid() || c.distance < min_range_ || c.distance > max_range_) continue;
+        if (cloud_.size() == cloud_.capacity()) break;
+        cloud_.push_back(to_keyframe * Eigen::Vector3f(c.x, c.y, c.z));
+      }
+    }
+    loops_->add_keyframe(cloud_, w.path);
+    ++taken;
+    close_loops();
+  }
+  for (std::size_t i = taken; i < waiting_count_; ++i) waiting_[i - taken] = waiting_[i];
+  waiting_count_ -= taken;
+}
+
+void MappingTask::give_up_waiting(std::int64_t now_ns) {
+  const std::int64_t gap = static_cast<std::int64_t>(options_.loop_max_gap * 1e9);
+  std::size_t dropped = 0;
+  while (dropped < waiting_count_ && now_ns - waiting_[dropped].t_ns > gap) {
+    ++local_.loop_no_cloud;
+    loops_->add_keyframe({}, waiting_[dropped].path);
+    ++dropped;
+  }
+  for (std::size_t i = dropped; i < waiting_count_; ++i) waiting_[i - dropped] = waiting_[i];
+  waiting_count_ -= dropped;
+}
+
+void MappingTask::close_loops() {
+  // The map's poses of every keyframe (the newest ones as placed from the
+  // last solve and the odometry since).
+  estimates_.clear();
+  const PoseGraph2d& g = graph_.graph();
+  for (std::size_t k = 1; k <= graph_.keyframe_count() && estimates_.size() < estimates_.capacity(); ++k) {
+    const Se2& p = g.pose(static_cast<std::size_t>(graph_.keyframe_vertex(k)));
+    Eigen::Isometry3d e = Eigen::Isometry3d::Identity();
+    e.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    e.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
+    estimates_.push_back(e);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  std::optional<perception::registration::LoopClosure> lc;
+  {
+    heap_redirect::ArenaRedirect redirect(*loop_arena_);
+    const heap_redirect::Scope scope(redirect);
+    try {
+      lc = loops_->close(estimates_);
+    } catch (const std::bad_alloc&) {
+      ++local_.loop_arena_failures;
+    }
+  }
+  local_.loop_ms_max = std::max(local_.loop_ms_max,
+                                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  local_.loops = loops_->counters();
+  local_.loop_arena_high_water = loop_arena_->high_water();
+  if (!lc) return;
+  const Eigen::Isometry3d& m = lc->measurement;
+  const Se2 z{m.translation().x(), m.translation().y(), std::atan2(m.linear()(1, 0), m.linear()(0, 0))};
+  graph_.add_loop_closure(static_cast<std::int32_t>(lc->from + 1), static_cast<std::int32_t>(lc->to + 1), z,
+                          lc->information);
 }
 
 void MappingTask::take_fix(const pose::MappingFix& f) {
@@ -230,6 +362,12 @@ void MappingTask::run(const TaskTick& tick) {
     } else {
       take_pose(pose_batch_[i++]);
     }
+  }
+  // The newest revolution for the keyframes waiting for one; those that
+  // waited too long go without.
+  if (loops_ && revolutions_ != nullptr) {
+    if (const velodyne::RangeImage* image = revolutions_->try_read()) take_revolution(*image);
+    if (recent_->size() > 0) give_up_waiting(recent_->newest().t_ns);
   }
 
   const PoseGraph2d& g = graph_.graph();

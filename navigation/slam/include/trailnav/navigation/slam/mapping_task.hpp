@@ -44,6 +44,17 @@
 // with what reaches it, and the correction stays that of the last keyframe;
 // health says `full`.
 //
+// Loop closures (`loops`, with a lidar's revolutions: set_revolutions()):
+// each keyframe keeps a voxel-filtered cloud of the revolution the task takes
+// next (its points moved into the keyframe's frame by the odometry between
+// the two, at most `loop_max_gap` apart), and at each new keyframe the
+// earlier ones the map's current poses put near it are verified by GICP
+// (perception/registration/loop_closure.hpp); an accepted closure becomes an
+// edge, and the graph is solved at the next period as after a fix. Without
+// GPS the first closure is what starts the optimisation. The clouds' pool is
+// allocated here; the k-d trees a verification builds come from an arena of
+// its own behind a heap redirect (runtime/heap_redirect.hpp).
+//
 // Memory: the keyframe graph, the solver's hierarchy arena
 // (smf_hierarchy_bytes) and one part's arena (smf_part_arena_bytes) are
 // allocated in the constructor; a run never allocates (the scheduler's
@@ -53,9 +64,13 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
+#include "trailnav/drivers/velodyne/range_image.hpp"
 #include "trailnav/navigation/pose/pose_estimator.hpp"
+#include "trailnav/perception/registration/loop_closure.hpp"
+#include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/navigation/slam/arena.hpp"
 #include "trailnav/navigation/slam/keyframes.hpp"
 #include "trailnav/navigation/slam/smf.hpp"
@@ -77,6 +92,10 @@ struct MappingOptions {
   // bias (keyframes.hpp; trailnavd takes the GPS alignment's: pose.*).
   double gps_white_sigma = 1.5;
   double gps_bias_time = 120.0;
+  // Loop closures from the lidar's revolutions (above); off without.
+  std::optional<perception::registration::LoopClosureConfig> loops;
+  double loop_max_gap = 1.0;                         // s between a keyframe and the revolution it takes
+  std::size_t loop_arena_bytes = std::size_t{32} << 20;  // the verifications' k-d trees
 };
 
 // Checks the options; empty when fine, else names the field.
@@ -120,6 +139,13 @@ struct MappingTaskStatus {
   // The newest correction of the GPS alignment at the newest keyframe: how
   // far the optimised map moved the robot there, and turned it.
   double correction_m = 0.0, correction_rad = 0.0;
+  // Loop closures: the verifications' counters, keyframes that found no
+  // revolution within loop_max_gap (kept without a cloud), verifications
+  // the arena could not serve, and its high-water mark.
+  perception::registration::LoopCounters loops;
+  std::uint64_t loop_no_cloud = 0, loop_arena_failures = 0;
+  double loop_ms_max = 0.0;
+  std::size_t loop_arena_capacity = 0, loop_arena_high_water = 0;
 };
 
 class MappingTask final : public Task {
@@ -127,6 +153,9 @@ class MappingTask final : public Task {
   // `fixes` may be null (no GPS: use_gps must be false).
   MappingTask(const MappingOptions& options, perception::PoseQueue& poses, pose::MappingFixQueue* fixes,
               Mailbox<MappingSnapshot>& out);
+  ~MappingTask() override;
+  MappingTask(const MappingTask&) = delete;
+  MappingTask& operator=(const MappingTask&) = delete;
 
   // Woken after each published snapshot (the DDS publisher). Before the scheduler starts.
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
@@ -137,6 +166,15 @@ class MappingTask final : public Task {
   // an edge between two keyframes (indices ≥ 1, as in the path) measured in
   // the first's frame, with its information. Call on this task's thread.
   bool add_loop_closure(std::int32_t from, std::int32_t to, const Se2& measurement, const Se2::Matrix& information);
+  // With options.loops: the lidar's revolutions (a reader of its own), the
+  // sensor's mount on the robot and the returns kept. Before the scheduler starts.
+  void set_revolutions(Broadcast<velodyne::RangeImage>::Reader* revolutions, const Eigen::Isometry3f& mount,
+                       float min_range, float max_range) noexcept {
+    revolutions_ = revolutions;
+    mount_ = mount;
+    min_range_ = min_range;
+    max_range_ = max_range;
+  }
 
   void run(const TaskTick& tick) override;
   MappingTaskStatus status() const noexcept { return shared_.read(); }
@@ -147,6 +185,10 @@ class MappingTask final : public Task {
   void optimise();
   void publish();
   Se2 correction() const noexcept;  // map -> odom in graph coordinates
+  // Loop closures: the keyframes waiting for a revolution, and one taken.
+  void take_revolution(const velodyne::RangeImage& image);
+  void give_up_waiting(std::int64_t now_ns);
+  void close_loops();
 
   MappingOptions options_;
   perception::PoseQueue& poses_;
@@ -173,6 +215,25 @@ class MappingTask final : public Task {
   std::int64_t last_optimise_ = -1;
   MappingTaskStatus local_;
   StatusBoard<MappingTaskStatus> shared_;
+  // Loop closures.
+  std::unique_ptr<perception::registration::LoopCloser> loops_;
+  Broadcast<velodyne::RangeImage>::Reader* revolutions_ = nullptr;
+  Eigen::Isometry3f mount_ = Eigen::Isometry3f::Identity();
+  float min_range_ = 1.0f, max_range_ = 60.0f;
+  std::unique_ptr<Arena> loop_arena_;
+  std::unique_ptr<perception::PoseTrack> recent_;  // the odometry of the last seconds, for a revolution's pose
+  struct Waiting {
+    std::int64_t t_ns = 0;
+    Se2 odometry{};
+    double path = 0.0;
+  };
+  std::array<Waiting, 16> waiting_{};  // keyframes without a cloud yet, oldest first
+  std::size_t waiting_count_ = 0;
+  double path_ = 0.0;                  // m driven, by the odometry
+  bool have_last_ = false;
+  Se2 last_pose_{};
+  std::vector<perception::registration::Point> cloud_;
+  std::vector<Eigen::Isometry3d> estimates_;
 };
 
 }  // namespace trailnav::slam
