@@ -429,16 +429,15 @@ slam::MappingOptions parse_mapping(const ConfigNode& n, bool has_gps, const pose
     // Loop closures from the lidar's revolutions (docs/slam.md "Loop
     // closures"): 3D clouds at 0.3 m, candidates within 8 m of the map's
     // pose and 25 m of driving back, verified by GICP.
-    perception::registration::LoopClosureConfig lc;
-    lc.planar = false;
-    lc.voxel = static_cast<float>(l->number("voxel_m", 0.05, 5.0, 0.3));
-    lc.max_points = static_cast<std::size_t>(l->integer("points", 100, 100000, 4000));
-    lc.neighbours = static_cast<int>(l->integer("neighbours", 5, 64, 20));
-    lc.search_radius = l->number("radius_m", 0.5, 1000.0, 8.0);
-    lc.min_path = l->number("min_path_m", 0.0, 100000.0, 25.0);
+    perception::registration::LoopClosureConfig lc = perception::registration::spinning_lidar_loop_config();
+    lc.voxel = static_cast<float>(l->number("voxel_m", 0.05, 5.0, static_cast<double>(lc.voxel)));
+    lc.max_points = static_cast<std::size_t>(l->integer("points", 100, 100000, static_cast<std::int64_t>(lc.max_points)));
+    lc.neighbours = static_cast<int>(l->integer("neighbours", 5, 64, lc.neighbours));
+    lc.search_radius = l->number("radius_m", 0.5, 1000.0, lc.search_radius);
+    lc.min_path = l->number("min_path_m", 0.0, 100000.0, lc.min_path);
     lc.max_candidates = static_cast<int>(l->integer("candidates", 1, 100, lc.max_candidates));
-    lc.min_overlap = l->number("min_overlap", 0.01, 1.0, 0.5);
-    lc.max_rms = l->number("max_rms_m", 0.005, 2.0, 0.1);
+    lc.min_overlap = l->number("min_overlap", 0.01, 1.0, lc.min_overlap);
+    lc.max_rms = l->number("max_rms_m", 0.005, 2.0, lc.max_rms);
     lc.max_jump_m = l->number("max_jump_m", 0.01, 100.0, lc.max_jump_m);
     lc.max_jump_rad = l->number("max_jump_deg", 0.1, 180.0, lc.max_jump_rad * 180.0 / 3.14159265358979323846) *
                       3.14159265358979323846 / 180.0;

@@ -54,16 +54,8 @@ LoopEvalOptions default_loop_eval_options_3d() {
   o.keyframes.sigma_per_metre = 0.02;
   o.keyframes.sigma_theta_per_metre = 0.003;
   o.keyframes.max_keyframes = 5000;
-  o.loops.planar = false;
-  o.loops.voxel = 0.3f;
-  o.loops.max_points = 4000;
-  o.loops.neighbours = 20;
+  o.loops = reg::spinning_lidar_loop_config();
   o.loops.capacity = 5000;
-  o.loops.search_radius = 8.0;
-  o.loops.min_path = 25.0;
-  o.loops.max_rms = 0.10;
-  o.loops.min_overlap = 0.5;
-  o.loops.max_input_points = 200'000;
   return o;
 }
 

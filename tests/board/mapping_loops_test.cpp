@@ -62,15 +62,8 @@ LoopRun run_mapping(const std::string& recording, bool loops) {
   mo.keyframes.max_keyframes = 500;
   mo.optimize_period = 2.0;
   if (loops) {
-    perception::registration::LoopClosureConfig lc;
-    lc.planar = false;
-    lc.voxel = 0.3f;
-    lc.max_points = 4000;
-    lc.neighbours = 20;
-    lc.search_radius = 8.0;
-    lc.min_path = 25.0;
-    lc.max_rms = 0.1;
-    lc.min_overlap = 0.5;
+    // trailnavd's defaults (mapping.loops: {}).
+    perception::registration::LoopClosureConfig lc = perception::registration::spinning_lidar_loop_config();
     lc.max_input_points = static_cast<std::size_t>(source.shape().rings) * static_cast<std::size_t>(source.shape().max_columns);
     mo.loops = lc;
   }

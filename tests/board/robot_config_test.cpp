@@ -205,6 +205,23 @@ TEST(RobotConfig, MappingNeedsThePoseItsTaskAndSaysWhetherItUsesGps) {
   EXPECT_NE(e.find(":15: 'mapping.max_part'"), std::string::npos) << e;
   e = load_error(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {spacing: 2}\n");
   EXPECT_NE(e.find("spacing"), std::string::npos) << e;
+  // Loop closures: trailnavd's defaults with `{}`, each key in its units,
+  // the lidar's revolution reader counted, and nothing without a Velodyne.
+  const auto loops = load(std::string(kMinimal) + task + pose_tasks + pose +
+                          "mapping: {loops: {radius_m: 6, max_jump_deg: 10, points: 1500}}\n");
+  ASSERT_TRUE(loops.config) << loops.error;
+  ASSERT_TRUE(loops.config->mapping->loops.has_value());
+  const auto& lc = *loops.config->mapping->loops;
+  EXPECT_FALSE(lc.planar);
+  EXPECT_DOUBLE_EQ(lc.search_radius, 6.0);
+  EXPECT_NEAR(lc.max_jump_rad, 10.0 * 3.14159265358979 / 180.0, 1e-9);
+  EXPECT_EQ(lc.max_points, 1500u);
+  EXPECT_EQ(lc.capacity, loops.config->mapping->keyframes.max_keyframes);
+  EXPECT_EQ(loops.config->lidar->driver.revolution_readers, 2);  // the obstacle thread's and the mapping's
+  e = load_error(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {loops: {min_overlap: 0}}\n");
+  EXPECT_NE(e.find("mapping.loops.min_overlap"), std::string::npos) << e;
+  e = load_error(std::string(kMinimal) + task + pose_tasks + pose + "mapping: {loops: {radius: 6}}\n");
+  EXPECT_NE(e.find("radius"), std::string::npos) << e;
 }
 
 // trailnavd --check goes as far as start-up with the navigation section: the

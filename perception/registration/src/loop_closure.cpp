@@ -35,6 +35,20 @@ std::string check_loop_closure_config(const LoopClosureConfig& c) {
   return "";
 }
 
+LoopClosureConfig spinning_lidar_loop_config() {
+  LoopClosureConfig c;
+  c.planar = false;
+  c.voxel = 0.3f;
+  c.max_points = 2000;
+  c.neighbours = 20;
+  c.search_radius = 8.0;
+  c.min_path = 25.0;
+  c.max_rms = 0.1;
+  c.min_overlap = 0.5;
+  c.max_input_points = 200'000;  // an HDL-64E's revolution
+  return c;
+}
+
 LoopCloser::LoopCloser(const LoopClosureConfig& config)
     : config_(config),
       pool_(config.capacity * config.max_points),
