@@ -205,15 +205,12 @@ void print_sample(const dds::ReceivedSample& r, std::uint64_t n, double latency_
 }
 
 int run_echo(const EchoOptions& o) {
-  std::string xml = dds::loopback_config();
-  if (!o.cyclone_config.empty()) {
-    auto text = dds::read_cyclone_config(o.cyclone_config);
-    if (!text.error.empty()) {
-      std::fprintf(stderr, "trailnav echo: %s\n", text.error.c_str());
-      return 2;
-    }
-    xml = text.xml;
+  const dds::ConfigText config = dds::cyclone_config_or_loopback(o.cyclone_config);
+  if (!config.error.empty()) {
+    std::fprintf(stderr, "trailnav echo: %s\n", config.error.c_str());
+    return 2;
   }
+  const std::string& xml = config.xml;
   if (!o.png_dir.empty()) {
     std::error_code ec;
     fs::create_directories(o.png_dir, ec);

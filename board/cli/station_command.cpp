@@ -552,15 +552,12 @@ int run_play(const PlayOptions& o) {
                  log.first_error.empty() ? "" : "; the first refused: ", log.first_error.c_str());
     return 1;
   }
-  std::string xml = dds::loopback_config();
-  if (!o.cyclone_config.empty()) {
-    auto text = dds::read_cyclone_config(o.cyclone_config);
-    if (!text.error.empty()) {
-      std::fprintf(stderr, "trailnav station play: %s\n", text.error.c_str());
-      return 2;
-    }
-    xml = text.xml;
+  const dds::ConfigText config = dds::cyclone_config_or_loopback(o.cyclone_config);
+  if (!config.error.empty()) {
+    std::fprintf(stderr, "trailnav station play: %s\n", config.error.c_str());
+    return 2;
   }
+  const std::string& xml = config.xml;
   auto domain = dds::Domain::create(o.domain, xml);
   if (!domain.domain) {
     std::fprintf(stderr, "trailnav station play: %s\n", domain.error.c_str());

@@ -15,6 +15,21 @@ namespace trailnav::daemon {
 
 namespace {
 
+// The lidar's place on the robot (the obstacle map's mount: roll, pitch and
+// yaw in degrees, R = Rz Ry Rx), as the transform from its frame to the robot's.
+Eigen::Isometry3f mount_transform(const perception::MountParams& m) {
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  Eigen::Isometry3f t = Eigen::Isometry3f::Identity();
+  t.linear() = (Eigen::AngleAxisd(m.rotation_deg[2] * kDeg, Eigen::Vector3d::UnitZ()) *
+                Eigen::AngleAxisd(m.rotation_deg[1] * kDeg, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(m.rotation_deg[0] * kDeg, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix()
+                   .cast<float>();
+  t.translation() =
+      Eigen::Vector3f(static_cast<float>(m.translation[0]), static_cast<float>(m.translation[1]), static_cast<float>(m.translation[2]));
+  return t;
+}
+
 const TaskSpec* find_task(const std::vector<TaskSpec>& tasks, std::string_view name) {
   for (const TaskSpec& t : tasks) {
     if (t.name == name) return &t;
@@ -215,18 +230,8 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
     d->mapping_ = std::make_unique<slam::MappingTask>(m, *d->mapping_poses_, d->mapping_fixes_.get(), *d->mapping_out_);
     if (m.loops) {
       // The keyframes' clouds: the lidar's revolutions in the robot frame (the obstacle map's mount).
-      Eigen::Isometry3f mount = Eigen::Isometry3f::Identity();
-      if (config.obstacles) {
-        constexpr double kDeg = 3.14159265358979323846 / 180.0;
-        const perception::MountParams& mp = config.obstacles->mount;
-        mount.linear() = (Eigen::AngleAxisd(mp.rotation_deg[2] * kDeg, Eigen::Vector3d::UnitZ()) *
-                          Eigen::AngleAxisd(mp.rotation_deg[1] * kDeg, Eigen::Vector3d::UnitY()) *
-                          Eigen::AngleAxisd(mp.rotation_deg[0] * kDeg, Eigen::Vector3d::UnitX()))
-                             .toRotationMatrix()
-                             .cast<float>();
-        mount.translation() = Eigen::Vector3f(static_cast<float>(mp.translation[0]), static_cast<float>(mp.translation[1]),
-                                              static_cast<float>(mp.translation[2]));
-      }
+      const Eigen::Isometry3f mount =
+          config.obstacles ? mount_transform(config.obstacles->mount) : Eigen::Isometry3f::Identity();
       d->mapping_->set_revolutions(&d->lidar_revolutions(d->revolution_reader(ReaderOf::mapping)), mount, 2.0f, 60.0f);
       TN_LOG_INFO("mapping: loop closures from the lidar's revolutions (voxel %.2f m, %zu points a keyframe, "
                   "candidates within %.1f m and %.0f m of driving back, %.0f MB for the clouds)",
@@ -272,19 +277,8 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
                                                           d->station_poses_.get(), *d->station_out_);
     if (sc.input == StationSection::Input::velodyne) {
       reg::RingBand band = sc.band;
-      if (!sc.band_mount_given && config.obstacles) {
-        // The lidar's own mount, as the obstacle map takes it.
-        constexpr double kDeg = 3.14159265358979323846 / 180.0;
-        const perception::MountParams& m = config.obstacles->mount;
-        const Eigen::Matrix3d r = (Eigen::AngleAxisd(m.rotation_deg[2] * kDeg, Eigen::Vector3d::UnitZ()) *
-                                   Eigen::AngleAxisd(m.rotation_deg[1] * kDeg, Eigen::Vector3d::UnitY()) *
-                                   Eigen::AngleAxisd(m.rotation_deg[0] * kDeg, Eigen::Vector3d::UnitX()))
-                                      .toRotationMatrix();
-        band.mount.linear() = r.cast<float>();
-        band.mount.translation() = Eigen::Vector3f(static_cast<float>(m.translation[0]),
-                                                   static_cast<float>(m.translation[1]),
-                                                   static_cast<float>(m.translation[2]));
-      }
+      // The lidar's own mount, as the obstacle map takes it.
+      if (!sc.band_mount_given && config.obstacles) band.mount = mount_transform(config.obstacles->mount);
       d->station_task_->set_revolutions(&d->lidar_revolutions(d->revolution_reader(ReaderOf::station)), band);
     }
     std::size_t points = 0;

@@ -48,27 +48,12 @@ CloudReader::Created CloudReader::create(const Domain& domain, const CloudReader
   // A revolution every 0.1 s: reliable (a lost fragment of a large sample
   // is repaired, not the whole revolution lost), and only the newest kept
   // (a reader behind takes the latest, as the lidar driver's readers do).
-  dds_qos_t* q = dds_create_qos();
-  dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
-  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 1);
-  r->topic_ = dds_create_topic(domain.participant(), &sensor_msgs_msg_dds__PointCloud2__desc, r->name_.c_str(), nullptr,
-                               nullptr);
-  if (r->topic_ < 0) {
-    result.error = "topic " + r->name_ + ": " + dds_strretcode(r->topic_);
-    r->topic_ = 0;
-    dds_delete_qos(q);
+  auto input = SampleReader::create(domain, sensor_msgs_msg_dds__PointCloud2__desc, options.topic, {true, 1});
+  if (!input.reader) {
+    result.error = input.error;
     return result;
   }
-  r->reader_ = dds_create_reader(domain.participant(), r->topic_, q, nullptr);
-  dds_delete_qos(q);
-  if (r->reader_ < 0) {
-    result.error = "reader on " + r->name_ + ": " + dds_strretcode(r->reader_);
-    r->reader_ = 0;
-    return result;
-  }
-  r->waitset_ = dds_create_waitset(domain.participant());
-  dds_set_status_mask(r->reader_, DDS_DATA_AVAILABLE_STATUS);
-  dds_waitset_attach(r->waitset_, r->reader_, r->reader_);
+  r->input_ = std::move(input.reader);
   result.reader = std::move(r);
   return result;
 }
@@ -76,9 +61,6 @@ CloudReader::Created CloudReader::create(const Domain& domain, const CloudReader
 CloudReader::~CloudReader() {
   stop();
   dds_sample_free(&sample_, &sensor_msgs_msg_dds__PointCloud2__desc, DDS_FREE_CONTENTS);
-  for (dds_entity_t e : {waitset_, reader_, topic_}) {
-    if (e > 0) dds_delete(e);
-  }
 }
 
 void CloudReader::start() {
@@ -88,7 +70,7 @@ void CloudReader::start() {
 
 void CloudReader::stop() {
   if (!running_.exchange(false)) return;
-  if (waitset_ > 0) dds_waitset_set_trigger(waitset_, true);
+  input_->trigger();
   if (thread_.joinable()) thread_.join();
 }
 
@@ -148,15 +130,7 @@ void CloudReader::handle(const sensor_msgs_msg_dds__PointCloud2_& m, std::int64_
 
 void CloudReader::loop() noexcept {
   while (running_.load(std::memory_order_acquire)) {
-    dds_attach_t triggered[1];
-    dds_waitset_wait(waitset_, triggered, 1, DDS_MSECS(200));
-    if (!running_.load(std::memory_order_acquire)) break;
-    dds_sample_info_t info;
-    void* one[1] = {&sample_};
-    while (dds_take(reader_, one, &info, 1, 1) == 1) {
-      if (!info.valid_data) continue;
-      handle(sample_, host_now_ns());
-    }
+    if (!input_->wait_and_take(&sample_, 200, [this] { handle(sample_, host_now_ns()); })) break;
   }
 }
 

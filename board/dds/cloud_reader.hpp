@@ -95,7 +95,7 @@ class CloudReader {
   TaskEvent* event_ = nullptr;
   const Clock* event_clock_ = nullptr;
   std::string name_;  // the topic, for errors
-  dds_entity_t topic_ = 0, reader_ = 0, waitset_ = 0;
+  std::unique_ptr<SampleReader> input_;
   sensor_msgs_msg_dds__PointCloud2_ sample_{};
   std::atomic<bool> running_{false};
   std::thread thread_;

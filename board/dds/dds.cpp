@@ -101,6 +101,56 @@ bool Writer::write(const void* sample, std::int64_t source_ns) noexcept {
   return false;
 }
 
+SampleReader::Created SampleReader::create(const Domain& domain, const dds_topic_descriptor_t& type,
+                                           const std::string& topic_name, const EndpointQos& qos) {
+  Created result;
+  std::unique_ptr<SampleReader> r(new SampleReader());
+  r->topic_ = ros_topic(topic_name);
+  r->topic_entity_ = dds_create_topic(domain.participant(), &type, r->topic_.c_str(), nullptr, nullptr);
+  if (r->topic_entity_ < 0) {
+    result.error = "topic " + r->topic_ + ": " + dds_strretcode(r->topic_entity_);
+    r->topic_entity_ = 0;
+    return result;
+  }
+  dds_qos_t* q = dds_create_qos();
+  dds_qset_reliability(q, qos.reliable ? DDS_RELIABILITY_RELIABLE : DDS_RELIABILITY_BEST_EFFORT, DDS_MSECS(100));
+  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, qos.depth);
+  r->reader_ = dds_create_reader(domain.participant(), r->topic_entity_, q, nullptr);
+  dds_delete_qos(q);
+  if (r->reader_ < 0) {
+    result.error = "reader on " + r->topic_ + ": " + dds_strretcode(r->reader_);
+    r->reader_ = 0;
+    return result;
+  }
+  r->waitset_ = dds_create_waitset(domain.participant());
+  dds_set_status_mask(r->reader_, DDS_DATA_AVAILABLE_STATUS);
+  dds_waitset_attach(r->waitset_, r->reader_, r->reader_);
+  result.reader = std::move(r);
+  return result;
+}
+
+SampleReader::~SampleReader() {
+  for (dds_entity_t e : {waitset_, reader_, topic_entity_}) {
+    if (e > 0) dds_delete(e);
+  }
+}
+
+void SampleReader::trigger() noexcept {
+  triggered_.store(true, std::memory_order_release);
+  if (waitset_ > 0) dds_waitset_set_trigger(waitset_, true);
+}
+
+bool SampleReader::wait(int timeout_ms) noexcept {
+  dds_attach_t triggered[1];
+  dds_waitset_wait(waitset_, triggered, 1, DDS_MSECS(timeout_ms));
+  return !triggered_.load(std::memory_order_acquire);
+}
+
+ConfigText cyclone_config_or_loopback(const std::string& path) {
+  if (path.empty()) return {loopback_config(), {}};
+  return read_cyclone_config(path);
+}
+
 std::string with_small_receive_buffer(const std::string& xml) {
   static constexpr const char* kBuffer = "<SocketReceiveBufferSize min=\"80kB\" max=\"80kB\"/>";
   std::string out = xml;

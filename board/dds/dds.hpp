@@ -5,6 +5,7 @@
 // on the publisher thread, never on a real-time thread.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -58,6 +59,9 @@ struct ConfigText {
   std::string error;
 };
 ConfigText read_cyclone_config(const std::string& path);
+// The tools' configuration: `path`'s text, or the built-in loopback one when
+// `path` is empty.
+ConfigText cyclone_config_or_loopback(const std::string& path);
 
 enum class Durability : std::uint8_t { volatile_, transient_local };
 
@@ -97,6 +101,48 @@ class Writer {
 
 struct Writer::Created {
   std::unique_ptr<Writer> writer;
+  std::string error;
+};
+
+// The reading end of an input topic (a point cloud's, a laser scan's): the
+// topic, a reader keeping the newest `depth` samples, and a wait set that
+// wakes when data arrives, so a plain thread can wait on it and take every
+// sample into one preallocated one (`sample`, of the topic's type).
+class SampleReader {
+ public:
+  struct Created;
+  static Created create(const Domain& domain, const dds_topic_descriptor_t& type, const std::string& topic_name,
+                        const EndpointQos& qos);
+  ~SampleReader();
+  SampleReader(const SampleReader&) = delete;
+  SampleReader& operator=(const SampleReader&) = delete;
+
+  // Waits up to `timeout_ms` for data, then takes each valid sample into
+  // `sample` and calls `handle` with it. False when trigger() ended the wait.
+  template <class Handle>
+  bool wait_and_take(void* sample, int timeout_ms, Handle&& handle) {
+    if (!wait(timeout_ms)) return false;
+    dds_sample_info_t info;
+    void* one[1] = {sample};
+    while (dds_take(reader_, one, &info, 1, 1) == 1) {
+      if (info.valid_data) handle();
+    }
+    return true;
+  }
+  // Ends a wait_and_take() in progress (stopping the thread that waits).
+  void trigger() noexcept;
+  const std::string& topic() const noexcept { return topic_; }
+
+ private:
+  SampleReader() = default;
+  bool wait(int timeout_ms) noexcept;
+  std::string topic_;
+  dds_entity_t topic_entity_ = 0, reader_ = 0, waitset_ = 0;
+  std::atomic<bool> triggered_{false};
+};
+
+struct SampleReader::Created {
+  std::unique_ptr<SampleReader> reader;
   std::string error;
 };
 

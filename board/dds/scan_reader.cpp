@@ -75,27 +75,12 @@ LaserScanReader::Created LaserScanReader::create(const Domain& domain, const Las
   std::unique_ptr<LaserScanReader> r(new LaserScanReader(options, out));
   // Sensor data: best effort is what laser drivers offer (SensorDataQoS),
   // and a best-effort reader matches reliable writers too; only the newest kept.
-  dds_qos_t* q = dds_create_qos();
-  dds_qset_reliability(q, DDS_RELIABILITY_BEST_EFFORT, 0);
-  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 1);
-  r->topic_ = dds_create_topic(domain.participant(), &sensor_msgs_msg_dds__LaserScan__desc, r->name_.c_str(), nullptr,
-                               nullptr);
-  if (r->topic_ < 0) {
-    result.error = "topic " + r->name_ + ": " + dds_strretcode(r->topic_);
-    r->topic_ = 0;
-    dds_delete_qos(q);
+  auto input = SampleReader::create(domain, sensor_msgs_msg_dds__LaserScan__desc, options.topic, {false, 1});
+  if (!input.reader) {
+    result.error = input.error;
     return result;
   }
-  r->reader_ = dds_create_reader(domain.participant(), r->topic_, q, nullptr);
-  dds_delete_qos(q);
-  if (r->reader_ < 0) {
-    result.error = "reader on " + r->name_ + ": " + dds_strretcode(r->reader_);
-    r->reader_ = 0;
-    return result;
-  }
-  r->waitset_ = dds_create_waitset(domain.participant());
-  dds_set_status_mask(r->reader_, DDS_DATA_AVAILABLE_STATUS);
-  dds_waitset_attach(r->waitset_, r->reader_, r->reader_);
+  r->input_ = std::move(input.reader);
   result.reader = std::move(r);
   return result;
 }
@@ -103,9 +88,6 @@ LaserScanReader::Created LaserScanReader::create(const Domain& domain, const Las
 LaserScanReader::~LaserScanReader() {
   stop();
   dds_sample_free(&sample_, &sensor_msgs_msg_dds__LaserScan__desc, DDS_FREE_CONTENTS);
-  for (dds_entity_t e : {waitset_, reader_, topic_}) {
-    if (e > 0) dds_delete(e);
-  }
 }
 
 void LaserScanReader::start() {
@@ -115,7 +97,7 @@ void LaserScanReader::start() {
 
 void LaserScanReader::stop() {
   if (!running_.exchange(false)) return;
-  if (waitset_ > 0) dds_waitset_set_trigger(waitset_, true);
+  input_->trigger();
   if (thread_.joinable()) thread_.join();
 }
 
@@ -146,15 +128,7 @@ void LaserScanReader::handle(const sensor_msgs_msg_dds__LaserScan_& m, std::int6
 
 void LaserScanReader::loop() noexcept {
   while (running_.load(std::memory_order_acquire)) {
-    dds_attach_t triggered[1];
-    dds_waitset_wait(waitset_, triggered, 1, DDS_MSECS(200));
-    if (!running_.load(std::memory_order_acquire)) break;
-    dds_sample_info_t info;
-    void* one[1] = {&sample_};
-    while (dds_take(reader_, one, &info, 1, 1) == 1) {
-      if (!info.valid_data) continue;
-      handle(sample_, host_now_ns());
-    }
+    if (!input_->wait_and_take(&sample_, 200, [this] { handle(sample_, host_now_ns()); })) break;
   }
 }
 

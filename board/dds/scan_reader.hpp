@@ -72,7 +72,7 @@ class LaserScanReader {
   LaserScanOptions options_;
   Mailbox<perception::registration::PlanarScan>& out_;
   std::string name_;
-  dds_entity_t topic_ = 0, reader_ = 0, waitset_ = 0;
+  std::unique_ptr<SampleReader> input_;
   sensor_msgs_msg_dds__LaserScan_ sample_{};
   std::atomic<bool> running_{false};
   std::thread thread_;

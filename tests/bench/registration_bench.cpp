@@ -125,6 +125,33 @@ void BM_StationUpdate(benchmark::State& state) {
 }
 BENCHMARK(BM_StationUpdate)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond);
 
+// The box of the thesis' simulated floor taught from 16 scans at their true
+// poses, and the floor's segments, for the station benchmarks.
+struct SimBox {
+  trailnav::sim::station::World world = trailnav::sim::station::thesis_world();
+  std::vector<trailnav::sim::station::Segment> segments;
+  StationConfig config;
+  BuiltStation built;
+  SimBox() {
+    namespace st = trailnav::sim::station;
+    std::vector<st::Pose2> taught;
+    for (const auto& o : world.objects) taught.push_back(o.pose);
+    segments = world.walls;
+    const auto os = st::object_segments(world, taught);
+    segments.insert(segments.end(), os.begin(), os.end());
+    const st::ObjectShape& box = world.objects[0];
+    const st::Drive teach = st::teach_drive(box, 16, 1);
+    std::vector<StationScan> scans(teach.truth.size());
+    for (std::size_t i = 0; i < scans.size(); ++i) {
+      scans[i].points = st::cast(segments, teach.truth[i], st::LaserConfig{}, 100 + i);
+      scans[i].pose = st::to_isometry(teach.truth[i]);
+    }
+    const StationObject marked{"box", {box.mark.begin(), box.mark.end()}};
+    built = build_station(scans, std::span<const StationObject>(&marked, 1), config);
+    if (!built.error.empty()) throw std::runtime_error(built.error);
+  }
+};
+
 // A visit to the thesis' simulated station (board/sim/station_world.hpp):
 // the box taught from 16 scans, then per iteration a visit of 10 scans
 // (each registered onto the previous ones: `BM_StationVisit/0` stops there)
@@ -132,24 +159,12 @@ BENCHMARK(BM_StationUpdate)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond);
 // (`/1`): what trailnavd's station task does at each arrival.
 void BM_StationVisit(benchmark::State& state) {
   namespace st = trailnav::sim::station;
-  const st::World w = st::thesis_world();
-  std::vector<st::Pose2> taught;
-  for (const auto& o : w.objects) taught.push_back(o.pose);
-  std::vector<st::Segment> seg = w.walls;
-  const auto os = st::object_segments(w, taught);
-  seg.insert(seg.end(), os.begin(), os.end());
-  const st::ObjectShape& box = w.objects[0];
+  const SimBox sim;
+  const StationConfig& config = sim.config;
+  const BuiltStation& built = sim.built;
+  const auto& seg = sim.segments;
+  const st::ObjectShape& box = sim.world.objects[0];
   const st::LaserConfig laser;
-  const st::Drive teach = st::teach_drive(box, 16, 1);
-  std::vector<StationScan> scans(teach.truth.size());
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    scans[i].points = st::cast(seg, teach.truth[i], laser, 100 + i);
-    scans[i].pose = st::to_isometry(teach.truth[i]);
-  }
-  const StationConfig config;
-  const StationObject marked{"box", {box.mark.begin(), box.mark.end()}};
-  const BuiltStation built = build_station(scans, std::span<const StationObject>(&marked, 1), config);
-  if (!built.error.empty()) throw std::runtime_error(built.error);
   StationLocaliser localiser(built.station, config);
   const st::Drive visit = st::visit_drive(box, 10, 2);
   std::vector<std::vector<Point>> visit_scans;
@@ -176,24 +191,12 @@ BENCHMARK(BM_StationVisit)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 // the station row of the task presets (board/daemon/task_presets.cpp).
 void BM_StationTaskRun(benchmark::State& state) {
   namespace st = trailnav::sim::station;
-  const st::World w = st::thesis_world();
-  std::vector<st::Pose2> taught;
-  for (const auto& o : w.objects) taught.push_back(o.pose);
-  std::vector<st::Segment> seg = w.walls;
-  const auto os = st::object_segments(w, taught);
-  seg.insert(seg.end(), os.begin(), os.end());
-  const st::ObjectShape& box = w.objects[0];
+  const SimBox sim;
+  const StationConfig& config = sim.config;
+  const BuiltStation& built = sim.built;
+  const auto& seg = sim.segments;
+  const st::ObjectShape& box = sim.world.objects[0];
   const st::LaserConfig laser;
-  const st::Drive teach = st::teach_drive(box, 16, 1);
-  std::vector<StationScan> scans(teach.truth.size());
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    scans[i].points = st::cast(seg, teach.truth[i], laser, 100 + i);
-    scans[i].pose = st::to_isometry(teach.truth[i]);
-  }
-  const StationConfig config;
-  const StationObject marked{"box", {box.mark.begin(), box.mark.end()}};
-  const BuiltStation built = build_station(scans, std::span<const StationObject>(&marked, 1), config);
-  if (!built.error.empty()) throw std::runtime_error(built.error);
   // Standing at the box: the same place scanned again and again (new noise each time).
   const st::Drive visit = st::visit_drive(box, 2, 2);
   std::vector<std::vector<Point>> visit_scans;

@@ -23,6 +23,7 @@
 #include "geometry_msgs.h"
 #include "random.hpp"
 #include "run_cli.hpp"
+#include "sim_station.hpp"
 #include "robot_config.hpp"
 #include "scan_reader.hpp"
 #include "sensor_msgs.h"
@@ -54,24 +55,7 @@ fs::path test_dir() {
 
 // The box taught from 16 scans (noisy odometry refined), saved as a station file.
 std::string teach_box(const st::World& world, const std::string& object_name) {
-  std::vector<st::Pose2> taught;
-  for (const st::ObjectShape& o : world.objects) taught.push_back(o.pose);
-  const st::ObjectShape& box = world.objects[0];
-  std::vector<st::Segment> seg = world.walls;
-  const auto os = st::object_segments(world, taught);
-  seg.insert(seg.end(), os.begin(), os.end());
-  const st::Drive teach = st::teach_drive(box, 16, 21);
-  std::vector<reg::StationScan> scans(teach.truth.size());
-  st::Pose2 guess = teach.truth.front();
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    if (i > 0) guess = st::compose(guess, teach.odometry[i]);
-    scans[i].points = st::cast(seg, teach.truth[i], {}, sim::hash(22, i));
-    scans[i].pose = st::to_isometry(guess);
-  }
-  const reg::StationConfig config;
-  reg::teach(scans, config);
-  const reg::StationObject marked{object_name, {box.mark.begin(), box.mark.end()}};
-  const reg::BuiltStation built = reg::build_station(scans, std::span<const reg::StationObject>(&marked, 1), config);
+  const reg::BuiltStation built = test::teach_simulated_box(world, object_name, 21, 22, reg::StationConfig{});
   EXPECT_EQ(built.error, "");
   const std::string path = (test_dir() / (object_name + ".tnstation")).string();
   EXPECT_EQ(reg::save_station(reg::station_file_of(built.station, "thesis_floor"), path), "");

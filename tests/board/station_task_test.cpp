@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "random.hpp"
+#include "sim_station.hpp"
 #include "station_world.hpp"
 #include "trailnav/perception/registration/station_task.hpp"
 #include "trailnav/runtime/alloc_guard.hpp"
@@ -29,21 +30,7 @@ struct TaughtBox {
   std::vector<st::Pose2> taught;
   TaughtBox() {
     for (const st::ObjectShape& o : world.objects) taught.push_back(o.pose);
-    const st::ObjectShape& box = world.objects[0];
-    std::vector<st::Segment> seg = world.walls;
-    const auto os = st::object_segments(world, taught);
-    seg.insert(seg.end(), os.begin(), os.end());
-    const st::Drive teach = st::teach_drive(box, 16, 11);
-    std::vector<reg::StationScan> scans(teach.truth.size());
-    st::Pose2 guess = teach.truth.front();
-    for (std::size_t i = 0; i < scans.size(); ++i) {
-      if (i > 0) guess = st::compose(guess, teach.odometry[i]);
-      scans[i].points = st::cast(seg, teach.truth[i], {}, sim::hash(12, i));
-      scans[i].pose = st::to_isometry(guess);
-    }
-    reg::teach(scans, config);
-    const reg::StationObject marked{box.name, {box.mark.begin(), box.mark.end()}};
-    reg::BuiltStation built = reg::build_station(scans, std::span<const reg::StationObject>(&marked, 1), config);
+    reg::BuiltStation built = test::teach_simulated_box(world, world.objects[0].name, 11, 12, config);
     EXPECT_EQ(built.error, "");
     station = std::move(built.station);
   }
