@@ -64,14 +64,11 @@ CloudReader::~CloudReader() {
 }
 
 void CloudReader::start() {
-  if (running_.exchange(true)) return;
-  thread_ = std::thread([this] { loop(); });
+  input_->start(&sample_, [this] { handle(sample_, host_now_ns()); });
 }
 
 void CloudReader::stop() {
-  if (!running_.exchange(false)) return;
-  input_->trigger();
-  if (thread_.joinable()) thread_.join();
+  if (input_) input_->stop();
 }
 
 CloudReaderStats CloudReader::stats() const {
@@ -126,12 +123,6 @@ void CloudReader::handle(const sensor_msgs_msg_dds__PointCloud2_& m, std::int64_
   ++stats_.published;
   stats_.points += points;
   stats_.image += image_stats;
-}
-
-void CloudReader::loop() noexcept {
-  while (running_.load(std::memory_order_acquire)) {
-    if (!input_->wait_and_take(&sample_, 200, [this] { handle(sample_, host_now_ns()); })) break;
-  }
 }
 
 }  // namespace trailnav::dds

@@ -83,7 +83,6 @@ class CloudReader {
 
  private:
   CloudReader(const CloudReaderOptions& options, velodyne::RangeImageShape shape, std::size_t max_points);
-  void loop() noexcept;
 
   CloudReaderOptions options_;
   velodyne::RangeImageShape shape_;
@@ -97,8 +96,6 @@ class CloudReader {
   std::string name_;  // the topic, for errors
   std::unique_ptr<SampleReader> input_;
   sensor_msgs_msg_dds__PointCloud2_ sample_{};
-  std::atomic<bool> running_{false};
-  std::thread thread_;
   mutable std::mutex mutex_;  // stats_ (the health thread reads them)
   CloudReaderStats stats_;
 };

@@ -130,20 +130,36 @@ SampleReader::Created SampleReader::create(const Domain& domain, const dds_topic
 }
 
 SampleReader::~SampleReader() {
+  stop();
   for (dds_entity_t e : {waitset_, reader_, topic_entity_}) {
     if (e > 0) dds_delete(e);
   }
 }
 
-void SampleReader::trigger() noexcept {
-  triggered_.store(true, std::memory_order_release);
-  if (waitset_ > 0) dds_waitset_set_trigger(waitset_, true);
+void SampleReader::start(void* sample, std::function<void()> on_sample) {
+  if (running_.exchange(true)) return;
+  sample_ = sample;
+  on_sample_ = std::move(on_sample);
+  thread_ = std::thread([this] { loop(); });
 }
 
-bool SampleReader::wait(int timeout_ms) noexcept {
-  dds_attach_t triggered[1];
-  dds_waitset_wait(waitset_, triggered, 1, DDS_MSECS(timeout_ms));
-  return !triggered_.load(std::memory_order_acquire);
+void SampleReader::stop() {
+  if (!running_.exchange(false)) return;
+  if (waitset_ > 0) dds_waitset_set_trigger(waitset_, true);
+  if (thread_.joinable()) thread_.join();
+}
+
+void SampleReader::loop() noexcept {
+  while (running_.load(std::memory_order_acquire)) {
+    dds_attach_t triggered[1];
+    dds_waitset_wait(waitset_, triggered, 1, DDS_MSECS(200));
+    if (!running_.load(std::memory_order_acquire)) break;
+    dds_sample_info_t info;
+    void* one[1] = {sample_};
+    while (dds_take(reader_, one, &info, 1, 1) == 1) {
+      if (info.valid_data) on_sample_();
+    }
+  }
 }
 
 ConfigText cyclone_config_or_loopback(const std::string& path) {

@@ -6,6 +6,8 @@
 #pragma once
 
 #include <atomic>
+#include <thread>
+#include <functional>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -105,9 +107,10 @@ struct Writer::Created {
 };
 
 // The reading end of an input topic (a point cloud's, a laser scan's): the
-// topic, a reader keeping the newest `depth` samples, and a wait set that
-// wakes when data arrives, so a plain thread can wait on it and take every
-// sample into one preallocated one (`sample`, of the topic's type).
+// topic, a reader keeping the newest `depth` samples, a wait set that wakes
+// when data arrives, and a plain thread of its own (never a real-time one:
+// Cyclone allocates as it deserialises) that takes every sample into one
+// preallocated one (`sample`, of the topic's type) and hands it on.
 class SampleReader {
  public:
   struct Created;
@@ -117,28 +120,21 @@ class SampleReader {
   SampleReader(const SampleReader&) = delete;
   SampleReader& operator=(const SampleReader&) = delete;
 
-  // Waits up to `timeout_ms` for data, then takes each valid sample into
-  // `sample` and calls `handle` with it. False when trigger() ended the wait.
-  template <class Handle>
-  bool wait_and_take(void* sample, int timeout_ms, Handle&& handle) {
-    if (!wait(timeout_ms)) return false;
-    dds_sample_info_t info;
-    void* one[1] = {sample};
-    while (dds_take(reader_, one, &info, 1, 1) == 1) {
-      if (info.valid_data) handle();
-    }
-    return true;
-  }
-  // Ends a wait_and_take() in progress (stopping the thread that waits).
-  void trigger() noexcept;
+  // Starts the thread: each valid sample taken into `sample`, then
+  // `on_sample()` called on the thread.
+  void start(void* sample, std::function<void()> on_sample);
+  void stop();
   const std::string& topic() const noexcept { return topic_; }
 
  private:
   SampleReader() = default;
-  bool wait(int timeout_ms) noexcept;
+  void loop() noexcept;
   std::string topic_;
   dds_entity_t topic_entity_ = 0, reader_ = 0, waitset_ = 0;
-  std::atomic<bool> triggered_{false};
+  void* sample_ = nullptr;
+  std::function<void()> on_sample_;
+  std::atomic<bool> running_{false};
+  std::thread thread_;
 };
 
 struct SampleReader::Created {

@@ -91,14 +91,11 @@ LaserScanReader::~LaserScanReader() {
 }
 
 void LaserScanReader::start() {
-  if (running_.exchange(true)) return;
-  thread_ = std::thread([this] { loop(); });
+  input_->start(&sample_, [this] { handle(sample_, host_now_ns()); });
 }
 
 void LaserScanReader::stop() {
-  if (!running_.exchange(false)) return;
-  input_->trigger();
-  if (thread_.joinable()) thread_.join();
+  if (input_) input_->stop();
 }
 
 LaserScanStats LaserScanReader::stats() const {
@@ -124,12 +121,6 @@ void LaserScanReader::handle(const sensor_msgs_msg_dds__LaserScan_& m, std::int6
   ++stats_.handed;
   stats_.beams += m.ranges._length;
   stats_.returns += scan.points.size();
-}
-
-void LaserScanReader::loop() noexcept {
-  while (running_.load(std::memory_order_acquire)) {
-    if (!input_->wait_and_take(&sample_, 200, [this] { handle(sample_, host_now_ns()); })) break;
-  }
 }
 
 }  // namespace trailnav::dds

@@ -67,15 +67,12 @@ class LaserScanReader {
 
  private:
   LaserScanReader(const LaserScanOptions& options, Mailbox<perception::registration::PlanarScan>& out);
-  void loop() noexcept;
 
   LaserScanOptions options_;
   Mailbox<perception::registration::PlanarScan>& out_;
   std::string name_;
   std::unique_ptr<SampleReader> input_;
   sensor_msgs_msg_dds__LaserScan_ sample_{};
-  std::atomic<bool> running_{false};
-  std::thread thread_;
   std::uint64_t sequence_ = 0;
   mutable std::mutex mutex_;
   LaserScanStats stats_;
