@@ -44,6 +44,8 @@ namespace st = sim::station;
 namespace {
 
 constexpr std::uint32_t kDomain = 94;
+// The real log's test runs beside the simulated one (ctest -j): a domain of its own.
+constexpr std::uint32_t kRealDomain = 96;
 constexpr double kStep = 0.5 * std::numbers::pi / 180.0;  // the simulated laser's
 constexpr int kBeams = 361;
 
@@ -62,12 +64,13 @@ std::string teach_box(const st::World& world, const std::string& object_name) {
   return path;
 }
 
-std::string write_config(const std::string& name, const std::string& station, const std::string& extra = "") {
+std::string write_config(const std::string& name, const std::string& station, const std::string& extra = "",
+                         std::uint32_t domain = kDomain) {
   const std::string path = (test_dir() / name).string();
   std::ofstream c(path);
   c << "runtime: {realtime: off, lock_memory: false, log_level: warn, log_sink: stderr}\n"
     << extra << "station: " << station << "\n"
-    << "dds: {domain: " << kDomain << ", cyclone_config: loopback, health_period_s: 0.2}\n"
+    << "dds: {domain: " << domain << ", cyclone_config: loopback, health_period_s: 0.2}\n"
     << "tasks: {preset: auto}\n";
   return path;
 }
@@ -237,7 +240,7 @@ TEST(StationDaemon, LaserScansOverDdsGiveEachObjectsPoseAndMotion) {
 // taught from scans 1480-1495 (328 s into the log) by `trailnav station
 // teach`; trailnavd starts with the station and the log's pose at scan 553
 // (121 s, a pass 207 s earlier) as a visit's start; `trailnav station play`
-// sends scans 553-582 as sensor_msgs/LaserScan at 10 Hz. Nothing moved the
+// sends scans 553-582 as sensor_msgs/LaserScan at 5 Hz. Nothing moved the
 // cabinet between the passes: every fix says so to within the thesis' largest
 // real-case errors (measured 2026-12-05: at most 12.5 mm and 0.60 deg over 21
 // fixes), and puts the robot where the log's (SLAM-corrected) poses have it
@@ -261,13 +264,13 @@ TEST(StationDaemon, ARealLogPlayedAsLaserScansFindsTheCabinetWhereItWasTaught) {
   char station[400];
   std::snprintf(station, sizeof station, "{file: %s, topic: test/real_scan, start: [%.4f, %.4f, %.4f]}", file.c_str(), p0.x,
                 p0.y, p0.theta * 180.0 / std::numbers::pi);
-  RobotConfigResult loaded = load_robot_config(write_config("real.yaml", station));
+  RobotConfigResult loaded = load_robot_config(write_config("real.yaml", station, "", kRealDomain));
   ASSERT_TRUE(loaded.config) << loaded.error;
   auto made = Daemon::create(*loaded.config);
   ASSERT_TRUE(made.daemon) << made.error;
   Daemon& daemon = *made.daemon;
   ASSERT_TRUE(daemon.start());
-  auto domain = dds::Domain::create(kDomain, dds::loopback_config());
+  auto domain = dds::Domain::create(kRealDomain, dds::loopback_config());
   ASSERT_TRUE(domain.domain) << domain.error;
   auto fixes = dds::Subscriber::create(*domain.domain, "trailnav/station", &trailnav_msgs_msg_dds__StationFix__desc, 0);
   ASSERT_TRUE(fixes.subscriber) << fixes.error;
@@ -290,7 +293,7 @@ TEST(StationDaemon, ARealLogPlayedAsLaserScansFindsTheCabinetWhereItWasTaught) {
     }
   });
   const int played = test::run_cli({"station", "play", log, "--from", "553", "--to", "582", "--topic", "test/real_scan",
-                                    "--domain", std::to_string(kDomain), "--rate", "10", "--quiet"},
+                                    "--domain", std::to_string(kRealDomain), "--rate", "5", "--quiet"},
                                    text);
   reader.join();
   const perception::registration::StationCounters c = daemon.station_counters();
@@ -302,16 +305,24 @@ TEST(StationDaemon, ARealLogPlayedAsLaserScansFindsTheCabinetWhereItWasTaught) {
               static_cast<unsigned long long>(c.scans), static_cast<unsigned long long>(c.fixes),
               static_cast<unsigned long long>(seen), worst_mm, worst_deg, robot_x, robot_y, visit.scans.back().pose.x,
               visit.scans.back().pose.y);
-  EXPECT_GE(c.scans, 20u);  // the task takes the newest scan each run: at 10 Hz against 10 Hz a few may pass
-  EXPECT_GE(c.fixes, 5u);
+  // The task takes the newest scan each run: on a loaded machine (or under a
+  // sanitizer) it may pass some by, and each scan it takes once its local
+  // model is full gives a fix.
+  EXPECT_GE(c.scans, 12u);
+  EXPECT_EQ(c.fixes, c.scans - 9);
   EXPECT_EQ(c.lost, 0u);
-  EXPECT_GE(seen, 5u);
+  EXPECT_GE(seen, 1u);
   EXPECT_TRUE(all_observed);
   // Every fix within the thesis' largest real-case errors (Fig. 4.10: 19 mm, 1.1 deg).
   EXPECT_LT(worst_mm, 19.0);
   EXPECT_LT(worst_deg, 1.1);
-  // The robot near where the log had it at its last scan (the last fix may be a scan or two before).
-  EXPECT_LT(std::hypot(robot_x - visit.scans.back().pose.x, robot_y - visit.scans.back().pose.y), 0.3);
+  // The robot where the log had it at one of the scans (the last fix's, which
+  // is the last scan's unless the task passed that one by).
+  double nearest = 1e9;
+  for (const reg::LaserScan2& scan : visit.scans) {
+    nearest = std::min(nearest, std::hypot(robot_x - scan.pose.x, robot_y - scan.pose.y));
+  }
+  EXPECT_LT(nearest, 0.03);
   fs::remove_all(dir);
 }
 
