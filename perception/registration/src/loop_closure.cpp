@@ -53,6 +53,7 @@ LoopCloser::LoopCloser(const LoopClosureConfig& config)
     : config_(config),
       pool_(config.capacity * config.max_points),
       sizes_(config.capacity, 0),
+      voxels_(config.capacity, config.voxel),
       path_(config.capacity, 0.0),
       filter_(config.max_input_points > 0 ? config.max_input_points : config.max_points * 8),
       covariances_(config.neighbours, 1e-3f, config.planar),
@@ -69,12 +70,21 @@ bool LoopCloser::add_keyframe(std::span<const Point> cloud, double path_m) {
     ++counters_.refused_full;
     return false;
   }
-  filter_.filter(cloud, config_.voxel, filtered_);
-  // Evenly thinned to the slot's size (a filter's output keeps its voxels' order).
+  // A coarser grid until the cloud fits its slot: the same grid for every
+  // keyframe of a place, so two clouds sample a surface alike (thinning one
+  // grid's voxels would keep different ones in each). Beyond 16 times the
+  // voxel, the rest is thinned evenly.
+  float voxel = config_.voxel;
+  filter_.filter(cloud, voxel, filtered_);
+  while (filtered_.size() > config_.max_points && voxel < 16.0f * config_.voxel) {
+    voxel *= 1.25f;
+    filter_.filter(cloud, voxel, filtered_);
+  }
   const std::size_t n = filtered_.size();
   const std::size_t keep = std::min(n, config_.max_points);
   Point* slot = pool_.data() + count_ * config_.max_points;
   for (std::size_t i = 0; i < keep; ++i) slot[i] = filtered_.points[i * n / keep];
+  voxels_[count_] = voxel;
   sizes_[count_] = keep;
   path_[count_] = path_m;
   ++count_;
@@ -128,12 +138,11 @@ std::optional<LoopClosure> LoopCloser::verify(std::size_t from, std::size_t to, 
   lc.from = from;
   lc.to = to;
   lc.measurement = r.transform;
-  lc.overlap = static_cast<double>(r.correspondences) / static_cast<double>(source_.size());
   // The RMS distance along the target's normals (point to plane): a wrong
   // place leaves its points off the surfaces, where the distance between
   // two samplings of the same surface (a 3D voxel grid's, up to its size
   // apart) would not tell the two apart.
-  const float gate = static_cast<float>(3.0 * config_.max_rms);
+  const float gate = std::max(static_cast<float>(3.0 * config_.max_rms), std::max(voxels_[from], voxels_[to]));
   const Eigen::Isometry3f tf = r.transform.cast<float>();
   double sum = 0.0;
   std::size_t n = 0;
@@ -149,6 +158,7 @@ std::optional<LoopClosure> LoopCloser::verify(std::size_t from, std::size_t to, 
     ++n;
   }
   lc.rms = n > 0 ? std::sqrt(sum / static_cast<double>(n)) : std::numeric_limits<double>::infinity();
+  lc.overlap = static_cast<double>(n) / static_cast<double>(source_.size());
   const Eigen::Isometry3d jump = guess.inverse() * r.transform;
   lc.jump_m = jump.translation().head<2>().norm();
   lc.jump_rad = std::abs(yaw_of(jump));

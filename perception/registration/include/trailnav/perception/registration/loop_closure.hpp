@@ -7,8 +7,9 @@
 // each is verified by GICP of the new keyframe's cloud onto the candidate's,
 // starting from the poses' relative guess, and accepted when
 //
-//   - a second pass from the first's answer with a gate of 3 × `max_rms`
-//     associates at least `min_overlap` of the new cloud's points,
+//   - after a second pass from the first's answer with a gate of 3 × `max_rms`,
+//     at least `min_overlap` of the new cloud's points have a partner within
+//     that gate or the two clouds' voxel size, whichever is larger,
 //   - the RMS distance of the associated points from the candidate's
 //     surfaces (along their normals) is at most `max_rms` (a wrong place
 //     aligns its walls only in part), and
@@ -44,8 +45,8 @@ namespace trailnav::perception::registration {
 
 struct LoopClosureConfig {
   GicpConfig gicp{Metric::plane_to_plane, 60, 1.0f, 2e-5, 5e-5, 0.0};
-  float voxel = 0.1f;             // m, a keyframe's cloud
-  std::size_t max_points = 1500;  // per keyframe after the filter (evenly thinned beyond)
+  float voxel = 0.1f;             // m, a keyframe's cloud (coarser, by steps of 1.25, until it fits max_points)
+  std::size_t max_points = 1500;  // per keyframe after the filter
   std::size_t max_input_points = 0;  // a keyframe's cloud before the filter at most (0: 8 × max_points)
   int neighbours = 15;            // k for the covariances
   bool planar = true;             // 2D scans (z = 0)
@@ -109,6 +110,7 @@ class LoopCloser {
   LoopClosureConfig config_;
   std::vector<Point> pool_;          // capacity × max_points
   std::vector<std::size_t> sizes_;   // per keyframe
+  std::vector<float> voxels_;        // per keyframe: the voxel its cloud fitted at
   std::vector<double> path_;         // per keyframe
   std::size_t count_ = 0;
   VoxelFilter filter_;
