@@ -468,11 +468,9 @@ int run_locate(const LocateOptions& o) {
   const reg::StationFix fix = localiser.localise();
   const reg::Station& st = built.station;
   auto yaw_deg = [](const Eigen::Isometry3d& t) { return reg::to_pose2(t).theta * 180.0 / 3.14159265358979323846; };
-  // How far each body's centre (the mean of its taught points) moved.
+  // How far each body's centre (reg::body_centre: its polygon's centroid) moved, as trailnavd reports it.
   auto centre_shift = [&](std::size_t k) {
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (const reg::Point& p : st.bodies[k].cloud.points) c += p.cast<double>();
-    c /= static_cast<double>(std::max<std::size_t>(1, st.bodies[k].cloud.size()));
+    const Eigen::Vector3d c = reg::body_centre(st, k);
     return Eigen::Vector3d(fix.moved(k) * c - c);
   };
   if (!o.png.empty()) {

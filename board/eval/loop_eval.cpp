@@ -13,7 +13,8 @@ namespace reg = perception::registration;
 namespace {
 
 slam::Se2 se2_of(const Eigen::Isometry3d& t) noexcept {
-  return {t.translation().x(), t.translation().y(), std::atan2(t.linear()(1, 0), t.linear()(0, 0))};
+  const reg::Pose2 p = reg::to_pose2(t);
+  return {p.x, p.y, p.theta};
 }
 
 Eigen::Isometry3d iso_of(const slam::Se2& p) noexcept { return reg::to_isometry({p.x, p.y, p.theta}); }

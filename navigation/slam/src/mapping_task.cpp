@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <new>
 
+#include "trailnav/perception/registration/carmen.hpp"
 #include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::slam {
@@ -179,10 +180,7 @@ void MappingTask::take_revolution(const velodyne::RangeImage& image) {
     // The revolution's points in the keyframe's frame: the mount, then the
     // odometry from the keyframe to the revolution's end.
     const Se2 rel = w.odometry.inverse() * robot_at_r;
-    Eigen::Isometry3f t = Eigen::Isometry3f::Identity();
-    t.linear() = Eigen::AngleAxisf(static_cast<float>(rel.theta), Eigen::Vector3f::UnitZ()).toRotationMatrix();
-    t.translation() = Eigen::Vector3f(static_cast<float>(rel.x), static_cast<float>(rel.y), 0.0f);
-    const Eigen::Isometry3f to_keyframe = t * mount_;
+    const Eigen::Isometry3f to_keyframe = perception::registration::to_isometry({rel.x, rel.y, rel.theta}).cast<float>() * mount_;
     cloud_.clear();
     for (int ring = 0; ring < image.rings(); ++ring) {
       for (const velodyne::RangeCell& c : image.row(0, ring)) {
@@ -218,10 +216,7 @@ void MappingTask::close_loops() {
   const PoseGraph2d& g = graph_.graph();
   for (std::size_t k = 1; k <= graph_.keyframe_count() && estimates_.size() < estimates_.capacity(); ++k) {
     const Se2& p = g.pose(static_cast<std::size_t>(graph_.keyframe_vertex(k)));
-    Eigen::Isometry3d e = Eigen::Isometry3d::Identity();
-    e.linear() = Eigen::AngleAxisd(p.theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-    e.translation() = Eigen::Vector3d(p.x, p.y, 0.0);
-    estimates_.push_back(e);
+    estimates_.push_back(perception::registration::to_isometry({p.x, p.y, p.theta}));
   }
   const auto t0 = std::chrono::steady_clock::now();
   std::optional<perception::registration::LoopClosure> lc;
@@ -239,8 +234,8 @@ void MappingTask::close_loops() {
   local_.loops = loops_->counters();
   local_.loop_arena_high_water = loop_arena_->high_water();
   if (!lc) return;
-  const Eigen::Isometry3d& m = lc->measurement;
-  const Se2 z{m.translation().x(), m.translation().y(), std::atan2(m.linear()(1, 0), m.linear()(0, 0))};
+  const perception::registration::Pose2 m = perception::registration::to_pose2(lc->measurement);
+  const Se2 z{m.x, m.y, m.theta};
   graph_.add_loop_closure(static_cast<std::int32_t>(lc->from + 1), static_cast<std::int32_t>(lc->to + 1), z,
                           lc->information);
 }

@@ -5,6 +5,8 @@
 #include <limits>
 #include <string>
 
+#include "trailnav/perception/registration/carmen.hpp"
+
 namespace trailnav::perception::registration {
 
 namespace {
@@ -14,8 +16,6 @@ GicpConfig fine_gate(const LoopClosureConfig& c) noexcept {
   f.max_correspondence_distance = static_cast<float>(3.0 * c.max_rms);
   return f;
 }
-
-double yaw_of(const Eigen::Isometry3d& t) noexcept { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
 
 }  // namespace
 
@@ -161,7 +161,7 @@ std::optional<LoopClosure> LoopCloser::verify(std::size_t from, std::size_t to, 
   lc.overlap = static_cast<double>(n) / static_cast<double>(source_.size());
   const Eigen::Isometry3d jump = guess.inverse() * r.transform;
   lc.jump_m = jump.translation().head<2>().norm();
-  lc.jump_rad = std::abs(yaw_of(jump));
+  lc.jump_rad = std::abs(to_pose2(jump).theta);
   if (lc.overlap < config_.min_overlap) {
     ++counters_.low_overlap;
     return std::nullopt;

@@ -284,6 +284,27 @@ BuiltStation build_station(std::span<const StationScan> scans, std::span<const S
   return built;
 }
 
+Eigen::Vector3d body_centre(const Station& station, std::size_t k) noexcept {
+  // The polygon's area centroid (the shoelace sums); a degenerate one falls back.
+  if (k < station.polygons.size() && station.polygons[k].size() >= 3) {
+    const std::vector<Eigen::Vector2d>& poly = station.polygons[k];
+    double area = 0.0;
+    Eigen::Vector2d c = Eigen::Vector2d::Zero();
+    for (std::size_t i = 0; i < poly.size(); ++i) {
+      const Eigen::Vector2d& a = poly[i];
+      const Eigen::Vector2d& b = poly[(i + 1) % poly.size()];
+      const double cross = a.x() * b.y() - b.x() * a.y();
+      area += cross;
+      c += cross * (a + b);
+    }
+    if (std::abs(area) > 1e-12) return {c.x() / (3.0 * area), c.y() / (3.0 * area), 0.0};
+  }
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  if (k >= station.bodies.size() || station.bodies[k].cloud.points.empty()) return sum;
+  for (const Point& p : station.bodies[k].cloud.points) sum += p.cast<double>();
+  return sum / static_cast<double>(station.bodies[k].cloud.points.size());
+}
+
 StationFile station_file_of(const Station& station, const std::string& name) {
   StationFile f;
   f.name = name;

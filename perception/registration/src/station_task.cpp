@@ -4,22 +4,11 @@
 #include <cmath>
 #include <new>
 
+#include "trailnav/perception/registration/carmen.hpp"
 #include "trailnav/runtime/heap_redirect.hpp"
 
 namespace trailnav::perception::registration {
 
-namespace {
-
-double yaw_of(const Eigen::Isometry3d& t) noexcept { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
-
-Eigen::Isometry3d planar(double x, double y, double yaw) noexcept {
-  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  t.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  t.translation() = Eigen::Vector3d(x, y, 0.0);
-  return t;
-}
-
-}  // namespace
 
 void band_scan(const velodyne::RangeImage& image, const RingBand& band, PlanarScan& out) noexcept {
   out.points.clear();
@@ -53,33 +42,9 @@ StationTask::StationTask(const Station& station, const StationConfig& config, co
       arena_(options.arena_bytes),
       track_(kPoseQueueCapacity) {
   localiser_.emplace(station, config);
-  // Each object's centre: that of the polygon it was marked by (its area's
-  // centroid: the user drew it around the whole object, where the taught
-  // points are only the faces the teach-in saw); else its points' mean.
-  for (std::size_t k = 0; k < station.bodies.size(); ++k) {
-    const std::vector<Eigen::Vector2d>* poly = k < station.polygons.size() ? &station.polygons[k] : nullptr;
-    double area = 0.0;
-    Eigen::Vector2d c = Eigen::Vector2d::Zero();
-    if (poly != nullptr && poly->size() >= 3) {
-      for (std::size_t i = 0; i < poly->size(); ++i) {
-        const Eigen::Vector2d& a = (*poly)[i];
-        const Eigen::Vector2d& b = (*poly)[(i + 1) % poly->size()];
-        const double cross = a.x() * b.y() - b.x() * a.y();
-        area += cross;
-        c += cross * (a + b);
-      }
-    }
-    if (std::abs(area) > 1e-12) {
-      c /= 3.0 * area;
-      centres_.emplace_back(c.x(), c.y(), 0.0);
-      continue;
-    }
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (const Point& p : station.bodies[k].cloud.points) sum += p.cast<double>();
-    const auto n = station.bodies[k].cloud.points.size();
-    centres_.push_back(n == 0 ? sum : Eigen::Vector3d(sum / static_cast<double>(n)));
-  }
+  for (std::size_t k = 0; k < station.bodies.size(); ++k) centres_.push_back(body_centre(station, k));
   c_.arena_capacity = arena_.capacity();
+  board_.post(c_);
 }
 
 StationTask::~StationTask() {
@@ -99,7 +64,7 @@ Eigen::Isometry3d StationTask::motion(std::int64_t stamp_ns) noexcept {
       const Pose before = last_pose_;
       last_pose_ = now;
       have_last_pose_ = true;
-      if (had) return planar(before.x, before.y, before.yaw).inverse() * planar(now.x, now.y, now.yaw);
+      if (had) return to_isometry({before.x, before.y, before.yaw}).inverse() * to_isometry({now.x, now.y, now.yaw});
     }
   }
   ++c_.without_odometry;
@@ -119,14 +84,8 @@ void StationTask::run(const TaskTick&) {
   }
   if (scan == nullptr) return;
   step(*scan);
-  scans_seen_.store(c_.scans, std::memory_order_relaxed);
-  fixes_seen_.store(c_.fixes, std::memory_order_relaxed);
-  lost_seen_.store(c_.lost, std::memory_order_relaxed);
-  visits_seen_.store(c_.visits, std::memory_order_relaxed);
-  without_odometry_seen_.store(c_.without_odometry, std::memory_order_relaxed);
-  arena_failures_seen_.store(c_.arena_failures, std::memory_order_relaxed);
-  dropped_seen_.store(c_.dropped_points, std::memory_order_relaxed);
-  high_water_seen_.store(arena_.high_water(), std::memory_order_relaxed);
+  c_.arena_high_water = arena_.high_water();
+  board_.post(c_);
 }
 
 void StationTask::step(const PlanarScan& scan) noexcept {
@@ -191,7 +150,7 @@ void StationTask::publish(const StationFix& fix, const PlanarScan& scan) noexcep
     const Eigen::Vector3d t = b.transform.translation();
     o.x = t.x();
     o.y = t.y();
-    o.yaw = yaw_of(b.transform);
+    o.yaw = to_pose2(b.transform).theta;
     o.covariance = planar_pose_covariance(b.information, t, b.error, b.correspondences);
     o.correspondences = static_cast<std::uint32_t>(b.correspondences);
     o.observed = b.observed;
@@ -202,26 +161,12 @@ void StationTask::publish(const StationFix& fix, const PlanarScan& scan) noexcep
       const Eigen::Isometry3d m = fix.moved(k);
       o.moved_x = m.translation().x();
       o.moved_y = m.translation().y();
-      o.turned = yaw_of(m);
-      o.centre_moved = k < centres_.size() ? (m * centres_[k] - centres_[k]).head<2>().norm() : 0.0;
+      o.turned = to_pose2(m).theta;
+      o.centre_moved = (m * centres_[k] - centres_[k]).head<2>().norm();
     }
   }
   out_.publish();
   if (notify_ != nullptr) notify_->notify();
-}
-
-StationCounters StationTask::counters() const noexcept {
-  StationCounters c;
-  c.scans = scans_seen_.load(std::memory_order_relaxed);
-  c.fixes = fixes_seen_.load(std::memory_order_relaxed);
-  c.lost = lost_seen_.load(std::memory_order_relaxed);
-  c.visits = visits_seen_.load(std::memory_order_relaxed);
-  c.without_odometry = without_odometry_seen_.load(std::memory_order_relaxed);
-  c.arena_failures = arena_failures_seen_.load(std::memory_order_relaxed);
-  c.dropped_points = dropped_seen_.load(std::memory_order_relaxed);
-  c.arena_high_water = high_water_seen_.load(std::memory_order_relaxed);
-  c.arena_capacity = c_.arena_capacity;
-  return c;
 }
 
 }  // namespace trailnav::perception::registration

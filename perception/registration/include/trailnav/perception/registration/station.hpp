@@ -92,6 +92,12 @@ struct StationObject {
 bool inside(const std::vector<Eigen::Vector2d>& polygon, const Eigen::Vector2d& p) noexcept;
 
 // The taught station: body 0 the surroundings, body k the k-th object.
+struct Station;
+// A body's centre in the station frame, the point whose shift says how far
+// an object moved: the centroid of the polygon it was marked by (the user
+// drew it round the whole object, where its taught points are only the faces
+// the teach-in saw), else the mean of its taught points (the surroundings).
+Eigen::Vector3d body_centre(const Station& station, std::size_t body) noexcept;
 struct Station {
   std::vector<std::string> names;  // names[0] == "surroundings"
   std::vector<Target> bodies;

@@ -25,7 +25,6 @@
 // the scan is dropped, never served from the heap.
 #pragma once
 
-#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -40,6 +39,7 @@
 #include "trailnav/runtime/broadcast.hpp"
 #include "trailnav/runtime/mailbox.hpp"
 #include "trailnav/runtime/scheduler.hpp"
+#include "trailnav/runtime/status_board.hpp"
 #include "trailnav/runtime/wakeup.hpp"
 
 namespace trailnav::perception::registration {
@@ -82,7 +82,7 @@ struct StationBodyFix {
   // the final normal matrix), taken from the left perturbation to the pose.
   std::array<double, 9> covariance{};
   double moved_x = 0.0, moved_y = 0.0, turned = 0.0;  // the object's motion since the teach-in (station frame); 0 for body 0
-  double centre_moved = 0.0;  // m, how far its centre (its polygon's centroid) went by that motion
+  double centre_moved = 0.0;  // m, how far its centre (body_centre(): its polygon's centroid) went by that motion
   std::uint32_t correspondences = 0;
   bool observed = false;
   double fitness = 0.0;  // m², mean squared distance of its associations
@@ -129,7 +129,8 @@ class StationTask final : public Task {
   }
   void set_notify(Wakeup* wakeup) noexcept { notify_ = wakeup; }
   void run(const TaskTick& tick) override;
-  StationCounters counters() const noexcept;
+  // A consistent copy, for health (StatusBoard: the task never waits on a reader).
+  StationCounters counters() const noexcept { return board_.read(); }
 
  private:
   void step(const PlanarScan& scan) noexcept;
@@ -147,7 +148,7 @@ class StationTask final : public Task {
   PlanarScan band_scan_;
   Wakeup* notify_ = nullptr;
   Arena arena_;
-  std::vector<Eigen::Vector3d> centres_;  // per body: its polygon's centroid, else its points' mean (station frame)
+  std::vector<Eigen::Vector3d> centres_;  // per body: body_centre()
   std::optional<StationLocaliser> localiser_;
   PoseTrack track_;
   bool in_visit_ = false;
@@ -158,9 +159,7 @@ class StationTask final : public Task {
   Eigen::Isometry3d last_registered_ = Eigen::Isometry3d::Identity();
   int since_fix_ = 0;
   StationCounters c_;
-  std::atomic<std::uint64_t> scans_seen_{0}, fixes_seen_{0}, lost_seen_{0}, visits_seen_{0}, without_odometry_seen_{0},
-      arena_failures_seen_{0}, dropped_seen_{0};
-  std::atomic<std::size_t> high_water_seen_{0};
+  StatusBoard<StationCounters> board_;
 };
 
 }  // namespace trailnav::perception::registration
