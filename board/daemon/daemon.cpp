@@ -77,17 +77,6 @@ std::string navigation_summary(const nav::NavigationSection& n, const osm::RoadG
 
 Daemon::Daemon(const RobotConfig& config) : config_(config) {}
 
-// The lidar's revolution readers, in the order robot_config.cpp counts them:
-// the obstacle thread's, the terrain thread's (when it does not share the
-// obstacle thread's alignment), the station's ring band, the mapping's loop closures.
-std::size_t Daemon::revolution_reader(ReaderOf who) const noexcept {
-  const RobotConfig& c = config_;
-  std::size_t i = (c.obstacles ? 1u : 0u) + (c.terrain && !c.terrain_shares_alignment() ? 1u : 0u);
-  if (who == ReaderOf::station) return i;
-  if (c.station && c.station->input == StationSection::Input::velodyne) ++i;
-  return i;  // ReaderOf::mapping
-}
-
 Daemon::~Daemon() { stop(); }
 
 Daemon::Created Daemon::create(const RobotConfig& config) {
@@ -232,7 +221,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       // The keyframes' clouds: the lidar's revolutions in the robot frame (the obstacle map's mount).
       const Eigen::Isometry3f mount =
           config.obstacles ? mount_transform(config.obstacles->mount) : Eigen::Isometry3f::Identity();
-      d->mapping_->set_revolutions(&d->lidar_revolutions(d->revolution_reader(ReaderOf::mapping)), mount, 2.0f, 60.0f);
+      d->mapping_->set_revolutions(&d->lidar_revolutions(config.revolution_reader(RobotConfig::Reader::mapping)), mount, 2.0f, 60.0f);
       TN_LOG_INFO("mapping: loop closures from the lidar's revolutions (voxel %.2f m, %zu points a keyframe, "
                   "candidates within %.1f m and %.0f m of driving back, %.0f MB for the clouds)",
                   static_cast<double>(m.loops->voxel), m.loops->max_points, m.loops->search_radius, m.loops->min_path,
@@ -279,7 +268,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
       reg::RingBand band = sc.band;
       // The lidar's own mount, as the obstacle map takes it.
       if (!sc.band_mount_given && config.obstacles) band.mount = mount_transform(config.obstacles->mount);
-      d->station_task_->set_revolutions(&d->lidar_revolutions(d->revolution_reader(ReaderOf::station)), band);
+      d->station_task_->set_revolutions(&d->lidar_revolutions(config.revolution_reader(RobotConfig::Reader::station)), band);
     }
     std::size_t points = 0;
     for (std::size_t k = 0; k < d->station_->bodies.size(); ++k) points += d->station_->bodies[k].cloud.size();
@@ -336,7 +325,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
         d->pose_->add_pose_output(d->terrain_pose_queue_.get());
       }
       d->terrain_ = std::make_unique<perception::TerrainTask>(*d->terrain_mapper_,
-                                                             d->lidar_revolutions(config.obstacles ? 1 : 0),
+                                                             d->lidar_revolutions(config.revolution_reader(RobotConfig::Reader::terrain)),
                                                              d->terrain_pose_queue_.get(), *d->terrain_out_, 512,
                                                              config.pose_wait);
     }
@@ -380,7 +369,7 @@ Daemon::Created Daemon::create(const RobotConfig& config) {
   }
   if (config.obstacles) {
     d->obstacles_ = std::make_unique<perception::ObstacleTask>(
-        *d->pipeline_, d->lidar_revolutions(0), d->pose_queue_.get(),
+        *d->pipeline_, d->lidar_revolutions(config.revolution_reader(RobotConfig::Reader::obstacles)), d->pose_queue_.get(),
         d->terrain_out_ ? &d->terrain_out_->reader(0) : nullptr, *d->obstacle_out_, 512, config.pose_wait);
     d->obstacles_->set_aligned(d->aligned_.get());
     d->obstacles_->set_streaming(config.obstacles->streaming);

@@ -121,8 +121,6 @@ class Daemon {
   Broadcast<velodyne::RangeImage>::Reader& lidar_revolutions(std::size_t reader) noexcept {
     return lidar_ ? lidar_->revolutions(reader) : cloud_reader_->revolutions(reader);
   }
-  enum class ReaderOf { station, mapping };
-  std::size_t revolution_reader(ReaderOf who) const noexcept;
   TaskEvent revolution_event_;
   std::unique_ptr<gps::GpsDriver> gps_;
   std::unique_ptr<imu::ImuDriver> imu_;

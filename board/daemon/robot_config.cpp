@@ -558,9 +558,7 @@ RobotConfig parse_robot_config(const ConfigNode& root) {
   // takes the obstacle thread's aligned points: RobotConfig::terrain_shares_alignment()).
   if (c.lidar) {
     c.lidar->driver.revolution_readers =
-        std::max(1, (c.obstacles ? 1 : 0) + (c.terrain && !c.terrain_shares_alignment() ? 1 : 0) +
-                        (c.station && c.station->input == StationSection::Input::velodyne ? 1 : 0) +
-                        (c.mapping && c.mapping->loops ? 1 : 0));
+        std::max(1, static_cast<int>(c.revolution_reader(RobotConfig::Reader::count)));
     // The obstacle thread, working on each revolution while it arrives, is
     // woken every quarter turn (every 1/32 in the last quarter, and at its
     // end) with the lidar's progress: each wake-up costs more than the work

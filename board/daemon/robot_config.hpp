@@ -122,6 +122,21 @@ struct RobotConfig {
   bool terrain_shares_alignment() const noexcept {
     return obstacles.has_value() && terrain.has_value() && obstacles_use_pose == terrain_use_pose;
   }
+  // The lidar's revolution readers, one per thread that reads the
+  // revolutions itself, in this order: the obstacle thread, the terrain
+  // thread (when it does not share the obstacle thread's alignment), the
+  // station's ring band, the mapping's loop closures. revolution_reader(r)
+  // is r's index when r reads (and the number of readers before it when it
+  // does not); revolution_reader(Reader::count) is how many there are.
+  enum class Reader { obstacles, terrain, station, mapping, count };
+  std::size_t revolution_reader(Reader who) const noexcept {
+    const bool reads[] = {obstacles.has_value(), terrain.has_value() && !terrain_shares_alignment(),
+                          station.has_value() && station->input == StationSection::Input::velodyne,
+                          mapping.has_value() && mapping->loops.has_value()};
+    std::size_t i = 0;
+    for (std::size_t r = 0; r < static_cast<std::size_t>(who); ++r) i += reads[r] ? 1 : 0;
+    return i;
+  }
 };
 
 // Throws ConfigError. Relative paths are taken from the config file's directory.

@@ -565,3 +565,22 @@ TEST(RobotConfig, TheStationSectionAsTheRobotExampleGivesIt) {
   const std::string e = load_error(std::string(kMinimal) + "  - {name: station, kind: periodic, rate_hz: 10, budget_ms: 50}\n");
   EXPECT_NE(e.find("task 'station' has nothing to run"), std::string::npos) << e;
 }
+
+// The lidar's revolution readers: one per thread that reads the revolutions
+// itself, in a fixed order, counted in the driver's options by the same rule
+// the daemon hands them out by.
+TEST(RobotConfig, EachRevolutionReaderHasItsPlace) {
+  const std::string task = "  - {name: mapping, kind: periodic, rate_hz: 2, budget_ms: 450}\n";
+  const auto r = load(std::string(kMinimal) + task + kPoseTasks + kPoseSections + "mapping: {loops: {}}\n");
+  ASSERT_TRUE(r.config) << r.error;
+  using R = daemon::RobotConfig::Reader;
+  const daemon::RobotConfig& c = *r.config;
+  EXPECT_EQ(c.revolution_reader(R::obstacles), 0u);
+  EXPECT_EQ(c.revolution_reader(R::mapping), 1u);  // no terrain thread, no station band before it
+  EXPECT_EQ(c.revolution_reader(R::count), 2u);
+  EXPECT_EQ(c.lidar->driver.revolution_readers, 2);
+  const auto plain = load(kMinimal);
+  ASSERT_TRUE(plain.config) << plain.error;
+  EXPECT_EQ(plain.config->revolution_reader(R::count), 1u);
+  EXPECT_EQ(plain.config->lidar->driver.revolution_readers, 1);
+}
