@@ -66,24 +66,26 @@ eval::LoopEvalOptions loop_options(const Options& o, eval::LoopEvalOptions lo);
 std::string loops_json(const eval::LoopEvalResult& lr) {
   const perception::registration::LoopCounters& l = lr.counters;
   const bool ref = !lr.reference.empty();
-  auto pair = [&](double a, double b, int digits) {
-    return ref ? "[" + num(a, digits) + ", " + num(b, digits) + "]" : std::string("null");
+  // The keyframes' errors by the odometry alone ("before") and with the
+  // closures ("after"), under the same names and meaning as the report's own.
+  auto errors = [&](const perception::registration::RelativePoseError& rpe, double end, double ate) {
+    if (!ref) return std::string("null");
+    return "{\"rpe_translation_percent\": " + num(rpe.translation_percent, 4) +
+           ", \"rpe_rotation_deg_per_100m\": " + num(rpe.rotation_deg_per_100m, 4) + ", \"end_error_m\": " + num(end, 3) +
+           ", \"ate_rmse_m\": " + num(ate, 3) + "}";
   };
-  char text[1400];
+  char text[800];
   std::snprintf(text, sizeof text,
                 ", \"loops\": {\"keyframes\": %zu, \"candidates\": %llu, \"accepted\": %llu, \"false\": %s, "
                 "\"rejected_overlap\": %llu, \"rejected_rms\": %llu, \"rejected_jump\": %llu, \"not_converged\": %llu, "
-                "\"optimisations\": %d, \"solve_ms_max\": %s, \"close_ms_max\": %s, \"rpe_translation_percent\": %s, "
-                "\"rpe_rotation_deg_per_100m\": %s, \"end_error_m\": %s, \"ate_rmse_m\": %s}",
+                "\"optimisations\": %d, \"solve_ms_max\": %s, \"close_ms_max\": %s, ",
                 lr.keyframes, static_cast<unsigned long long>(l.candidates), static_cast<unsigned long long>(l.accepted),
                 ref ? std::to_string(lr.false_closures).c_str() : "null", static_cast<unsigned long long>(l.low_overlap),
                 static_cast<unsigned long long>(l.high_rms), static_cast<unsigned long long>(l.jumped),
                 static_cast<unsigned long long>(l.not_converged), lr.optimisations, num(lr.solve_ms_max, 2).c_str(),
-                num(lr.close_ms_max, 2).c_str(),
-                pair(lr.rpe_odometry.translation_percent, lr.rpe_loops.translation_percent, 4).c_str(),
-                pair(lr.rpe_odometry.rotation_deg_per_100m, lr.rpe_loops.rotation_deg_per_100m, 4).c_str(),
-                pair(lr.end_odometry_m, lr.end_loops_m, 3).c_str(), pair(lr.ate_odometry_m, lr.ate_loops_m, 3).c_str());
-  return text;
+                num(lr.close_ms_max, 2).c_str());
+  return text + ("\"before\": " + errors(lr.rpe_odometry, lr.end_odometry_m, lr.ate_odometry_m) + ", \"after\": " +
+                 errors(lr.rpe_loops, lr.end_loops_m, lr.ate_loops_m) + "}");
 }
 
 void print_loops(const eval::LoopEvalResult& lr, const eval::LoopEvalOptions& lo) {
@@ -417,7 +419,7 @@ void add_lidar_odometry_command(CLI::App& app) {
   cmd->add_flag("--loops", o.loops,
                 "Also close loops: keyframes (a CARMEN log's every metre, a lidar's every 2 m) in a pose graph, each new one registered by GICP onto "
                 "earlier ones the map puts near it (verified by overlap, RMS and the jump from the map's guess), the "
-                "graph solved by SMF after each closure; reports the keyframes' errors before and after (JSON \"loops\")");
+                "graph solved by SMF after each closure; reports the keyframes' errors before and after (JSON \"loops\": its counts, and \"before\" and \"after\" with rpe_translation_percent, rpe_rotation_deg_per_100m, end_error_m, ate_rmse_m)");
   cmd->add_option("--loop-radius", o.loop_radius, "Candidates within this of the new keyframe by the map's poses (m; default 4, a lidar's 8)");
   cmd->add_option("--loop-min-path", o.loop_min_path, "Driving between a candidate and the new keyframe at least (m; default 15, a lidar's 25)");
   cmd->add_option("--loop-max-rms", o.loop_max_rms, "A closure's points' RMS distance from the surfaces they joined (along their normals) at most (m; default 0.04, a lidar's 0.1)");

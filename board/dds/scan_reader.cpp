@@ -19,31 +19,29 @@ std::string number(double v) {
 
 Status read_laser_scan(const sensor_msgs_msg_dds__LaserScan_& m, const LaserScanOptions& o, std::string_view what,
                        perception::registration::PlanarScan& out) noexcept {
-  const std::string who(what);
+  // What is wrong, named by the topic (the string built only for a refusal).
+  auto refused = [what](const std::string& why) { return Status::error(std::string(what) + ": " + why); };
   const std::uint32_t n = m.ranges._length;
-  if (n == 0 || m.ranges._buffer == nullptr) return Status::error(who + ": a scan without beams");
+  if (n == 0 || m.ranges._buffer == nullptr) return refused("a scan without beams");
   if (n > o.max_beams || n > out.points.capacity()) {
-    return Status::error(who + ": " + std::to_string(n) + " beams; the input takes at most " +
-                         std::to_string(std::min(o.max_beams, out.points.capacity())) + " (station.max_points)");
+    return refused(std::to_string(n) + " beams; the input takes at most " +
+                   std::to_string(std::min(o.max_beams, out.points.capacity())) + " (station.max_points)");
   }
   if (!std::isfinite(m.angle_min) || !std::isfinite(m.angle_max) || !std::isfinite(m.angle_increment) ||
       m.angle_increment == 0.0f) {
-    return Status::error(who + ": angle_min " + number(m.angle_min) + ", angle_max " + number(m.angle_max) +
-                         ", angle_increment " + number(m.angle_increment) + ": the angles must be finite and the "
-                         "increment not zero");
+    return refused("angle_min " + number(m.angle_min) + ", angle_max " + number(m.angle_max) + ", angle_increment " +
+                   number(m.angle_increment) + ": the angles must be finite and the increment not zero");
   }
   // The last beam's angle as the message says it, and as its beams put it;
   // drivers differ by one beam (whether angle_max is the last beam's or one
   // past it), more is a message that does not describe its own beams.
   const double last = static_cast<double>(m.angle_min) + static_cast<double>(n - 1) * static_cast<double>(m.angle_increment);
   if (std::abs(last - static_cast<double>(m.angle_max)) > 1.01 * std::abs(static_cast<double>(m.angle_increment)) + 1e-6) {
-    return Status::error(who + ": " + std::to_string(n) + " beams from angle_min " + number(m.angle_min) + " by " +
-                         number(m.angle_increment) + " rad end at " + number(last) + ", but angle_max is " +
-                         number(m.angle_max));
+    return refused(std::to_string(n) + " beams from angle_min " + number(m.angle_min) + " by " +
+                   number(m.angle_increment) + " rad end at " + number(last) + ", but angle_max is " + number(m.angle_max));
   }
   if (!std::isfinite(m.range_min) || !std::isfinite(m.range_max) || m.range_min < 0.0f || m.range_max <= m.range_min) {
-    return Status::error(who + ": range_min " + number(m.range_min) + ", range_max " + number(m.range_max) +
-                         ": not a range window");
+    return refused("range_min " + number(m.range_min) + ", range_max " + number(m.range_max) + ": not a range window");
   }
   const float far = o.max_range > 0.0f ? std::min(o.max_range, m.range_max) : m.range_max;
   const double c = std::cos(o.mount_yaw), s = std::sin(o.mount_yaw);
