@@ -601,11 +601,17 @@ DiagnosticsMessage::DiagnosticsMessage() : store_(kStatuses), statuses_(kStatuse
 void DiagnosticsMessage::clear(std::int64_t utc_ns) noexcept {
   msg_.header.stamp = to_time(utc_ns);
   msg_.status._length = 0;
+  open_ = false;
+  dropped_ = 0;
 }
 
 bool DiagnosticsMessage::begin(Level level, std::string_view name, std::string_view message,
                                std::string_view hardware_id) noexcept {
-  if (msg_.status._length >= kStatuses) return false;
+  open_ = msg_.status._length < kStatuses;
+  if (!open_) {
+    ++dropped_;
+    return false;
+  }
   const std::size_t i = msg_.status._length++;
   Status& s = store_[i];
   s.name.set(name);
@@ -617,10 +623,12 @@ bool DiagnosticsMessage::begin(Level level, std::string_view name, std::string_v
 }
 
 void DiagnosticsMessage::value(std::string_view key, std::string_view value) noexcept {
-  if (msg_.status._length == 0) return;
   const std::size_t i = msg_.status._length - 1;
+  if (!open_ || statuses_[i].values._length >= kValues) {
+    ++dropped_;
+    return;
+  }
   auto& seq = statuses_[i].values;
-  if (seq._length >= kValues) return;
   store_[i].keys[seq._length].set(key);
   store_[i].values[seq._length].set(value);
   ++seq._length;

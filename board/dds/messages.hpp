@@ -320,8 +320,11 @@ class DiagnosticsMessage {
   DiagnosticsMessage& operator=(const DiagnosticsMessage&) = delete;
 
   void clear(std::int64_t utc_ns) noexcept;
-  // Starts a status; false when there is no room (further values are dropped).
+  // Starts a status; false when there is no room: it and its values are
+  // dropped (never added to the status before it) and counted.
   bool begin(Level level, std::string_view name, std::string_view message, std::string_view hardware_id) noexcept;
+  // Statuses and values left out of this sample for want of room.
+  std::size_t dropped() const noexcept { return dropped_; }
   void value(std::string_view key, std::string_view value) noexcept;
   void value(std::string_view key, std::uint64_t value) noexcept;
   void value(std::string_view key, double value, int decimals) noexcept;
@@ -337,6 +340,8 @@ class DiagnosticsMessage {
     std::array<diagnostic_msgs_msg_dds__KeyValue_, kValues> pairs{};
   };
   FixedString<8> frame_;
+  bool open_ = false;  // the last begin() had room: values go to it
+  std::size_t dropped_ = 0;
   std::vector<Status> store_;
   std::vector<diagnostic_msgs_msg_dds__DiagnosticStatus_> statuses_;
   diagnostic_msgs_msg_dds__DiagnosticArray_ msg_{};

@@ -5,6 +5,7 @@
 #include <ctime>
 
 #include "trailnav/runtime/host_clock.hpp"
+#include "trailnav/runtime/log.hpp"
 
 namespace trailnav::dds {
 
@@ -179,6 +180,12 @@ void DdsPublisher::publish_health(Nanos now) noexcept {
     health_msg_.value("odometry", s.odometry);
   }
   health_msg_.value("write_failures", s.write_failures);
+  if (health_msg_.dropped() > 0 && !health_overflow_said_) {
+    // Said once: a config with more parts than the sample holds loses their last values.
+    health_overflow_said_ = true;
+    TN_LOG_WARN("diagnostics: %zu statuses and values did not fit the sample (%zu statuses of %zu values) and were "
+                "left out", health_msg_.dropped(), DiagnosticsMessage::kStatuses, DiagnosticsMessage::kValues);
+  }
   if (health_writer_->write(&health_msg_.sample())) {
     health_.fetch_add(1, std::memory_order_relaxed);
   } else {

@@ -215,6 +215,7 @@ class DdsPublisher {
   std::uint64_t last_active_revision_ = 0, last_path_revision_ = 0;
   UtmFixMessages utm_msg_;
   DiagnosticsMessage health_msg_;
+  bool health_overflow_said_ = false;  // publisher thread only
   std::atomic<bool> running_{false};
   std::thread thread_;
   // Publisher thread's state, copied out under the atomics below.

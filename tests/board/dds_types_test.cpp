@@ -238,6 +238,32 @@ TEST_F(DdsTypes, PathIsXcdr1AsRos2WritesIt) {
   EXPECT_EQ(got, c.payload());
 }
 
+// A sample holds kStatuses statuses of kValues values: a status beyond them
+// is dropped with its values (they never land on the status before it), a
+// value beyond a status' room too, and both are counted.
+TEST(Diagnostics, WhatDoesNotFitIsDroppedAndCountedNotAddedElsewhere) {
+  dds::DiagnosticsMessage m;
+  m.clear(1);
+  m.value("before any status", std::uint64_t{1});
+  EXPECT_EQ(m.dropped(), 1u);
+  for (std::size_t k = 0; k < dds::DiagnosticsMessage::kStatuses; ++k) {
+    ASSERT_TRUE(m.begin(dds::DiagnosticsMessage::ok, "status", "", ""));
+  }
+  for (std::size_t v = 0; v < dds::DiagnosticsMessage::kValues + 2; ++v) m.value("key", std::uint64_t{v});
+  EXPECT_EQ(m.sample().status._buffer[dds::DiagnosticsMessage::kStatuses - 1].values._length, dds::DiagnosticsMessage::kValues);
+  EXPECT_EQ(m.dropped(), 3u);
+  EXPECT_FALSE(m.begin(dds::DiagnosticsMessage::warn, "one too many", "", ""));
+  m.value("its value", std::uint64_t{9});
+  EXPECT_EQ(m.sample().status._length, dds::DiagnosticsMessage::kStatuses);
+  EXPECT_EQ(m.sample().status._buffer[dds::DiagnosticsMessage::kStatuses - 1].values._length, dds::DiagnosticsMessage::kValues);
+  EXPECT_EQ(m.dropped(), 5u);
+  m.clear(2);
+  EXPECT_EQ(m.dropped(), 0u);
+  ASSERT_TRUE(m.begin(dds::DiagnosticsMessage::ok, "fresh", "", ""));
+  m.value("key", std::uint64_t{1});
+  EXPECT_EQ(m.sample().status._buffer[0].values._length, 1u);
+}
+
 TEST_F(DdsTypes, DiagnosticArrayIsXcdr1AsRos2WritesIt) {
   dds::DiagnosticsMessage m;
   m.clear(10'000'000'500LL);
