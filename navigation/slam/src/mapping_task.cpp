@@ -138,12 +138,7 @@ void MappingTask::take_pose(const perception::Pose& p) {
       alignment_at_keyframe_ = alignment_;
       if (loops_) {
         // It waits for a revolution; a full queue lets its oldest go without a cloud.
-        if (waiting_count_ == waiting_.size()) {
-          ++local_.loop_no_cloud;
-          loops_->add_keyframe({}, waiting_[0].path);
-          for (std::size_t i = 1; i < waiting_count_; ++i) waiting_[i - 1] = waiting_[i];
-          --waiting_count_;
-        }
+        if (waiting_count_ == waiting_.size()) pop_waiting({});
         waiting_[waiting_count_++] = {p.t_ns, o, path_};
       }
       break;
@@ -167,14 +162,11 @@ void MappingTask::take_revolution(const velodyne::RangeImage& image) {
   }
   const Se2 robot_at_r{at.x, at.y, at.yaw};
   const std::int64_t gap = static_cast<std::int64_t>(options_.loop_max_gap * 1e9);
-  std::size_t taken = 0;
-  while (taken < waiting_count_) {
-    const Waiting& w = waiting_[taken];
+  while (waiting_count_ > 0) {
+    const Waiting& w = waiting_[0];
     if (w.t_ns - r > gap) break;  // the revolution is too old for it (and for the ones after)
     if (r - w.t_ns > gap) {       // too late for this keyframe: it goes without a cloud
-      ++local_.loop_no_cloud;
-      loops_->add_keyframe({}, w.path);
-      ++taken;
+      pop_waiting({});
       continue;
     }
     // The revolution's points in the keyframe's frame: the mount, then the
@@ -182,31 +174,33 @@ void MappingTask::take_revolution(const velodyne::RangeImage& image) {
     const Se2 rel = w.odometry.inverse() * robot_at_r;
     const Eigen::Isometry3f to_keyframe = perception::registration::to_isometry({rel.x, rel.y, rel.theta}).cast<float>() * mount_;
     cloud_.clear();
-    for (int ring = 0; ring < image.rings(); ++ring) {
+    for (int ring = 0; ring < image.rings() && cloud_.size() < cloud_.capacity(); ++ring) {
       for (const velodyne::RangeCell& c : image.row(0, ring)) {
         if (!c.valid() || c.distance < min_range_ || c.distance > max_range_) continue;
         if (cloud_.size() == cloud_.capacity()) break;
         cloud_.push_back(to_keyframe * Eigen::Vector3f(c.x, c.y, c.z));
       }
     }
-    loops_->add_keyframe(cloud_, w.path);
-    ++taken;
-    close_loops();
+    pop_waiting(cloud_);
   }
-  for (std::size_t i = taken; i < waiting_count_; ++i) waiting_[i - taken] = waiting_[i];
-  waiting_count_ -= taken;
 }
 
 void MappingTask::give_up_waiting(std::int64_t now_ns) {
   const std::int64_t gap = static_cast<std::int64_t>(options_.loop_max_gap * 1e9);
-  std::size_t dropped = 0;
-  while (dropped < waiting_count_ && now_ns - waiting_[dropped].t_ns > gap) {
+  while (waiting_count_ > 0 && now_ns - waiting_[0].t_ns > gap) pop_waiting({});
+}
+
+void MappingTask::pop_waiting(std::span<const perception::registration::Point> cloud) {
+  // Keyframes reach the loop closer in the graph's order, each with its
+  // cloud or none (counted): its k-th keyframe is the graph's (k + 1)-th.
+  loops_->add_keyframe(cloud, waiting_[0].path);
+  for (std::size_t i = 1; i < waiting_count_; ++i) waiting_[i - 1] = waiting_[i];
+  --waiting_count_;
+  if (cloud.empty()) {
     ++local_.loop_no_cloud;
-    loops_->add_keyframe({}, waiting_[dropped].path);
-    ++dropped;
+    return;
   }
-  for (std::size_t i = dropped; i < waiting_count_; ++i) waiting_[i - dropped] = waiting_[i];
-  waiting_count_ -= dropped;
+  close_loops();
 }
 
 void MappingTask::close_loops() {

@@ -65,6 +65,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "trailnav/drivers/velodyne/range_image.hpp"
@@ -188,6 +189,7 @@ class MappingTask final : public Task {
   // Loop closures: the keyframes waiting for a revolution, and one taken.
   void take_revolution(const velodyne::RangeImage& image);
   void give_up_waiting(std::int64_t now_ns);
+  void pop_waiting(std::span<const perception::registration::Point> cloud);  // the oldest, to the closer
   void close_loops();
 
   MappingOptions options_;
