@@ -125,8 +125,8 @@ constexpr double kDemonstrationNeedMs = 1.53;
 // fix of the model against the surroundings and an object, the box of the
 // thesis' simulated floor. Alone (`taskset -c 1 build/release/bin/trailnav_registration_bench
 // --benchmark_filter='BM_Station(Visit|TaskRun)'`, 2026-12-05): a run standing
-// at the box 8.8 ms (BM_StationTaskRun); the fix after driving in, its first
-// iterations from further off, 20.5 ms (BM_StationVisit/1 less /0) and the
+// at the box 8.8-9.0 ms (BM_StationTaskRun); the fix after driving in, its first
+// iterations from further off, 17.8-20.5 ms (BM_StationVisit/1 less /0, two runs) and the
 // scan's registration 1.4 ms. In trailnavd, the largest CPU time of one run
 // over four runs of `build/release/bin/trailnav_station_daemon_tests
 // --gtest_filter='*OverDds*'` (30 scans each, next to the DDS threads on this
